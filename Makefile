@@ -1,0 +1,40 @@
+# Every install step lives here, so a fresh clone needs only Python 3.11.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+DEMO_DIR ?= runs/demo
+
+.PHONY: install demo test bench docs lint clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/sphere run configs/demo.toml -o $(DEMO_DIR) --overwrite
+	@echo
+	@echo "Output is in $(DEMO_DIR)/:"
+	@echo "  $(DEMO_DIR)/trajectory.h5   particle frames (H5MD); open $(DEMO_DIR)/trajectory.xmf in ParaView"
+	@echo "  $(DEMO_DIR)/checkpoints/    restart files; continue with: $(BIN)/sphere resume $(DEMO_DIR) --until 0.5"
+	@echo "Summary: $(BIN)/sphere inspect $(DEMO_DIR)"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/sphere bench
+
+docs: $(STAMP)
+	$(BIN)/python -m sphere_cli.docgen docs/case-reference.md
+
+lint: $(STAMP)
+	$(BIN)/ruff check sphere_cli tests
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

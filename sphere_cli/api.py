@@ -1,0 +1,217 @@
+"""Every CLI command as a plain library function (tests and notebooks need no CLI)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time as wallclock
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .build.scene import build_scene
+from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict
+from .config.schema import NON_PHYSICS_KEYS, Case
+from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
+from .io.checkpoint import newest_valid_checkpoint, remove_stale_temporaries
+from .io.progress import Progress
+from .io.provenance import provenance
+from .io.rundir import RunDirectory, RunOutput
+from .simulation import Loop, StopFlag, end_step_for
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    status: str  # "done" or "stopped"
+    step: int
+    time: float
+    wall_seconds: float
+    particle_steps_per_second: float
+
+
+def validate(path: str | Path) -> dict:
+    """Validate a case file without building anything; returns the resolved case."""
+    return resolved_dict(load_case(path).case)
+
+
+def schema() -> dict:
+    return Case.model_json_schema()
+
+
+def _set_threads(case: Case) -> None:
+    if case.simulation.threads is not None:
+        import numba
+
+        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
+
+
+def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
+    if until is None:
+        return loaded
+    sim = loaded.case.simulation.model_copy(update={"duration": until})
+    return LoadedCase(case=loaded.case.model_copy(update={"simulation": sim}), text=loaded.text,
+                      path=loaded.path)
+
+
+@contextmanager
+def _signal_handlers(stop: StopFlag, enabled: bool):
+    """SIGTERM/SIGUSR1 (what SLURM sends before a time limit) and a first SIGINT ask for a
+    checkpoint at the next step; a second SIGINT stops at once (KeyboardInterrupt)."""
+    if not enabled:
+        yield
+        return
+
+    def polite(signum, _frame):
+        name = signal.Signals(signum).name
+        if signum == signal.SIGINT and stop.reason is not None:
+            raise KeyboardInterrupt
+        stop.request(f"{name} received")
+
+    previous = {s: signal.signal(s, polite) for s in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _drive(scene, rundir: RunDirectory, output: RunOutput, log, max_wall_time: float | None,
+           handle_signals: bool, show_progress: bool) -> RunResult:
+    clock = scene.state.clock
+    end_step = end_step_for(scene.case.simulation.duration, clock.dt)
+    start_step = clock.step
+    progress = Progress(rundir, end_step, start_step, clock.dt, scene.state.particles.count,
+                        scene.case.output.status_every_seconds, enabled=show_progress)
+    stop = StopFlag()
+    loop = Loop(scene, end_step, output, stop, max_wall_time, progress)
+    started = wallclock.monotonic()
+    log.info("running from step %d to %d (dt = %.6g s, %d particles)", start_step, end_step, clock.dt,
+             scene.state.particles.count)
+    try:
+        with _signal_handlers(stop, handle_signals):
+            outcome = loop.run()
+    except NumericalError as exc:
+        log.error("%s", exc)
+        progress.close()
+        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
+        raise
+    except KeyboardInterrupt:
+        log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
+        progress.close()
+        raise
+    finally:
+        rundir.close_logger()
+    progress.close()
+    wall = wallclock.monotonic() - started
+    steps = clock.step - start_step
+    rate = steps * scene.state.particles.count / wall if wall > 0 else 0.0
+    result = RunResult(rundir.path, "done" if outcome == "done" else "stopped", clock.step, clock.time,
+                       wall, rate)
+    if outcome != "done":
+        log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
+        raise StoppedEarly(
+            f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a checkpoint was "
+            f"written: continue with `sphere resume {rundir.path}`"
+        )
+    log.info("done at step %d (t = %.6g s), %.3g particle-steps/s", clock.step, clock.time, rate)
+    return result
+
+
+def run(case_path: str | Path, run_dir: str | Path | None = None, overwrite: bool = False,
+        max_wall_time: float | None = None, handle_signals: bool = False,
+        show_progress: bool = False) -> RunResult:
+    loaded = load_case(case_path)
+    _set_threads(loaded.case)
+    rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
+    rundir.check_new(overwrite)
+    scene = build_scene(loaded)
+    rundir.prepare_new(overwrite)
+    rundir.case.write_text(loaded.text, encoding="utf-8")
+    resolved = resolved_dict(loaded.case)
+    phash = physics_hash(resolved)
+    log = rundir.logger()
+    log.info("case %s -> %s", case_path, rundir.path)
+    output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
+    output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
+    output.frame(scene)
+    output.checkpoint(scene)
+    return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+
+
+def resume(run_dir: str | Path, until: float | None = None, max_wall_time: float | None = None,
+           handle_signals: bool = False, show_progress: bool = False) -> RunResult:
+    rundir = RunDirectory(Path(run_dir))
+    if not rundir.is_run():
+        raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
+    loaded = _with_duration(load_case(rundir.case), until)
+    _set_threads(loaded.case)
+    remove_stale_temporaries(rundir.checkpoints)
+    log = rundir.logger()
+    ck = newest_valid_checkpoint(rundir.checkpoints, log=log.warning)
+    if ck is None:
+        rundir.close_logger()
+        raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
+    resolved = resolved_dict(loaded.case)
+    phash = physics_hash(resolved)
+    if phash != ck.physics_hash:
+        rundir.close_logger()
+        changed = ", ".join(_changed_keys(ck.resolved, resolved)) or "(unknown)"
+        raise ResumeRefused(
+            f"{rundir.case}: changed in a way that alters the physics since {ck.path.name} was written "
+            f"(changed: {changed}); only {', '.join('.'.join(k) for k in NON_PHYSICS_KEYS)} may "
+            "change on resume. Start a new run instead."
+        )
+    scene = build_scene(loaded, restart=ck)
+    log.info("resuming from %s (step %d)", ck.path.name, ck.step)
+    output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
+    output.last_checkpoint = ck.path
+    try:
+        output.trajectory.truncate_after(ck.step)
+    except OutputError as exc:
+        aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
+        rundir.trajectory_path.rename(aside)
+        log.warning("%s; moved it to %s and started a new trajectory file", exc, aside.name)
+        output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
+        output.frame(scene)
+    return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+
+
+def _changed_keys(old, new, prefix: str = "") -> list[str]:
+    keys = []
+    if isinstance(old, dict) and isinstance(new, dict):
+        for key in sorted(set(old) | set(new)):
+            keys += _changed_keys(old.get(key), new.get(key), f"{prefix}{key}.")
+    elif old != new:
+        keys.append(prefix.rstrip("."))
+    free = tuple(".".join(key) for key in NON_PHYSICS_KEYS)
+    return [k for k in keys if not k.startswith(free)]
+
+
+def run_in_memory(text: str, steps: int, base_dir: Path | None = None):
+    """Build a scene from TOML text and advance it `steps` steps (tests, notebooks)."""
+    from .simulation import advance
+
+    loaded = parse_case(text, None if base_dir is None else base_dir / "case.toml")
+    scene = build_scene(loaded)
+    advance(scene, steps)
+    return scene
+
+
+def inspect(path: str | Path) -> dict:
+    from .io.inspect import summarize
+
+    return summarize(Path(path))
+
+
+def to_json(data) -> str:
+    def default(obj):
+        if isinstance(obj, np.generic):
+            return obj.item()
+        if isinstance(obj, Path):
+            return str(obj)
+        raise TypeError(type(obj))
+
+    return json.dumps(data, indent=2, default=default)

@@ -1,0 +1,147 @@
+"""`sphere`: the command line. Parses arguments, calls `api`, maps errors to exit codes.
+
+Exit codes (design guide §6): 0 done; 2 usage; 65 bad case file; 66 missing input;
+70 numerical failure; 74 I/O failure; 75 stopped early on request; 78 resume refused.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import typer
+
+from . import api
+from .errors import SphereError, StoppedEarly
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="sphere: discrete-element simulation of dry and fluid-saturated granular materials.",
+)
+
+DURATION = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*([smhd]?)\s*$")
+UNIT_SECONDS = {"": 1.0, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_wall_time(text: str | None) -> float | None:
+    """'90', '90s', '45m', '2h', '1.5d' -> seconds."""
+    if text is None:
+        return None
+    match = DURATION.match(text)
+    if not match:
+        raise typer.BadParameter(f"{text!r}: expected a duration such as 3600, 45m, 2h or 1.5d")
+    return float(match.group(1)) * UNIT_SECONDS[match.group(2)]
+
+
+def _fail(exc: SphereError) -> None:
+    typer.echo(f"sphere: error: {exc}", err=True)
+    raise typer.Exit(exc.exit_code)
+
+
+@app.command()
+def validate(
+    case: Path = typer.Argument(..., help="Case file (TOML)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the resolved case as JSON."),
+) -> None:
+    """Check a case file without running it; print the resolved case (defaults filled in)."""
+    from .config.load import render_tree
+
+    try:
+        resolved = api.validate(case)
+    except SphereError as exc:
+        _fail(exc)
+    if as_json:
+        typer.echo(json.dumps(resolved, indent=2))
+    else:
+        typer.echo(f"{case}: valid\n" + render_tree(resolved))
+
+
+@app.command()
+def schema() -> None:
+    """Print the JSON schema of case files (for editors)."""
+    typer.echo(json.dumps(api.schema(), indent=2))
+
+
+@app.command()
+def run(
+    case: Path = typer.Argument(..., help="Case file (TOML)."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Run directory (default runs/<case name>)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory."),
+    max_wall_time: str | None = typer.Option(
+        None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
+    ),
+    quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
+) -> None:
+    """Run a case: build the scene, advance it, write trajectory and checkpoints."""
+    try:
+        result = api.run(case, output, overwrite=overwrite, max_wall_time=parse_wall_time(max_wall_time),
+                         handle_signals=True, show_progress=not quiet)
+    except SphereError as exc:
+        _fail(exc)
+    except KeyboardInterrupt:
+        _interrupted()
+    _report(result)
+
+
+@app.command()
+def resume(
+    run_dir: Path = typer.Argument(..., help="Run directory written by `sphere run`."),
+    until: float | None = typer.Option(None, "--until", help="New end time [s] (default: the case's duration)."),
+    max_wall_time: str | None = typer.Option(
+        None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
+    ),
+    quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
+) -> None:
+    """Continue a run from its newest checkpoint that verifies (bitwise identical continuation)."""
+    try:
+        result = api.resume(run_dir, until=until, max_wall_time=parse_wall_time(max_wall_time),
+                            handle_signals=True, show_progress=not quiet)
+    except SphereError as exc:
+        _fail(exc)
+    except KeyboardInterrupt:
+        _interrupted()
+    _report(result)
+
+
+@app.command()
+def inspect(
+    path: Path = typer.Argument(..., help="Run directory, trajectory.h5 or checkpoint file."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+) -> None:
+    """Summarise any output: case, particles, time reached, energies, checkpoints and their integrity."""
+    from .io.inspect import render
+
+    try:
+        summary = api.inspect(path)
+    except SphereError as exc:
+        _fail(exc)
+    typer.echo(api.to_json(summary) if as_json else render(summary))
+
+
+def _interrupted() -> None:
+    typer.echo("sphere: interrupted; the newest checkpoint is intact: continue with `sphere resume`", err=True)
+    raise typer.Exit(StoppedEarly.exit_code)
+
+
+def _report(result: api.RunResult) -> None:
+    typer.echo(
+        f"done: t = {result.time:.6g} s (step {result.step}) in {result.wall_seconds:.1f} s, "
+        f"{result.particle_steps_per_second / 1e6:.2f} M particle-steps/s\n"
+        f"output: {result.run_dir}/trajectory.h5 (open {result.run_dir}/trajectory.xmf in ParaView), "
+        f"checkpoints in {result.run_dir}/checkpoints/"
+    )
+
+
+def main() -> None:
+    try:
+        app()
+    except KeyboardInterrupt:
+        sys.exit(StoppedEarly.exit_code)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,158 @@
+"""Read a TOML case file into a validated `Case`, with errors that name the key, value and line.
+
+Also: the resolved case as a plain dict (every default filled in), its rendering as a tree,
+and the hash of the physics-relevant part that `resume` compares against a checkpoint.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import tomli
+from pydantic import ValidationError
+
+from ..errors import CaseError, MissingInputError
+from .consistency import check_consistency
+from .locate import find_line, format_location
+from .schema import NON_PHYSICS_KEYS, Case
+
+
+@dataclass(frozen=True)
+class LoadedCase:
+    case: Case
+    text: str
+    path: Path | None
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent if self.path is not None else Path.cwd()
+
+    def error(self, loc: tuple, message: str) -> CaseError:
+        """A CaseError about the key at `loc`, found while building the scene."""
+        where = str(self.path) if self.path is not None else "<case>"
+        data = tomli.loads(self.text)
+        return CaseError(_one_error(where, self.text, loc, _value_at(data, loc), message))
+
+
+def load_case(path: str | Path) -> LoadedCase:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MissingInputError(f"{path}: case file not found") from None
+    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+        raise MissingInputError(f"{path}: cannot read case file ({exc})") from None
+    return parse_case(text, path)
+
+
+def parse_case(text: str, path: Path | None = None) -> LoadedCase:
+    where = str(path) if path is not None else "<case>"
+    try:
+        data = tomli.loads(text)
+    except tomli.TOMLDecodeError as exc:
+        raise CaseError(f"{where}: not valid TOML: {exc}") from None
+    try:
+        case = Case.model_validate(data)
+    except ValidationError as exc:
+        raise CaseError(_describe_validation_error(exc, data, text, where)) from None
+    problems = check_consistency(case)
+    if problems:
+        lines = []
+        for loc, message in problems:
+            value = _value_at(data, loc)
+            lines.append(_one_error(where, text, loc, value, message))
+        raise CaseError("\n".join(lines))
+    return LoadedCase(case=case, text=text, path=path)
+
+
+def _one_error(where: str, text: str, loc: tuple, value, message: str) -> str:
+    line = find_line(text, loc)
+    place = f"{where}:{line}" if line else where
+    key = format_location(loc) if loc else "(top level)"
+    shown = "" if value is _MISSING else f" = {value!r}"
+    return f"{place}: {key}{shown}: {message}"
+
+
+_MISSING = object()
+
+
+def _value_at(data, loc: tuple):
+    node = data
+    for part in loc:
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            return _MISSING
+    return node
+
+
+def _clean_location(data, loc: tuple) -> tuple:
+    """Drop the union tags pydantic inserts (e.g. 'uniform' in particles.radius.uniform.min)."""
+    cleaned, node = [], data
+    for i, part in enumerate(loc):
+        found = (isinstance(node, dict) and part in node) or (
+            isinstance(node, list) and isinstance(part, int) and part < len(node)
+        )
+        if found:
+            cleaned.append(part)
+            node = node[part]
+        elif i == len(loc) - 1:
+            cleaned.append(part)  # a required key that the file lacks
+    return tuple(cleaned)
+
+
+def _describe_validation_error(exc: ValidationError, data, text: str, where: str) -> str:
+    lines = []
+    for err in exc.errors(include_url=False):
+        loc = _clean_location(data, tuple(err["loc"]))
+        message = err["msg"]
+        if err["type"] == "extra_forbidden":
+            message = "unknown key (check the spelling; `sphere schema` lists every key)"
+        elif err["type"] == "missing":
+            message = "required key is missing"
+        elif err["type"] == "union_tag_invalid":
+            expected = err.get("ctx", {}).get("expected_tags", "")
+            message = f"unknown choice; expected one of {expected}"
+        elif message.startswith("Value error, "):
+            message = message[len("Value error, ") :]
+        value = _value_at(data, loc) if err["type"] != "missing" else _MISSING
+        lines.append(_one_error(where, text, loc, value, message))
+    return "\n".join(lines)
+
+
+def resolved_dict(case: Case) -> dict:
+    """The case with every default filled in, as plain JSON-compatible data."""
+    return case.model_dump(mode="json")
+
+
+def physics_hash(resolved: dict) -> str:
+    """SHA-256 of the part of the case that changes the physics (output, duration excluded)."""
+    physics = copy.deepcopy(resolved)
+    for key in NON_PHYSICS_KEYS:
+        node = physics
+        for part in key[:-1]:
+            node = node.get(part, {})
+        node.pop(key[-1], None)
+    blob = json.dumps(physics, sort_keys=True, separators=(",", ":")).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+def render_tree(data, indent: str = "") -> str:
+    """Render nested dicts/lists as an indented tree for `sphere validate`."""
+    out = []
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if isinstance(value, dict) or (isinstance(value, list) and value and isinstance(value[0], dict)):
+                out.append(f"{indent}{key}")
+                out.append(render_tree(value, indent + "  "))
+            else:
+                out.append(f"{indent}{key} = {json.dumps(value)}")
+    elif isinstance(data, list):
+        for i, item in enumerate(data):
+            out.append(f"{indent}[{i}]")
+            out.append(render_tree(item, indent + "  "))
+    return "\n".join(line for line in out if line)

@@ -1,0 +1,307 @@
+"""The case-file schema: every key a case may hold, its unit, its default and its bounds.
+
+SI units everywhere. `extra = "forbid"` makes a typo an error rather than a silent default.
+Each physics option is a tagged union (`model = "..."`, `distribution = "..."`,
+`method = "..."`), so the validated case says exactly which physics runs.
+Cross-field rules (walls against periodic axes, particles against the box) live in
+`consistency.py`, where each error can name the key it is about.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Vec3 = tuple[float, float, float]
+FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class Simulation(Strict):
+    """Time stepping and when to stop."""
+
+    duration: float = Field(gt=0, description="Simulated time to reach [s].")
+    dt: float | Literal["auto"] = Field(
+        "auto",
+        description=(
+            'Time step [s], or "auto": dt_safety times the smallest stability limit of any '
+            "possible contact. A number above that limit is refused."
+        ),
+    )
+    dt_safety: float = Field(
+        0.1, gt=0, le=1, description="Fraction of the critical time step used by dt = \"auto\" [-]."
+    )
+    threads: int | None = Field(
+        None, ge=1, description="Numba threads (default: all cores). Results do not depend on it."
+    )
+    neighbor_skin: float = Field(
+        0.4,
+        gt=0,
+        le=2,
+        description=(
+            "Verlet-list skin as a fraction of the largest radius [-]. Affects speed only: "
+            "results are the same for any skin."
+        ),
+    )
+    blowup_check_every: int = Field(
+        100,
+        ge=1,
+        description="Steps between checks for NaN and runaway velocities [-].",
+    )
+
+    @model_validator(mode="after")
+    def _positive_dt(self):
+        if self.dt != "auto" and not self.dt > 0:
+            raise ValueError(f'dt must be a positive number of seconds or "auto", got {self.dt}')
+        return self
+
+
+class Domain(Strict):
+    """The simulation box: an axis-aligned box, each axis either walled/open or periodic."""
+
+    lower: Vec3 = Field((0.0, 0.0, 0.0), description="Lower corner of the box [m].")
+    upper: Vec3 = Field(description="Upper corner of the box [m].")
+    periodic: tuple[bool, bool, bool] = Field(
+        (False, False, False), description="Periodic boundary along x, y, z."
+    )
+    gravity: Vec3 = Field((0.0, 0.0, -9.81), description="Gravitational acceleration [m/s^2].")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for ax, lo, hi in zip("xyz", self.lower, self.upper, strict=True):
+            if not hi > lo:
+                raise ValueError(f"upper {ax} ({hi}) must exceed lower {ax} ({lo})")
+        return self
+
+
+class Wall(Strict):
+    """A plane wall on one face of the box, its normal pointing into the box."""
+
+    face: Literal["x-", "x+", "y-", "y+", "z-", "z+"] = Field(
+        description='Face of the box the wall lies on: "x-", "x+", "y-", "y+", "z-" or "z+".'
+    )
+    mode: Literal["fixed"] = Field("fixed", description="Wall motion: fixed in place.")
+    friction: float | None = Field(
+        None, ge=0, description="Coulomb friction coefficient against particles (default: the contact's) [-]."
+    )
+
+
+# --- particle radii -------------------------------------------------------------------------
+
+
+class FixedRadius(Strict):
+    distribution: Literal["fixed"] = "fixed"
+    value: float = Field(gt=0, description="Radius of every particle [m].")
+
+    @property
+    def largest(self) -> float:
+        return self.value
+
+
+class UniformRadius(Strict):
+    distribution: Literal["uniform"]
+    min: float = Field(gt=0, description="Smallest radius [m].")
+    max: float = Field(gt=0, description="Largest radius [m].")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.max < self.min:
+            raise ValueError(f"max ({self.max}) must not be below min ({self.min})")
+        return self
+
+    @property
+    def largest(self) -> float:
+        return self.max
+
+
+class LognormalRadius(Strict):
+    distribution: Literal["lognormal"]
+    median: float = Field(gt=0, description="Median radius [m].")
+    sigma: float = Field(gt=0, le=2, description="Standard deviation of ln(radius) [-].")
+    min: float = Field(gt=0, description="Radii below this are redrawn [m].")
+    max: float = Field(gt=0, description="Radii above this are redrawn [m].")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if not self.min <= self.median <= self.max:
+            raise ValueError(f"need min <= median <= max, got {self.min}, {self.median}, {self.max}")
+        return self
+
+    @property
+    def largest(self) -> float:
+        return self.max
+
+
+class BimodalRadius(Strict):
+    distribution: Literal["bimodal"]
+    small: float = Field(gt=0, description="Radius of the small species [m].")
+    large: float = Field(gt=0, description="Radius of the large species [m].")
+    large_fraction: float = Field(
+        0.5, ge=0, le=1, description="Number fraction of large particles [-]."
+    )
+
+    @property
+    def largest(self) -> float:
+        return max(self.small, self.large)
+
+
+RadiusDistribution = Annotated[
+    FixedRadius | UniformRadius | LognormalRadius | BimodalRadius,
+    Field(discriminator="distribution"),
+]
+
+# --- particle placement ---------------------------------------------------------------------
+
+
+class LatticePlacement(Strict):
+    method: Literal["lattice"] = "lattice"
+    spacing: float = Field(
+        1.2, ge=1.0, description="Lattice spacing as a multiple of the largest diameter [-]."
+    )
+    jitter: float = Field(
+        0.1,
+        ge=0,
+        le=1,
+        description="Random offset of each site, as a fraction of the free gap between spheres [-].",
+    )
+    region_lower: Vec3 | None = Field(None, description="Lower corner of the filled region (default: the box) [m].")
+    region_upper: Vec3 | None = Field(None, description="Upper corner of the filled region (default: the box) [m].")
+
+
+class RandomPlacement(Strict):
+    method: Literal["random"]
+    region_lower: Vec3 | None = Field(None, description="Lower corner of the filled region (default: the box) [m].")
+    region_upper: Vec3 | None = Field(None, description="Upper corner of the filled region (default: the box) [m].")
+    max_attempts: int = Field(
+        200, ge=1, description="Candidate positions tried per particle before giving up [-]."
+    )
+
+
+class FilePlacement(Strict):
+    method: Literal["file"]
+    path: str = Field(
+        description=(
+            "CSV (header x,y,z,r and optionally vx,vy,vz) or HDF5 (datasets position (N,3), "
+            "radius (N,), optional velocity (N,3)); relative paths are relative to the case file."
+        )
+    )
+
+
+Placement = Annotated[
+    LatticePlacement | RandomPlacement | FilePlacement, Field(discriminator="method")
+]
+
+
+class Particles(Strict):
+    """The spheres: how many, how big, how dense, where."""
+
+    count: int | None = Field(
+        None, ge=1, description="Number of particles (not used with placement from a file) [-]."
+    )
+    density: float = Field(gt=0, description="Material density [kg/m^3].")
+    radius: RadiusDistribution = Field(
+        default_factory=lambda: FixedRadius(value=1e-3),
+        description="Radius distribution (with a file, used only if the file has no radii).",
+    )
+    placement: Placement = Field(default_factory=LatticePlacement, description="Where the spheres start.")
+    velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial velocity of every particle [m/s].")
+    seed: int = Field(0, ge=0, description="Seed of the random numbers for radii and positions [-].")
+    overlap_tolerance: float = Field(
+        0.05,
+        ge=0,
+        le=0.5,
+        description="Largest initial overlap accepted, as a fraction of the smaller radius [-].",
+    )
+
+
+# --- contact law ----------------------------------------------------------------------------
+
+
+class LinearContact(Strict):
+    """Linear spring-dashpot normal force with an elastic tangential spring and Coulomb cap."""
+
+    model: Literal["linear"] = "linear"
+    normal_stiffness: float = Field(gt=0, description="Normal spring constant k_n [N/m].")
+    tangential_stiffness: float | None = Field(
+        None, gt=0, description="Tangential spring constant k_t (default 2/7 k_n) [N/m]."
+    )
+    restitution: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description=(
+            "Normal coefficient of restitution e. The damping is calibrated so that the "
+            "contact, whose normal force is never attractive, rebounds at exactly e [-]."
+        ),
+    )
+    friction: float = Field(0.5, ge=0, description="Coulomb friction coefficient mu [-].")
+
+    @property
+    def kt(self) -> float:
+        if self.tangential_stiffness is None:
+            return 2.0 / 7.0 * self.normal_stiffness
+        return self.tangential_stiffness
+
+
+ContactModel = Annotated[LinearContact, Field(discriminator="model")]
+
+# --- output ---------------------------------------------------------------------------------
+
+
+class Schedule(Strict):
+    """When something happens: at any of these intervals (whichever comes first)."""
+
+    every_time: float | None = Field(None, gt=0, description="Interval of simulated time [s].")
+    every_steps: int | None = Field(None, ge=1, description="Interval in time steps [-].")
+    every_wall_minutes: float | None = Field(None, gt=0, description="Interval of wall-clock time [min].")
+
+
+class CheckpointSchedule(Schedule):
+    every_wall_minutes: float | None = Field(
+        30.0, gt=0, description="Interval of wall-clock time [min]."
+    )
+    keep: int = Field(3, ge=1, description="Number of newest checkpoints kept [-].")
+
+
+class Output(Strict):
+    frames: Schedule = Field(
+        default_factory=lambda: Schedule(every_steps=1000),
+        description="When trajectory frames are written (a first frame is always written at the start).",
+    )
+    checkpoints: CheckpointSchedule = Field(
+        default_factory=CheckpointSchedule,
+        description="When checkpoints are written (one is always written at the end).",
+    )
+    status_every_seconds: float = Field(
+        10.0, gt=0, description="Wall-clock interval of the status line and status.json [s]."
+    )
+    fields: list[Literal["velocity", "angular_velocity", "force", "torque"]] = Field(
+        default_factory=lambda: ["velocity", "angular_velocity", "force"],
+        description="Per-particle fields written in each frame besides position (radius is written once).",
+    )
+
+
+class Case(Strict):
+    """A complete case file."""
+
+    title: str = Field("", description="Free text describing the case.")
+    simulation: Simulation
+    domain: Domain
+    particles: Particles
+    contact: ContactModel
+    walls: list[Wall] = Field(default_factory=list, description="Plane walls, one table per wall.")
+    output: Output = Field(default_factory=Output)
+
+
+# Keys whose change does not alter the physics of a run (resume accepts them changed).
+NON_PHYSICS_KEYS = (
+    ("title",),
+    ("simulation", "duration"),
+    ("simulation", "threads"),
+    ("simulation", "neighbor_skin"),
+    ("output",),
+)

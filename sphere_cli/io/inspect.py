@@ -1,0 +1,113 @@
+"""Summaries of any output: a run directory, a trajectory file or a checkpoint file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+
+from ..errors import MissingInputError, OutputError
+from .checkpoint import list_checkpoints, read_checkpoint
+from .rundir import RunDirectory
+
+
+def summarize(path: Path) -> dict:
+    if not path.exists():
+        raise MissingInputError(f"{path}: no such file or directory")
+    if path.is_dir():
+        return _run_directory(RunDirectory(path))
+    try:
+        with h5py.File(path, "r") as f:
+            is_trajectory = "h5md" in f
+    except OSError as exc:
+        raise OutputError(f"{path}: not a readable HDF5 file ({exc})") from None
+    return _trajectory(path) if is_trajectory else _checkpoint(path)
+
+
+def _run_directory(rundir: RunDirectory) -> dict:
+    if not rundir.is_run():
+        raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
+    out = {"kind": "run directory", "path": str(rundir.path)}
+    if rundir.status_path.is_file():
+        out["status"] = json.loads(rundir.status_path.read_text())
+    if rundir.trajectory_path.is_file():
+        try:
+            out["trajectory"] = _trajectory(rundir.trajectory_path)
+        except OutputError as exc:
+            out["trajectory"] = {"error": str(exc)}
+    out["checkpoints"] = [_checkpoint_entry(p) for p in list_checkpoints(rundir.checkpoints)]
+    return out
+
+
+def _checkpoint_entry(path: Path) -> dict:
+    try:
+        ck = read_checkpoint(path)
+        return {"file": path.name, "step": ck.step, "time": ck.step * ck.dt, "valid": True}
+    except OutputError as exc:
+        return {"file": path.name, "valid": False, "error": str(exc)}
+
+
+def _trajectory(path: Path) -> dict:
+    try:
+        with h5py.File(path, "r") as f:
+            params = f["parameters"].attrs
+            resolved = json.loads(params["resolved_case"])
+            part = f["particles/trajectory"]
+            steps = part["position/step"][...]
+            times = part["position/time"][...]
+            obs = {}
+            for name, group in f["observables"].items():
+                values = group["value"][...]
+                if values.size:
+                    obs[name] = values[-1].item()
+            return {
+                "kind": "trajectory",
+                "path": str(path),
+                "title": resolved.get("title", ""),
+                "particles": int(part["radius"].shape[0]),
+                "frames": int(steps.size),
+                "first_time": float(times[0]) if times.size else None,
+                "last_step": int(steps[-1]) if steps.size else None,
+                "last_time": float(times[-1]) if times.size else None,
+                "dt": float(params["dt"]),
+                "dt_limit": float(params["dt_limit"]),
+                "contact_model": resolved["contact"]["model"],
+                "walls": [w["face"] for w in resolved.get("walls", [])],
+                "periodic": resolved["domain"]["periodic"],
+                "fluid": None,
+                "last_observables": obs,
+                "provenance": dict(f["sphere/provenance"].attrs.items()),
+            }
+    except (OSError, KeyError) as exc:
+        raise OutputError(f"{path}: not a readable sphere trajectory ({exc})") from None
+
+
+def _checkpoint(path: Path) -> dict:
+    ck = read_checkpoint(path)
+    return {
+        "kind": "checkpoint",
+        "path": str(path),
+        "valid": True,
+        "step": ck.step,
+        "time": ck.step * ck.dt,
+        "dt": ck.dt,
+        "particles": int(ck.arrays["particles"]["pos"].shape[0]),
+        "modules": sorted(ck.arrays),
+        "physics_hash": ck.physics_hash,
+    }
+
+
+def render(summary: dict, indent: str = "") -> str:
+    lines = []
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            lines.append(f"{indent}{key}:")
+            lines.append(render(value, indent + "  "))
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            lines.append(f"{indent}{key}:")
+            for item in value:
+                lines.append(indent + "  - " + ", ".join(f"{k}={v}" for k, v in item.items()))
+        else:
+            lines.append(f"{indent}{key}: {value}")
+    return "\n".join(lines)

@@ -1,0 +1,77 @@
+"""Progress on stderr: a tqdm bar on a terminal, a periodic one-line status otherwise
+(batch logs), and status.json in the run directory either way."""
+
+from __future__ import annotations
+
+import sys
+
+from tqdm import tqdm
+
+
+class Progress:
+    def __init__(self, rundir, end_step: int, start_step: int, dt: float, n_particles: int,
+                 status_every: float, stream=None, enabled: bool = True):
+        self.rundir = rundir
+        self.end_step = end_step
+        self.dt = dt
+        self.n = n_particles
+        self.stream = stream if stream is not None else sys.stderr
+        self.bar = None
+        self.enabled = enabled
+        self.status_every = status_every
+        self.last_status = float("-inf")
+        if enabled and self.stream.isatty():
+            self.bar = tqdm(total=end_step, initial=start_step, file=self.stream, unit="step",
+                            dynamic_ncols=True, mininterval=0.5)
+
+    def info(self, scene, steps_done: int, elapsed: float, state: str = "running") -> dict:
+        clock = scene.state.clock
+        rate = steps_done / elapsed if elapsed > 0 else 0.0
+        remaining = self.end_step - clock.step
+        return {
+            "state": state,
+            "step": clock.step,
+            "end_step": self.end_step,
+            "time": clock.time,
+            "end_time": self.end_step * self.dt,
+            "dt": self.dt,
+            "particles": self.n,
+            "steps_per_second": rate,
+            "particle_steps_per_second": rate * self.n,
+            "elapsed_seconds": elapsed,
+            "eta_seconds": remaining / rate if rate > 0 else None,
+        }
+
+    @property
+    def interval(self) -> float:
+        """How often the loop should call update() [s of wall time]."""
+        return min(0.5, self.status_every) if self.bar is not None else self.status_every
+
+    def update(self, scene, steps_done: int, elapsed: float, state: str = "running") -> None:
+        info = self.info(scene, steps_done, elapsed, state)
+        due = state != "running" or elapsed - self.last_status >= self.status_every
+        if due:
+            self.rundir.write_status(info)
+            self.last_status = elapsed
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.n = info["step"]
+            self.bar.set_postfix_str(
+                f"t={info['time']:.4g}/{info['end_time']:.4g} s, "
+                f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s"
+            )
+            self.bar.refresh()
+        elif due:
+            eta = info["eta_seconds"]
+            eta_text = f"{eta:.0f} s" if eta is not None else "?"
+            print(
+                f"[sphere] step {info['step']}/{self.end_step}  t = {info['time']:.6g} s  "
+                f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s  ETA {eta_text}",
+                file=self.stream,
+                flush=True,
+            )
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

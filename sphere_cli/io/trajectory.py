@@ -1,0 +1,144 @@
+"""The trajectory file: frames appended on the output schedule, in the H5MD 1.1 layout.
+
+/h5md                          version, author, creator
+/particles/trajectory/box      dimension, boundary, edges
+/particles/trajectory/radius   time-independent (N,) [m]
+/particles/trajectory/<field>  {step, time, value} for position, velocity, ...
+/observables/<name>            {step, time, value}: energies, contact counts
+/parameters                    the case file, the resolved case, the physics hash, dt
+/sphere/provenance             versions, threads, host, job id (attributes)
+
+The file is opened only while a frame is written, so a crash between frames leaves it whole.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..errors import OutputError
+from ..physics.energy import UNITS
+
+FIELD_UNITS = {
+    "position": "m",
+    "velocity": "m s-1",
+    "angular_velocity": "s-1",
+    "force": "N",
+    "torque": "N m",
+}
+FIELD_SOURCE = {
+    "position": "pos",
+    "velocity": "vel",
+    "angular_velocity": "angvel",
+    "force": "force",
+    "torque": "torque",
+}
+GROUP = "/particles/trajectory"
+
+
+def _time_series(parent: h5py.Group, name: str, shape: tuple, dtype, unit: str) -> None:
+    g = parent.create_group(name)
+    g.create_dataset("step", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(256,))
+    t = g.create_dataset("time", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(256,))
+    t.attrs["unit"] = "s"
+    chunk = (1, *shape) if shape else (256,)
+    v = g.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=chunk)
+    if unit:
+        v.attrs["unit"] = unit
+
+
+def _append(g: h5py.Group, step: int, time: float, value) -> None:
+    k = g["step"].shape[0]
+    for name in ("step", "time", "value"):
+        g[name].resize(k + 1, axis=0)
+    g["step"][k] = step
+    g["time"][k] = time
+    g["value"][k] = value
+
+
+class Trajectory:
+    def __init__(self, path: Path, fields: list[str]):
+        self.path = path
+        self.fields = ["position", *fields]
+
+    def create(self, scene, case_text: str, resolved: dict, physics_hash: str, provenance: dict) -> None:
+        state = scene.state
+        n = state.particles.count
+        try:
+            with h5py.File(self.path, "w") as f:
+                h5 = f.create_group("h5md")
+                h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
+                h5.create_group("author").attrs["name"] = provenance.get("host", "")
+                creator = h5.create_group("creator")
+                creator.attrs["name"] = "sphere"
+                creator.attrs["version"] = provenance.get("sphere_version", "")
+                part = f.create_group(GROUP)
+                box = part.create_group("box")
+                box.attrs["dimension"] = 3
+                box.attrs["boundary"] = np.array(
+                    [b"periodic" if p else b"none" for p in state.box.periodic]
+                )
+                edges = box.create_dataset("edges", data=state.box.length)
+                edges.attrs["unit"] = "m"
+                box.create_dataset("offset", data=state.box.lower).attrs["unit"] = "m"
+                part.create_dataset("radius", data=state.particles.radius).attrs["unit"] = "m"
+                part.create_dataset("mass", data=state.particles.mass).attrs["unit"] = "kg"
+                for field in self.fields:
+                    _time_series(part, field, (n, 3), np.float64, FIELD_UNITS[field])
+                obs = f.create_group("observables")
+                for name, unit in UNITS.items():
+                    _time_series(obs, name, (), np.float64, unit)
+                params = f.create_group("parameters")
+                params.attrs["case_toml"] = case_text
+                params.attrs["resolved_case"] = json.dumps(resolved)
+                params.attrs["physics_hash"] = physics_hash
+                params.attrs["dt"] = state.clock.dt
+                params.attrs["dt_limit"] = scene.dt_limit
+                prov = f.create_group("sphere/provenance")
+                for key, value in provenance.items():
+                    prov.attrs[key] = value
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
+
+    def append(self, scene, observables: dict) -> None:
+        state = scene.state
+        step, time = state.clock.step, state.clock.time
+        try:
+            with h5py.File(self.path, "a") as f:
+                part = f[GROUP]
+                if part["position/step"].shape[0] and part["position/step"][-1] >= step:
+                    return  # this step is already recorded (e.g. the end frame of a resumed run)
+                for field in self.fields:
+                    _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
+                for name, value in observables.items():
+                    _append(f["observables"][name], step, time, value)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot append a frame ({exc})") from None
+
+    def truncate_after(self, step: int) -> None:
+        """Drop frames later than `step` (they are recomputed by a resumed run)."""
+        try:
+            with h5py.File(self.path, "a") as f:
+                for group in _series_groups(f):
+                    steps = group["step"][...]
+                    keep = int(np.searchsorted(steps, step, side="right"))
+                    if keep < steps.size:
+                        for name in ("step", "time", "value"):
+                            group[name].resize(keep, axis=0)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
+
+    def frame_steps(self) -> np.ndarray:
+        with h5py.File(self.path, "r") as f:
+            return f[GROUP]["position/step"][...]
+
+
+def _series_groups(f: h5py.File):
+    for parent in (f[GROUP], f["observables"]):
+        for name in parent:
+            item = parent[name]
+            if isinstance(item, h5py.Group) and "step" in item:
+                yield item

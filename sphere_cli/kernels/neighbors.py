@@ -1,0 +1,174 @@
+"""Verlet neighbour lists built from a cell list, with the contact history carried across rebuilds.
+
+A full list: row i holds every j (sorted ascending) with |x_i - x_j| < r_i + r_j + skin, so a
+force kernel can gather each particle's contacts and write only its own force (no races).
+The list stays valid until some particle has moved skin/2 since the build.
+
+Arguments (N particles, C neighbour slots per particle):
+  pos (N,3) [m], radius (N,) [m], lower/length (3,) box corner and edge [m],
+  periodic (3,) uint8, nbr (N,C) int32, nbr_count (N,) int32, hist (N,C,3) [m] tangential springs.
+Capacity: a row that would exceed C stores C entries and records its true count; the caller
+sees count > C, grows C and rebuilds (no contact is ever dropped silently).
+"""
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def minimum_image(d, length, periodic):
+    if periodic and d > 0.5 * length:
+        return d - length
+    if periodic and d < -0.5 * length:
+        return d + length
+    return d
+
+
+@njit(cache=True)
+def cell_index(pos, lower, cell_size, ncell, cell_of):
+    """Cell of each particle (clamped to the grid, so escaped particles still bin)."""
+    n = pos.shape[0]
+    for i in range(n):
+        flat = 0
+        for a in range(3):
+            c = int(np.floor((pos[i, a] - lower[a]) / cell_size[a]))
+            if c < 0:
+                c = 0
+            elif c >= ncell[a]:
+                c = ncell[a] - 1
+            flat = flat * ncell[a] + c
+        cell_of[i] = flat
+
+
+@njit(cache=True)
+def counting_sort(cell_of, ncells_total, cell_start, order):
+    """Particles ordered by cell (stable, so deterministic); cell c is order[start[c]:start[c+1]]."""
+    cell_start[:] = 0
+    for i in range(cell_of.shape[0]):
+        cell_start[cell_of[i] + 1] += 1
+    for c in range(ncells_total):
+        cell_start[c + 1] += cell_start[c]
+    fill = cell_start[:-1].copy()
+    for i in range(cell_of.shape[0]):
+        c = cell_of[i]
+        order[fill[c]] = i
+        fill[c] += 1
+
+
+@njit(cache=True)
+def _axis_offsets(n, periodic):
+    """Distinct neighbouring cell offsets along one axis (fewer than 3 cells: no duplicates)."""
+    if n == 1:
+        return np.array([0], dtype=np.int64)
+    if n == 2 and periodic:
+        return np.array([0, 1], dtype=np.int64)
+    return np.array([-1, 0, 1], dtype=np.int64)
+
+
+@njit(cache=True, parallel=True)
+def build_lists(pos, radius, lower, length, periodic, cell_size, ncell, cell_of, cell_start, order,
+                skin, old_nbr, old_count, old_hist, nbr, nbr_count, hist):
+    """Fill nbr/nbr_count/hist for every particle, copying each surviving pair's history."""
+    n = pos.shape[0]
+    cap = nbr.shape[1]
+    offx = _axis_offsets(ncell[0], periodic[0])
+    offy = _axis_offsets(ncell[1], periodic[1])
+    offz = _axis_offsets(ncell[2], periodic[2])
+    for i in prange(n):
+        c = cell_of[i]
+        cz = c % ncell[2]
+        cy = (c // ncell[2]) % ncell[1]
+        cx = c // (ncell[2] * ncell[1])
+        count = 0
+        for ox in offx:
+            gx = cx + ox
+            if gx < 0 or gx >= ncell[0]:
+                if not periodic[0]:
+                    continue
+                gx = (gx + ncell[0]) % ncell[0]
+            for oy in offy:
+                gy = cy + oy
+                if gy < 0 or gy >= ncell[1]:
+                    if not periodic[1]:
+                        continue
+                    gy = (gy + ncell[1]) % ncell[1]
+                for oz in offz:
+                    gz = cz + oz
+                    if gz < 0 or gz >= ncell[2]:
+                        if not periodic[2]:
+                            continue
+                        gz = (gz + ncell[2]) % ncell[2]
+                    g = (gx * ncell[1] + gy) * ncell[2] + gz
+                    for s in range(cell_start[g], cell_start[g + 1]):
+                        j = order[s]
+                        if j == i:
+                            continue
+                        d2 = 0.0
+                        for a in range(3):
+                            d = minimum_image(pos[j, a] - pos[i, a], length[a], periodic[a])
+                            d2 += d * d
+                        reach = radius[i] + radius[j] + skin
+                        if d2 < reach * reach:
+                            if count < cap:
+                                # insertion keeps the row sorted by j: a fixed summation order
+                                k = count
+                                while k > 0 and nbr[i, k - 1] > j:
+                                    nbr[i, k] = nbr[i, k - 1]
+                                    k -= 1
+                                nbr[i, k] = j
+                            count += 1
+        nbr_count[i] = count
+        # carry the tangential history of pairs present in both lists (both rows sorted)
+        kept = min(count, cap)
+        old = old_count[i]
+        if old > cap:
+            old = cap
+        p = 0
+        for k in range(kept):
+            j = nbr[i, k]
+            while p < old and old_nbr[i, p] < j:
+                p += 1
+            if p < old and old_nbr[i, p] == j:
+                for a in range(3):
+                    hist[i, k, a] = old_hist[i, p, a]
+            else:
+                for a in range(3):
+                    hist[i, k, a] = 0.0
+
+
+@njit(cache=True)
+def max_displacement_sq(pos, ref_pos, length, periodic):
+    """Largest squared displacement since the list was built (minimum image) [m^2]."""
+    worst = 0.0
+    for i in range(pos.shape[0]):
+        d2 = 0.0
+        for a in range(3):
+            d = minimum_image(pos[i, a] - ref_pos[i, a], length[a], periodic[a])
+            d2 += d * d
+        if d2 > worst:
+            worst = d2
+    return worst
+
+
+@njit(cache=True)
+def worst_overlap(pos, radius, nbr, nbr_count, length, periodic):
+    """The listed pair with the largest overlap relative to the smaller radius.
+    Returns (i, j, overlap / min(r_i, r_j)); (-1, -1, 0.0) when nothing touches."""
+    best_i = -1
+    best_j = -1
+    best = 0.0
+    for i in range(pos.shape[0]):
+        for k in range(min(nbr_count[i], nbr.shape[1])):
+            j = nbr[i, k]
+            if j < i:
+                continue
+            d2 = 0.0
+            for a in range(3):
+                d = minimum_image(pos[i, a] - pos[j, a], length[a], periodic[a])
+                d2 += d * d
+            overlap = (radius[i] + radius[j] - d2**0.5) / min(radius[i], radius[j])
+            if overlap > best:
+                best = overlap
+                best_i = i
+                best_j = j
+    return best_i, best_j, best

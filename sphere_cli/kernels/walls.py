@@ -1,0 +1,83 @@
+"""Plane walls on the faces of the box: the linear contact law of `contact.py` against a body
+of infinite mass (m* = m_i), with its own Coulomb coefficient per wall.
+
+Arguments: pos, vel, angvel (N,3); radius, mass (N,); wall_axis (W,) int64 axis of the normal;
+wall_sign (W,) +1.0 on a lower face (normal along +axis), -1.0 on an upper face; wall_coord (W,)
+[m]; wall_mu (W,) [-]; wall_hist (N,W,3) [m]; force, torque (N,3) accumulated in place.
+"""
+
+import math
+
+from numba import njit, prange
+
+from .contact import tangential_force
+
+
+@njit(cache=True, parallel=True)
+def linear_wall_forces(pos, vel, angvel, radius, mass, wall_axis, wall_sign, wall_coord, wall_mu,
+                       wall_hist, kn, kt, zeta, dt, force, torque):
+    """Add the forces of plane walls (W walls) to force/torque.
+
+    wall_axis (W,) int64 axis of the wall normal; wall_sign (W,) +1 for a lower face (normal
+    points up the axis), -1 for an upper face; wall_coord (W,) [m]; wall_mu (W,) [-];
+    wall_hist (N,W,3) [m]. A wall acts as a body of infinite mass: m* = m_i.
+    """
+    n = pos.shape[0]
+    nw = wall_axis.shape[0]
+    for i in prange(n):
+        ri = radius[i]
+        mi = mass[i]
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        for w in range(nw):
+            a = wall_axis[w]
+            gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
+            if gap >= ri:
+                wall_hist[i, w, 0] = 0.0
+                wall_hist[i, w, 1] = 0.0
+                wall_hist[i, w, 2] = 0.0
+                continue
+            n0 = 0.0
+            n1 = 0.0
+            n2 = 0.0
+            if a == 0:
+                n0 = wall_sign[w]
+            elif a == 1:
+                n1 = wall_sign[w]
+            else:
+                n2 = wall_sign[w]
+            delta = ri - gap
+            s0 = ri * angvel[i, 0]
+            s1 = ri * angvel[i, 1]
+            s2 = ri * angvel[i, 2]
+            v0 = vel[i, 0] - (s1 * n2 - s2 * n1)
+            v1 = vel[i, 1] - (s2 * n0 - s0 * n2)
+            v2 = vel[i, 2] - (s0 * n1 - s1 * n0)
+            vn = v0 * n0 + v1 * n1 + v2 * n2
+            cn = 2.0 * zeta * math.sqrt(kn * mi)
+            fn = kn * delta - cn * vn
+            if fn < 0.0:
+                fn = 0.0
+            vt0 = v0 - vn * n0
+            vt1 = v1 - vn * n1
+            vt2 = v2 - vn * n2
+            ct = 2.0 * zeta * math.sqrt(kt * mi)
+            g0, g1, g2 = tangential_force(
+                wall_hist, i, w, vt0, vt1, vt2, n0, n1, n2, kt, ct, wall_mu[w], fn, dt
+            )
+            f0 += fn * n0 + g0
+            f1 += fn * n1 + g1
+            f2 += fn * n2 + g2
+            t0 -= ri * (n1 * g2 - n2 * g1)
+            t1 -= ri * (n2 * g0 - n0 * g2)
+            t2 -= ri * (n0 * g1 - n1 * g0)
+        force[i, 0] += f0
+        force[i, 1] += f1
+        force[i, 2] += f2
+        torque[i, 0] += t0
+        torque[i, 1] += t1
+        torque[i, 2] += t2

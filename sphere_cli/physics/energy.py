@@ -1,0 +1,35 @@
+"""Observables of the particle system (diagnose phase, on the output schedule only):
+kinetic, gravitational and elastic energy, and contact counts. See kernels/energy.py."""
+
+from __future__ import annotations
+
+from ..kernels.energy import kinetic_energy, potential_energy
+
+UNITS = {
+    "kinetic_energy": "J",
+    "potential_energy": "J",
+    "elastic_energy": "J",
+    "total_energy": "J",
+    "contacts": "",
+    "wall_contacts": "",
+}
+
+
+def observables(scene) -> dict[str, float]:
+    state = scene.state
+    p = state.particles
+    kinetic = float(kinetic_energy(p.vel, p.angvel, p.mass, p.inertia))
+    potential = float(potential_energy(p.pos, p.mass, state.box.body_acc))
+    elastic, contacts = scene.contact.elastic_energy(state)
+    wall_contacts = 0
+    if scene.walls is not None:
+        wall_elastic, wall_contacts = scene.walls.elastic_energy(state)
+        elastic += wall_elastic
+    return {
+        "kinetic_energy": kinetic,
+        "potential_energy": potential,
+        "elastic_energy": elastic,
+        "total_energy": kinetic + potential + elastic,
+        "contacts": contacts,
+        "wall_contacts": wall_contacts,
+    }

@@ -1,0 +1,36 @@
+"""Time integration (integrate phase): velocity Verlet, see kernels/motion.py."""
+
+from __future__ import annotations
+
+from ..kernels.motion import first_unstable, kick, kick_drift
+from ..state import Particles, State
+
+
+class Motion:
+    phase = "integrate"
+
+    def kick_drift(self, state: State) -> None:
+        p, box = state.particles, state.box
+        kick_drift(p.pos, p.vel, p.angvel, p.force, p.torque, p.inv_mass, p.inv_inertia,
+                   box.lower, box.length, box.periodic, state.clock.dt)
+
+    def kick(self, state: State) -> None:
+        p = state.particles
+        kick(p.vel, p.angvel, p.force, p.torque, p.inv_mass, p.inv_inertia, state.clock.dt)
+
+    @staticmethod
+    def first_unstable(state: State) -> tuple[int, int]:
+        p, box = state.particles, state.box
+        i, reason = first_unstable(p.pos, p.vel, p.angvel, p.radius, box.lower, box.upper,
+                                   box.periodic, state.clock.dt)
+        return int(i), int(reason)
+
+    @staticmethod
+    def prognostic_state(state: State) -> dict:
+        p = state.particles
+        return {name: getattr(p, name) for name in Particles.PROGNOSTIC}
+
+    @staticmethod
+    def restore(state: State, arrays: dict) -> None:
+        for name in Particles.PROGNOSTIC:
+            getattr(state.particles, name)[...] = arrays[name]

@@ -1,0 +1,90 @@
+"""Neighbour search (prepare phase): keep the Verlet list valid, rebuilding it when some
+particle has moved half the skin, and growing its capacity when a row overflows."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.neighbors import build_lists, cell_index, counting_sort, max_displacement_sq
+from ..state import NeighborList, State
+
+INITIAL_CAPACITY = 16
+
+
+def allocate_neighbor_list(n: int, skin: float, capacity: int = INITIAL_CAPACITY) -> NeighborList:
+    return NeighborList(
+        skin=skin,
+        nbr=np.zeros((n, capacity), dtype=np.int32),
+        nbr_count=np.zeros(n, dtype=np.int32),
+        hist=np.zeros((n, capacity, 3)),
+        ref_pos=np.zeros((n, 3)),
+    )
+
+
+class NeighborSearch:
+    phase = "prepare"
+
+    def __init__(self, state: State):
+        box, p, nl = state.box, state.particles, state.neighbors
+        reach = 2.0 * float(p.radius.max()) + nl.skin
+        self.ncell = np.maximum(np.floor(box.length / reach).astype(np.int64), 1)
+        self.cell_size = box.length / self.ncell
+        self.cell_of = np.zeros(p.count, dtype=np.int64)
+        self.cell_start = np.zeros(int(np.prod(self.ncell)) + 1, dtype=np.int64)
+        self.order = np.zeros(p.count, dtype=np.int64)
+        self.threshold2 = (0.5 * nl.skin) ** 2
+        self._spare_like(nl)
+
+    def _spare_like(self, nl: NeighborList):
+        self.spare_nbr = np.zeros_like(nl.nbr)
+        self.spare_count = np.zeros_like(nl.nbr_count)
+        self.spare_hist = np.zeros_like(nl.hist)
+
+    def prepare(self, state: State) -> None:
+        box, p, nl = state.box, state.particles, state.neighbors
+        if max_displacement_sq(p.pos, nl.ref_pos, box.length, box.periodic) > self.threshold2:
+            self.rebuild(state)
+
+    def rebuild(self, state: State) -> None:
+        box, p, nl = state.box, state.particles, state.neighbors
+        cell_index(p.pos, box.lower, self.cell_size, self.ncell, self.cell_of)
+        counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
+        while True:
+            build_lists(p.pos, p.radius, box.lower, box.length, box.periodic, self.cell_size,
+                        self.ncell, self.cell_of, self.cell_start, self.order, nl.skin,
+                        nl.nbr, nl.nbr_count, nl.hist, self.spare_nbr, self.spare_count,
+                        self.spare_hist)
+            needed = int(self.spare_count.max()) if p.count else 0
+            if needed <= nl.nbr.shape[1]:
+                break
+            self._grow(nl, needed)
+        nl.nbr, self.spare_nbr = self.spare_nbr, nl.nbr
+        nl.nbr_count, self.spare_count = self.spare_count, nl.nbr_count
+        nl.hist, self.spare_hist = self.spare_hist, nl.hist
+        nl.ref_pos[:] = p.pos
+        nl.builds += 1
+
+    def _grow(self, nl: NeighborList, needed: int) -> None:
+        """Widen every row to hold `needed` (plus headroom), keeping the current list intact."""
+        capacity = max(needed + 4, int(1.5 * nl.nbr.shape[1]))
+        n = nl.nbr.shape[0]
+        nbr = np.zeros((n, capacity), dtype=np.int32)
+        hist = np.zeros((n, capacity, 3))
+        width = nl.nbr.shape[1]
+        nbr[:, :width] = nl.nbr
+        hist[:, :width] = nl.hist
+        nl.nbr, nl.hist = nbr, hist
+        self._spare_like(nl)
+
+    @staticmethod
+    def prognostic_state(state: State) -> dict:
+        nl = state.neighbors
+        arrays = {name: getattr(nl, name) for name in NeighborList.PROGNOSTIC}
+        arrays["skin"] = np.float64(nl.skin)
+        return arrays
+
+    def restore(self, state: State, arrays: dict) -> None:
+        nl = state.neighbors
+        for name in NeighborList.PROGNOSTIC:
+            setattr(nl, name, np.array(arrays[name]))
+        self._spare_like(nl)

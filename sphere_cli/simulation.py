@@ -1,0 +1,144 @@
+"""The time loop: one step composes only the modules the scene holds, then the schedules run.
+
+Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick.
+After the clock advances: stability guard (every `blowup_check_every` steps and before every
+checkpoint), trajectory frames, checkpoints and status, each on its own schedule. A stop
+request (signal, wall-time budget) writes a checkpoint at the next step boundary.
+"""
+
+from __future__ import annotations
+
+import math
+import time as wallclock
+from dataclasses import dataclass, field
+
+from .errors import NumericalError
+
+REASONS = {1: "a non-finite position or velocity", 2: "it moves more than half its radius in one step",
+           3: "it left the box through an open face"}
+
+
+@dataclass
+class StepSchedule:
+    """Fires every n steps, and/or every `wall_seconds` of wall-clock time."""
+
+    every_steps: int | None = None
+    wall_seconds: float | None = None
+    last_wall: float = field(default_factory=wallclock.monotonic)
+
+    @classmethod
+    def from_config(cls, schedule, dt: float) -> StepSchedule:
+        steps = schedule.every_steps
+        if schedule.every_time is not None:
+            by_time = max(1, round(schedule.every_time / dt))
+            steps = by_time if steps is None else min(steps, by_time)
+        wall = schedule.every_wall_minutes * 60.0 if schedule.every_wall_minutes else None
+        return cls(every_steps=steps, wall_seconds=wall)
+
+    def due(self, step: int, now: float) -> bool:
+        if self.every_steps is not None and step % self.every_steps == 0:
+            return True
+        return self.wall_seconds is not None and now - self.last_wall >= self.wall_seconds
+
+    def done(self, now: float) -> None:
+        self.last_wall = now
+
+
+class StopFlag:
+    """Set from a signal handler or the wall-time budget; read once per step."""
+
+    def __init__(self):
+        self.reason: str | None = None
+
+    def request(self, reason: str) -> None:
+        if self.reason is None:
+            self.reason = reason
+
+
+def end_step_for(duration: float, dt: float) -> int:
+    # the run reaches at least `duration`; the tiny tolerance absorbs round-off in duration/dt
+    return max(0, math.ceil(duration / dt - 1e-9))
+
+
+def advance(scene, steps: int) -> None:
+    """Advance the scene by `steps` steps with no output (library use and tests)."""
+    state = scene.state
+    motion, neighbors = scene.motion, scene.neighbors
+    forces = scene.force_modules
+    clock = state.clock
+    for _ in range(steps):
+        motion.kick_drift(state)
+        neighbors.prepare(state)
+        for module in forces:
+            module.forces(state)
+        motion.kick(state)
+        clock.step += 1
+
+
+def check_stable(scene) -> None:
+    """Raise NumericalError naming step, time and particle if the state has gone bad."""
+    i, reason = scene.motion.first_unstable(scene.state)
+    if i >= 0:
+        p = scene.state.particles
+        clock = scene.state.clock
+        raise NumericalError(
+            f"numerical failure at step {clock.step} (t = {clock.time:.6g} s): particle {i} at "
+            f"{tuple(float(x) for x in p.pos[i])} m with velocity {tuple(float(x) for x in p.vel[i])} "
+            f"m/s: {REASONS[reason]}. The newest checkpoint before this step is intact; a smaller "
+            "dt (or dt = \"auto\") or softer contacts may help."
+        )
+
+
+class Loop:
+    """Runs a scene to `end_step`, calling back into the run directory for output."""
+
+    def __init__(self, scene, end_step: int, output, stop: StopFlag, max_wall_seconds: float | None,
+                 progress):
+        self.scene = scene
+        self.end_step = end_step
+        self.output = output
+        self.stop = stop
+        self.max_wall_seconds = max_wall_seconds
+        self.progress = progress
+        dt = scene.state.clock.dt
+        out_cfg = scene.case.output
+        self.frames = StepSchedule.from_config(out_cfg.frames, dt)
+        self.checkpoints = StepSchedule.from_config(out_cfg.checkpoints, dt)
+        self.status = StepSchedule(wall_seconds=progress.interval)
+        self.check_every = scene.case.simulation.blowup_check_every
+
+    def run(self) -> str:
+        """Returns "done" or the stop reason."""
+        scene = self.scene
+        state = scene.state
+        clock = state.clock
+        started = wallclock.monotonic()
+        start_step = clock.step
+        while clock.step < self.end_step:
+            if self.stop.reason is not None:
+                break
+            if self.max_wall_seconds is not None and wallclock.monotonic() - started >= self.max_wall_seconds:
+                self.stop.request("wall-time budget (--max-wall-time) reached")
+                break
+            advance(scene, 1)
+            step = clock.step
+            if step % self.check_every == 0:
+                check_stable(scene)
+            now = wallclock.monotonic()
+            if self.frames.due(step, now):
+                self.output.frame(scene)
+                self.frames.done(now)
+            if self.checkpoints.due(step, now) and step < self.end_step:
+                check_stable(scene)
+                self.output.checkpoint(scene)
+                self.checkpoints.done(now)
+            if self.status.due(step, now):
+                self.progress.update(scene, step - start_step, now - started)
+                self.status.done(now)
+        check_stable(scene)
+        self.output.frame(scene)
+        self.output.checkpoint(scene)
+        finished = clock.step >= self.end_step
+        self.progress.update(scene, clock.step - start_step, wallclock.monotonic() - started,
+                             state="done" if finished else "stopped")
+        return "done" if finished else self.stop.reason

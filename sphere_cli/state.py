@@ -1,0 +1,94 @@
+"""Plain containers of arrays: the whole state of a run, and nothing that is not needed.
+
+A container exists only when the case needs it (no walls: `walls` is None; a dry scene:
+`fluid` is None). Arrays are allocated once by the builder; the time loop only writes into
+them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Clock:
+    dt: float
+    step: int = 0
+
+    @property
+    def time(self) -> float:
+        # computed, not accumulated: no drift, and bitwise equal after a restart
+        return self.step * self.dt
+
+
+@dataclass
+class Box:
+    lower: np.ndarray  # (3,) [m]
+    upper: np.ndarray  # (3,) [m]
+    periodic: np.ndarray  # (3,) uint8
+    body_acc: np.ndarray  # (3,) [m/s^2] gravity
+
+    @property
+    def length(self) -> np.ndarray:
+        return self.upper - self.lower
+
+
+@dataclass
+class Particles:
+    pos: np.ndarray  # (N,3) [m]
+    vel: np.ndarray  # (N,3) [m/s]
+    angvel: np.ndarray  # (N,3) [rad/s]
+    force: np.ndarray  # (N,3) [N], at the current step (the next half kick needs it)
+    torque: np.ndarray  # (N,3) [N m]
+    radius: np.ndarray  # (N,) [m]
+    mass: np.ndarray  # (N,) [kg]
+    inertia: np.ndarray  # (N,) [kg m^2]
+    inv_mass: np.ndarray  # (N,) [1/kg]
+    inv_inertia: np.ndarray  # (N,) [1/(kg m^2)]
+
+    @property
+    def count(self) -> int:
+        return self.pos.shape[0]
+
+    PROGNOSTIC = ("pos", "vel", "angvel", "force", "torque", "radius", "mass", "inertia",
+                  "inv_mass", "inv_inertia")
+
+
+@dataclass
+class NeighborList:
+    """Verlet list with skin and the tangential spring of every listed pair (see kernels)."""
+
+    skin: float  # [m]
+    nbr: np.ndarray  # (N,C) int32
+    nbr_count: np.ndarray  # (N,) int32
+    hist: np.ndarray  # (N,C,3) [m]
+    ref_pos: np.ndarray  # (N,3) positions at the last build [m]
+    builds: int = 0
+    # double buffers and cell-list scratch (not state: rebuilt from the above)
+    spare: dict = field(default_factory=dict)
+
+    PROGNOSTIC = ("nbr", "nbr_count", "hist", "ref_pos")
+
+
+@dataclass
+class Walls:
+    faces: list[str]
+    axis: np.ndarray  # (W,) int64
+    sign: np.ndarray  # (W,) float64, +1 lower face, -1 upper face
+    coord: np.ndarray  # (W,) [m]
+    mu: np.ndarray  # (W,) [-]
+    hist: np.ndarray  # (N,W,3) [m]
+
+    PROGNOSTIC = ("coord", "hist")
+
+
+@dataclass
+class State:
+    clock: Clock
+    box: Box
+    particles: Particles
+    neighbors: NeighborList
+    walls: Walls | None = None
+    fluid: object | None = None

@@ -1,0 +1,20 @@
+"""Shared fixtures: small cases written as TOML text, run through the library API."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture
+def write_case(tmp_path: Path):
+    """Write dedented TOML text to a file in tmp_path and return its path."""
+
+    def _write(text: str, name: str = "case.toml") -> Path:
+        path = tmp_path / name
+        path.write_text(textwrap.dedent(text))
+        return path
+
+    return _write
