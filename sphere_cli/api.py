@@ -122,8 +122,8 @@ def _drive(scene, rundir: RunDirectory, output: RunOutput, log, max_wall_time: f
 
 def run(case_path: str | Path, run_dir: str | Path | None = None, overwrite: bool = False,
         max_wall_time: float | None = None, handle_signals: bool = False,
-        show_progress: bool = False) -> RunResult:
-    loaded = load_case(case_path)
+        show_progress: bool = False, until: float | None = None) -> RunResult:
+    loaded = _with_duration(load_case(case_path), until)
     _set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)

@@ -71,6 +71,7 @@ def run(
     case: Path = typer.Argument(..., help="Case file (TOML)."),
     output: Path | None = typer.Option(None, "-o", "--output", help="Run directory (default runs/<case name>)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory."),
+    until: float | None = typer.Option(None, "--until", help="End time [s] instead of simulation.duration."),
     max_wall_time: str | None = typer.Option(
         None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
     ),
@@ -79,7 +80,7 @@ def run(
     """Run a case: build the scene, advance it, write trajectory and checkpoints."""
     try:
         result = api.run(case, output, overwrite=overwrite, max_wall_time=parse_wall_time(max_wall_time),
-                         handle_signals=True, show_progress=not quiet)
+                         handle_signals=True, show_progress=not quiet, until=until)
     except SphereError as exc:
         _fail(exc)
     except KeyboardInterrupt:

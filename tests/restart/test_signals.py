@@ -1,0 +1,91 @@
+"""Batch-job stops: SIGTERM/SIGUSR1 (sent by SLURM before a time limit), Ctrl-C and the
+wall-time budget write a checkpoint at the next step and exit 75; the run then resumes."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from sphere_cli import api
+from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+
+CASE = """
+    [simulation]
+    duration = 20.0
+    [domain]
+    upper = [0.01, 0.01, 0.02]
+    [particles]
+    count = 40
+    density = 2500.0
+    [contact]
+    model = "linear"
+    normal_stiffness = 1.0e4
+    [[walls]]
+    face = "z-"
+    [output.frames]
+    every_time = 1.0
+    [output.checkpoints]
+    every_time = 5.0
+"""
+
+
+def _start(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE))
+    run_dir = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "sphere_cli.cli", "run", str(case), "-o", str(run_dir)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    log = run_dir / "run.log"
+    while time.monotonic() < deadline:  # wait until the time loop is running
+        if log.is_file() and "running from step" in log.read_text():
+            break
+        if proc.poll() is not None:
+            pytest.fail(f"run ended early: {proc.communicate()}")
+        time.sleep(0.05)
+    time.sleep(0.3)
+    return proc, run_dir
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1, signal.SIGINT], ids=lambda s: s.name)
+def test_signal_writes_checkpoint_and_exits_75(tmp_path: Path, sig):
+    proc, run_dir = _start(tmp_path)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 75, err
+    assert "Traceback" not in err
+    assert "sphere resume" in err
+    newest = read_checkpoint(list_checkpoints(run_dir / "checkpoints")[-1])
+    assert newest.step > 0
+    status = json.loads((run_dir / "status.json").read_text())
+    assert status["state"] == "stopped" and status["step"] == newest.step
+    result = api.resume(run_dir, until=newest.step * newest.dt + 0.01)
+    assert result.status == "done"
+
+
+def test_second_interrupt_stops_at_once(tmp_path: Path):
+    proc, run_dir = _start(tmp_path)
+    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 75, err
+    assert "Traceback" not in err
+    for path in list_checkpoints(run_dir / "checkpoints"):
+        read_checkpoint(path)  # every checkpoint left behind verifies
+
+
+def test_wall_time_budget(tmp_path: Path):
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE))
+    proc = subprocess.run([sys.executable, "-m", "sphere_cli.cli", "run", str(case), "-o",
+                           str(tmp_path / "run"), "--max-wall-time", "1s"], capture_output=True, text=True)
+    assert proc.returncode == 75, proc.stderr
+    assert "wall-time" in proc.stderr
+    assert len(list_checkpoints(tmp_path / "run" / "checkpoints")) >= 2
