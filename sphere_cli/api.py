@@ -25,7 +25,7 @@ from .simulation import Loop, StopFlag, end_step_for
 @dataclass
 class RunResult:
     run_dir: Path
-    status: str  # "done" or "stopped"
+    status: str  # "done" (a stop raises StoppedEarly)
     step: int
     time: float
     wall_seconds: float
@@ -93,31 +93,26 @@ def _drive(scene, rundir: RunDirectory, output: RunOutput, log, max_wall_time: f
     try:
         with _signal_handlers(stop, handle_signals):
             outcome = loop.run()
+        wall = wallclock.monotonic() - started
+        rate = (clock.step - start_step) * scene.state.particles.count / wall if wall > 0 else 0.0
+        if outcome != "done":
+            log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
+            raise StoppedEarly(
+                f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a checkpoint "
+                f"was written: continue with `sphere resume {rundir.path}`"
+            )
+        log.info("done at step %d (t = %.6g s), %.3g particle-steps/s", clock.step, clock.time, rate)
+        return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate)
     except NumericalError as exc:
         log.error("%s", exc)
-        progress.close()
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
         raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
-        progress.close()
         raise
     finally:
+        progress.close()
         rundir.close_logger()
-    progress.close()
-    wall = wallclock.monotonic() - started
-    steps = clock.step - start_step
-    rate = steps * scene.state.particles.count / wall if wall > 0 else 0.0
-    result = RunResult(rundir.path, "done" if outcome == "done" else "stopped", clock.step, clock.time,
-                       wall, rate)
-    if outcome != "done":
-        log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
-        raise StoppedEarly(
-            f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a checkpoint was "
-            f"written: continue with `sphere resume {rundir.path}`"
-        )
-    log.info("done at step %d (t = %.6g s), %.3g particle-steps/s", clock.step, clock.time, rate)
-    return result
 
 
 def run(case_path: str | Path, run_dir: str | Path | None = None, overwrite: bool = False,

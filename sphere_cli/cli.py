@@ -123,6 +123,33 @@ def inspect(
     typer.echo(api.to_json(summary) if as_json else render(summary))
 
 
+@app.command()
+def bench(
+    sizes: str = typer.Option("10000,100000", "--sizes", help="Particle counts, comma-separated."),
+    threads: str = typer.Option("1,2", "--threads", help="Thread counts, comma-separated."),
+    steps: int = typer.Option(200, "--steps", help="Steps per timing."),
+    repeats: int = typer.Option(3, "--repeats", help="Timings per row (the median is reported)."),
+    states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
+    output: Path = typer.Option(Path("bench-results"), "-o", "--output", help="Folder for results and the settled beds."),
+) -> None:
+    """Benchmark the canonical scene: particle-steps per second for each size, state and thread count."""
+    from .bench import run_benchmark
+
+    def numbers(text: str) -> tuple[int, ...]:
+        try:
+            return tuple(int(x) for x in text.split(",") if x.strip())
+        except ValueError:
+            raise typer.BadParameter(f"{text!r}: expected comma-separated integers") from None
+
+    chosen = tuple(s.strip() for s in states.split(",") if s.strip())
+    if not set(chosen) <= {"loose", "settled"}:
+        raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
+    try:
+        run_benchmark(numbers(sizes), numbers(threads), steps, repeats, chosen, output)
+    except SphereError as exc:
+        _fail(exc)
+
+
 def _interrupted() -> None:
     typer.echo("sphere: interrupted; the newest checkpoint is intact: continue with `sphere resume`", err=True)
     raise typer.Exit(StoppedEarly.exit_code)

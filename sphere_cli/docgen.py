@@ -42,9 +42,10 @@ of the value, `-` meaning dimensionless. Unknown keys are errors. How to read th
   and line named. Rules that tie several keys together (for instance `min <= max`, walls on
   periodic axes, particles that must fit in the box) are checked too; see the user guide.
 - A **tagged union** is a table whose tag key (`distribution`, `method`, `model`, ...) picks
-  one variant; the tag must be written whenever the table is, and only the keys of the chosen
-  variant are allowed. A table that has a default may be left out entirely; its default then
-  applies as a whole.
+  one variant; only the keys of that variant are allowed. Where a tag has a default, a table
+  without the tag is read as that variant.
+- A table that has a default may be left out entirely; its default then applies as a whole
+  (writing the table replaces it: keys not written take their own defaults).
 
 `sphere validate case.toml` prints a case with every default filled in; `sphere schema` prints
 the same information as a JSON schema for editors.
@@ -263,7 +264,7 @@ def _row(path: str, field: FieldInfo, tag: str | None = None) -> str:
     unit, text = _unit_and_text(field.description)
     if tag is not None:
         type_text = _type_text(field.annotation)
-        default = "*required*"
+        default = _default(field)
         text = text or f"Selects this variant (`{tag} = {type_text}`)."
     else:
         type_text = _type_text(_without_none(_strip_annotated(field.annotation)[0])[0])
@@ -341,8 +342,12 @@ def _section(field: FieldInfo, path: str, level: int) -> list[str]:
     out += _field_intro(field, kind) + [""]
     tag = kind.tag
     if tag:
-        names = [_type_text(m.model_fields[tag].annotation) for m in kind.models if tag in m.model_fields]
-        out += [f"`{tag}` is one of: " + ", ".join(f"{n}" for n in names) + ".", ""]
+        variants = [m.model_fields[tag] for m in kind.models if tag in m.model_fields]
+        line = f"`{tag}` selects the variant: " + ", ".join(_type_text(f.annotation) for f in variants) + "."
+        implied = [f for f in variants if not f.is_required()]
+        if len(implied) == 1:
+            line += f" A table without `{tag}` is read as {_toml(implied[0].get_default())}."
+        out += [line, ""]
     for model in kind.models:
         if tag and tag in model.model_fields:
             heading = f"`{tag} = {_type_text(model.model_fields[tag].annotation)}`"

@@ -15,10 +15,10 @@ from pathlib import Path
 import tomli
 from pydantic import ValidationError
 
-from ..errors import CaseError, MissingInputError
+from ..errors import CaseError, MissingInputError, SphereError
 from .consistency import check_consistency
 from .locate import find_line, format_location
-from .schema import NON_PHYSICS_KEYS, Case
+from .schema import NON_PHYSICS_KEYS, Case, Strict
 
 
 @dataclass(frozen=True)
@@ -44,8 +44,10 @@ def load_case(path: str | Path) -> LoadedCase:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise MissingInputError(f"{path}: case file not found") from None
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
-        raise MissingInputError(f"{path}: cannot read case file ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise CaseError(f"{path}: a case file must be UTF-8 text ({exc})") from None
+    except OSError as exc:
+        raise MissingInputError(f"{path}: cannot read case file ({exc.strerror or exc})") from None
     return parse_case(text, path)
 
 
@@ -54,7 +56,10 @@ def parse_case(text: str, path: Path | None = None) -> LoadedCase:
     try:
         data = tomli.loads(text)
     except tomli.TOMLDecodeError as exc:
-        raise CaseError(f"{where}: not valid TOML: {exc}") from None
+        line = getattr(exc, "lineno", None)
+        if line is None:
+            raise CaseError(f"{where}: not valid TOML: {exc}") from None
+        raise CaseError(f"{where}:{line}: not valid TOML: {exc.msg} (column {exc.colno})") from None
     try:
         case = Case.model_validate(data)
     except ValidationError as exc:
@@ -66,18 +71,60 @@ def parse_case(text: str, path: Path | None = None) -> LoadedCase:
             value = _value_at(data, loc)
             lines.append(_one_error(where, text, loc, value, message))
         raise CaseError("\n".join(lines))
+    _remember_source(case, (where, text))
     return LoadedCase(case=case, text=text, path=path)
+
+
+def _remember_source(model, source: tuple[str, str]) -> None:
+    """Tell every part of the case which file and text it came from (see `case_error`)."""
+    if isinstance(model, Strict):
+        model._source = source
+        for name in type(model).model_fields:
+            _remember_source(getattr(model, name), source)
+    elif isinstance(model, list | tuple):
+        for item in model:
+            _remember_source(item, source)
+
+
+def case_error(model, loc: tuple, message: str, error=CaseError) -> SphereError:
+    """An error about the key at `loc` (a path from the top of the case), found after loading,
+    e.g. while building the scene. `model` is any part of a loaded case: the message then starts
+    with `case.toml:LINE: key = value:`, as the errors of loading do."""
+    source = getattr(model, "_source", None)
+    if source is None:
+        return error(f"{format_location(loc)}: {message}")
+    where, text = source
+    try:
+        value = _value_at(tomli.loads(text), loc)
+    except tomli.TOMLDecodeError:
+        value = _MISSING
+    return error(_one_error(where, text, loc, value, message))
 
 
 def _one_error(where: str, text: str, loc: tuple, value, message: str) -> str:
     line = find_line(text, loc)
     place = f"{where}:{line}" if line else where
     key = format_location(loc) if loc else "(top level)"
-    shown = "" if value is _MISSING else f" = {value!r}"
+    shown = "" if value is _MISSING else f" = {_toml_value(value)}"
     return f"{place}: {key}{shown}: {message}"
 
 
 _MISSING = object()
+
+
+def _toml_value(value) -> str:
+    """A value as it would be written in TOML (short: long tables and arrays are elided)."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = json.dumps(value)
+    elif isinstance(value, dict):
+        text = "{ " + ", ".join(f"{format_location((k,))} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    elif isinstance(value, list):
+        text = "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    else:
+        text = str(value)
+    return text if len(text) <= 80 else text[:76] + " ..."
 
 
 def _value_at(data, loc: tuple):
@@ -115,11 +162,15 @@ def _describe_validation_error(exc: ValidationError, data, text: str, where: str
         elif err["type"] == "missing":
             message = "required key is missing"
         elif err["type"] == "union_tag_invalid":
-            expected = err.get("ctx", {}).get("expected_tags", "")
-            message = f"unknown choice; expected one of {expected}"
+            ctx = err.get("ctx", {})
+            loc += (ctx.get("discriminator", "").strip("'"),)
+            message = "unknown choice; expected one of " + ctx.get("expected_tags", "").replace("'", '"')
+        elif err["type"] == "union_tag_not_found":
+            loc += (err.get("ctx", {}).get("discriminator", "").strip("'"),)
+            message = "required key is missing (it selects the kind; `sphere schema` lists the choices)"
         elif message.startswith("Value error, "):
             message = message[len("Value error, ") :]
-        value = _value_at(data, loc) if err["type"] != "missing" else _MISSING
+        value = _value_at(data, loc) if err["type"] not in ("missing", "union_tag_not_found") else _MISSING
         lines.append(_one_error(where, text, loc, value, message))
     return "\n".join(lines)
 

@@ -11,20 +11,35 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
-Vec3 = tuple[float, float, float]
+# Numbers and flags are strict: TOML `true` is not 1, and "2500" is not a number. An integer is
+# still accepted where a float is expected.
+Real = Annotated[float, Field(strict=True)]
+Count = Annotated[int, Field(strict=True)]
+Flag = Annotated[bool, Field(strict=True)]
+Vec3 = tuple[Real, Real, Real]
 FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
+    # (file name, TOML text) the values came from, set by config.load.parse_case, so that a
+    # check made later (while building the scene) can still name the line of a key.
+    _source: tuple[str, str] | None = PrivateAttr(None)
+
+
+def _default_tag(data, field: str, tag: str, default: str):
+    """Fill in the tag of a tagged union given as a table without it (its declared default)."""
+    if isinstance(data, dict) and isinstance(data.get(field), dict) and tag not in data[field]:
+        data = {**data, field: {tag: default, **data[field]}}
+    return data
 
 
 class Simulation(Strict):
     """Time stepping and when to stop."""
 
-    duration: float = Field(gt=0, description="Simulated time to reach [s].")
+    duration: Real = Field(gt=0, description="Simulated time to reach [s].")
     dt: float | Literal["auto"] = Field(
         "auto",
         description=(
@@ -32,13 +47,13 @@ class Simulation(Strict):
             "possible contact. A number above that limit is refused."
         ),
     )
-    dt_safety: float = Field(
+    dt_safety: Real = Field(
         0.1, gt=0, le=1, description="Fraction of the critical time step used by dt = \"auto\" [-]."
     )
-    threads: int | None = Field(
+    threads: Count | None = Field(
         None, ge=1, description="Numba threads (default: all cores). Results do not depend on it."
     )
-    neighbor_skin: float = Field(
+    neighbor_skin: Real = Field(
         0.4,
         gt=0,
         le=2,
@@ -47,17 +62,20 @@ class Simulation(Strict):
             "results are the same for any skin."
         ),
     )
-    blowup_check_every: int = Field(
+    blowup_check_every: Count = Field(
         100,
         ge=1,
         description="Steps between checks for NaN and runaway velocities [-].",
     )
 
-    @model_validator(mode="after")
-    def _positive_dt(self):
-        if self.dt != "auto" and not self.dt > 0:
-            raise ValueError(f'dt must be a positive number of seconds or "auto", got {self.dt}')
-        return self
+    @field_validator("dt", mode="before")
+    @classmethod
+    def _positive_dt(cls, value):
+        if value == "auto":
+            return value
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise ValueError('expected a positive number of seconds or "auto"')
+        return float(value)
 
 
 class Domain(Strict):
@@ -65,7 +83,7 @@ class Domain(Strict):
 
     lower: Vec3 = Field((0.0, 0.0, 0.0), description="Lower corner of the box [m].")
     upper: Vec3 = Field(description="Upper corner of the box [m].")
-    periodic: tuple[bool, bool, bool] = Field(
+    periodic: tuple[Flag, Flag, Flag] = Field(
         (False, False, False), description="Periodic boundary along x, y, z."
     )
     gravity: Vec3 = Field((0.0, 0.0, -9.81), description="Gravitational acceleration [m/s^2].")
@@ -85,7 +103,7 @@ class Wall(Strict):
         description='Face of the box the wall lies on: "x-", "x+", "y-", "y+", "z-" or "z+".'
     )
     mode: Literal["fixed"] = Field("fixed", description="Wall motion: fixed in place.")
-    friction: float | None = Field(
+    friction: Real | None = Field(
         None, ge=0, description="Coulomb friction coefficient against particles (default: the contact's) [-]."
     )
 
@@ -95,7 +113,7 @@ class Wall(Strict):
 
 class FixedRadius(Strict):
     distribution: Literal["fixed"] = "fixed"
-    value: float = Field(gt=0, description="Radius of every particle [m].")
+    value: Real = Field(gt=0, description="Radius of every particle [m].")
 
     @property
     def largest(self) -> float:
@@ -104,8 +122,8 @@ class FixedRadius(Strict):
 
 class UniformRadius(Strict):
     distribution: Literal["uniform"]
-    min: float = Field(gt=0, description="Smallest radius [m].")
-    max: float = Field(gt=0, description="Largest radius [m].")
+    min: Real = Field(gt=0, description="Smallest radius [m].")
+    max: Real = Field(gt=0, description="Largest radius [m].")
 
     @model_validator(mode="after")
     def _ordered(self):
@@ -120,10 +138,10 @@ class UniformRadius(Strict):
 
 class LognormalRadius(Strict):
     distribution: Literal["lognormal"]
-    median: float = Field(gt=0, description="Median radius [m].")
-    sigma: float = Field(gt=0, le=2, description="Standard deviation of ln(radius) [-].")
-    min: float = Field(gt=0, description="Radii below this are redrawn [m].")
-    max: float = Field(gt=0, description="Radii above this are redrawn [m].")
+    median: Real = Field(gt=0, description="Median radius [m].")
+    sigma: Real = Field(gt=0, le=2, description="Standard deviation of ln(radius) [-].")
+    min: Real = Field(gt=0, description="Radii below this are redrawn [m].")
+    max: Real = Field(gt=0, description="Radii above this are redrawn [m].")
 
     @model_validator(mode="after")
     def _ordered(self):
@@ -138,9 +156,9 @@ class LognormalRadius(Strict):
 
 class BimodalRadius(Strict):
     distribution: Literal["bimodal"]
-    small: float = Field(gt=0, description="Radius of the small species [m].")
-    large: float = Field(gt=0, description="Radius of the large species [m].")
-    large_fraction: float = Field(
+    small: Real = Field(gt=0, description="Radius of the small species [m].")
+    large: Real = Field(gt=0, description="Radius of the large species [m].")
+    large_fraction: Real = Field(
         0.5, ge=0, le=1, description="Number fraction of large particles [-]."
     )
 
@@ -159,10 +177,10 @@ RadiusDistribution = Annotated[
 
 class LatticePlacement(Strict):
     method: Literal["lattice"] = "lattice"
-    spacing: float = Field(
+    spacing: Real = Field(
         1.2, ge=1.0, description="Lattice spacing as a multiple of the largest diameter [-]."
     )
-    jitter: float = Field(
+    jitter: Real = Field(
         0.1,
         ge=0,
         le=1,
@@ -176,7 +194,7 @@ class RandomPlacement(Strict):
     method: Literal["random"]
     region_lower: Vec3 | None = Field(None, description="Lower corner of the filled region (default: the box) [m].")
     region_upper: Vec3 | None = Field(None, description="Upper corner of the filled region (default: the box) [m].")
-    max_attempts: int = Field(
+    max_attempts: Count = Field(
         200, ge=1, description="Candidate positions tried per particle before giving up [-]."
     )
 
@@ -199,23 +217,29 @@ Placement = Annotated[
 class Particles(Strict):
     """The spheres: how many, how big, how dense, where."""
 
-    count: int | None = Field(
+    count: Count | None = Field(
         None, ge=1, description="Number of particles (not used with placement from a file) [-]."
     )
-    density: float = Field(gt=0, description="Material density [kg/m^3].")
+    density: Real = Field(gt=0, description="Material density [kg/m^3].")
     radius: RadiusDistribution = Field(
         default_factory=lambda: FixedRadius(value=1e-3),
         description="Radius distribution (with a file, used only if the file has no radii).",
     )
     placement: Placement = Field(default_factory=LatticePlacement, description="Where the spheres start.")
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial velocity of every particle [m/s].")
-    seed: int = Field(0, ge=0, description="Seed of the random numbers for radii and positions [-].")
-    overlap_tolerance: float = Field(
+    seed: Count = Field(0, ge=0, description="Seed of the random numbers for radii and positions [-].")
+    overlap_tolerance: Real = Field(
         0.05,
         ge=0,
         le=0.5,
         description="Largest initial overlap accepted, as a fraction of the smaller radius [-].",
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_tags(cls, data):
+        data = _default_tag(data, "radius", "distribution", "fixed")
+        return _default_tag(data, "placement", "method", "lattice")
 
 
 # --- contact law ----------------------------------------------------------------------------
@@ -225,11 +249,11 @@ class LinearContact(Strict):
     """Linear spring-dashpot normal force with an elastic tangential spring and Coulomb cap."""
 
     model: Literal["linear"] = "linear"
-    normal_stiffness: float = Field(gt=0, description="Normal spring constant k_n [N/m].")
-    tangential_stiffness: float | None = Field(
+    normal_stiffness: Real = Field(gt=0, description="Normal spring constant k_n [N/m].")
+    tangential_stiffness: Real | None = Field(
         None, gt=0, description="Tangential spring constant k_t (default 2/7 k_n) [N/m]."
     )
-    restitution: float = Field(
+    restitution: Real = Field(
         0.5,
         gt=0,
         le=1,
@@ -238,7 +262,7 @@ class LinearContact(Strict):
             "contact, whose normal force is never attractive, rebounds at exactly e [-]."
         ),
     )
-    friction: float = Field(0.5, ge=0, description="Coulomb friction coefficient mu [-].")
+    friction: Real = Field(0.5, ge=0, description="Coulomb friction coefficient mu [-].")
 
     @property
     def kt(self) -> float:
@@ -255,16 +279,16 @@ ContactModel = Annotated[LinearContact, Field(discriminator="model")]
 class Schedule(Strict):
     """When something happens: at any of these intervals (whichever comes first)."""
 
-    every_time: float | None = Field(None, gt=0, description="Interval of simulated time [s].")
-    every_steps: int | None = Field(None, ge=1, description="Interval in time steps [-].")
-    every_wall_minutes: float | None = Field(None, gt=0, description="Interval of wall-clock time [min].")
+    every_time: Real | None = Field(None, gt=0, description="Interval of simulated time [s].")
+    every_steps: Count | None = Field(None, ge=1, description="Interval in time steps [-].")
+    every_wall_minutes: Real | None = Field(None, gt=0, description="Interval of wall-clock time [min].")
 
 
 class CheckpointSchedule(Schedule):
-    every_wall_minutes: float | None = Field(
+    every_wall_minutes: Real | None = Field(
         30.0, gt=0, description="Interval of wall-clock time [min]."
     )
-    keep: int = Field(3, ge=1, description="Number of newest checkpoints kept [-].")
+    keep: Count = Field(3, ge=1, description="Number of newest checkpoints kept [-].")
 
 
 class Output(Strict):
@@ -276,7 +300,7 @@ class Output(Strict):
         default_factory=CheckpointSchedule,
         description="When checkpoints are written (one is always written at the end).",
     )
-    status_every_seconds: float = Field(
+    status_every_seconds: Real = Field(
         10.0, gt=0, description="Wall-clock interval of the status line and status.json [s]."
     )
     fields: list[Literal["velocity", "angular_velocity", "force", "torque"]] = Field(
@@ -295,6 +319,11 @@ class Case(Strict):
     contact: ContactModel
     walls: list[Wall] = Field(default_factory=list, description="Plane walls, one table per wall.")
     output: Output = Field(default_factory=Output)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_tags(cls, data):
+        return _default_tag(data, "contact", "model", "linear")
 
 
 # Keys whose change does not alter the physics of a run (resume accepts them changed).

@@ -30,7 +30,10 @@ def _run_directory(rundir: RunDirectory) -> dict:
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     out = {"kind": "run directory", "path": str(rundir.path)}
     if rundir.status_path.is_file():
-        out["status"] = json.loads(rundir.status_path.read_text())
+        try:
+            out["status"] = json.loads(rundir.status_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            out["status"] = {"error": f"{rundir.status_path}: unreadable ({exc})"}
     if rundir.trajectory_path.is_file():
         try:
             out["trajectory"] = _trajectory(rundir.trajectory_path)

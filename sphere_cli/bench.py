@@ -1,0 +1,173 @@
+"""`sphere bench`: particle-steps per second on the canonical scene (never part of the tests).
+
+Canonical scene (contact-physics issue): N monodisperse spheres, R = 1 mm, rho = 2500 kg/m^3,
+linear contact k_n = 1e5 N/m, k_t = 2/7 k_n, e = 0.5, mu = 0.5, six fixed walls, gravity,
+dt = 4e-6 s; once from a loose lattice (spacing 1.2 d) and once from the settled bed.
+The settled bed is made once by running the loose scene and cached in the output folder.
+Compile (or cache-load) time is measured apart from run time; each timing is the median of
+`repeats` runs of `steps` steps.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from .build.scene import build_scene
+from .config.load import parse_case
+from .io.checkpoint import newest_valid_checkpoint
+from .simulation import advance
+
+RADIUS = 1e-3
+SPACING = 1.2
+SETTLE_TIME = 0.15  # s of simulated time: the bed is at rest well before this
+
+
+def canonical_case(n: int, duration: float = 1.0) -> str:
+    """The canonical scene as case-file text: a box about N^(1/3) lattice sites wide and twice
+    as tall, so the loose lattice fills its lower half."""
+    d = 2.0 * RADIUS
+    side = math.ceil(n ** (1.0 / 3.0))
+    width = side * SPACING * d + d
+    layers = math.ceil(n / side**2)
+    height = max(2.0 * width, (layers + 1) * SPACING * d + d)
+    walls = "\n".join(f'[[walls]]\nface = "{f}"' for f in ("x-", "x+", "y-", "y+", "z-", "z+"))
+    return f"""
+title = "canonical benchmark scene, N = {n}"
+[simulation]
+duration = {duration!r}
+dt = 4.0e-6
+[domain]
+upper = [{width!r}, {width!r}, {height!r}]
+[particles]
+count = {n}
+density = 2500.0
+radius = {{ distribution = "fixed", value = {RADIUS!r} }}
+placement = {{ method = "lattice", spacing = {SPACING}, jitter = 0.1 }}
+[contact]
+model = "linear"
+normal_stiffness = 1.0e5
+tangential_stiffness = {2.0 / 7.0 * 1.0e5!r}
+restitution = 0.5
+friction = 0.5
+{walls}
+[output.frames]
+every_time = {duration!r}
+[output.checkpoints]
+every_time = {duration!r}
+keep = 1
+"""
+
+
+def _settled_scene(n: int, out_dir: Path, log):
+    from . import api
+
+    case_path = out_dir / f"canonical-{n}.toml"
+    case_path.write_text(canonical_case(n, SETTLE_TIME))
+    run_dir = out_dir / f"settled-{n}"
+    ck = newest_valid_checkpoint(run_dir / "checkpoints") if run_dir.is_dir() else None
+    if ck is None or ck.step * ck.dt < SETTLE_TIME * (1 - 1e-6):
+        log(f"settling N = {n} for {SETTLE_TIME} s of simulated time (cached in {run_dir}) ...")
+        api.run(case_path, run_dir, overwrite=True)
+        ck = newest_valid_checkpoint(run_dir / "checkpoints")
+    loaded = parse_case(canonical_case(n), case_path)
+    return build_scene(loaded, restart=ck)
+
+
+def _time_steps(scene, steps: int, repeats: int) -> list[float]:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        advance(scene, steps)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+def bytes_per_particle(scene) -> float:
+    state = scene.state
+    arrays = [getattr(state.particles, name) for name in state.particles.PROGNOSTIC]
+    nl = state.neighbors
+    arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos]
+    arrays += [scene.neighbors.spare_nbr, scene.neighbors.spare_count, scene.neighbors.spare_hist,
+               scene.neighbors.cell_of, scene.neighbors.order]
+    if state.walls is not None:
+        arrays.append(state.walls.hist)
+    return sum(a.nbytes for a in arrays) / state.particles.count
+
+
+def run_benchmark(sizes=(10_000, 100_000), threads=(1, 2), steps: int = 200, repeats: int = 3,
+                  states=("loose", "settled"), out_dir: Path = Path("bench-results"), log=print) -> dict:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    max_threads = numba.config.NUMBA_NUM_THREADS
+    results = {"machine": _machine(), "steps": steps, "repeats": repeats, "rows": []}
+    t0 = time.perf_counter()
+    warm = build_scene(parse_case(canonical_case(64)))
+    advance(warm, 1)
+    results["first_call_seconds"] = time.perf_counter() - t0
+    log(f"compile / cache load of the kernels: {results['first_call_seconds']:.2f} s")
+    for n in sizes:
+        for state_name in states:
+            if state_name == "loose":
+                scene = build_scene(parse_case(canonical_case(n)))
+            else:
+                scene = _settled_scene(n, out_dir, log)
+            contacts = _mean_contacts(scene)
+            for t in threads:
+                if t > max_threads:
+                    continue
+                numba.set_num_threads(t)
+                advance(scene, 5)
+                times = _time_steps(scene, steps, repeats)
+                median = statistics.median(times)
+                row = {
+                    "n": n, "state": state_name, "threads": t, "steps": steps,
+                    "seconds": median, "all_seconds": times,
+                    "particle_steps_per_second": n * steps / median,
+                    "contacts_per_particle": contacts,
+                    "neighbor_rebuilds": scene.state.neighbors.builds,
+                    "bytes_per_particle": bytes_per_particle(scene),
+                }
+                results["rows"].append(row)
+                log(f"N = {n:>7} {state_name:>7}  threads = {t}  "
+                    f"{row['particle_steps_per_second'] / 1e6:6.2f} M particle-steps/s  "
+                    f"(median of {repeats} x {steps} steps, {contacts:.2f} contacts/particle, "
+                    f"{row['bytes_per_particle']:.0f} B/particle)")
+            numba.set_num_threads(max_threads)
+    _speedups(results, log)
+    (out_dir / "bench.json").write_text(json.dumps(results, indent=2))
+    log(f"results written to {out_dir / 'bench.json'}")
+    return results
+
+
+def _mean_contacts(scene) -> float:
+    from .physics.energy import observables
+
+    obs = observables(scene)
+    return 2.0 * obs["contacts"] / scene.state.particles.count
+
+
+def _speedups(results: dict, log) -> None:
+    rows = results["rows"]
+    for row in rows:
+        if row["threads"] == 1:
+            continue
+        base = [r for r in rows if r["n"] == row["n"] and r["state"] == row["state"] and r["threads"] == 1]
+        if base:
+            row["speedup"] = row["particle_steps_per_second"] / base[0]["particle_steps_per_second"]
+            log(f"N = {row['n']:>7} {row['state']:>7}  {row['threads']} threads: "
+                f"{row['speedup']:.2f} x one thread")
+
+
+def _machine() -> dict:
+    import os
+    import platform
+
+    return {"cpu_count": os.cpu_count(), "platform": platform.platform(),
+            "numba": numba.__version__, "numpy": np.__version__,
+            "threading_layer_requested": numba.config.THREADING_LAYER}

@@ -1,0 +1,107 @@
+"""The run directory holds what the design guide promises: an H5MD trajectory with units, an
+XDMF sidecar whose every reference resolves, checksummed checkpoints (newest K kept), status.json
+and a log; a dry scene writes nothing of a fluid."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import h5py
+import pytest
+
+from sphere_cli import api
+from sphere_cli.io.checkpoint import list_checkpoints
+
+CASE = """
+    title = "output layout"
+    [simulation]
+    duration = 0.004
+    [domain]
+    upper = [0.01, 0.01, 0.02]
+    [particles]
+    count = 30
+    density = 2500.0
+    [contact]
+    model = "linear"
+    normal_stiffness = 1.0e4
+    [[walls]]
+    face = "z-"
+    [output]
+    fields = ["velocity", "angular_velocity", "force", "torque"]
+    [output.frames]
+    every_steps = 100
+    [output.checkpoints]
+    every_steps = 100
+    keep = 2
+"""
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    tmp = tmp_path_factory.mktemp("layout")
+    case = tmp / "case.toml"
+    case.write_text(textwrap.dedent(CASE))
+    api.run(case, tmp / "run")
+    return tmp / "run"
+
+
+def test_h5md_layout(run_dir: Path):
+    with h5py.File(run_dir / "trajectory.h5", "r") as f:
+        assert list(f["h5md"].attrs["version"]) == [1, 1]
+        assert f["h5md/creator"].attrs["name"] == "sphere"
+        traj = f["particles/trajectory"]
+        assert traj["box"].attrs["dimension"] == 3
+        assert traj["radius"].shape == (30,) and traj["radius"].attrs["unit"] == "m"
+        frames = traj["position/step"].shape[0]
+        assert frames >= 3
+        for field, unit in (("position", "m"), ("velocity", "m s-1"), ("angular_velocity", "s-1"),
+                            ("force", "N"), ("torque", "N m")):
+            assert traj[f"{field}/value"].shape == (frames, 30, 3)
+            assert traj[f"{field}/value"].attrs["unit"] == unit
+            assert traj[f"{field}/time"].attrs["unit"] == "s"
+        steps = traj["position/step"][...]
+        assert steps[0] == 0 and all(s % 100 == 0 for s in steps[:-1])
+        assert f["observables/kinetic_energy/value"].attrs["unit"] == "J"
+        assert f["observables/contacts/value"].shape == (frames,)
+        resolved = json.loads(f["parameters"].attrs["resolved_case"])
+        assert resolved["title"] == "output layout"
+        assert "threads" in f["sphere/provenance"].attrs
+        names = []
+        f.visit(names.append)
+        assert not [n for n in names if "fluid" in n.lower()]
+
+
+def test_xdmf_references_resolve(run_dir: Path):
+    root = ET.parse(run_dir / "trajectory.xmf").getroot()
+    grids = root.findall(".//Grid[@GridType='Uniform']")
+    with h5py.File(run_dir / "trajectory.h5", "r") as f:
+        assert len(grids) == f["particles/trajectory/position/step"].shape[0]
+        for item in root.iter("DataItem"):
+            if item.get("Format") == "HDF":
+                filename, dataset = item.text.strip().split(":")
+                assert filename == "trajectory.h5"
+                dims = tuple(int(x) for x in item.get("Dimensions").split())
+                assert f[dataset].shape == dims
+    names = {a.get("Name") for a in grids[0].findall("Attribute")}
+    assert {"radius", "velocity", "angular_velocity", "force", "torque"} <= names
+
+
+def test_checkpoints_kept_and_checksummed(run_dir: Path):
+    ckpts = list_checkpoints(run_dir / "checkpoints")
+    assert len(ckpts) == 2
+    with h5py.File(ckpts[-1], "r") as f:
+        assert f.attrs["complete"] == 1
+        assert f["sphere/state/particles/pos"].fletcher32
+        assert set(f["sphere/state"]) == {"particles", "neighbors", "walls"}
+
+
+def test_status_and_log(run_dir: Path):
+    status = json.loads((run_dir / "status.json").read_text())
+    assert status["state"] == "done"
+    assert status["step"] == status["end_step"]
+    log = (run_dir / "run.log").read_text()
+    assert "done at step" in log and "checkpoint" in log
+    assert (run_dir / "case.toml").read_text() == textwrap.dedent(CASE)
