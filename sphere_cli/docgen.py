@@ -40,7 +40,8 @@ of the value, `-` meaning dimensionless. Unknown keys are errors. How to read th
   unless given (the description says what absence means).
 - **Bounds** are checked when the file is read; a value outside them is refused with the key
   and line named. Rules that tie several keys together (for instance `min <= max`, walls on
-  periodic axes, particles that must fit in the box) are checked too; see the user guide.
+  periodic axes, particles that must fit in the box) are checked too; see the
+  [user guide](user-guide.md).
 - A **tagged union** is a table whose tag key (`distribution`, `method`, `model`, ...) picks
   one variant; only the keys of that variant are allowed. Where a tag has a default, a table
   without the tag is read as that variant.

@@ -1,0 +1,82 @@
+#!/bin/bash
+# SLURM template for sphere: starts a run, or continues it, and requeues itself until it is done.
+#
+#   sbatch --export=ALL,CASE=configs/demo.toml,RUN_DIR=runs/demo docs/slurm/sphere-job.sh
+#   sbatch --array=1-20 --export=ALL,CASE=cases/bed.toml docs/slurm/sphere-job.sh   # one seed per task
+#
+# Shortly before the time limit SLURM sends SIGUSR1 to this script, which passes it on to sphere;
+# sphere writes a checkpoint and exits 75. The script then requeues the job, and the next start
+# runs `sphere resume`, which continues bitwise identically. See docs/user-guide.md, section 7.
+#
+#SBATCH --job-name=sphere
+#SBATCH --ntasks=1
+#SBATCH --cpus-per-task=8
+#SBATCH --time=24:00:00
+#SBATCH --signal=B:USR1@300
+#SBATCH --requeue
+#SBATCH --open-mode=append
+#SBATCH --output=sphere-%x-%j.out
+
+set -u
+
+CASE=${CASE:?set CASE to the case file, e.g. sbatch --export=ALL,CASE=case.toml ...}
+SPHERE=${SPHERE:-sphere}   # or the full path, e.g. $HOME/sphere/.venv/bin/sphere
+name=$(basename "$CASE" .toml)
+
+# Ensemble member: a copy of the case with its own seed and its own run directory.
+if [ -n "${SLURM_ARRAY_TASK_ID:-}" ]; then
+    seed=$SLURM_ARRAY_TASK_ID
+    member="$(dirname "$CASE")/$name-seed$seed.toml"
+    if [ ! -f "$member" ]; then
+        if [ "$(grep -cE '^[[:space:]]*seed[[:space:]]*=' "$CASE")" != 1 ]; then
+            echo "sphere-job: $CASE must hold exactly one line 'seed = ...' (in [particles])" >&2
+            exit 65
+        fi
+        sed -E "s/^([[:space:]]*seed[[:space:]]*=).*/\1 $seed/" "$CASE" > "$member"
+    fi
+    CASE=$member
+    RUN_DIR=${RUN_DIR:-runs}/$name-seed$seed
+else
+    RUN_DIR=${RUN_DIR:-runs/$name}
+fi
+
+# Exactly the CPUs SLURM gave this task (sphere's results do not depend on the count).
+export NUMBA_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}
+export OMP_NUM_THREADS=$NUMBA_NUM_THREADS
+
+if [ -f "$RUN_DIR/case.toml" ]; then
+    "$SPHERE" resume "$RUN_DIR" &
+else
+    "$SPHERE" run "$CASE" -o "$RUN_DIR" &
+fi
+pid=$!
+
+# Pass SIGUSR1 (from --signal) and SIGTERM (scancel, time limit) on to sphere.
+signalled=0
+trap 'signalled=1; kill -USR1 "$pid" 2>/dev/null' USR1 TERM
+while :; do
+    wait "$pid"
+    rc=$?
+    # A trapped signal interrupts `wait` (status > 128) while sphere is still writing its
+    # checkpoint: wait again for sphere's own exit status.
+    if [ "$signalled" = 1 ] && [ "$rc" -gt 128 ]; then
+        signalled=0
+        continue
+    fi
+    break
+done
+
+if [ "$rc" -eq 75 ]; then
+    echo "sphere-job: stopped early with a checkpoint (exit 75); requeueing"
+    job=$SLURM_JOB_ID
+    if [ -n "${SLURM_ARRAY_TASK_ID:-}" ]; then
+        job=${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}
+    fi
+    if ! scontrol requeue "$job"; then
+        # Requeueing not allowed here: submit this script again, as a plain job, for the same
+        # case and run directory (for an array task: its own seeded case).
+        script=$(scontrol show job "$SLURM_JOB_ID" | sed -nE 's/^[[:space:]]*Command=([^ ]*).*/\1/p')
+        sbatch --export=ALL,CASE="$CASE",RUN_DIR="$RUN_DIR",SPHERE="$SPHERE" "$script"
+    fi
+fi
+exit "$rc"
