@@ -159,12 +159,20 @@ def resume(run_dir: str | Path, until: float | None = None, max_wall_time: float
             f"(changed: {changed}); only {', '.join('.'.join(k) for k in NON_PHYSICS_KEYS)} may "
             "change on resume. Start a new run instead."
         )
+    old_fields = ck.resolved["output"]["fields"]
+    if loaded.case.output.fields != old_fields:
+        rundir.close_logger()
+        raise ResumeRefused(
+            f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
+            "the trajectory file holds the original fields. Restore them, or start a new run."
+        )
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.last_checkpoint = ck.path
     try:
         output.trajectory.truncate_after(ck.step)
+        output.trajectory.record_resume(ck.step, provenance())
     except OutputError as exc:
         aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
         rundir.trajectory_path.rename(aside)

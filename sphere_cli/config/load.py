@@ -119,7 +119,8 @@ def _toml_value(value) -> str:
     elif isinstance(value, str):
         text = json.dumps(value)
     elif isinstance(value, dict):
-        text = "{ " + ", ".join(f"{format_location((k,))} = {_toml_value(v)}" for k, v in value.items()) + " }"
+        text = "{ " + ", ".join(f"{format_location((k,))} = {_toml_value(v)}" for k, v in value.items())
+        text += " }"
     elif isinstance(value, list):
         text = "[" + ", ".join(_toml_value(v) for v in value) + "]"
     else:

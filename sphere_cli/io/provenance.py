@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import getpass
 import os
 import platform
 import socket
@@ -17,6 +18,13 @@ def _version(package: str) -> str:
         return "unknown"
 
 
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return ""
+
+
 def provenance() -> dict:
     import numba
 
@@ -29,6 +37,7 @@ def provenance() -> dict:
         "threads": int(numba.get_num_threads()),
         "threading_layer": os.environ.get("NUMBA_THREADING_LAYER", "default"),
         "host": socket.gethostname(),
+        "user": _user(),
         "platform": platform.platform(),
         "job_id": os.environ.get("SLURM_JOB_ID", ""),
         "array_task_id": os.environ.get("SLURM_ARRAY_TASK_ID", ""),

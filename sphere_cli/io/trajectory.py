@@ -71,7 +71,10 @@ class Trajectory:
             with h5py.File(self.path, "w") as f:
                 h5 = f.create_group("h5md")
                 h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
-                h5.create_group("author").attrs["name"] = provenance.get("host", "")
+                h5.create_group("author").attrs["name"] = provenance.get("user", "")
+                units = h5.create_group("modules/units")
+                units.attrs["version"] = np.array([1, 0], dtype=np.int32)
+                units.attrs["system"] = "SI"
                 creator = h5.create_group("creator")
                 creator.attrs["name"] = "sphere"
                 creator.attrs["version"] = provenance.get("sphere_version", "")
@@ -131,9 +134,17 @@ class Trajectory:
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
 
-    def frame_steps(self) -> np.ndarray:
-        with h5py.File(self.path, "r") as f:
-            return f[GROUP]["position/step"][...]
+    def record_resume(self, step: int, provenance: dict) -> None:
+        """Keep the provenance of every resume (host, job id, threads may differ each time)."""
+        try:
+            with h5py.File(self.path, "a") as f:
+                resumes = f.require_group("sphere/provenance/resumes")
+                group = resumes.create_group(f"{len(resumes):04d}")
+                group.attrs["from_step"] = step
+                for key, value in provenance.items():
+                    group.attrs[key] = value
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
 
 
 def _series_groups(f: h5py.File):

@@ -84,7 +84,11 @@ class NeighborSearch:
         return arrays
 
     def restore(self, state: State, arrays: dict) -> None:
+        """Restore the list; with a different skin than it was built for (a resume may change
+        simulation.neighbor_skin) rebuild it at once, carrying the history across."""
         nl = state.neighbors
         for name in NeighborList.PROGNOSTIC:
             setattr(nl, name, np.array(arrays[name]))
         self._spare_like(nl)
+        if float(arrays["skin"]) != nl.skin:
+            self.rebuild(state)

@@ -20,6 +20,7 @@ import pytest
 from sphere_cli import api
 from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
+from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 
 CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
@@ -69,7 +70,7 @@ CASE = """
     [domain]
     upper = [0.01, 0.01, 0.02]
     [particles]
-    count = 60
+    count = 40
     density = 2500.0
     radius = {{ distribution = "uniform", min = 0.0007, max = 0.0009 }}
     [contact]
@@ -137,3 +138,47 @@ def test_kill_during_checkpoint_write(tmp_path: Path, datasets: int):
     assert result.step == 400
     _assert_same_state(_final_state(tmp_path / "whole"), _final_state(tmp_path / "killed"))
     assert not list((tmp_path / "killed" / "checkpoints").glob(".*.tmp"))
+
+
+def test_changed_skin_on_resume_is_still_bitwise(tmp_path: Path):
+    """neighbor_skin may change on resume: the list is rebuilt, and the result is unchanged."""
+    dense = 'density = 2500.0\nplacement = {{ method = "lattice", spacing = 1.0, jitter = 0.5 }}\n'
+    low = CASE.replace("count = 40", "count = 100").replace(
+        "density = 2500.0", dense + "velocity = [0.05, 0.0, -0.1]"
+    )
+    probe = tmp_path / "probe.toml"
+    probe.write_text(textwrap.dedent(low.format(duration=1.0)))
+    dt = _dt(probe)
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(low.format(duration=repr(4000 * dt))))  # the bed has landed
+    api.run(case, tmp_path / "whole")
+    api.run(case, tmp_path / "split", until=2500 * dt)
+    edited = tmp_path / "split" / "case.toml"
+    edited.write_text(edited.read_text().replace("[simulation]", "[simulation]\nneighbor_skin = 1.5"))
+    api.resume(tmp_path / "split")
+    whole, split = _final_state(tmp_path / "whole"), _final_state(tmp_path / "split")
+    for module in ("particles", "walls"):
+        for name in whole[module]:
+            assert np.array_equal(whole[module][name], split[module][name]), f"{module}/{name}"
+    assert _pair_history(whole["neighbors"]) == _pair_history(split["neighbors"])
+
+
+def _pair_history(nl: dict) -> dict:
+    """(i, j) -> tangential spring, for every listed pair with a spring (the lists differ)."""
+    springs = {}
+    for i in range(nl["nbr"].shape[0]):
+        for k in range(min(nl["nbr_count"][i], nl["nbr"].shape[1])):
+            if np.any(nl["hist"][i, k] != 0):
+                springs[(i, int(nl["nbr"][i, k]))] = tuple(nl["hist"][i, k])
+    assert springs, "the test scene should have contacts with history"
+    return springs
+
+
+def test_changed_output_fields_refused(tmp_path: Path):
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE.format(duration=1e-3)))
+    api.run(case, tmp_path / "run")
+    edited = tmp_path / "run" / "case.toml"
+    edited.write_text(edited.read_text().replace("[output.frames]", '[output]\nfields = ["torque"]\n[output.frames]'))
+    with pytest.raises(ResumeRefused, match="output.fields"):
+        api.resume(tmp_path / "run", until=2e-3)
