@@ -7,6 +7,7 @@ Exit codes (design guide §6): 0 done; 2 usage; 65 bad case file; 66 missing inp
 from __future__ import annotations
 
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -35,6 +36,13 @@ def parse_wall_time(text: str | None) -> float | None:
     if not match:
         raise typer.BadParameter(f"{text!r}: expected a duration such as 3600, 45m, 2h or 1.5d")
     return float(match.group(1)) * UNIT_SECONDS[match.group(2)]
+
+
+def check_end_time(value: float | None) -> float | None:
+    """--until: a positive, finite number of seconds."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"{value}: expected a positive end time in seconds")
+    return value
 
 
 def _fail(exc: SphereError) -> None:
@@ -71,7 +79,8 @@ def run(
     case: Path = typer.Argument(..., help="Case file (TOML)."),
     output: Path | None = typer.Option(None, "-o", "--output", help="Run directory (default runs/<case name>)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory."),
-    until: float | None = typer.Option(None, "--until", help="End time [s] instead of simulation.duration."),
+    until: float | None = typer.Option(None, "--until", callback=check_end_time,
+                                       help="End time [s] instead of simulation.duration."),
     max_wall_time: str | None = typer.Option(
         None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
     ),
@@ -91,7 +100,8 @@ def run(
 @app.command()
 def resume(
     run_dir: Path = typer.Argument(..., help="Run directory written by `sphere run`."),
-    until: float | None = typer.Option(None, "--until", help="New end time [s] (default: the case's duration)."),
+    until: float | None = typer.Option(None, "--until", callback=check_end_time,
+                                       help="New end time [s] (default: the case's duration)."),
     max_wall_time: str | None = typer.Option(
         None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
     ),

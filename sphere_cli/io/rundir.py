@@ -73,7 +73,10 @@ class RunDirectory:
         log.setLevel(logging.INFO)
         log.propagate = False
         if not log.handlers:
-            handler = logging.FileHandler(self.log_path, encoding="utf-8")
+            try:
+                handler = logging.FileHandler(self.log_path, encoding="utf-8")
+            except OSError as exc:
+                raise OutputError(f"{self.log_path}: cannot open the log ({exc})") from None
             handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
             log.addHandler(handler)
         return log

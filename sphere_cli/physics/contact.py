@@ -34,8 +34,10 @@ class LinearContactForces:
 
         The stiffest mode is normal (omega^2 = k_n/m*) or tangential with the rolling coupling
         of two spheres (omega^2 = 3.5 k_t/m*); the dashpot lowers the central-difference limit
-        to 2 (sqrt(1 + zeta^2) - zeta)/omega.
+        to 2 (sqrt(1 + zeta^2) - zeta)/omega. No possible contact (m_eff infinite): no limit.
         """
+        if not math.isfinite(m_eff):
+            return math.inf
         omega = math.sqrt(max(self.kn, 3.5 * self.kt) / m_eff)
         return 2.0 * (math.sqrt(1.0 + self.zeta**2) - self.zeta) / omega
 

@@ -95,14 +95,21 @@ def sphere(*args, cwd: Path | None = None, timeout: float = 300) -> Result:
     return Result(proc.returncode, proc.stdout, proc.stderr)
 
 
-def sphere_inproc(*args) -> Result:
-    """Run the CLI in this process (typer's CliRunner): quick, for checks that build no scene."""
+def sphere_inproc(*args, cwd: Path | None = None) -> Result:
+    """Run the CLI in this process (typer's CliRunner): no interpreter start-up, kernels loaded once."""
     from sphere_cli.cli import app
 
-    result = CliRunner().invoke(app, [str(a) for a in args])
+    previous = Path.cwd()
+    if cwd is not None:
+        os.chdir(cwd)
+    try:
+        result = CliRunner().invoke(app, [str(a) for a in args])
+    finally:
+        os.chdir(previous)
     # An exception other than the SystemExit of typer.Exit is a bug the user would see as a traceback.
     if result.exception is not None and not isinstance(result.exception, SystemExit):
-        raise AssertionError(f"sphere {' '.join(map(str, args))} raised {result.exception!r}") from result.exception
+        command = " ".join(map(str, args))
+        raise AssertionError(f"sphere {command} raised {result.exception!r}") from result.exception
     return Result(result.exit_code, result.stdout, result.stderr)
 
 

@@ -1,0 +1,195 @@
+"""Case -> scene: radii, positions, walls, the physics modules in play, and the time step.
+
+Only what the case asks for is allocated: no walls, no wall arrays; a dry case, no fluid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config.load import LoadedCase
+from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
+from ..errors import ResumeRefused
+from ..kernels.neighbors import worst_overlap
+from ..physics.contact import LinearContactForces, smallest_pair_mass
+from ..physics.motion import Motion
+from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
+from ..physics.walls import PlaneWallForces, allocate_walls
+from ..state import Box, Clock, Particles, State
+from .packing import lattice_positions, random_positions, read_particle_file
+from .radii import draw_radii
+
+
+@dataclass
+class Scene:
+    case: Case
+    state: State
+    motion: Motion
+    neighbors: NeighborSearch
+    contact: LinearContactForces
+    walls: PlaneWallForces | None
+    dt_limit: float  # smallest stability limit of any possible contact [s]
+
+    @property
+    def force_modules(self) -> list:
+        return [m for m in (self.contact, self.walls) if m is not None]
+
+    @property
+    def stateful_modules(self) -> dict:
+        """name -> module with prognostic_state()/restore(), only those in play."""
+        modules = {"particles": self.motion, "neighbors": self.neighbors}
+        if self.walls is not None:
+            modules["walls"] = self.walls
+        return modules
+
+    def compute_forces(self) -> None:
+        for module in self.force_modules:
+            module.forces(self.state)
+
+
+def build_scene(loaded: LoadedCase, restart=None) -> Scene:
+    """Build the scene of a case; with `restart` (a CheckpointData), the particles come from the
+    checkpoint (placement files are not needed again) and every module's state is restored."""
+    case = loaded.case
+    rng = np.random.default_rng(case.particles.seed)
+    if restart is None:
+        pos, radius, vel = _initial_particles(loaded, rng)
+    else:
+        saved = restart.arrays["particles"]
+        pos, radius, vel = saved["pos"], saved["radius"], saved["vel"]
+    n = radius.size
+    density = case.particles.density
+    mass = density * 4.0 / 3.0 * np.pi * radius**3
+    inertia = 0.4 * mass * radius**2
+    particles = Particles(
+        pos=pos, vel=vel, angvel=np.zeros((n, 3)), force=np.zeros((n, 3)), torque=np.zeros((n, 3)),
+        radius=radius, mass=mass, inertia=inertia, inv_mass=1.0 / mass, inv_inertia=1.0 / inertia,
+    )
+    dom = case.domain
+    box = Box(lower=np.array(dom.lower, dtype=np.float64), upper=np.array(dom.upper, dtype=np.float64),
+              periodic=np.array(dom.periodic, dtype=np.uint8), body_acc=np.array(dom.gravity, dtype=np.float64))
+    if restart is None:
+        _check_inside(loaded, box, particles)
+
+    contact = LinearContactForces(case.contact)
+    walls_state = None
+    walls = None
+    if case.walls:
+        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, contact.mu)
+        walls = PlaneWallForces(contact)
+    dt_limit = contact.critical_dt(smallest_pair_mass(mass))
+    if walls is not None:
+        dt_limit = min(dt_limit, contact.critical_dt(float(mass.min())))
+    dt = _resolve_dt(loaded, dt_limit)
+
+    skin = case.simulation.neighbor_skin * float(radius.max())
+    state = State(clock=Clock(dt=dt), box=box, particles=particles,
+                  neighbors=allocate_neighbor_list(n, skin), walls=walls_state)
+    neighbors = NeighborSearch(state)
+    scene = Scene(case=case, state=state, motion=Motion(), neighbors=neighbors, contact=contact,
+                  walls=walls, dt_limit=dt_limit)
+    if restart is None:
+        neighbors.rebuild(state)
+        _check_overlaps(loaded, state)
+        scene.compute_forces()
+    else:
+        _restore(loaded, scene, restart)
+    return scene
+
+
+def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
+    if restart.dt != scene.state.clock.dt:
+        raise ResumeRefused(
+            f"{restart.path}: was written with dt = {restart.dt!r} s but the case now gives "
+            f"{scene.state.clock.dt!r} s"
+        )
+    modules = scene.stateful_modules
+    if set(modules) != set(restart.arrays):
+        raise ResumeRefused(
+            f"{restart.path}: holds state for {sorted(restart.arrays)} but the case needs {sorted(modules)}"
+        )
+    for name, module in modules.items():
+        module.restore(scene.state, restart.arrays[name])
+    scene.state.clock.step = restart.step
+
+
+def _initial_particles(loaded: LoadedCase, rng):
+    spec = loaded.case.particles
+    velocity = None
+    if isinstance(spec.placement, FilePlacement):
+        pos, radius, velocity = read_particle_file(spec.placement, loaded.base_dir)
+        if radius is None:
+            radius = draw_radii(spec.radius, pos.shape[0], rng)
+    else:
+        radius = draw_radii(spec.radius, spec.count, rng)
+        if isinstance(spec.placement, LatticePlacement):
+            pos = lattice_positions(spec.placement, loaded.case, radius, rng)
+        elif isinstance(spec.placement, RandomPlacement):
+            pos = random_positions(spec.placement, loaded.case, radius, rng)
+        else:
+            raise TypeError(f"unknown placement {spec.placement!r}")
+    if velocity is None:
+        velocity = np.tile(np.array(spec.velocity, dtype=np.float64), (radius.size, 1))
+    return (np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(radius, dtype=np.float64),
+            np.ascontiguousarray(velocity, dtype=np.float64))
+
+
+def _check_inside(loaded: LoadedCase, box: Box, p: Particles) -> None:
+    for a in range(3):
+        if box.periodic[a]:
+            continue
+        outside = np.flatnonzero((p.pos[:, a] < box.lower[a]) | (p.pos[:, a] > box.upper[a]))
+        if outside.size:
+            i = int(outside[0])
+            raise loaded.error(
+                ("particles", "placement"),
+                f"particle {i} starts outside the box along {'xyz'[a]} (at {p.pos[i, a]:g} m, box "
+                f"{box.lower[a]:g} .. {box.upper[a]:g} m); {outside.size} particle(s) in all",
+            )
+    tol = loaded.case.particles.overlap_tolerance
+    for w in loaded.case.walls:
+        a = "xyz".index(w.face[0])
+        gap = p.pos[:, a] - box.lower[a] if w.face[1] == "-" else box.upper[a] - p.pos[:, a]
+        deep = np.flatnonzero(p.radius - gap > tol * p.radius)
+        if deep.size:
+            i = int(deep[0])
+            raise loaded.error(
+                ("particles", "placement"),
+                f"particle {i} overlaps the {w.face} wall by {(p.radius[i] - gap[i]) / p.radius[i]:.3g} of "
+                f"its radius, more than particles.overlap_tolerance = {tol}",
+            )
+
+
+def _check_overlaps(loaded: LoadedCase, state: State) -> None:
+    p, box, nl = state.particles, state.box, state.neighbors
+    i, j, overlap = worst_overlap(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic)
+    tol = loaded.case.particles.overlap_tolerance
+    if overlap > tol:
+        placement = loaded.case.particles.placement
+        source = f" (from {placement.path})" if isinstance(placement, FilePlacement) else ""
+        raise loaded.error(
+            ("particles", "overlap_tolerance"),
+            f"particles {i} and {j}{source} start overlapping by {overlap:.3g} of the smaller radius; "
+            "move them apart or raise the tolerance",
+        )
+
+
+def _resolve_dt(loaded: LoadedCase, dt_limit: float) -> float:
+    sim = loaded.case.simulation
+    if sim.dt == "auto":
+        if not math.isfinite(dt_limit):
+            raise loaded.error(
+                ("simulation", "dt"),
+                'no contact can occur (one particle, no walls), so "auto" has no limit; give dt in seconds',
+            )
+        return sim.dt_safety * dt_limit
+    if sim.dt > dt_limit:
+        raise loaded.error(
+            ("simulation", "dt"),
+            f"above the contact stability limit {dt_limit:.4g} s (2(sqrt(1+zeta^2)-zeta)/omega for the "
+            f"stiffest contact and lightest pair); use dt <= {dt_limit:.4g} s or dt = \"auto\"",
+        )
+    return float(sim.dt)

@@ -1,0 +1,266 @@
+"""The commands on good input: validate, schema, run, inspect, resume and the wall-time budget."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import typer
+from cli_test_support import (
+    FROM_FILE,
+    TINY,
+    TINY_END_STEP,
+    TWO_SPHERES_CSV,
+    assert_clean_error,
+    edit,
+    sphere,
+    sphere_inproc,
+)
+
+from sphere_cli.cli import parse_wall_time
+
+# --- validate and schema ---------------------------------------------------------------------------
+
+
+def test_validate_prints_the_resolved_tree(tmp_path):
+    case = tmp_path / "case.toml"
+    case.write_text(TINY)
+    result = sphere("validate", case)
+    assert_clean_error(result, 0)
+    assert result.stdout.startswith(f"{case}: valid\n")
+    assert "\nsimulation\n" in result.stdout
+    assert re.search(r"^  dt_safety = 0\.1$", result.stdout, re.M)  # a default, filled in
+    assert re.search(r"^    distribution = \"uniform\"$", result.stdout, re.M)
+    assert re.search(r"^  \[0\]\n    face = \"z-\"$", result.stdout, re.M)
+
+
+def test_validate_json_fills_in_defaults(tmp_path):
+    case = tmp_path / "case.toml"
+    case.write_text(TINY)
+    resolved = json.loads(sphere_inproc("validate", case, "--json").stdout)
+    assert resolved["simulation"]["dt"] == "auto"
+    assert resolved["simulation"]["dt_safety"] == 0.1
+    assert resolved["particles"]["overlap_tolerance"] == 0.05
+    assert resolved["particles"]["placement"] == {"method": "lattice", "spacing": 1.2, "jitter": 0.1,
+                                                  "region_lower": None, "region_upper": None}
+    assert resolved["contact"]["tangential_stiffness"] is None
+    assert resolved["walls"] == [{"face": "z-", "mode": "fixed", "friction": None}]
+    assert resolved["output"]["checkpoints"]["keep"] == 3
+    assert resolved["domain"]["periodic"] == [False, False, False]
+
+
+def test_validate_fills_in_the_default_tags(tmp_path):
+    """`model`, `distribution` and `method` have declared defaults: a table without them uses them."""
+    text = edit(TINY, 'model = "linear"\n', "")
+    text = edit(text, 'radius = { distribution = "uniform", min = 0.0008, max = 0.001 }',
+                "radius = { value = 0.0009 }")
+    text = edit(text, 'placement = { method = "lattice" }', "placement = { spacing = 1.5 }")
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    result = sphere_inproc("validate", case, "--json")
+    assert_clean_error(result, 0)
+    resolved = json.loads(result.stdout)
+    assert resolved["contact"]["model"] == "linear"
+    assert resolved["particles"]["radius"] == {"distribution": "fixed", "value": 0.0009}
+    assert resolved["particles"]["placement"]["method"] == "lattice"
+    assert resolved["particles"]["placement"]["spacing"] == 1.5
+
+
+def test_validate_does_not_build_the_scene(tmp_path):
+    """A missing placement file is a build-time check: `validate` reads only the case file, and
+    writes nothing."""
+    case = tmp_path / "case.toml"
+    case.write_text(FROM_FILE)
+    result = sphere("validate", case, "--json", cwd=tmp_path)
+    assert_clean_error(result, 0)
+    assert json.loads(result.stdout)["particles"]["placement"]["path"] == "spheres.csv"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.toml"]
+    assert_clean_error(sphere("run", case, "-q", cwd=tmp_path), 66, "spheres.csv")
+
+
+def test_every_example_config_validates():
+    configs = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
+    assert configs
+    for case in configs:
+        assert_clean_error(sphere_inproc("validate", case), 0)
+
+
+def test_schema_is_json_schema_naming_the_sections():
+    result = sphere("schema")
+    assert_clean_error(result, 0)
+    schema = json.loads(result.stdout)
+    assert schema["type"] == "object"
+    sections = {"title", "simulation", "domain", "particles", "contact", "walls", "output"}
+    assert set(schema["properties"]) == sections
+    assert set(schema["required"]) == {"simulation", "domain", "particles", "contact"}
+    assert schema["additionalProperties"] is False  # typos are errors
+    simulation = schema["$defs"]["Simulation"]
+    assert "[s]" in simulation["properties"]["duration"]["description"]  # units in descriptions
+    assert simulation["additionalProperties"] is False
+
+
+# --- run -------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory) -> tuple[Path, object]:
+    root = tmp_path_factory.mktemp("tiny")
+    (root / "case.toml").write_text(TINY)
+    result = sphere("run", "case.toml", "-o", "run", cwd=root)
+    return root / "run", result
+
+
+def test_run_writes_the_run_directory(tiny_run):
+    run, result = tiny_run
+    assert_clean_error(result, 0)
+    assert f"step {TINY_END_STEP}" in result.stdout and "trajectory.xmf" in result.stdout
+    for name in ("case.toml", "trajectory.h5", "trajectory.xmf", "status.json", "run.log"):
+        assert (run / name).is_file(), name
+    assert (run / "case.toml").read_text() == TINY
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "done"
+    assert status["step"] == status["end_step"] == TINY_END_STEP
+    checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
+    assert checkpoints == ["ckpt-000000000700.h5", "ckpt-000000000750.h5", "ckpt-000000000784.h5"]  # keep = 3
+    assert "trajectory.h5:/particles/trajectory/position/value" in (run / "trajectory.xmf").read_text()
+    log = (run / "run.log").read_text()
+    assert "running from step 0 to 784" in log and "done at step 784" in log
+
+
+def test_run_without_output_uses_runs_case_name(tmp_path):
+    (tmp_path / "mycase.toml").write_text(TINY)
+    assert_clean_error(sphere_inproc("run", "mycase.toml", "-q", cwd=tmp_path), 0)
+    assert (tmp_path / "runs" / "mycase" / "trajectory.h5").is_file()
+
+
+def test_run_from_a_placement_file(tmp_path):
+    (tmp_path / "case.toml").write_text(FROM_FILE)
+    (tmp_path / "spheres.csv").write_text(TWO_SPHERES_CSV)
+    assert_clean_error(sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path), 0)
+    summary = json.loads(sphere_inproc("inspect", tmp_path / "out" / "trajectory.h5", "--json").stdout)
+    assert summary["particles"] == 2
+
+
+def test_a_single_particle_on_a_floor(tmp_path):
+    """One particle has no pair limit: the wall gives dt = "auto" its limit."""
+    (tmp_path / "case.toml").write_text(edit(TINY, "count = 20", "count = 1"))
+    assert_clean_error(sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path), 0)
+
+
+# --- inspect ---------------------------------------------------------------------------------------
+
+
+def test_inspect_run_directory(tiny_run):
+    run, _ = tiny_run
+    result = sphere("inspect", run)
+    assert_clean_error(result, 0)
+    assert "kind: run directory" in result.stdout and "state: done" in result.stdout
+    assert "file=ckpt-000000000784.h5, step=784" in result.stdout
+    summary = json.loads(sphere_inproc("inspect", run, "--json").stdout)
+    assert summary["kind"] == "run directory"
+    assert summary["status"]["state"] == "done"
+    assert summary["trajectory"]["last_step"] == TINY_END_STEP
+    assert [c["valid"] for c in summary["checkpoints"]] == [True, True, True]
+
+
+def test_inspect_trajectory(tiny_run):
+    run, _ = tiny_run
+    text = sphere_inproc("inspect", run / "trajectory.h5")
+    assert_clean_error(text, 0)
+    assert "kind: trajectory" in text.stdout and "particles: 20" in text.stdout
+    summary = json.loads(sphere_inproc("inspect", run / "trajectory.h5", "--json").stdout)
+    assert summary["kind"] == "trajectory"
+    assert summary["title"] == "tiny"
+    assert summary["particles"] == 20
+    assert summary["last_step"] == TINY_END_STEP
+    assert summary["frames"] == 1 + TINY_END_STEP // 50 + 1  # start, every 50 steps, the end
+    assert summary["contact_model"] == "linear" and summary["walls"] == ["z-"]
+    assert summary["dt"] < summary["dt_limit"]
+    assert "kinetic_energy" in summary["last_observables"]
+
+
+def test_inspect_checkpoint(tiny_run):
+    run, _ = tiny_run
+    path = run / "checkpoints" / "ckpt-000000000750.h5"
+    text = sphere_inproc("inspect", path)
+    assert_clean_error(text, 0)
+    assert "kind: checkpoint" in text.stdout and "step: 750" in text.stdout
+    summary = json.loads(sphere_inproc("inspect", path, "--json").stdout)
+    assert summary["kind"] == "checkpoint"
+    assert summary["valid"] is True
+    assert summary["step"] == 750
+    assert summary["particles"] == 20
+    assert summary["modules"] == ["neighbors", "particles", "walls"]
+
+
+# --- wall-time budget and resume -------------------------------------------------------------------
+
+
+def test_max_wall_time_zero_stops_then_resume_completes(tmp_path):
+    (tmp_path / "case.toml").write_text(TINY)
+    result = sphere("run", "case.toml", "-o", "run", "-q", "--max-wall-time", "0", cwd=tmp_path)
+    assert_clean_error(result, 75, "stopped early", "sphere resume run")
+    run = tmp_path / "run"
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "stopped" and status["step"] == 0
+    assert [p.name for p in (run / "checkpoints").iterdir()] == ["ckpt-000000000000.h5"]
+
+    result = sphere("resume", "run", "-q", cwd=tmp_path)
+    assert_clean_error(result, 0)
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "done" and status["step"] == TINY_END_STEP
+    assert "resuming from ckpt-000000000000.h5 (step 0)" in (run / "run.log").read_text()
+
+
+def test_resume_until_extends_a_finished_run(tiny_run, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run[0], run)
+    assert_clean_error(sphere_inproc("resume", run, "-q", "--until", "0.003"), 0)
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "done" and status["time"] >= 0.003
+
+
+def test_max_wall_time_with_units_parses(tmp_path):
+    (tmp_path / "case.toml").write_text(TINY)
+    result = sphere_inproc("run", "case.toml", "-o", "run", "-q", "--max-wall-time", "2h", cwd=tmp_path)
+    assert_clean_error(result, 0)
+
+
+@pytest.mark.parametrize(("text", "seconds"),
+                         [("3600", 3600.0), ("90s", 90.0), ("45m", 2700.0), ("2h", 7200.0),
+                          ("1.5d", 129600.0), (" 0 ", 0.0)])
+def test_parse_wall_time(text, seconds):
+    assert parse_wall_time(text) == seconds
+
+
+@pytest.mark.parametrize("text", ["banana", "-1h", "2 hours", "1e3", "h", ""])
+def test_parse_wall_time_rejects(text):
+    with pytest.raises(typer.BadParameter):
+        parse_wall_time(text)
+
+
+def test_max_wall_time_banana_is_a_usage_error(tmp_path):
+    (tmp_path / "case.toml").write_text(TINY)
+    for command in (["run", "case.toml", "-o", "run"], ["resume", "run"]):
+        result = sphere(*command, "--max-wall-time", "banana", cwd=tmp_path)
+        assert_clean_error(result, 2, "banana")
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("until", ["-1", "0", "nan", "inf", "soon"])
+def test_until_must_be_a_positive_time(tmp_path, until):
+    (tmp_path / "case.toml").write_text(TINY)
+    for command in (["run", "case.toml", "-o", "run"], ["resume", "run"]):
+        result = sphere_inproc(*command, "--until", until, cwd=tmp_path)
+        assert_clean_error(result, 2, "--until")
+    assert not (tmp_path / "run").exists()
+
+
+def test_help_of_every_command():
+    for command in ("run", "resume", "inspect", "validate", "schema"):
+        result = sphere_inproc(command, "--help")
+        assert_clean_error(result, 0)
+        assert "Usage" in result.stdout
