@@ -52,8 +52,9 @@ def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
     if until is None:
         return loaded
     sim = loaded.case.simulation.model_copy(update={"duration": until})
-    return LoadedCase(case=loaded.case.model_copy(update={"simulation": sim}), text=loaded.text,
-                      path=loaded.path)
+    return LoadedCase(
+        case=loaded.case.model_copy(update={"simulation": sim}), text=loaded.text, path=loaded.path
+    )
 
 
 @contextmanager
@@ -78,18 +79,37 @@ def _signal_handlers(stop: StopFlag, enabled: bool):
             signal.signal(s, handler)
 
 
-def _drive(scene, rundir: RunDirectory, output: RunOutput, log, max_wall_time: float | None,
-           handle_signals: bool, show_progress: bool) -> RunResult:
+def _drive(
+    scene,
+    rundir: RunDirectory,
+    output: RunOutput,
+    log,
+    max_wall_time: float | None,
+    handle_signals: bool,
+    show_progress: bool,
+) -> RunResult:
     clock = scene.state.clock
     end_step = end_step_for(scene.case.simulation.duration, clock.dt)
     start_step = clock.step
-    progress = Progress(rundir, end_step, start_step, clock.dt, scene.state.particles.count,
-                        scene.case.output.status_every_seconds, enabled=show_progress)
+    progress = Progress(
+        rundir,
+        end_step,
+        start_step,
+        clock.dt,
+        scene.state.particles.count,
+        scene.case.output.status_every_seconds,
+        enabled=show_progress,
+    )
     stop = StopFlag()
     loop = Loop(scene, end_step, output, stop, max_wall_time, progress)
     started = wallclock.monotonic()
-    log.info("running from step %d to %d (dt = %.6g s, %d particles)", start_step, end_step, clock.dt,
-             scene.state.particles.count)
+    log.info(
+        "running from step %d to %d (dt = %.6g s, %d particles)",
+        start_step,
+        end_step,
+        clock.dt,
+        scene.state.particles.count,
+    )
     try:
         with _signal_handlers(stop, handle_signals):
             outcome = loop.run()
@@ -115,9 +135,15 @@ def _drive(scene, rundir: RunDirectory, output: RunOutput, log, max_wall_time: f
         rundir.close_logger()
 
 
-def run(case_path: str | Path, run_dir: str | Path | None = None, overwrite: bool = False,
-        max_wall_time: float | None = None, handle_signals: bool = False,
-        show_progress: bool = False, until: float | None = None) -> RunResult:
+def run(
+    case_path: str | Path,
+    run_dir: str | Path | None = None,
+    overwrite: bool = False,
+    max_wall_time: float | None = None,
+    handle_signals: bool = False,
+    show_progress: bool = False,
+    until: float | None = None,
+) -> RunResult:
     loaded = _with_duration(load_case(case_path), until)
     _set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
@@ -136,8 +162,13 @@ def run(case_path: str | Path, run_dir: str | Path | None = None, overwrite: boo
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
 
 
-def resume(run_dir: str | Path, until: float | None = None, max_wall_time: float | None = None,
-           handle_signals: bool = False, show_progress: bool = False) -> RunResult:
+def resume(
+    run_dir: str | Path,
+    until: float | None = None,
+    max_wall_time: float | None = None,
+    handle_signals: bool = False,
+    show_progress: bool = False,
+) -> RunResult:
     rundir = RunDirectory(Path(run_dir))
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")

@@ -94,15 +94,27 @@ def bytes_per_particle(scene) -> float:
     arrays = [getattr(state.particles, name) for name in state.particles.PROGNOSTIC]
     nl = state.neighbors
     arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos]
-    arrays += [scene.neighbors.spare_nbr, scene.neighbors.spare_count, scene.neighbors.spare_hist,
-               scene.neighbors.cell_of, scene.neighbors.order]
+    arrays += [
+        scene.neighbors.spare_nbr,
+        scene.neighbors.spare_count,
+        scene.neighbors.spare_hist,
+        scene.neighbors.cell_of,
+        scene.neighbors.order,
+    ]
     if state.walls is not None:
         arrays.append(state.walls.hist)
     return sum(a.nbytes for a in arrays) / state.particles.count
 
 
-def run_benchmark(sizes=(10_000, 100_000), threads=(1, 2), steps: int = 200, repeats: int = 3,
-                  states=("loose", "settled"), out_dir: Path = Path("bench-results"), log=print) -> dict:
+def run_benchmark(
+    sizes=(10_000, 100_000),
+    threads=(1, 2),
+    steps: int = 200,
+    repeats: int = 3,
+    states=("loose", "settled"),
+    out_dir: Path = Path("bench-results"),
+    log=print,
+) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     max_threads = numba.config.NUMBA_NUM_THREADS
     results = {"machine": _machine(), "steps": steps, "repeats": repeats, "rows": []}
@@ -126,18 +138,24 @@ def run_benchmark(sizes=(10_000, 100_000), threads=(1, 2), steps: int = 200, rep
                 times = _time_steps(scene, steps, repeats)
                 median = statistics.median(times)
                 row = {
-                    "n": n, "state": state_name, "threads": t, "steps": steps,
-                    "seconds": median, "all_seconds": times,
+                    "n": n,
+                    "state": state_name,
+                    "threads": t,
+                    "steps": steps,
+                    "seconds": median,
+                    "all_seconds": times,
                     "particle_steps_per_second": n * steps / median,
                     "contacts_per_particle": contacts,
                     "neighbor_rebuilds": scene.state.neighbors.builds,
                     "bytes_per_particle": bytes_per_particle(scene),
                 }
                 results["rows"].append(row)
-                log(f"N = {n:>7} {state_name:>7}  threads = {t}  "
+                log(
+                    f"N = {n:>7} {state_name:>7}  threads = {t}  "
                     f"{row['particle_steps_per_second'] / 1e6:6.2f} M particle-steps/s  "
                     f"(median of {repeats} x {steps} steps, {contacts:.2f} contacts/particle, "
-                    f"{row['bytes_per_particle']:.0f} B/particle)")
+                    f"{row['bytes_per_particle']:.0f} B/particle)"
+                )
             numba.set_num_threads(max_threads)
     _speedups(results, log)
     (out_dir / "bench.json").write_text(json.dumps(results, indent=2))
@@ -160,14 +178,20 @@ def _speedups(results: dict, log) -> None:
         base = [r for r in rows if r["n"] == row["n"] and r["state"] == row["state"] and r["threads"] == 1]
         if base:
             row["speedup"] = row["particle_steps_per_second"] / base[0]["particle_steps_per_second"]
-            log(f"N = {row['n']:>7} {row['state']:>7}  {row['threads']} threads: "
-                f"{row['speedup']:.2f} x one thread")
+            log(
+                f"N = {row['n']:>7} {row['state']:>7}  {row['threads']} threads: "
+                f"{row['speedup']:.2f} x one thread"
+            )
 
 
 def _machine() -> dict:
     import os
     import platform
 
-    return {"cpu_count": os.cpu_count(), "platform": platform.platform(),
-            "numba": numba.__version__, "numpy": np.__version__,
-            "threading_layer_requested": numba.config.THREADING_LAYER}
+    return {
+        "cpu_count": os.cpu_count(),
+        "platform": platform.platform(),
+        "numba": numba.__version__,
+        "numpy": np.__version__,
+        "threading_layer_requested": numba.config.THREADING_LAYER,
+    }

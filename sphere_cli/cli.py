@@ -77,10 +77,13 @@ def schema() -> None:
 @app.command()
 def run(
     case: Path = typer.Argument(..., help="Case file (TOML)."),
-    output: Path | None = typer.Option(None, "-o", "--output", help="Run directory (default runs/<case name>)."),
+    output: Path | None = typer.Option(
+        None, "-o", "--output", help="Run directory (default runs/<case name>)."
+    ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory."),
-    until: float | None = typer.Option(None, "--until", callback=check_end_time,
-                                       help="End time [s] instead of simulation.duration."),
+    until: float | None = typer.Option(
+        None, "--until", callback=check_end_time, help="End time [s] instead of simulation.duration."
+    ),
     max_wall_time: str | None = typer.Option(
         None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
     ),
@@ -88,8 +91,15 @@ def run(
 ) -> None:
     """Run a case: build the scene, advance it, write trajectory and checkpoints."""
     try:
-        result = api.run(case, output, overwrite=overwrite, max_wall_time=parse_wall_time(max_wall_time),
-                         handle_signals=True, show_progress=not quiet, until=until)
+        result = api.run(
+            case,
+            output,
+            overwrite=overwrite,
+            max_wall_time=parse_wall_time(max_wall_time),
+            handle_signals=True,
+            show_progress=not quiet,
+            until=until,
+        )
     except SphereError as exc:
         _fail(exc)
     except KeyboardInterrupt:
@@ -100,8 +110,9 @@ def run(
 @app.command()
 def resume(
     run_dir: Path = typer.Argument(..., help="Run directory written by `sphere run`."),
-    until: float | None = typer.Option(None, "--until", callback=check_end_time,
-                                       help="New end time [s] (default: the case's duration)."),
+    until: float | None = typer.Option(
+        None, "--until", callback=check_end_time, help="New end time [s] (default: the case's duration)."
+    ),
     max_wall_time: str | None = typer.Option(
         None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
     ),
@@ -109,8 +120,13 @@ def resume(
 ) -> None:
     """Continue a run from its newest checkpoint that verifies (bitwise identical continuation)."""
     try:
-        result = api.resume(run_dir, until=until, max_wall_time=parse_wall_time(max_wall_time),
-                            handle_signals=True, show_progress=not quiet)
+        result = api.resume(
+            run_dir,
+            until=until,
+            max_wall_time=parse_wall_time(max_wall_time),
+            handle_signals=True,
+            show_progress=not quiet,
+        )
     except SphereError as exc:
         _fail(exc)
     except KeyboardInterrupt:
@@ -140,7 +156,9 @@ def bench(
     steps: int = typer.Option(200, "--steps", help="Steps per timing."),
     repeats: int = typer.Option(3, "--repeats", help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
-    output: Path = typer.Option(Path("bench-results"), "-o", "--output", help="Folder for results and the settled beds."),
+    output: Path = typer.Option(
+        Path("bench-results"), "-o", "--output", help="Folder for results and the settled beds."
+    ),
 ) -> None:
     """Benchmark the canonical scene: particle-steps per second for each size, state and thread count."""
     from .bench import run_benchmark
@@ -161,7 +179,9 @@ def bench(
 
 
 def _interrupted() -> None:
-    typer.echo("sphere: interrupted; the newest checkpoint is intact: continue with `sphere resume`", err=True)
+    typer.echo(
+        "sphere: interrupted; the newest checkpoint is intact: continue with `sphere resume`", err=True
+    )
     raise typer.Exit(StoppedEarly.exit_code)
 
 

@@ -216,9 +216,15 @@ def _bounds(field: FieldInfo) -> str:
     _, _, inner = _strip_annotated(field.annotation)
     parts = []
     for meta in [*field.metadata, *inner]:
-        for attr, symbol in (("gt", ">"), ("ge", "≥"), ("lt", "<"), ("le", "≤"),
-                             ("multiple_of", "multiple of"), ("min_length", "length ≥"),
-                             ("max_length", "length ≤")):
+        for attr, symbol in (
+            ("gt", ">"),
+            ("ge", "≥"),
+            ("lt", "<"),
+            ("le", "≤"),
+            ("multiple_of", "multiple of"),
+            ("min_length", "length ≥"),
+            ("max_length", "length ≤"),
+        ):
             value = getattr(meta, attr, None)
             if value is not None:
                 parts.append(f"{symbol} {_toml(value)}")
@@ -307,8 +313,9 @@ def _field_intro(field: FieldInfo, kind: _Kind) -> list[str]:
     return [" ".join(lines)]
 
 
-def _model_body(model, prefix: str, level: int, tag: str | None = None,
-                intro: list[str] | None = None) -> list[str]:
+def _model_body(
+    model, prefix: str, level: int, tag: str | None = None, intro: list[str] | None = None
+) -> list[str]:
     out = []
     doc = _doc(model)
     if doc:
@@ -376,8 +383,9 @@ def generate(model=Case) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m sphere_cli.docgen", description=__doc__.splitlines()[0])
     parser.add_argument("path", type=Path, help="Markdown file to write (or to check)")
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 if the file differs from the generated text")
+    parser.add_argument(
+        "--check", action="store_true", help="exit 1 if the file differs from the generated text"
+    )
     args = parser.parse_args(argv)
     text = generate()
     if args.check:
@@ -387,8 +395,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.path}: cannot read ({exc}); run `make docs`", file=sys.stderr)
             return 1
         if current != text:
-            print(f"{args.path}: out of date with sphere_cli/config/schema.py; run `make docs`",
-                  file=sys.stderr)
+            print(
+                f"{args.path}: out of date with sphere_cli/config/schema.py; run `make docs`", file=sys.stderr
+            )
             return 1
         return 0
     args.path.parent.mkdir(parents=True, exist_ok=True)

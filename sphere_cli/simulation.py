@@ -14,8 +14,17 @@ from dataclasses import dataclass, field
 
 from .errors import NumericalError
 
-REASONS = {1: "a non-finite position or velocity", 2: "it moves more than half its radius in one step",
-           3: "it left the box through an open face"}
+REASONS = {
+    1: ("a non-finite position or velocity", 'a smaller dt (or dt = "auto") or softer contacts may help'),
+    2: (
+        "it moves more than half its radius in one step",
+        'a smaller dt (or dt = "auto") or softer contacts may help',
+    ),
+    3: (
+        "it left the box through an open face",
+        "enlarge the box, add a wall on that face, or make the axis periodic",
+    ),
+}
 
 
 @dataclass
@@ -84,16 +93,17 @@ def check_stable(scene) -> None:
         raise NumericalError(
             f"numerical failure at step {clock.step} (t = {clock.time:.6g} s): particle {i} at "
             f"{tuple(float(x) for x in p.pos[i])} m with velocity {tuple(float(x) for x in p.vel[i])} "
-            f"m/s: {REASONS[reason]}. The newest checkpoint before this step is intact; a smaller "
-            "dt (or dt = \"auto\") or softer contacts may help."
+            f"m/s: {REASONS[reason][0]}. The newest checkpoint before this step is intact; "
+            f"{REASONS[reason][1]}."
         )
 
 
 class Loop:
     """Runs a scene to `end_step`, calling back into the run directory for output."""
 
-    def __init__(self, scene, end_step: int, output, stop: StopFlag, max_wall_seconds: float | None,
-                 progress):
+    def __init__(
+        self, scene, end_step: int, output, stop: StopFlag, max_wall_seconds: float | None, progress
+    ):
         self.scene = scene
         self.end_step = end_step
         self.output = output
@@ -139,6 +149,10 @@ class Loop:
         self.output.frame(scene)
         self.output.checkpoint(scene)
         finished = clock.step >= self.end_step
-        self.progress.update(scene, clock.step - start_step, wallclock.monotonic() - started,
-                             state="done" if finished else "stopped")
+        self.progress.update(
+            scene,
+            clock.step - start_step,
+            wallclock.monotonic() - started,
+            state="done" if finished else "stopped",
+        )
         return "done" if finished else self.stop.reason

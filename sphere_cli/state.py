@@ -47,13 +47,27 @@ class Particles:
     inertia: np.ndarray  # (N,) [kg m^2]
     inv_mass: np.ndarray  # (N,) [1/kg]
     inv_inertia: np.ndarray  # (N,) [1/(kg m^2)]
+    # scratch, rewritten by every kick_drift (not prognostic): v_n + dt a_n, the dashpots'
+    # second-order estimate of v_{n+1}
+    vel_pred: np.ndarray | None = None  # (N,3) [m/s]
+    angvel_pred: np.ndarray | None = None  # (N,3) [rad/s]
 
     @property
     def count(self) -> int:
         return self.pos.shape[0]
 
-    PROGNOSTIC = ("pos", "vel", "angvel", "force", "torque", "radius", "mass", "inertia",
-                  "inv_mass", "inv_inertia")
+    PROGNOSTIC = (
+        "pos",
+        "vel",
+        "angvel",
+        "force",
+        "torque",
+        "radius",
+        "mass",
+        "inertia",
+        "inv_mass",
+        "inv_inertia",
+    )
 
 
 @dataclass

@@ -30,7 +30,8 @@ def lattice_positions(placement: LatticePlacement, case, radius, rng) -> np.ndar
     capacity = int(np.prod(sites))
     if capacity < radius.size:
         raise case_error(
-            case, ("particles", "count"),
+            case,
+            ("particles", "count"),
             f"the lattice (particles.placement) holds only {capacity} sites ({sites[0]} x {sites[1]} x "
             f"{sites[2]} at spacing {spacing:g} m); enlarge the box or region, lower "
             "particles.placement.spacing, or use fewer particles",
@@ -58,10 +59,11 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
     placed = insert_random(radius[order], cand[order], lower, cell, ncell, pos)
     if placed < radius.size:
         raise case_error(
-            case, ("particles", "placement"),
+            case,
+            ("particles", "placement"),
             f"random insertion placed only {placed} of {radius.size} particles after "
             f"{placement.max_attempts} attempts each; enlarge the region, use fewer particles, "
-            "or use method = \"lattice\"",
+            'or use method = "lattice"',
         )
     out = np.empty_like(pos)
     out[order] = pos
@@ -74,8 +76,9 @@ def read_particle_file(placement: FilePlacement, base_dir: Path):
     if not path.is_absolute():
         path = base_dir / path
     if not path.is_file():
-        raise case_error(placement, ("particles", "placement", "path"), f"file not found ({path})",
-                         MissingInputError)
+        raise case_error(
+            placement, ("particles", "placement", "path"), f"file not found ({path})", MissingInputError
+        )
     if path.suffix.lower() in (".h5", ".hdf5"):
         return _read_hdf5(path)
     return _read_csv(path)
@@ -86,8 +89,11 @@ def _read_csv(path: Path):
         text = path.read_text(encoding="utf-8")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # numpy warns about blank input; it is reported below
-            data = np.genfromtxt(io.StringIO(text), delimiter=",", names=True, dtype=np.float64) \
-                if text.strip() else np.zeros(0)
+            data = (
+                np.genfromtxt(io.StringIO(text), delimiter=",", names=True, dtype=np.float64)
+                if text.strip()
+                else np.zeros(0)
+            )
     except (ValueError, OSError, IndexError) as exc:  # UnicodeDecodeError is a ValueError
         detail = " ".join(str(exc).replace("Some errors were detected !", "").split())
         raise CaseError(f"{path}: not a readable CSV particle file ({detail})") from None

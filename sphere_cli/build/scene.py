@@ -45,9 +45,11 @@ class Scene:
             modules["walls"] = self.walls
         return modules
 
-    def compute_forces(self) -> None:
+    def compute_initial_forces(self) -> None:
+        """Forces of the initial state, for the first half kick: no time has passed, so the
+        tangential springs do not grow."""
         for module in self.force_modules:
-            module.forces(self.state)
+            module.forces(self.state, spring_dt=0.0)
 
 
 def build_scene(loaded: LoadedCase, restart=None) -> Scene:
@@ -65,12 +67,26 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     mass = density * 4.0 / 3.0 * np.pi * radius**3
     inertia = 0.4 * mass * radius**2
     particles = Particles(
-        pos=pos, vel=vel, angvel=np.zeros((n, 3)), force=np.zeros((n, 3)), torque=np.zeros((n, 3)),
-        radius=radius, mass=mass, inertia=inertia, inv_mass=1.0 / mass, inv_inertia=1.0 / inertia,
+        pos=pos,
+        vel=vel,
+        angvel=np.zeros((n, 3)),
+        force=np.zeros((n, 3)),
+        torque=np.zeros((n, 3)),
+        radius=radius,
+        mass=mass,
+        inertia=inertia,
+        inv_mass=1.0 / mass,
+        inv_inertia=1.0 / inertia,
+        vel_pred=vel.copy(),
+        angvel_pred=np.zeros((n, 3)),
     )
     dom = case.domain
-    box = Box(lower=np.array(dom.lower, dtype=np.float64), upper=np.array(dom.upper, dtype=np.float64),
-              periodic=np.array(dom.periodic, dtype=np.uint8), body_acc=np.array(dom.gravity, dtype=np.float64))
+    box = Box(
+        lower=np.array(dom.lower, dtype=np.float64),
+        upper=np.array(dom.upper, dtype=np.float64),
+        periodic=np.array(dom.periodic, dtype=np.uint8),
+        body_acc=np.array(dom.gravity, dtype=np.float64),
+    )
     if restart is None:
         _check_inside(loaded, box, particles)
 
@@ -86,15 +102,27 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     dt = _resolve_dt(loaded, dt_limit)
 
     skin = case.simulation.neighbor_skin * float(radius.max())
-    state = State(clock=Clock(dt=dt), box=box, particles=particles,
-                  neighbors=allocate_neighbor_list(n, skin), walls=walls_state)
+    state = State(
+        clock=Clock(dt=dt),
+        box=box,
+        particles=particles,
+        neighbors=allocate_neighbor_list(n, skin),
+        walls=walls_state,
+    )
     neighbors = NeighborSearch(state)
-    scene = Scene(case=case, state=state, motion=Motion(), neighbors=neighbors, contact=contact,
-                  walls=walls, dt_limit=dt_limit)
+    scene = Scene(
+        case=case,
+        state=state,
+        motion=Motion(),
+        neighbors=neighbors,
+        contact=contact,
+        walls=walls,
+        dt_limit=dt_limit,
+    )
     if restart is None:
         neighbors.rebuild(state)
         _check_overlaps(loaded, state)
-        scene.compute_forces()
+        scene.compute_initial_forces()
     else:
         _restore(loaded, scene, restart)
     return scene
@@ -133,8 +161,11 @@ def _initial_particles(loaded: LoadedCase, rng):
             raise TypeError(f"unknown placement {spec.placement!r}")
     if velocity is None:
         velocity = np.tile(np.array(spec.velocity, dtype=np.float64), (radius.size, 1))
-    return (np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(radius, dtype=np.float64),
-            np.ascontiguousarray(velocity, dtype=np.float64))
+    return (
+        np.ascontiguousarray(pos, dtype=np.float64),
+        np.ascontiguousarray(radius, dtype=np.float64),
+        np.ascontiguousarray(velocity, dtype=np.float64),
+    )
 
 
 def _check_inside(loaded: LoadedCase, box: Box, p: Particles) -> None:
@@ -190,6 +221,6 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float) -> float:
         raise loaded.error(
             ("simulation", "dt"),
             f"above the contact stability limit {dt_limit:.4g} s (2(sqrt(1+zeta^2)-zeta)/omega for the "
-            f"stiffest contact and lightest pair); use dt <= {dt_limit:.4g} s or dt = \"auto\"",
+            f'stiffest contact and lightest pair); use dt <= {dt_limit:.4g} s or dt = "auto"',
         )
     return float(sim.dt)

@@ -48,7 +48,7 @@ class Simulation(Strict):
         ),
     )
     dt_safety: Real = Field(
-        0.1, gt=0, le=1, description="Fraction of the critical time step used by dt = \"auto\" [-]."
+        0.1, gt=0, le=1, description='Fraction of the critical time step used by dt = "auto" [-].'
     )
     threads: Count | None = Field(
         None, ge=1, description="Numba threads (default: all cores). Results do not depend on it."
@@ -158,9 +158,7 @@ class BimodalRadius(Strict):
     distribution: Literal["bimodal"]
     small: Real = Field(gt=0, description="Radius of the small species [m].")
     large: Real = Field(gt=0, description="Radius of the large species [m].")
-    large_fraction: Real = Field(
-        0.5, ge=0, le=1, description="Number fraction of large particles [-]."
-    )
+    large_fraction: Real = Field(0.5, ge=0, le=1, description="Number fraction of large particles [-].")
 
     @property
     def largest(self) -> float:
@@ -186,14 +184,22 @@ class LatticePlacement(Strict):
         le=1,
         description="Random offset of each site, as a fraction of the free gap between spheres [-].",
     )
-    region_lower: Vec3 | None = Field(None, description="Lower corner of the filled region (default: the box) [m].")
-    region_upper: Vec3 | None = Field(None, description="Upper corner of the filled region (default: the box) [m].")
+    region_lower: Vec3 | None = Field(
+        None, description="Lower corner of the filled region (default: the box) [m]."
+    )
+    region_upper: Vec3 | None = Field(
+        None, description="Upper corner of the filled region (default: the box) [m]."
+    )
 
 
 class RandomPlacement(Strict):
     method: Literal["random"]
-    region_lower: Vec3 | None = Field(None, description="Lower corner of the filled region (default: the box) [m].")
-    region_upper: Vec3 | None = Field(None, description="Upper corner of the filled region (default: the box) [m].")
+    region_lower: Vec3 | None = Field(
+        None, description="Lower corner of the filled region (default: the box) [m]."
+    )
+    region_upper: Vec3 | None = Field(
+        None, description="Upper corner of the filled region (default: the box) [m]."
+    )
     max_attempts: Count = Field(
         200, ge=1, description="Candidate positions tried per particle before giving up [-]."
     )
@@ -209,9 +215,7 @@ class FilePlacement(Strict):
     )
 
 
-Placement = Annotated[
-    LatticePlacement | RandomPlacement | FilePlacement, Field(discriminator="method")
-]
+Placement = Annotated[LatticePlacement | RandomPlacement | FilePlacement, Field(discriminator="method")]
 
 
 class Particles(Strict):
@@ -285,9 +289,7 @@ class Schedule(Strict):
 
 
 class CheckpointSchedule(Schedule):
-    every_wall_minutes: Real | None = Field(
-        30.0, gt=0, description="Interval of wall-clock time [min]."
-    )
+    every_wall_minutes: Real | None = Field(30.0, gt=0, description="Interval of wall-clock time [min].")
     keep: Count = Field(3, ge=1, description="Number of newest checkpoints kept [-].")
 
 

@@ -46,8 +46,9 @@ def list_checkpoints(directory: Path) -> list[Path]:
     return [p for _, p in sorted(found)]
 
 
-def write_checkpoint(directory: Path, scene, case_text: str, resolved: dict, physics_hash: str,
-                     keep: int) -> Path:
+def write_checkpoint(
+    directory: Path, scene, case_text: str, resolved: dict, physics_hash: str, keep: int
+) -> Path:
     state = scene.state
     final = checkpoint_path(directory, state.clock.step)
     tmp = directory / f".{final.name}.tmp"

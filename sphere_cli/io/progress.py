@@ -9,8 +9,17 @@ from tqdm import tqdm
 
 
 class Progress:
-    def __init__(self, rundir, end_step: int, start_step: int, dt: float, n_particles: int,
-                 status_every: float, stream=None, enabled: bool = True):
+    def __init__(
+        self,
+        rundir,
+        end_step: int,
+        start_step: int,
+        dt: float,
+        n_particles: int,
+        status_every: float,
+        stream=None,
+        enabled: bool = True,
+    ):
         self.rundir = rundir
         self.end_step = end_step
         self.dt = dt
@@ -21,8 +30,14 @@ class Progress:
         self.status_every = status_every
         self.last_status = float("-inf")
         if enabled and self.stream.isatty():
-            self.bar = tqdm(total=end_step, initial=start_step, file=self.stream, unit="step",
-                            dynamic_ncols=True, mininterval=0.5)
+            self.bar = tqdm(
+                total=end_step,
+                initial=start_step,
+                file=self.stream,
+                unit="step",
+                dynamic_ncols=True,
+                mininterval=0.5,
+            )
 
     def info(self, scene, steps_done: int, elapsed: float, state: str = "running") -> dict:
         clock = scene.state.clock

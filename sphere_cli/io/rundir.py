@@ -119,13 +119,19 @@ class RunOutput:
 
         with h5py.File(self.rundir.trajectory_path, "r") as f:
             times = f["/particles/trajectory/position/time"][...].tolist()
-        write_xdmf(self.rundir.xdmf, self.rundir.trajectory_path.name, times,
-                   scene.state.particles.count, self.fields)
+        write_xdmf(
+            self.rundir.xdmf,
+            self.rundir.trajectory_path.name,
+            times,
+            scene.state.particles.count,
+            self.fields,
+        )
 
     def checkpoint(self, scene) -> None:
         step = scene.state.clock.step
         if self.last_checkpoint is not None and self.last_checkpoint.name.endswith(f"{step:012d}.h5"):
             return
-        self.last_checkpoint = write_checkpoint(self.rundir.checkpoints, scene, self.case_text,
-                                                self.resolved, self.physics_hash, self.keep)
+        self.last_checkpoint = write_checkpoint(
+            self.rundir.checkpoints, scene, self.case_text, self.resolved, self.physics_hash, self.keep
+        )
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)

@@ -81,9 +81,7 @@ class Trajectory:
                 part = f.create_group(GROUP)
                 box = part.create_group("box")
                 box.attrs["dimension"] = 3
-                box.attrs["boundary"] = np.array(
-                    [b"periodic" if p else b"none" for p in state.box.periodic]
-                )
+                box.attrs["boundary"] = np.array([b"periodic" if p else b"none" for p in state.box.periodic])
                 edges = box.create_dataset("edges", data=state.box.length)
                 edges.attrs["unit"] = "m"
                 box.create_dataset("offset", data=state.box.lower).attrs["unit"] = "m"

@@ -11,8 +11,12 @@ from pathlib import Path
 
 from .atomic import write_text_atomic
 
-VECTOR_NAMES = {"velocity": "velocity", "angular_velocity": "angular_velocity", "force": "force",
-                "torque": "torque"}
+VECTOR_NAMES = {
+    "velocity": "velocity",
+    "angular_velocity": "angular_velocity",
+    "force": "force",
+    "torque": "torque",
+}
 
 
 def _slab(h5name: str, dataset: str, frame: int, frames: int, n: int) -> str:
@@ -44,7 +48,9 @@ def write_xdmf(path: Path, h5name: str, times, n: int, fields: list[str]) -> Non
             f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}"/>'
             f'<Geometry GeometryType="XYZ">'
             + _slab(h5name, "/particles/trajectory/position/value", k, frames, n)
-            + "</Geometry>" + "".join(attrs) + "</Grid>"
+            + "</Geometry>"
+            + "".join(attrs)
+            + "</Grid>"
         )
     text = (
         '<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>'

@@ -25,8 +25,11 @@ from .neighbors import minimum_image
 
 
 @njit(cache=True, inline="always")
-def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt):
-    """Update the spring xi = hist[i, k] (3,) in place and return F_t as a tuple [N]."""
+def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
+    """Update the spring xi = hist[i, k] (3,) in place and return F_t as a tuple [N].
+
+    vt: tangential slip velocity at the half step (grows the spring: exact midpoint rule);
+    ut: the same at the predicted full step (the dashpot acts at the time of the force)."""
     xi = hist[i, k]
     # rotate the spring into the current tangent plane, keeping its length
     old2 = xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]
@@ -43,9 +46,9 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt):
     xi[0] += vt0 * dt
     xi[1] += vt1 * dt
     xi[2] += vt2 * dt
-    f0 = -kt * xi[0] - ct * vt0
-    f1 = -kt * xi[1] - ct * vt1
-    f2 = -kt * xi[2] - ct * vt2
+    f0 = -kt * xi[0] - ct * ut0
+    f1 = -kt * xi[1] - ct * ut1
+    f2 = -kt * xi[2] - ct * ut2
     ft2 = f0 * f0 + f1 * f1 + f2 * f2
     cap = mu * fn
     if ft2 > cap * cap:
@@ -53,15 +56,35 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt):
         f0 *= ratio
         f1 *= ratio
         f2 *= ratio
-        xi[0] = -(f0 + ct * vt0) / kt
-        xi[1] = -(f1 + ct * vt1) / kt
-        xi[2] = -(f2 + ct * vt2) / kt
+        xi[0] = -(f0 + ct * ut0) / kt
+        xi[1] = -(f1 + ct * ut1) / kt
+        xi[2] = -(f2 + ct * ut2) / kt
     return f0, f1, f2
 
 
 @njit(cache=True, parallel=True)
-def linear_pair_forces(pos, vel, angvel, radius, mass, nbr, nbr_count, hist, kn, kt, zeta, mu,
-                       body_acc, length, periodic, dt, force, torque):
+def linear_pair_forces(
+    pos,
+    vel,
+    angvel,
+    vel_pred,
+    angvel_pred,
+    radius,
+    mass,
+    nbr,
+    nbr_count,
+    hist,
+    kn,
+    kt,
+    zeta,
+    mu,
+    body_acc,
+    length,
+    periodic,
+    dt,
+    force,
+    torque,
+):
     """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle."""
     n = pos.shape[0]
     cap = nbr.shape[1]
@@ -101,17 +124,43 @@ def linear_pair_forces(pos, vel, angvel, radius, mass, nbr, nbr_count, hist, kn,
             v1 = (vel[i, 1] - vel[j, 1]) - (s2 * n0 - s0 * n2)
             v2 = (vel[i, 2] - vel[j, 2]) - (s0 * n1 - s1 * n0)
             vn = v0 * n0 + v1 * n1 + v2 * n2
+            # the same at the predicted full step, for the dashpots
+            q0 = ri * angvel_pred[i, 0] + rj * angvel_pred[j, 0]
+            q1 = ri * angvel_pred[i, 1] + rj * angvel_pred[j, 1]
+            q2 = ri * angvel_pred[i, 2] + rj * angvel_pred[j, 2]
+            u0 = (vel_pred[i, 0] - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
+            u1 = (vel_pred[i, 1] - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
+            u2 = (vel_pred[i, 2] - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
+            un = u0 * n0 + u1 * n1 + u2 * n2
             mj = mass[j]
             m_eff = mi * mj / (mi + mj)
             cn = 2.0 * zeta * math.sqrt(kn * m_eff)
-            fn = kn * delta - cn * vn
+            fn = kn * delta - cn * un
             if fn < 0.0:
                 fn = 0.0
             vt0 = v0 - vn * n0
             vt1 = v1 - vn * n1
             vt2 = v2 - vn * n2
             ct = 2.0 * zeta * math.sqrt(kt * m_eff)
-            g0, g1, g2 = tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt)
+            g0, g1, g2 = tangential_force(
+                hist,
+                i,
+                k,
+                vt0,
+                vt1,
+                vt2,
+                n0,
+                n1,
+                n2,
+                kt,
+                ct,
+                mu,
+                fn,
+                dt,
+                u0 - un * n0,
+                u1 - un * n1,
+                u2 - un * n2,
+            )
             f0 += fn * n0 + g0
             f1 += fn * n1 + g1
             f2 += fn * n2 + g2

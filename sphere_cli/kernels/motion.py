@@ -16,13 +16,18 @@ from numba import njit, prange
 
 
 @njit(cache=True, parallel=True)
-def kick_drift(pos, vel, angvel, force, torque, inv_mass, inv_inertia, lower, length, periodic, dt):
-    """Half kick with the old forces, full drift, wrap into the periodic box."""
+def kick_drift(
+    pos, vel, angvel, force, torque, inv_mass, inv_inertia, lower, length, periodic, dt, vel_pred, angvel_pred
+):
+    """Half kick with the old forces, full drift, wrap into the periodic box; also the
+    prediction v_n + dt a_n of v_{n+1} that the dashpots use (vel_pred, angvel_pred)."""
     half = 0.5 * dt
     for i in prange(pos.shape[0]):
         for a in range(3):
             vel[i, a] += half * force[i, a] * inv_mass[i]
             angvel[i, a] += half * torque[i, a] * inv_inertia[i]
+            vel_pred[i, a] = vel[i, a] + half * force[i, a] * inv_mass[i]
+            angvel_pred[i, a] = angvel[i, a] + half * torque[i, a] * inv_inertia[i]
             x = pos[i, a] + dt * vel[i, a]
             if periodic[a]:
                 if x >= lower[a] + length[a]:

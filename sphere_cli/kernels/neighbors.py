@@ -66,8 +66,25 @@ def _axis_offsets(n, periodic):
 
 
 @njit(cache=True, parallel=True)
-def build_lists(pos, radius, lower, length, periodic, cell_size, ncell, cell_of, cell_start, order,
-                skin, old_nbr, old_count, old_hist, nbr, nbr_count, hist):
+def build_lists(
+    pos,
+    radius,
+    lower,
+    length,
+    periodic,
+    cell_size,
+    ncell,
+    cell_of,
+    cell_start,
+    order,
+    skin,
+    old_nbr,
+    old_count,
+    old_hist,
+    nbr,
+    nbr_count,
+    hist,
+):
     """Fill nbr/nbr_count/hist for every particle, copying each surviving pair's history."""
     n = pos.shape[0]
     cap = nbr.shape[1]

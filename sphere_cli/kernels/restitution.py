@@ -45,8 +45,12 @@ def hermite(y0, d0, y1, d1, h, s):
     """Cubic Hermite interpolant on a step of length h at fraction s in [0, 1]."""
     s2 = s * s
     s3 = s2 * s
-    return ((2.0 * s3 - 3.0 * s2 + 1.0) * y0 + (s3 - 2.0 * s2 + s) * h * d0
-            + (-2.0 * s3 + 3.0 * s2) * y1 + (s3 - s2) * h * d1)
+    return (
+        (2.0 * s3 - 3.0 * s2 + 1.0) * y0
+        + (s3 - 2.0 * s2 + s) * h * d0
+        + (-2.0 * s3 + 3.0 * s2) * y1
+        + (s3 - s2) * h * d1
+    )
 
 
 @njit(cache=True)

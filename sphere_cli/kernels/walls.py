@@ -14,8 +14,26 @@ from .contact import tangential_force
 
 
 @njit(cache=True, parallel=True)
-def linear_wall_forces(pos, vel, angvel, radius, mass, wall_axis, wall_sign, wall_coord, wall_mu,
-                       wall_hist, kn, kt, zeta, dt, force, torque):
+def linear_wall_forces(
+    pos,
+    vel,
+    angvel,
+    vel_pred,
+    angvel_pred,
+    radius,
+    mass,
+    wall_axis,
+    wall_sign,
+    wall_coord,
+    wall_mu,
+    wall_hist,
+    kn,
+    kt,
+    zeta,
+    dt,
+    force,
+    torque,
+):
     """Add the forces of plane walls (W walls) to force/torque.
 
     wall_axis (W,) int64 axis of the wall normal; wall_sign (W,) +1 for a lower face (normal
@@ -58,8 +76,15 @@ def linear_wall_forces(pos, vel, angvel, radius, mass, wall_axis, wall_sign, wal
             v1 = vel[i, 1] - (s2 * n0 - s0 * n2)
             v2 = vel[i, 2] - (s0 * n1 - s1 * n0)
             vn = v0 * n0 + v1 * n1 + v2 * n2
+            q0 = ri * angvel_pred[i, 0]
+            q1 = ri * angvel_pred[i, 1]
+            q2 = ri * angvel_pred[i, 2]
+            u0 = vel_pred[i, 0] - (q1 * n2 - q2 * n1)
+            u1 = vel_pred[i, 1] - (q2 * n0 - q0 * n2)
+            u2 = vel_pred[i, 2] - (q0 * n1 - q1 * n0)
+            un = u0 * n0 + u1 * n1 + u2 * n2
             cn = 2.0 * zeta * math.sqrt(kn * mi)
-            fn = kn * delta - cn * vn
+            fn = kn * delta - cn * un
             if fn < 0.0:
                 fn = 0.0
             vt0 = v0 - vn * n0
@@ -67,7 +92,23 @@ def linear_wall_forces(pos, vel, angvel, radius, mass, wall_axis, wall_sign, wal
             vt2 = v2 - vn * n2
             ct = 2.0 * zeta * math.sqrt(kt * mi)
             g0, g1, g2 = tangential_force(
-                wall_hist, i, w, vt0, vt1, vt2, n0, n1, n2, kt, ct, wall_mu[w], fn, dt
+                wall_hist,
+                i,
+                w,
+                vt0,
+                vt1,
+                vt2,
+                n0,
+                n1,
+                n2,
+                kt,
+                ct,
+                wall_mu[w],
+                fn,
+                dt,
+                u0 - un * n0,
+                u1 - un * n1,
+                u2 - un * n2,
             )
             f0 += fn * n0 + g0
             f1 += fn * n1 + g1

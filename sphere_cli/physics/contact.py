@@ -23,11 +23,33 @@ class LinearContactForces:
         self.mu = params.friction
         self.zeta = linear_damping_ratio(params.restitution)
 
-    def forces(self, state: State) -> None:
+    def forces(self, state: State, spring_dt: float | None = None) -> None:
+        """Pair forces at the current positions; the tangential springs grow by the slip over
+        `spring_dt` (default: one step; 0 for the forces of the initial state)."""
         p, box, nl = state.particles, state.box, state.neighbors
-        linear_pair_forces(p.pos, p.vel, p.angvel, p.radius, p.mass, nl.nbr, nl.nbr_count, nl.hist,
-                           self.kn, self.kt, self.zeta, self.mu, box.body_acc, box.length,
-                           box.periodic, state.clock.dt, p.force, p.torque)
+        dt = state.clock.dt if spring_dt is None else spring_dt
+        linear_pair_forces(
+            p.pos,
+            p.vel,
+            p.angvel,
+            p.vel_pred,
+            p.angvel_pred,
+            p.radius,
+            p.mass,
+            nl.nbr,
+            nl.nbr_count,
+            nl.hist,
+            self.kn,
+            self.kt,
+            self.zeta,
+            self.mu,
+            box.body_acc,
+            box.length,
+            box.periodic,
+            dt,
+            p.force,
+            p.torque,
+        )
 
     def critical_dt(self, m_eff: float) -> float:
         """Stability limit of velocity Verlet for this contact at reduced mass m_eff [s].
@@ -43,8 +65,9 @@ class LinearContactForces:
 
     def elastic_energy(self, state: State) -> tuple[float, int]:
         p, box, nl = state.particles, state.box, state.neighbors
-        energy, pairs = linear_pair_elastic_energy(p.pos, p.radius, nl.nbr, nl.nbr_count, nl.hist,
-                                                   self.kn, self.kt, box.length, box.periodic)
+        energy, pairs = linear_pair_elastic_energy(
+            p.pos, p.radius, nl.nbr, nl.nbr_count, nl.hist, self.kn, self.kt, box.length, box.periodic
+        )
         return float(energy), int(pairs)
 
 

@@ -11,8 +11,21 @@ class Motion:
 
     def kick_drift(self, state: State) -> None:
         p, box = state.particles, state.box
-        kick_drift(p.pos, p.vel, p.angvel, p.force, p.torque, p.inv_mass, p.inv_inertia,
-                   box.lower, box.length, box.periodic, state.clock.dt)
+        kick_drift(
+            p.pos,
+            p.vel,
+            p.angvel,
+            p.force,
+            p.torque,
+            p.inv_mass,
+            p.inv_inertia,
+            box.lower,
+            box.length,
+            box.periodic,
+            state.clock.dt,
+            p.vel_pred,
+            p.angvel_pred,
+        )
 
     def kick(self, state: State) -> None:
         p = state.particles
@@ -21,8 +34,9 @@ class Motion:
     @staticmethod
     def first_unstable(state: State) -> tuple[int, int]:
         p, box = state.particles, state.box
-        i, reason = first_unstable(p.pos, p.vel, p.angvel, p.radius, box.lower, box.upper,
-                                   box.periodic, state.clock.dt)
+        i, reason = first_unstable(
+            p.pos, p.vel, p.angvel, p.radius, box.lower, box.upper, box.periodic, state.clock.dt
+        )
         return int(i), int(reason)
 
     @staticmethod

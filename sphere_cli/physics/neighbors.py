@@ -50,10 +50,25 @@ class NeighborSearch:
         cell_index(p.pos, box.lower, self.cell_size, self.ncell, self.cell_of)
         counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
         while True:
-            build_lists(p.pos, p.radius, box.lower, box.length, box.periodic, self.cell_size,
-                        self.ncell, self.cell_of, self.cell_start, self.order, nl.skin,
-                        nl.nbr, nl.nbr_count, nl.hist, self.spare_nbr, self.spare_count,
-                        self.spare_hist)
+            build_lists(
+                p.pos,
+                p.radius,
+                box.lower,
+                box.length,
+                box.periodic,
+                self.cell_size,
+                self.ncell,
+                self.cell_of,
+                self.cell_start,
+                self.order,
+                nl.skin,
+                nl.nbr,
+                nl.nbr_count,
+                nl.hist,
+                self.spare_nbr,
+                self.spare_count,
+                self.spare_hist,
+            )
             needed = int(self.spare_count.max()) if p.count else 0
             if needed <= nl.nbr.shape[1]:
                 break

@@ -89,7 +89,10 @@ def sphere(*args, cwd: Path | None = None, timeout: float = 300) -> Result:
     """Run the real CLI in a fresh interpreter, as a user would."""
     proc = subprocess.run(
         [sys.executable, "-m", "sphere_cli.cli", *map(str, args)],
-        cwd=cwd, capture_output=True, text=True, timeout=timeout,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     return Result(proc.returncode, proc.stdout, proc.stderr)
@@ -123,5 +126,5 @@ def assert_clean_error(result: Result, code: int, *fragments: str) -> None:
         assert fragment in result.stderr, f"{fragment!r} missing from stderr\n{shown}"
     if code not in (0, 2):  # usage errors are worded by click
         assert "sphere: error: " in result.stderr, shown
-        message = result.stderr[result.stderr.index("sphere: error: "):]
+        message = result.stderr[result.stderr.index("sphere: error: ") :]
         assert len(message.splitlines()) <= 5, f"error message too long\n{shown}"

@@ -29,63 +29,193 @@ from cli_test_support import (
 # (id, text to replace, replacement, key named, text on the line named, other fragments)
 CASE_ERRORS = [
     ("typo-top-level", 'title = "tiny"', 'titel = "tiny"', "titel", "titel", ["unknown key"]),
-    ("typo-nested", 'dt = "auto"', 'dt = "auto"\ndt_safty = 0.2', "simulation.dt_safty", "dt_safty",
-     ["unknown key"]),
-    ("typo-inline-table", "min = 0.0008, max = 0.001", "min = 0.0008, mx = 0.001", "particles.radius.mx",
-     "radius =", ["unknown key"]),
+    (
+        "typo-nested",
+        'dt = "auto"',
+        'dt = "auto"\ndt_safty = 0.2',
+        "simulation.dt_safty",
+        "dt_safty",
+        ["unknown key"],
+    ),
+    (
+        "typo-inline-table",
+        "min = 0.0008, max = 0.001",
+        "min = 0.0008, mx = 0.001",
+        "particles.radius.mx",
+        "radius =",
+        ["unknown key"],
+    ),
     ("typo-array-of-tables", 'face = "z-"', 'fase = "z-"', "walls[0].fase", "fase", ["unknown key"]),
-    ("missing-required-key", "duration = 0.002\n", "", "simulation.duration", "[simulation]",
-     ["required key is missing"]),
-    ("wrong-type-string-for-int", "count = 20", 'count = "many"', "particles.count", "count =",
-     ["valid integer"]),
-    ("wrong-type-bool-for-int", "count = 20", "count = true", "particles.count", "count =",
-     ["valid integer"]),
-    ("wrong-type-string-for-float", "density = 2500.0", 'density = "2500"', "particles.density", "density =",
-     ["valid number"]),
-    ("wrong-type-number-for-flag", "upper = [0.01, 0.01, 0.02]",
-     "upper = [0.01, 0.01, 0.02]\nperiodic = [0, 0, 0]", "domain.periodic[0]", "periodic =", ["boolean"]),
-    ("negative-radius", "min = 0.0008", "min = -0.0008", "particles.radius.min", "radius =",
-     ["greater than 0"]),
-    ("negative-density", "density = 2500.0", "density = -2500.0", "particles.density", "density =",
-     ["greater than 0"]),
-    ("zero-density", "density = 2500.0", "density = 0.0", "particles.density", "density =",
-     ["greater than 0"]),
-    ("infinite-duration", "duration = 0.002", "duration = inf", "simulation.duration", "duration =",
-     ["finite"]),
-    ("box-smaller-than-particle", "upper = [0.01, 0.01, 0.02]", "upper = [0.001, 0.01, 0.02]", "domain.upper",
-     "upper =", ["smaller than the largest particle diameter 0.002 m"]),
-    ("periodic-axis-too-short", "upper = [0.01, 0.01, 0.02]",
-     "upper = [0.003, 0.01, 0.02]\nperiodic = [true, false, false]", "domain.periodic", "periodic =",
-     ["two largest diameters"]),
-    ("periodic-axis-with-wall", "upper = [0.01, 0.01, 0.02]",
-     "upper = [0.01, 0.01, 0.02]\nperiodic = [false, false, true]", "walls[0].face", 'face = "z-"',
-     ["periodic", "cannot have a wall"]),
-    ("duplicate-wall-face", '[[walls]]\nface = "z-"',
-     '[[walls]]\nface = "z-"\n\n[[walls]]\nface = "z-"  # twice',
-     "walls[1].face", "# twice", ["walls[0] is already on this face"]),
+    (
+        "missing-required-key",
+        "duration = 0.002\n",
+        "",
+        "simulation.duration",
+        "[simulation]",
+        ["required key is missing"],
+    ),
+    (
+        "wrong-type-string-for-int",
+        "count = 20",
+        'count = "many"',
+        "particles.count",
+        "count =",
+        ["valid integer"],
+    ),
+    (
+        "wrong-type-bool-for-int",
+        "count = 20",
+        "count = true",
+        "particles.count",
+        "count =",
+        ["valid integer"],
+    ),
+    (
+        "wrong-type-string-for-float",
+        "density = 2500.0",
+        'density = "2500"',
+        "particles.density",
+        "density =",
+        ["valid number"],
+    ),
+    (
+        "wrong-type-number-for-flag",
+        "upper = [0.01, 0.01, 0.02]",
+        "upper = [0.01, 0.01, 0.02]\nperiodic = [0, 0, 0]",
+        "domain.periodic[0]",
+        "periodic =",
+        ["boolean"],
+    ),
+    (
+        "negative-radius",
+        "min = 0.0008",
+        "min = -0.0008",
+        "particles.radius.min",
+        "radius =",
+        ["greater than 0"],
+    ),
+    (
+        "negative-density",
+        "density = 2500.0",
+        "density = -2500.0",
+        "particles.density",
+        "density =",
+        ["greater than 0"],
+    ),
+    (
+        "zero-density",
+        "density = 2500.0",
+        "density = 0.0",
+        "particles.density",
+        "density =",
+        ["greater than 0"],
+    ),
+    (
+        "infinite-duration",
+        "duration = 0.002",
+        "duration = inf",
+        "simulation.duration",
+        "duration =",
+        ["finite"],
+    ),
+    (
+        "box-smaller-than-particle",
+        "upper = [0.01, 0.01, 0.02]",
+        "upper = [0.001, 0.01, 0.02]",
+        "domain.upper",
+        "upper =",
+        ["smaller than the largest particle diameter 0.002 m"],
+    ),
+    (
+        "periodic-axis-too-short",
+        "upper = [0.01, 0.01, 0.02]",
+        "upper = [0.003, 0.01, 0.02]\nperiodic = [true, false, false]",
+        "domain.periodic",
+        "periodic =",
+        ["two largest diameters"],
+    ),
+    (
+        "periodic-axis-with-wall",
+        "upper = [0.01, 0.01, 0.02]",
+        "upper = [0.01, 0.01, 0.02]\nperiodic = [false, false, true]",
+        "walls[0].face",
+        'face = "z-"',
+        ["periodic", "cannot have a wall"],
+    ),
+    (
+        "duplicate-wall-face",
+        '[[walls]]\nface = "z-"',
+        '[[walls]]\nface = "z-"\n\n[[walls]]\nface = "z-"  # twice',
+        "walls[1].face",
+        "# twice",
+        ["walls[0] is already on this face"],
+    ),
     ("unknown-wall-face", 'face = "z-"', 'face = "top"', "walls[0].face", "face =", ['"top"']),
-    ("unknown-contact-model", 'model = "linear"', 'model = "hertz"', "contact.model", "model =",
-     ['"hertz"', "expected one of", '"linear"']),
-    ("unknown-radius-distribution", 'distribution = "uniform"', 'distribution = "gaussian"',
-     "particles.radius.distribution", "radius =",
-     ['"gaussian"', "expected one of", '"fixed"', '"uniform"', '"lognormal"', '"bimodal"']),
-    ("unknown-placement-method", 'method = "lattice"', 'method = "poisson"', "particles.placement.method",
-     "placement =", ['"poisson"', "expected one of", '"lattice"', '"random"', '"file"']),
-    ("region-outside-box", 'placement = { method = "lattice" }',
-     'placement = { method = "lattice", region_upper = [0.02, 0.01, 0.01] }',
-     "particles.placement.region_upper", "placement =", ["inside the domain box"]),
-    ("unknown-output-field", "[output.frames]", '[output]\nfields = ["pressure"]\n\n[output.frames]',
-     "output.fields[0]", "fields =", ['"pressure"']),
-    ("dt-not-a-number", 'dt = "auto"', 'dt = "fast"', "simulation.dt", "dt =",
-     ['"fast"', 'positive number of seconds or "auto"']),
-    ("dt-negative", 'dt = "auto"', "dt = -1e-6", "simulation.dt", "dt =",
-     ['positive number of seconds or "auto"']),
+    (
+        "unknown-contact-model",
+        'model = "linear"',
+        'model = "hertz"',
+        "contact.model",
+        "model =",
+        ['"hertz"', "expected one of", '"linear"'],
+    ),
+    (
+        "unknown-radius-distribution",
+        'distribution = "uniform"',
+        'distribution = "gaussian"',
+        "particles.radius.distribution",
+        "radius =",
+        ['"gaussian"', "expected one of", '"fixed"', '"uniform"', '"lognormal"', '"bimodal"'],
+    ),
+    (
+        "unknown-placement-method",
+        'method = "lattice"',
+        'method = "poisson"',
+        "particles.placement.method",
+        "placement =",
+        ['"poisson"', "expected one of", '"lattice"', '"random"', '"file"'],
+    ),
+    (
+        "region-outside-box",
+        'placement = { method = "lattice" }',
+        'placement = { method = "lattice", region_upper = [0.02, 0.01, 0.01] }',
+        "particles.placement.region_upper",
+        "placement =",
+        ["inside the domain box"],
+    ),
+    (
+        "unknown-output-field",
+        "[output.frames]",
+        '[output]\nfields = ["pressure"]\n\n[output.frames]',
+        "output.fields[0]",
+        "fields =",
+        ['"pressure"'],
+    ),
+    (
+        "dt-not-a-number",
+        'dt = "auto"',
+        'dt = "fast"',
+        "simulation.dt",
+        "dt =",
+        ['"fast"', 'positive number of seconds or "auto"'],
+    ),
+    (
+        "dt-negative",
+        'dt = "auto"',
+        "dt = -1e-6",
+        "simulation.dt",
+        "dt =",
+        ['positive number of seconds or "auto"'],
+    ),
     ("dt-zero", 'dt = "auto"', "dt = 0.0", "simulation.dt", "dt =", ['positive number of seconds or "auto"']),
 ]
 
 
-@pytest.mark.parametrize(("old", "new", "key", "marker", "fragments"),
-                         [c[1:] for c in CASE_ERRORS], ids=[c[0] for c in CASE_ERRORS])
+@pytest.mark.parametrize(
+    ("old", "new", "key", "marker", "fragments"),
+    [c[1:] for c in CASE_ERRORS],
+    ids=[c[0] for c in CASE_ERRORS],
+)
 def test_case_file_error_names_key_and_line(tmp_path, old, new, key, marker, fragments):
     text = edit(TINY, old, new)
     case = tmp_path / "case.toml"
@@ -94,8 +224,13 @@ def test_case_file_error_names_key_and_line(tmp_path, old, new, key, marker, fra
     assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
 
 
-SUBPROCESS_SAMPLE = ["typo-top-level", "negative-radius", "periodic-axis-with-wall", "unknown-contact-model",
-                     "dt-not-a-number"]
+SUBPROCESS_SAMPLE = [
+    "typo-top-level",
+    "negative-radius",
+    "periodic-axis-with-wall",
+    "unknown-contact-model",
+    "dt-not-a-number",
+]
 
 
 @pytest.mark.parametrize("case_id", SUBPROCESS_SAMPLE)
@@ -120,8 +255,12 @@ def test_several_errors_are_reported_together(tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(text)
     result = sphere_inproc("validate", case)
-    assert_clean_error(result, 65, f"case.toml:{line_of(text, 'titel')}: titel",
-                       f"case.toml:{line_of(text, 'density')}: particles.density")
+    assert_clean_error(
+        result,
+        65,
+        f"case.toml:{line_of(text, 'titel')}: titel",
+        f"case.toml:{line_of(text, 'density')}: particles.density",
+    )
 
 
 def test_missing_case_file(tmp_path):
@@ -158,8 +297,9 @@ def test_lattice_too_small_for_the_count(tmp_path):
     text = edit(TINY, "count = 20", "count = 2000")
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "particles.count", f"case.toml:{line_of(text, 'count =')}:", "lattice",
-                       "holds only")
+    assert_clean_error(
+        result, 65, "particles.count", f"case.toml:{line_of(text, 'count =')}:", "lattice", "holds only"
+    )
 
 
 def test_random_insertion_that_cannot_fit_the_count(tmp_path):
@@ -167,8 +307,13 @@ def test_random_insertion_that_cannot_fit_the_count(tmp_path):
     text = edit(text, 'method = "lattice"', 'method = "random", max_attempts = 5')
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "particles.placement", f"case.toml:{line_of(text, 'placement =')}:",
-                       "random insertion placed only")
+    assert_clean_error(
+        result,
+        65,
+        "particles.placement",
+        f"case.toml:{line_of(text, 'placement =')}:",
+        "random insertion placed only",
+    )
 
 
 def _file_case(tmp_path: Path, csv: str | None, case_text: str = FROM_FILE) -> Path:
@@ -183,8 +328,14 @@ def test_initial_overlap_beyond_tolerance(tmp_path):
     # centres 1.9 mm apart with radii 1 mm: overlap 0.1 of the radius, tolerance 0.05
     _file_case(tmp_path, "x,y,z,r\n0.004,0.005,0.005,0.001\n0.0059,0.005,0.005,0.001\n", text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "particles.overlap_tolerance",
-                       f"case.toml:{line_of(text, 'overlap_tolerance')}:", "particles 0 and 1", "overlapping")
+    assert_clean_error(
+        result,
+        65,
+        "particles.overlap_tolerance",
+        f"case.toml:{line_of(text, 'overlap_tolerance')}:",
+        "particles 0 and 1",
+        "overlapping",
+    )
 
 
 def test_initial_overlap_within_tolerance_runs(tmp_path):
@@ -197,15 +348,27 @@ def test_initial_overlap_within_tolerance_runs(tmp_path):
 def test_particle_outside_the_box_from_file(tmp_path):
     _file_case(tmp_path, "x,y,z,r\n0.005,0.005,0.005,0.001\n0.02,0.005,0.005,0.001\n")
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "particles.placement", f"case.toml:{line_of(FROM_FILE, 'placement =')}:",
-                       "particle 1", "outside the box along x")
+    assert_clean_error(
+        result,
+        65,
+        "particles.placement",
+        f"case.toml:{line_of(FROM_FILE, 'placement =')}:",
+        "particle 1",
+        "outside the box along x",
+    )
 
 
 def test_missing_placement_file(tmp_path):
     _file_case(tmp_path, None)
     result = sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 66, "particles.placement.path",
-                       f"case.toml:{line_of(FROM_FILE, 'placement =')}:", "spheres.csv", "not found")
+    assert_clean_error(
+        result,
+        66,
+        "particles.placement.path",
+        f"case.toml:{line_of(FROM_FILE, 'placement =')}:",
+        "spheres.csv",
+        "not found",
+    )
     assert not (tmp_path / "out").exists()
 
 
@@ -220,8 +383,15 @@ def test_missing_placement_file(tmp_path):
         ("", "must name columns x, y, z"),  # empty file
         (b"x,y,z,r\n\xff\xfe,0,0,0\n", "not a readable CSV"),  # not UTF-8
     ],
-    ids=["ragged-row", "no-xyz-header", "no-rows", "not-a-number", "negative-radius", "empty-file",
-         "not-utf8"],
+    ids=[
+        "ragged-row",
+        "no-xyz-header",
+        "no-rows",
+        "not-a-number",
+        "negative-radius",
+        "empty-file",
+        "not-utf8",
+    ],
 )
 def test_malformed_csv_names_the_file(tmp_path, csv, fragment):
     _file_case(tmp_path, None)
@@ -327,8 +497,11 @@ def test_resume_of_a_directory_that_is_not_a_run(tmp_path):
 
 def test_resume_with_every_checkpoint_truncated(run_copy):
     checkpoints = _checkpoints(run_copy)
-    assert [p.name for p in checkpoints] == ["ckpt-000000000700.h5", "ckpt-000000000750.h5",
-                                             "ckpt-000000000784.h5"]
+    assert [p.name for p in checkpoints] == [
+        "ckpt-000000000700.h5",
+        "ckpt-000000000750.h5",
+        "ckpt-000000000784.h5",
+    ]
     for path in checkpoints:
         with open(path, "r+b") as f:
             f.truncate(path.stat().st_size // 2)
@@ -378,8 +551,9 @@ def test_resume_refused_names_every_changed_key(run_copy):
 
 def test_resume_accepts_an_output_edit(run_copy):
     case = run_copy / "case.toml"
-    case.write_text(edit(case.read_text(), "[output.frames]\nevery_steps = 50",
-                         "[output.frames]\nevery_steps = 20"))
+    case.write_text(
+        edit(case.read_text(), "[output.frames]\nevery_steps = 50", "[output.frames]\nevery_steps = 20")
+    )
     result = sphere_inproc("resume", run_copy, "-q", "--until", 0.0025)
     assert_clean_error(result, 0)
 
@@ -427,7 +601,7 @@ def test_inspect_a_run_with_damaged_files(run_copy):
 def test_auto_dt_without_any_possible_contact(tmp_path):
     """One particle and no walls: no contact limits dt, so "auto" is refused with a clear message."""
     text = edit(TINY, "count = 20", "count = 1")
-    text = edit(text, "[[walls]]\nface = \"z-\"\n", "")
+    text = edit(text, '[[walls]]\nface = "z-"\n', "")
     (tmp_path / "case.toml").write_text(text)
     result = sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "simulation.dt")

@@ -44,8 +44,13 @@ def test_validate_json_fills_in_defaults(tmp_path):
     assert resolved["simulation"]["dt"] == "auto"
     assert resolved["simulation"]["dt_safety"] == 0.1
     assert resolved["particles"]["overlap_tolerance"] == 0.05
-    assert resolved["particles"]["placement"] == {"method": "lattice", "spacing": 1.2, "jitter": 0.1,
-                                                  "region_lower": None, "region_upper": None}
+    assert resolved["particles"]["placement"] == {
+        "method": "lattice",
+        "spacing": 1.2,
+        "jitter": 0.1,
+        "region_lower": None,
+        "region_upper": None,
+    }
     assert resolved["contact"]["tangential_stiffness"] is None
     assert resolved["walls"] == [{"face": "z-", "mode": "fixed", "friction": None}]
     assert resolved["output"]["checkpoints"]["keep"] == 3
@@ -55,8 +60,11 @@ def test_validate_json_fills_in_defaults(tmp_path):
 def test_validate_fills_in_the_default_tags(tmp_path):
     """`model`, `distribution` and `method` have declared defaults: a table without them uses them."""
     text = edit(TINY, 'model = "linear"\n', "")
-    text = edit(text, 'radius = { distribution = "uniform", min = 0.0008, max = 0.001 }',
-                "radius = { value = 0.0009 }")
+    text = edit(
+        text,
+        'radius = { distribution = "uniform", min = 0.0008, max = 0.001 }',
+        "radius = { value = 0.0009 }",
+    )
     text = edit(text, 'placement = { method = "lattice" }', "placement = { spacing = 1.5 }")
     case = tmp_path / "case.toml"
     case.write_text(text)
@@ -229,9 +237,10 @@ def test_max_wall_time_with_units_parses(tmp_path):
     assert_clean_error(result, 0)
 
 
-@pytest.mark.parametrize(("text", "seconds"),
-                         [("3600", 3600.0), ("90s", 90.0), ("45m", 2700.0), ("2h", 7200.0),
-                          ("1.5d", 129600.0), (" 0 ", 0.0)])
+@pytest.mark.parametrize(
+    ("text", "seconds"),
+    [("3600", 3600.0), ("90s", 90.0), ("45m", 2700.0), ("2h", 7200.0), ("1.5d", 129600.0), (" 0 ", 0.0)],
+)
 def test_parse_wall_time(text, seconds):
     assert parse_wall_time(text) == seconds
 

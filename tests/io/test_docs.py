@@ -58,8 +58,13 @@ def test_reference_is_up_to_date():
 def test_every_schema_key_is_documented():
     text = docgen.generate()
     paths = schema_paths(api.schema())
-    assert {"simulation.dt", "particles.radius.sigma", "contact.restitution", "walls[].face",
-            "output.checkpoints.keep"} <= paths  # the walk itself reaches nested and tagged keys
+    assert {
+        "simulation.dt",
+        "particles.radius.sigma",
+        "contact.restitution",
+        "walls[].face",
+        "output.checkpoints.keep",
+    } <= paths  # the walk itself reaches nested and tagged keys
     leaves = {p for p in paths if not any(q.startswith(p + ".") or q.startswith(p + "[].") for q in paths)}
     missing = sorted(p for p in leaves if f"`{p}`" not in text)
     assert not missing, f"keys missing from the case reference: {missing}"
@@ -85,8 +90,12 @@ def test_every_tagged_variant_is_documented():
     text = docgen.generate()
     unions = discriminated_unions(api.schema())
     assert {tag for tag, _ in unions} >= {"distribution", "method", "model"}
-    missing = [f'{tag} = "{value}"' for tag, values in unions for value in values
-               if f'`{tag} = "{value}"`' not in text]
+    missing = [
+        f'{tag} = "{value}"'
+        for tag, values in unions
+        for value in values
+        if f'`{tag} = "{value}"`' not in text
+    ]
     assert not missing, f"variants without their own section in the case reference: {missing}"
 
 

@@ -57,8 +57,13 @@ def test_h5md_layout(run_dir: Path):
         assert traj["radius"].shape == (30,) and traj["radius"].attrs["unit"] == "m"
         frames = traj["position/step"].shape[0]
         assert frames >= 3
-        for field, unit in (("position", "m"), ("velocity", "m s-1"), ("angular_velocity", "s-1"),
-                            ("force", "N"), ("torque", "N m")):
+        for field, unit in (
+            ("position", "m"),
+            ("velocity", "m s-1"),
+            ("angular_velocity", "s-1"),
+            ("force", "N"),
+            ("torque", "N m"),
+        ):
             assert traj[f"{field}/value"].shape == (frames, 30, 3)
             assert traj[f"{field}/value"].attrs["unit"] == unit
             assert traj[f"{field}/time"].attrs["unit"] == "s"

@@ -15,8 +15,14 @@ from sphere_cli.api import run_in_memory
 from sphere_cli.physics.restitution import linear_contact_time, linear_damping_ratio
 from sphere_cli.simulation import advance
 
-__all__ = ["advance", "make_scene", "sphere_mass", "clamped_contact_time", "linear_contact_time",
-           "linear_damping_ratio"]
+__all__ = [
+    "advance",
+    "make_scene",
+    "sphere_mass",
+    "clamped_contact_time",
+    "linear_contact_time",
+    "linear_damping_ratio",
+]
 
 
 def sphere_mass(radius: float, density: float) -> float:
@@ -32,12 +38,29 @@ def _vec(v) -> str:
     return "[" + ", ".join(repr(float(x)) for x in v) + "]"
 
 
-def make_scene(tmp_path: Path, pos, radius, vel=None, *, density: float = 2500.0, kn: float = 1.0e3,
-               kt: float | None = None, e: float = 0.5, mu: float = 0.5, walls=(),
-               wall_friction: dict | None = None, gravity=(0.0, 0.0, 0.0), lower=(0.0, 0.0, 0.0),
-               upper=(0.1, 0.1, 0.1), periodic=(False, False, False), dt: float | str = "auto",
-               dt_safety: float = 0.1, skin: float = 0.4, overlap_tolerance: float = 0.05,
-               name: str = "particles.csv"):
+def make_scene(
+    tmp_path: Path,
+    pos,
+    radius,
+    vel=None,
+    *,
+    density: float = 2500.0,
+    kn: float = 1.0e3,
+    kt: float | None = None,
+    e: float = 0.5,
+    mu: float = 0.5,
+    walls=(),
+    wall_friction: dict | None = None,
+    gravity=(0.0, 0.0, 0.0),
+    lower=(0.0, 0.0, 0.0),
+    upper=(0.1, 0.1, 0.1),
+    periodic=(False, False, False),
+    dt: float | str = "auto",
+    dt_safety: float = 0.1,
+    skin: float = 0.4,
+    overlap_tolerance: float = 0.05,
+    name: str = "particles.csv",
+):
     """Build a scene (advanced 0 steps) holding exactly the given particles.
 
     pos (N,3) [m], radius (N,) or scalar [m], vel (N,3) or None [m/s]; walls: faces like "z-";

@@ -127,8 +127,12 @@ def test_kill_during_checkpoint_write(tmp_path: Path, datasets: int):
 
     script = tmp_path / "killer.py"
     script.write_text(KILLER)
-    child = subprocess.run([sys.executable, str(script), str(case), str(tmp_path / "killed"), "300",
-                            str(datasets)], capture_output=True, text=True, env=os.environ.copy())
+    child = subprocess.run(
+        [sys.executable, str(script), str(case), str(tmp_path / "killed"), "300", str(datasets)],
+        capture_output=True,
+        text=True,
+        env=os.environ.copy(),
+    )
     assert child.returncode == -9, child.stderr
     ckpts = list_checkpoints(tmp_path / "killed" / "checkpoints")
     assert [int(p.stem.split("-")[1]) for p in ckpts] == [0, 100, 200]
@@ -179,6 +183,8 @@ def test_changed_output_fields_refused(tmp_path: Path):
     case.write_text(textwrap.dedent(CASE.format(duration=1e-3)))
     api.run(case, tmp_path / "run")
     edited = tmp_path / "run" / "case.toml"
-    edited.write_text(edited.read_text().replace("[output.frames]", '[output]\nfields = ["torque"]\n[output.frames]'))
+    edited.write_text(
+        edited.read_text().replace("[output.frames]", '[output]\nfields = ["torque"]\n[output.frames]')
+    )
     with pytest.raises(ResumeRefused, match="output.fields"):
         api.resume(tmp_path / "run", until=2e-3)

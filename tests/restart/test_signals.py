@@ -21,6 +21,7 @@ CASE = """
     duration = 20.0
     [domain]
     upper = [0.01, 0.01, 0.02]
+    periodic = [true, true, false]
     [particles]
     count = 40
     density = 2500.0
@@ -40,8 +41,12 @@ def _start(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(CASE))
     run_dir = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "sphere_cli.cli", "run", str(case), "-o", str(run_dir)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sphere_cli.cli", "run", str(case), "-o", str(run_dir)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
     log = run_dir / "run.log"
     while time.monotonic() < deadline:  # wait until the time loop is running
@@ -84,8 +89,21 @@ def test_second_interrupt_stops_at_once(tmp_path: Path):
 def test_wall_time_budget(tmp_path: Path):
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(CASE))
-    proc = subprocess.run([sys.executable, "-m", "sphere_cli.cli", "run", str(case), "-o",
-                           str(tmp_path / "run"), "--max-wall-time", "1s"], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sphere_cli.cli",
+            "run",
+            str(case),
+            "-o",
+            str(tmp_path / "run"),
+            "--max-wall-time",
+            "1s",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 75, proc.stderr
     assert "wall-time" in proc.stderr
     assert len(list_checkpoints(tmp_path / "run" / "checkpoints")) >= 2

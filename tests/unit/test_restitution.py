@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 # ---------------------------------------------------------------- linear spring-dashpot
 
+
 def integrate_clamped_linear(zetas, h=2.0e-4):
     """RK4 of x'' = -max(0, x + 2 zeta x') (omega0 = 1, x(0) = 0, x'(0) = 1) for an array of
     zetas at once; returns (e, t_end) located by linear interpolation of the force."""
@@ -129,7 +130,8 @@ def test_linear_contact_time():
     w0 = math.sqrt(k / m)
     assert linear_contact_time(k, m, 0.0) == pytest.approx(math.pi / w0, rel=1e-15)
     assert linear_contact_time(k, m, 0.3, clamped=False) == pytest.approx(
-        math.pi / (w0 * math.sqrt(1 - 0.09)), rel=1e-15)
+        math.pi / (w0 * math.sqrt(1 - 0.09)), rel=1e-15
+    )
     assert linear_contact_time(k, m, 0.3) < linear_contact_time(k, m, 0.3, clamped=False)
     assert linear_contact_time(k, m, 1.0) == pytest.approx(2.0 / w0, rel=1e-15)
     assert linear_contact_time(k, m, 1.0, clamped=False) == math.inf
@@ -145,6 +147,7 @@ def test_restitution_out_of_range(bad):
 
 
 # ---------------------------------------------------------------- Hertz with Tsuji damping
+
 
 def test_hertz_elastic():
     assert hertz_damping_coefficient(1.0) == 0.0
@@ -247,8 +250,9 @@ def test_hertz_kernel_without_jit_agrees():
         "print(repr(f(1.3, 0.05)))"
     )
     env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True,
-                         text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True, check=True
+    )
     pure = ast.literal_eval(out.stdout.strip())
     jitted = hertz_contact_dimensionless(1.3, 0.05)
     assert pure == pytest.approx(jitted, rel=1e-13)
