@@ -49,7 +49,7 @@ upper = [{width!r}, {width!r}, {height!r}]
 count = {n}
 density = 2500.0
 radius = {{ distribution = "fixed", value = {RADIUS!r} }}
-placement = {{ method = "lattice", spacing = {SPACING}, jitter = 0.1 }}
+placement = {{ method = "lattice", spacing = {SPACING}, jitter = 1.0 }}
 [contact]
 model = "linear"
 normal_stiffness = 1.0e5

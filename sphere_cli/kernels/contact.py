@@ -30,25 +30,28 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
 
     vt: tangential slip velocity at the half step (grows the spring: exact midpoint rule);
     ut: the same at the predicted full step (the dashpot acts at the time of the force)."""
-    xi = hist[i, k]
+    x0 = hist[i, k, 0]
+    x1 = hist[i, k, 1]
+    x2 = hist[i, k, 2]
     # rotate the spring into the current tangent plane, keeping its length
-    old2 = xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]
-    dot = xi[0] * n0 + xi[1] * n1 + xi[2] * n2
-    xi[0] -= dot * n0
-    xi[1] -= dot * n1
-    xi[2] -= dot * n2
-    new2 = xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]
-    if new2 > 0.0 and new2 != old2:
-        scale = math.sqrt(old2 / new2)
-        xi[0] *= scale
-        xi[1] *= scale
-        xi[2] *= scale
-    xi[0] += vt0 * dt
-    xi[1] += vt1 * dt
-    xi[2] += vt2 * dt
-    f0 = -kt * xi[0] - ct * ut0
-    f1 = -kt * xi[1] - ct * ut1
-    f2 = -kt * xi[2] - ct * ut2
+    old2 = x0 * x0 + x1 * x1 + x2 * x2
+    if old2 > 0.0:
+        dot = x0 * n0 + x1 * n1 + x2 * n2
+        x0 -= dot * n0
+        x1 -= dot * n1
+        x2 -= dot * n2
+        new2 = x0 * x0 + x1 * x1 + x2 * x2
+        if new2 > 0.0 and new2 != old2:
+            scale = math.sqrt(old2 / new2)
+            x0 *= scale
+            x1 *= scale
+            x2 *= scale
+    x0 += vt0 * dt
+    x1 += vt1 * dt
+    x2 += vt2 * dt
+    f0 = -kt * x0 - ct * ut0
+    f1 = -kt * x1 - ct * ut1
+    f2 = -kt * x2 - ct * ut2
     ft2 = f0 * f0 + f1 * f1 + f2 * f2
     cap = mu * fn
     if ft2 > cap * cap:
@@ -56,9 +59,12 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
         f0 *= ratio
         f1 *= ratio
         f2 *= ratio
-        xi[0] = -(f0 + ct * ut0) / kt
-        xi[1] = -(f1 + ct * ut1) / kt
-        xi[2] = -(f2 + ct * ut2) / kt
+        x0 = -(f0 + ct * ut0) / kt
+        x1 = -(f1 + ct * ut1) / kt
+        x2 = -(f2 + ct * ut2) / kt
+    hist[i, k, 0] = x0
+    hist[i, k, 1] = x1
+    hist[i, k, 2] = x2
     return f0, f1, f2
 
 
@@ -88,6 +94,8 @@ def linear_pair_forces(
     """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle."""
     n = pos.shape[0]
     cap = nbr.shape[1]
+    damp_n = 2.0 * zeta * math.sqrt(kn)  # c_n = damp_n sqrt(m*)
+    damp_t = 2.0 * zeta * math.sqrt(kt)
     for i in prange(n):
         ri = radius[i]
         mi = mass[i]
@@ -107,14 +115,16 @@ def linear_pair_forces(
             rj = radius[j]
             reach = ri + rj
             if dist2 >= reach * reach:
-                hist[i, k, 0] = 0.0
-                hist[i, k, 1] = 0.0
-                hist[i, k, 2] = 0.0
+                if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
+                    hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
+                    hist[i, k, 1] = 0.0
+                    hist[i, k, 2] = 0.0
                 continue
             dist = math.sqrt(dist2)
-            n0 = d0 / dist
-            n1 = d1 / dist
-            n2 = d2 / dist
+            inv = 1.0 / dist
+            n0 = d0 * inv
+            n1 = d1 * inv
+            n2 = d2 * inv
             delta = reach - dist
             # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
             s0 = ri * angvel[i, 0] + rj * angvel[j, 0]
@@ -133,15 +143,14 @@ def linear_pair_forces(
             u2 = (vel_pred[i, 2] - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
             un = u0 * n0 + u1 * n1 + u2 * n2
             mj = mass[j]
-            m_eff = mi * mj / (mi + mj)
-            cn = 2.0 * zeta * math.sqrt(kn * m_eff)
-            fn = kn * delta - cn * un
+            root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
+            fn = kn * delta - damp_n * root_m * un
             if fn < 0.0:
                 fn = 0.0
             vt0 = v0 - vn * n0
             vt1 = v1 - vn * n1
             vt2 = v2 - vn * n2
-            ct = 2.0 * zeta * math.sqrt(kt * m_eff)
+            ct = damp_t * root_m
             g0, g1, g2 = tangential_force(
                 hist,
                 i,
