@@ -47,6 +47,7 @@ class Particles:
     inertia: np.ndarray  # (N,) [kg m^2]
     inv_mass: np.ndarray  # (N,) [1/kg]
     inv_inertia: np.ndarray  # (N,) [1/(kg m^2)]
+    material: np.ndarray  # (N,) int32 material id (all 0 with one material)
     # scratch, rewritten by every kick_drift (not prognostic): v_n + dt a_n, the dashpots'
     # second-order estimate of v_{n+1}
     vel_pred: np.ndarray | None = None  # (N,3) [m/s]
@@ -67,6 +68,7 @@ class Particles:
         "inertia",
         "inv_mass",
         "inv_inertia",
+        "material",
     )
 
 
@@ -92,7 +94,7 @@ class Walls:
     axis: np.ndarray  # (W,) int64
     sign: np.ndarray  # (W,) float64, +1 lower face, -1 upper face
     coord: np.ndarray  # (W,) [m]
-    mu: np.ndarray  # (W,) [-]
+    table: np.ndarray  # (W,M,6) contact parameters of each wall against each material
     hist: np.ndarray  # (N,W,3) [m]
 
     PROGNOSTIC = ("coord", "hist")

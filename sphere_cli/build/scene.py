@@ -14,7 +14,8 @@ from ..config.load import LoadedCase
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
-from ..physics.contact import LinearContactForces, smallest_pair_mass
+from ..physics.contact import PairContactForces, stability_limit
+from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.motion import Motion
 from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
 from ..physics.walls import PlaneWallForces, allocate_walls
@@ -29,9 +30,14 @@ class Scene:
     state: State
     motion: Motion
     neighbors: NeighborSearch
-    contact: LinearContactForces
+    contact: PairContactForces
     walls: PlaneWallForces | None
     dt_limit: float  # smallest stability limit of any possible contact [s]
+    dt_limit_reason: str = ""  # what sets it
+
+    @property
+    def tables(self) -> ContactTables:
+        return self.contact.tables
 
     @property
     def force_modules(self) -> list:
@@ -57,13 +63,18 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     checkpoint (placement files are not needed again) and every module's state is restored."""
     case = loaded.case
     rng = np.random.default_rng(case.particles.seed)
+    tables = contact_tables(case)
     if restart is None:
         pos, radius, vel = _initial_particles(loaded, rng)
+        material = assign_materials(tables.fractions, radius.size, rng)
     else:
         saved = restart.arrays["particles"]
         pos, radius, vel = saved["pos"], saved["radius"], saved["vel"]
+        material = np.zeros(radius.size, dtype=np.int32)  # restored with the particles
+        if "material" in saved:
+            material[:] = saved["material"]
     n = radius.size
-    density = case.particles.density
+    density = np.array([m.density for m in tables.materials])[material]
     mass = density * 4.0 / 3.0 * np.pi * radius**3
     inertia = 0.4 * mass * radius**2
     particles = Particles(
@@ -77,6 +88,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         inertia=inertia,
         inv_mass=1.0 / mass,
         inv_inertia=1.0 / inertia,
+        material=material,
         vel_pred=vel.copy(),
         angvel_pred=np.zeros((n, 3)),
     )
@@ -90,16 +102,16 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     if restart is None:
         _check_inside(loaded, box, particles)
 
-    contact = LinearContactForces(case.contact)
+    contact = PairContactForces(tables)
     walls_state = None
     walls = None
     if case.walls:
-        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, contact.mu)
+        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table)
         walls = PlaneWallForces(contact)
-    dt_limit = contact.critical_dt(smallest_pair_mass(mass))
-    if walls is not None:
-        dt_limit = min(dt_limit, contact.critical_dt(float(mass.min())))
-    dt = _resolve_dt(loaded, dt_limit)
+    dt_limit, dt_reason = stability_limit(
+        tables, radius, mass, material, case.particles.overlap_tolerance, [w.face for w in case.walls]
+    )
+    dt = _resolve_dt(loaded, dt_limit, dt_reason)
 
     skin = case.simulation.neighbor_skin * float(radius.max())
     state = State(
@@ -118,6 +130,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         contact=contact,
         walls=walls,
         dt_limit=dt_limit,
+        dt_limit_reason=dt_reason,
     )
     if restart is None:
         neighbors.rebuild(state)
@@ -208,7 +221,7 @@ def _check_overlaps(loaded: LoadedCase, state: State) -> None:
         )
 
 
-def _resolve_dt(loaded: LoadedCase, dt_limit: float) -> float:
+def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str) -> float:
     sim = loaded.case.simulation
     if sim.dt == "auto":
         if not math.isfinite(dt_limit):
@@ -220,7 +233,7 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float) -> float:
     if sim.dt > dt_limit:
         raise loaded.error(
             ("simulation", "dt"),
-            f"above the contact stability limit {dt_limit:.4g} s (2(sqrt(1+zeta^2)-zeta)/omega for the "
-            f'stiffest contact and lightest pair); use dt <= {dt_limit:.4g} s or dt = "auto"',
+            f"above the contact stability limit {dt_limit:.4g} s ({reason}); "
+            f'use dt <= {dt_limit:.4g} s or dt = "auto"',
         )
     return float(sim.dt)

@@ -1,12 +1,15 @@
 """Rules that involve several keys at once, each reported against the key it is about.
 
 Checked on the case alone (no scene is built): walls against periodic axes, the box against
-the particles, placements against the box, schedules that can never fire.
+the particles, placements against the box, materials against the contact law and the names
+that refer to them, schedules that can never fire.
 """
 
 from __future__ import annotations
 
-from .schema import Case, FilePlacement
+import math
+
+from .schema import LAW_KEYS, Case, FilePlacement
 
 AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -79,7 +82,118 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
                 )
             )
 
+    problems += _material_problems(case)
+
     frames = case.output.frames
     if frames.every_time is None and frames.every_steps is None and frames.every_wall_minutes is None:
         problems.append((("output", "frames"), "set every_time, every_steps or every_wall_minutes"))
+    return problems
+
+
+def particle_materials(case: Case) -> dict[str, float]:
+    """Name -> number fraction of the materials particles are made of ({} for the single-material
+    form, particles.density with the properties of [contact])."""
+    spec = case.particles.material
+    if spec is None:
+        return {}
+    if isinstance(spec, str):
+        return {spec: 1.0}
+    return dict(spec)
+
+
+def _material_problems(case: Case) -> list[tuple[tuple, str]]:
+    problems: list[tuple[tuple, str]] = []
+    law = case.contact.model
+    own_keys = LAW_KEYS[law]
+    other_keys = [k for m, keys in LAW_KEYS.items() if m != law for k in keys]
+    names: dict[str, int] = {}
+    for i, material in enumerate(case.materials):
+        if material.name in names:
+            problems.append(
+                (("materials", i, "name"), f"materials[{names[material.name]}] already has this name")
+            )
+        names.setdefault(material.name, i)
+        for key in other_keys:
+            if getattr(material, key) is not None:
+                problems.append(
+                    (
+                        ("materials", i, key),
+                        f'not used by the contact model "{law}" (it needs {" and ".join(own_keys)})',
+                    )
+                )
+
+    used: dict[str, tuple] = {}  # material name -> where it is used
+    fractions = particle_materials(case)
+    spec = case.particles.material
+    if spec is None:
+        if case.particles.density is None:
+            problems.append(
+                (("particles", "density"), "required key is missing (or give particles.material)")
+            )
+    else:
+        if case.particles.density is not None:
+            problems.append(
+                (("particles", "density"), "the density comes from the material (particles.material)")
+            )
+        for name, fraction in fractions.items():
+            loc = ("particles", "material") if isinstance(spec, str) else ("particles", "material", name)
+            if name not in names:
+                problems.append((loc, f"no material of this name in [[materials]] (known: {sorted(names)})"))
+                continue
+            used[name] = loc
+            if not fraction > 0:
+                problems.append((loc, "a number fraction must be > 0"))
+            if case.materials[names[name]].density is None:
+                problems.append(
+                    (("materials", names[name], "density"), "required: particles are made of this material")
+                )
+        if not isinstance(spec, str) and not math.isclose(sum(fractions.values()), 1.0, abs_tol=1e-9):
+            problems.append(
+                (("particles", "material"), f"the number fractions sum to {sum(fractions.values())!r}, not 1")
+            )
+    for i, wall in enumerate(case.walls):
+        if wall.material is None:
+            continue
+        if wall.material not in names:
+            problems.append(
+                (
+                    ("walls", i, "material"),
+                    f"no material of this name in [[materials]] (known: {sorted(names)})",
+                )
+            )
+        else:
+            used.setdefault(wall.material, ("walls", i, "material"))
+
+    # the law's elastic properties: from the material or, as a default, from [contact]
+    required = ("normal_stiffness",) if law == "linear" else own_keys
+    for key in required:
+        if getattr(case.contact, key) is not None:
+            continue
+        if spec is None:
+            problems.append((("contact", key), f'required key is missing (the "{law}" model needs it)'))
+        for name in used:
+            if getattr(case.materials[names[name]], key) is None:
+                problems.append(
+                    (
+                        ("materials", names[name], key),
+                        f"required: this material is in use and [contact] gives no default {key}",
+                    )
+                )
+
+    seen: dict[frozenset, int] = {}
+    for i, pair in enumerate(case.contact.pairs):
+        for name in pair.materials:
+            if name not in names:
+                problems.append(
+                    (
+                        ("contact", "pairs", i, "materials"),
+                        f"no material {name!r} in [[materials]] (known: {sorted(names)})",
+                    )
+                )
+        key = frozenset(pair.materials)
+        if key in seen:
+            problems.append(
+                (("contact", "pairs", i, "materials"), f"contact.pairs[{seen[key]}] already sets this pair")
+            )
+        seen.setdefault(key, i)
     return problems

@@ -106,6 +106,15 @@ class Wall(Strict):
     friction: Real | None = Field(
         None, ge=0, description="Coulomb friction coefficient against particles (default: the contact's) [-]."
     )
+    material: str | None = Field(
+        None,
+        description=(
+            "Name of the wall's material (one of `materials`): its elasticity enters the contact (E*, "
+            "G* or the linear stiffness) and its surface properties are mixed with the particle's. "
+            "Default: a rigid wall with the particle material's own restitution, friction and "
+            "rolling friction (and, for the linear law, its stiffness)."
+        ),
+    )
 
 
 # --- particle radii -------------------------------------------------------------------------
@@ -224,7 +233,24 @@ class Particles(Strict):
     count: Count | None = Field(
         None, ge=1, description="Number of particles (not used with placement from a file) [-]."
     )
-    density: Real = Field(gt=0, description="Material density [kg/m^3].")
+    density: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Density of every particle; required unless particles.material names the materials, "
+            "which then give the density [kg/m^3]."
+        ),
+    )
+    material: str | dict[str, Real] | None = Field(
+        None,
+        description=(
+            'What the particles are made of: the name of one of `materials` ("glass"), or a '
+            "table of names and number fractions summing to 1 ({ glass = 0.7, steel = 0.3 }), "
+            "assigned at random (seeded by particles.seed) in exact proportions; material id k "
+            "is the k-th name. Unset: one material, of density particles.density and with the "
+            "properties of the contact table."
+        ),
+    )
     radius: RadiusDistribution = Field(
         default_factory=lambda: FixedRadius(value=1e-3),
         description="Radius distribution (with a file, used only if the file has no radii).",
@@ -249,24 +275,58 @@ class Particles(Strict):
 # --- contact law ----------------------------------------------------------------------------
 
 
+_RESTITUTION = (
+    "Normal coefficient of restitution e, in (0, 1]. The normal force is never attractive "
+    "(F_n = max(0, elastic + dashpot)), so the contact ends when the force vanishes, before the "
+    "overlap closes; the dashpot is calibrated for exactly that clamped contact, so the realised "
+    "restitution is e (for the Hertz law at every impact speed) [-]."
+)
+_ROLLING = (
+    "Rolling friction coefficient mu_r: a constant torque mu_r R* F_n against the relative "
+    "rolling of the two bodies (Ai et al. 2011, model A), never reversing it; 0 = off [-]."
+)
+
+
+class ContactPair(Strict):
+    """Properties of one pair of materials, replacing those the mixing rules would give."""
+
+    materials: tuple[str, str] = Field(
+        description="The two materials (names from `materials`; the same name twice for a like pair)."
+    )
+    restitution: Real | None = Field(None, gt=0, le=1, description="Restitution e of this pair [-].")
+    friction: Real | None = Field(None, ge=0, description="Coulomb friction coefficient of this pair [-].")
+    rolling_friction: Real | None = Field(
+        None, ge=0, description="Rolling friction coefficient of this pair [-]."
+    )
+
+
+class LinearPair(ContactPair):
+    normal_stiffness: Real | None = Field(None, gt=0, description="k_n of this pair [N/m].")
+    tangential_stiffness: Real | None = Field(None, gt=0, description="k_t of this pair [N/m].")
+
+
 class LinearContact(Strict):
     """Linear spring-dashpot normal force with an elastic tangential spring and Coulomb cap."""
 
     model: Literal["linear"] = "linear"
-    normal_stiffness: Real = Field(gt=0, description="Normal spring constant k_n [N/m].")
+    normal_stiffness: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Normal spring constant k_n; required unless every material in use gives its own "
+            "(values here are the defaults of every material) [N/m]."
+        ),
+    )
     tangential_stiffness: Real | None = Field(
         None, gt=0, description="Tangential spring constant k_t (default 2/7 k_n) [N/m]."
     )
-    restitution: Real = Field(
-        0.5,
-        gt=0,
-        le=1,
-        description=(
-            "Normal coefficient of restitution e. The damping is calibrated so that the "
-            "contact, whose normal force is never attractive, rebounds at exactly e [-]."
-        ),
-    )
+    restitution: Real = Field(0.5, gt=0, le=1, description=_RESTITUTION)
     friction: Real = Field(0.5, ge=0, description="Coulomb friction coefficient mu [-].")
+    rolling_friction: Real = Field(0.0, ge=0, description=_ROLLING)
+    pairs: list[LinearPair] = Field(
+        default_factory=list,
+        description="Explicit properties of pairs of `materials`, instead of the mixing rules.",
+    )
 
     @property
     def kt(self) -> float:
@@ -275,7 +335,61 @@ class LinearContact(Strict):
         return self.tangential_stiffness
 
 
-ContactModel = Annotated[LinearContact, Field(discriminator="model")]
+class HertzMindlinContact(Strict):
+    """Hertz normal force with a calibrated dashpot; Mindlin no-slip tangential spring and
+    Coulomb cap."""
+
+    model: Literal["hertz-mindlin"]
+    youngs_modulus: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Young's modulus E; required unless every material in use gives its own (values here "
+            "are the defaults of every material) [Pa]."
+        ),
+    )
+    poisson_ratio: Real | None = Field(
+        None, ge=0, le=0.5, description="Poisson's ratio nu (required like youngs_modulus) [-]."
+    )
+    restitution: Real = Field(0.5, gt=0, le=1, description=_RESTITUTION)
+    friction: Real = Field(0.5, ge=0, description="Coulomb friction coefficient mu [-].")
+    rolling_friction: Real = Field(0.0, ge=0, description=_ROLLING)
+    pairs: list[ContactPair] = Field(
+        default_factory=list,
+        description="Explicit properties of pairs of `materials`, instead of the mixing rules.",
+    )
+
+
+ContactModel = Annotated[LinearContact | HertzMindlinContact, Field(discriminator="model")]
+
+LAW_KEYS = {
+    "linear": ("normal_stiffness", "tangential_stiffness"),
+    "hertz-mindlin": ("youngs_modulus", "poisson_ratio"),
+}
+
+
+class Material(Strict):
+    """A material particles or walls are made of. Contact properties left out take the value of
+    the contact table."""
+
+    name: str = Field(min_length=1, description="Name that particles.material and walls[].material use.")
+    density: Real | None = Field(
+        None, gt=0, description="Density (required for a material particles are made of) [kg/m^3]."
+    )
+    youngs_modulus: Real | None = Field(None, gt=0, description="Young's modulus E (hertz-mindlin) [Pa].")
+    poisson_ratio: Real | None = Field(
+        None, ge=0, le=0.5, description="Poisson's ratio nu (hertz-mindlin) [-]."
+    )
+    normal_stiffness: Real | None = Field(
+        None, gt=0, description="k_n of a contact of two particles of this material (linear) [N/m]."
+    )
+    tangential_stiffness: Real | None = Field(
+        None, gt=0, description="k_t of such a contact (linear; default 2/7 of its k_n) [N/m]."
+    )
+    restitution: Real | None = Field(None, gt=0, le=1, description="Restitution e [-].")
+    friction: Real | None = Field(None, ge=0, description="Coulomb friction coefficient mu [-].")
+    rolling_friction: Real | None = Field(None, ge=0, description="Rolling friction coefficient mu_r [-].")
+
 
 # --- output ---------------------------------------------------------------------------------
 
@@ -319,6 +433,10 @@ class Case(Strict):
     domain: Domain
     particles: Particles
     contact: ContactModel
+    materials: list[Material] = Field(
+        default_factory=list,
+        description="Materials of particles and walls, referred to by name (one table per material).",
+    )
     walls: list[Wall] = Field(default_factory=list, description="Plane walls, one table per wall.")
     output: Output = Field(default_factory=Output)
 

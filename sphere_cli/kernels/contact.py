@@ -1,20 +1,40 @@
-"""Linear spring-dashpot contacts with an elastic tangential spring and a Coulomb cap.
+"""Particle-particle contacts: linear or Hertz-Mindlin normal law, tangential spring with a Coulomb
+cap, optional constant-torque rolling resistance; per-pair parameters from an (M, M, 6) table.
 
-Normal force on i from j (Cundall & Strack 1979; shared/validation A1):
-    F_n = max(0, k_n delta - c_n v_n),  c_n = 2 zeta sqrt(k_n m*),  m* = m_i m_j/(m_i + m_j)
-never attractive; zeta is calibrated so the realised restitution is the requested one.
-Tangential: a spring xi, rotated into the current contact plane, grown by the tangential
-slip velocity each step; F_t = -k_t xi - c_t v_t (c_t = 2 zeta sqrt(k_t m*)), capped at mu F_n,
-where xi is reset to the spring length consistent with the capped force (Luding 2008).
+Normal force on i from j, overlap delta, reduced mass m* = m_i m_j/(m_i + m_j), normal approach
+speed v_n (predicted full-step velocity), clamped so it is never attractive:
+  linear (Cundall & Strack 1979):  F_n = max(0, k_n delta - c_n v_n),  c_n = 2 zeta sqrt(k_n m*);
+  Hertz with the Tsuji dashpot (Tsuji, Tanaka & Ishida 1992, Powder Technol. 71:239):
+      F_n = max(0, (4/3) E* sqrt(R*) delta^{3/2} - c_h sqrt(m* k_h) delta^{1/4} v_n),
+      k_h = (4/3) E* sqrt(R*),  1/R* = 1/r_i + 1/r_j.
+zeta and c_h are calibrated (physics/restitution.py) so that the clamped contact rebounds at the
+requested restitution e exactly (for the Hertz law at every impact speed).
+Both laws are written with s = 1 (linear) or s = sqrt(R* delta) (Hertz), so one code serves both:
+  F_n = max(0, K_N s delta - D_N sqrt(s) sqrt(m*) v_n),  k_t = K_T s,  c_t = D_T sqrt(s) sqrt(m*),
+with the table columns K_N = k_n | (4/3) E*, K_T = k_t | 8 G* (Mindlin no-slip stiffness
+k_t = 8 G* sqrt(R* delta), Mindlin 1949), D_N = 2 zeta sqrt(k_n) | c_h sqrt(4 E*/3),
+D_T = 2 zeta sqrt(k_t) | c_h sqrt(16 G*/3). The tangential dashpot has the damping ratio of the
+normal one relative to its own stiffness (c_t/c_n = sqrt(k_t/(dF_n/d delta)) for both laws).
+Tangential: a spring xi, rotated into the current contact plane, grown by the slip velocity at
+the half step; F_t = -k_t xi - c_t u_t (u_t: slip at the predicted full step), capped at mu F_n,
+where xi is reset to the length consistent with the capped force (Luding 2008).
+Rolling resistance, model type A of Ai, Chen, Rotter & Ooi (2011, Powder Technol. 206:269):
+a torque M = -mu_r R* F_n w/|w| on i, w the rolling part (tangent to the contact plane) of the
+relative angular velocity w_i - w_j at the half step, limited to I* |w|/dt (1/I* = 1/I_i + 1/I_j)
+so that it stops, and never reverses, the relative rolling within one step.
 
 Gather form: a prange over particles, each summing over its own neighbour row and writing only
 its own force, torque and history row. Every operation is antisymmetric in (i, j), so the
 two copies of a pair's history stay exact negatives and the forces are equal and opposite to
 the last bit.
 
-Arguments: pos, vel, angvel (N,3) [m, m/s, rad/s]; radius, mass (N,) [m, kg];
-nbr (N,C) int32, nbr_count (N,); hist (N,C,3) [m]; body_acc (3,) [m/s^2] (gravity);
-length (3,) [m], periodic (3,) uint8; out force, torque (N,3) [N, N m].
+Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
+(N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32, nbr_count (N,);
+hist (N,C,3) [m]; table (M,M,6) per pair of materials, columns K_N, K_T, D_N, D_T, MU, MU_R as
+above [N/m or Pa, N/m or Pa, kg^1/2/s or (Pa kg)^1/2 m^-1/2, same, -, -]; hertz, rolling flags;
+body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
+tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
+limit); out force, torque (N,3) [N, N m].
 """
 
 import math
@@ -22,6 +42,33 @@ import math
 from numba import njit, prange
 
 from .neighbors import minimum_image
+
+# columns of the per-pair parameter table
+K_N = 0
+K_T = 1
+D_N = 2
+D_T = 3
+MU = 4
+MU_R = 5
+COLUMNS = 6
+
+
+@njit(cache=True, inline="always")
+def normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un):
+    """(F_n clamped at 0 [N], k_t [N/m], c_t [kg/s]) of one contact; kn, kt, dn, dt: the columns
+    K_N, K_T, D_N, D_T of its table row."""
+    if hertz:
+        s = math.sqrt(r_eff * delta)
+        root_s = math.sqrt(s)
+        fn = kn * s * delta - dn * root_s * root_m * un
+        kt = kt * s
+        ct = dt * root_s * root_m
+    else:
+        fn = kn * delta - dn * root_m * un
+        ct = dt * root_m
+    if fn < 0.0:
+        fn = 0.0
+    return fn, kt, ct
 
 
 @njit(cache=True, inline="always")
@@ -68,8 +115,27 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
     return f0, f1, f2
 
 
+@njit(cache=True, inline="always")
+def rolling_torque(w0, w1, w2, n0, n1, n2, mu_r, r_eff, fn, i_eff, dt):
+    """Constant rolling-resistance torque [N m] on a body whose angular velocity relative to the
+    other is w (3,) [rad/s]: -min(mu_r R* F_n, I* |w_r|/dt) w_r/|w_r|, w_r = w - (w.n) n."""
+    dot = w0 * n0 + w1 * n1 + w2 * n2
+    r0 = w0 - dot * n0
+    r1 = w1 - dot * n1
+    r2 = w2 - dot * n2
+    size = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if size == 0.0:
+        return 0.0, 0.0, 0.0
+    torque = mu_r * r_eff * fn
+    stop = i_eff * size / dt
+    if torque > stop:
+        torque = stop
+    scale = -torque / size
+    return scale * r0, scale * r1, scale * r2
+
+
 @njit(cache=True, parallel=True)
-def linear_pair_forces(
+def pair_forces(
     pos,
     vel,
     angvel,
@@ -77,28 +143,37 @@ def linear_pair_forces(
     angvel_pred,
     radius,
     mass,
+    inertia,
+    material,
     nbr,
     nbr_count,
     hist,
-    kn,
-    kt,
-    zeta,
-    mu,
+    table,
+    hertz,
+    rolling,
     body_acc,
     length,
     periodic,
-    dt,
+    spring_dt,
+    step_dt,
     force,
     torque,
 ):
     """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle."""
     n = pos.shape[0]
     cap = nbr.shape[1]
-    damp_n = 2.0 * zeta * math.sqrt(kn)  # c_n = damp_n sqrt(m*)
-    damp_t = 2.0 * zeta * math.sqrt(kt)
+    # one material: the parameters are loop constants
+    single = table.shape[0] == 1
+    kn = table[0, 0, K_N]
+    kt = table[0, 0, K_T]
+    dn = table[0, 0, D_N]
+    dt = table[0, 0, D_T]
+    mu = table[0, 0, MU]
+    mu_r = table[0, 0, MU_R]
     for i in prange(n):
         ri = radius[i]
         mi = mass[i]
+        ci = 0 if single else material[i]
         f0 = mi * body_acc[0]
         f1 = mi * body_acc[1]
         f2 = mi * body_acc[2]
@@ -120,6 +195,14 @@ def linear_pair_forces(
                     hist[i, k, 1] = 0.0
                     hist[i, k, 2] = 0.0
                 continue
+            if not single:
+                cj = material[j]
+                kn = table[ci, cj, K_N]
+                kt = table[ci, cj, K_T]
+                dn = table[ci, cj, D_N]
+                dt = table[ci, cj, D_T]
+                mu = table[ci, cj, MU]
+                mu_r = table[ci, cj, MU_R]
             dist = math.sqrt(dist2)
             inv = 1.0 / dist
             n0 = d0 * inv
@@ -144,13 +227,13 @@ def linear_pair_forces(
             un = u0 * n0 + u1 * n1 + u2 * n2
             mj = mass[j]
             root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
-            fn = kn * delta - damp_n * root_m * un
-            if fn < 0.0:
-                fn = 0.0
+            r_eff = 0.0
+            if hertz or rolling:
+                r_eff = ri * rj / (ri + rj)
+            fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
             vt0 = v0 - vn * n0
             vt1 = v1 - vn * n1
             vt2 = v2 - vn * n2
-            ct = damp_t * root_m
             g0, g1, g2 = tangential_force(
                 hist,
                 i,
@@ -161,11 +244,11 @@ def linear_pair_forces(
                 n0,
                 n1,
                 n2,
-                kt,
+                kt_now,
                 ct,
                 mu,
                 fn,
-                dt,
+                spring_dt,
                 u0 - un * n0,
                 u1 - un * n1,
                 u2 - un * n2,
@@ -177,6 +260,25 @@ def linear_pair_forces(
             t0 -= ri * (n1 * g2 - n2 * g1)
             t1 -= ri * (n2 * g0 - n0 * g2)
             t2 -= ri * (n0 * g1 - n1 * g0)
+            if rolling and mu_r > 0.0:
+                ii = inertia[i]
+                ij = inertia[j]
+                m0, m1, m2 = rolling_torque(
+                    angvel[i, 0] - angvel[j, 0],
+                    angvel[i, 1] - angvel[j, 1],
+                    angvel[i, 2] - angvel[j, 2],
+                    n0,
+                    n1,
+                    n2,
+                    mu_r,
+                    r_eff,
+                    fn,
+                    ii * ij / (ii + ij),
+                    step_dt,
+                )
+                t0 += m0
+                t1 += m1
+                t2 += m2
         force[i, 0] = f0
         force[i, 1] = f1
         force[i, 2] = f2

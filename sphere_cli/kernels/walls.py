@@ -1,20 +1,23 @@
-"""Plane walls on the faces of the box: the linear contact law of `contact.py` against a body
-of infinite mass (m* = m_i), with its own Coulomb coefficient per wall.
+"""Plane walls on the faces of the box: the contact law of `contact.py` (linear or Hertz-Mindlin,
+tangential spring with Coulomb cap, optional rolling resistance) against a fixed body of
+infinite mass and radius: m* = m_i, R* = r_i, I* = I_i, relative spin w_i.
 
-Arguments: pos, vel, angvel (N,3); radius, mass (N,); wall_axis (W,) int64 axis of the normal;
-wall_sign (W,) +1.0 on a lower face (normal along +axis), -1.0 on an upper face; wall_coord (W,)
-[m]; wall_mu (W,) [-]; wall_hist (N,W,3) [m]; force, torque (N,3) accumulated in place.
+Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3); radius, mass, inertia (N,); material
+(N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.0 on a lower face (normal
+along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_table (W,M,6) parameters of wall w
+against material m, columns as in contact.py (the wall's own elasticity, if any, is in E* and
+G*; a rigid wall has none); wall_hist (N,W,3) [m]; force, torque (N,3) accumulated in place.
 """
 
 import math
 
 from numba import njit, prange
 
-from .contact import tangential_force
+from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
 
 
 @njit(cache=True, parallel=True)
-def linear_wall_forces(
+def wall_forces(
     pos,
     vel,
     angvel,
@@ -22,29 +25,28 @@ def linear_wall_forces(
     angvel_pred,
     radius,
     mass,
+    inertia,
+    material,
     wall_axis,
     wall_sign,
     wall_coord,
-    wall_mu,
+    wall_table,
     wall_hist,
-    kn,
-    kt,
-    zeta,
-    dt,
+    hertz,
+    rolling,
+    spring_dt,
+    step_dt,
     force,
     torque,
 ):
-    """Add the forces of plane walls (W walls) to force/torque.
-
-    wall_axis (W,) int64 axis of the wall normal; wall_sign (W,) +1 for a lower face (normal
-    points up the axis), -1 for an upper face; wall_coord (W,) [m]; wall_mu (W,) [-];
-    wall_hist (N,W,3) [m]. A wall acts as a body of infinite mass: m* = m_i.
-    """
+    """Add the forces and torques of W plane walls to force/torque."""
     n = pos.shape[0]
     nw = wall_axis.shape[0]
+    single = wall_table.shape[1] == 1
     for i in prange(n):
         ri = radius[i]
-        mi = mass[i]
+        root_m = math.sqrt(mass[i])
+        ci = 0 if single else material[i]
         f0 = 0.0
         f1 = 0.0
         f2 = 0.0
@@ -59,6 +61,7 @@ def linear_wall_forces(
                 wall_hist[i, w, 1] = 0.0
                 wall_hist[i, w, 2] = 0.0
                 continue
+            row = wall_table[w, ci]
             n0 = 0.0
             n1 = 0.0
             n2 = 0.0
@@ -83,14 +86,10 @@ def linear_wall_forces(
             u1 = vel_pred[i, 1] - (q2 * n0 - q0 * n2)
             u2 = vel_pred[i, 2] - (q0 * n1 - q1 * n0)
             un = u0 * n0 + u1 * n1 + u2 * n2
-            cn = 2.0 * zeta * math.sqrt(kn * mi)
-            fn = kn * delta - cn * un
-            if fn < 0.0:
-                fn = 0.0
+            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, un)
             vt0 = v0 - vn * n0
             vt1 = v1 - vn * n1
             vt2 = v2 - vn * n2
-            ct = 2.0 * zeta * math.sqrt(kt * mi)
             g0, g1, g2 = tangential_force(
                 wall_hist,
                 i,
@@ -103,9 +102,9 @@ def linear_wall_forces(
                 n2,
                 kt,
                 ct,
-                wall_mu[w],
+                row[MU],
                 fn,
-                dt,
+                spring_dt,
                 u0 - un * n0,
                 u1 - un * n1,
                 u2 - un * n2,
@@ -116,6 +115,23 @@ def linear_wall_forces(
             t0 -= ri * (n1 * g2 - n2 * g1)
             t1 -= ri * (n2 * g0 - n0 * g2)
             t2 -= ri * (n0 * g1 - n1 * g0)
+            if rolling and row[MU_R] > 0.0:
+                m0, m1, m2 = rolling_torque(
+                    angvel[i, 0],
+                    angvel[i, 1],
+                    angvel[i, 2],
+                    n0,
+                    n1,
+                    n2,
+                    row[MU_R],
+                    ri,
+                    fn,
+                    inertia[i],
+                    step_dt,
+                )
+                t0 += m0
+                t1 += m1
+                t2 += m2
         force[i, 0] += f0
         force[i, 1] += f1
         force[i, 2] += f2

@@ -1,5 +1,28 @@
-"""Particle-particle contacts (forces phase): the linear spring-dashpot law of
-kernels/contact.py, its calibrated damping, and the time-step limit it imposes."""
+"""Particle-particle contacts (forces phase): the linear or Hertz-Mindlin law of kernels/contact.py
+with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
+
+Time-step limit (shared/validation E). Velocity Verlet is stable for a linear oscillator of
+angular frequency omega and damping ratio zeta while dt <= 2 (sqrt(1 + zeta^2) - zeta)/omega.
+For a contact the stiffest mode is normal (omega^2 = k_n/m*) or tangential coupled to the
+rotation of the spheres (omega^2 = 3.5 k_t/m*: 1/m* + r_i^2/I_i + r_j^2/I_j = 3.5/m*), so
+    dt_contact = 2 (sqrt(1 + zeta^2) - zeta) / sqrt(max(k_n, 3.5 k_t)/m*),
+taken over every pair of materials that can meet (two particles of a material only if it has
+two) with the lightest particles of each, and over every wall and material (m* = m).
+Hertz-Mindlin has no constant stiffness: its limit is the smaller of
+  - the Rayleigh time T_R = pi r sqrt(rho/G)/(0.1631 nu + 0.8766) of the smallest particle of
+    each material (Li, Xu & Thornton 2005, Powder Technol. 160:219; the usual Hertz criterion,
+    independent of impact speed), and
+  - dt_contact with the tangent stiffnesses k_n = dF_n/d delta = 2 E* sqrt(R* delta),
+    k_t = 8 G* sqrt(R* delta) and zeta = c_h/sqrt6 at delta = overlap_tolerance x the smaller
+    radius, the largest overlap a case may start with. This one matters: the tangential mode is
+    stiffer than the normal one (3.5 k_t ~ 3 k_n) and walls double E*, so at the default 5 %
+    overlap it is about half the Rayleigh time; with no initial overlap allowed it is infinite.
+The Rayleigh time covers impacts up to overlaps of ~ 5-15 % of the radius (where the normal
+tangent stiffness reaches 4 m*/T_R^2), i.e. relative speeds of tens to hundreds of m/s for
+engineering materials; dt_safety (default 0.1) leaves the margin beyond.
+A particle with several contacts has faster modes than any single pair (a chain of three:
+sqrt(3/2) times faster), which the safety factor also covers.
+"""
 
 from __future__ import annotations
 
@@ -7,28 +30,28 @@ import math
 
 import numpy as np
 
-from ..config.schema import LinearContact
-from ..kernels.contact import linear_pair_forces
-from ..kernels.energy import linear_pair_elastic_energy
+from ..kernels.contact import D_N, K_N, K_T
+from ..kernels.contact import pair_forces as pair_forces_kernel
+from ..kernels.energy import pair_elastic_energy
 from ..state import State
-from .restitution import linear_damping_ratio
+from .materials import ContactTables
 
 
-class LinearContactForces:
+class PairContactForces:
     phase = "forces"
 
-    def __init__(self, params: LinearContact):
-        self.kn = params.normal_stiffness
-        self.kt = params.kt
-        self.mu = params.friction
-        self.zeta = linear_damping_ratio(params.restitution)
+    def __init__(self, tables: ContactTables):
+        self.tables = tables
+        self.table = np.ascontiguousarray(tables.table)
+        self.hertz = tables.hertz
+        self.rolling = tables.rolling
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
         `spring_dt` (default: one step; 0 for the forces of the initial state)."""
         p, box, nl = state.particles, state.box, state.neighbors
-        dt = state.clock.dt if spring_dt is None else spring_dt
-        linear_pair_forces(
+        dt = state.clock.dt
+        pair_forces_kernel(
             p.pos,
             p.vel,
             p.angvel,
@@ -36,44 +59,133 @@ class LinearContactForces:
             p.angvel_pred,
             p.radius,
             p.mass,
+            p.inertia,
+            p.material,
             nl.nbr,
             nl.nbr_count,
             nl.hist,
-            self.kn,
-            self.kt,
-            self.zeta,
-            self.mu,
+            self.table,
+            self.hertz,
+            self.rolling,
             box.body_acc,
             box.length,
             box.periodic,
+            dt if spring_dt is None else spring_dt,
             dt,
             p.force,
             p.torque,
         )
 
-    def critical_dt(self, m_eff: float) -> float:
-        """Stability limit of velocity Verlet for this contact at reduced mass m_eff [s].
-
-        The stiffest mode is normal (omega^2 = k_n/m*) or tangential with the rolling coupling
-        of two spheres (omega^2 = 3.5 k_t/m*); the dashpot lowers the central-difference limit
-        to 2 (sqrt(1 + zeta^2) - zeta)/omega. No possible contact (m_eff infinite): no limit.
-        """
-        if not math.isfinite(m_eff):
-            return math.inf
-        omega = math.sqrt(max(self.kn, 3.5 * self.kt) / m_eff)
-        return 2.0 * (math.sqrt(1.0 + self.zeta**2) - self.zeta) / omega
-
     def elastic_energy(self, state: State) -> tuple[float, int]:
         p, box, nl = state.particles, state.box, state.neighbors
-        energy, pairs = linear_pair_elastic_energy(
-            p.pos, p.radius, nl.nbr, nl.nbr_count, nl.hist, self.kn, self.kt, box.length, box.periodic
+        energy, pairs = pair_elastic_energy(
+            p.pos,
+            p.radius,
+            p.material,
+            nl.nbr,
+            nl.nbr_count,
+            nl.hist,
+            self.table,
+            self.hertz,
+            box.length,
+            box.periodic,
         )
         return float(energy), int(pairs)
 
 
-def smallest_pair_mass(mass: np.ndarray) -> float:
-    """Smallest reduced mass of any possible pair: the two lightest particles [kg]."""
-    if mass.size < 2:
-        return float("inf")
-    two = np.partition(mass, 1)[:2]
-    return float(two[0] * two[1] / (two[0] + two[1]))
+def verlet_limit(kn: float, kt: float, zeta: float, m_eff: float) -> float:
+    """2 (sqrt(1 + zeta^2) - zeta)/omega, omega^2 = max(k_n, 3.5 k_t)/m* [s] (inf without stiffness)."""
+    stiffest = max(kn, 3.5 * kt)
+    if not (stiffest > 0.0 and math.isfinite(m_eff)):
+        return math.inf
+    return 2.0 * (math.sqrt(1.0 + zeta**2) - zeta) / math.sqrt(stiffest / m_eff)
+
+
+def row_limit(row: np.ndarray, hertz: bool, m_eff: float, r_eff: float, delta: float) -> float:
+    """dt_contact of one table row (kernels/contact.py) at reduced mass m_eff [kg]; for Hertz at
+    effective radius r_eff [m] and overlap delta [m] (tangent stiffnesses)."""
+    if hertz:
+        s = math.sqrt(r_eff * delta)
+        zeta = row[D_N] / (2.0 * math.sqrt(1.5 * row[K_N]))  # c_h/sqrt6
+        return verlet_limit(1.5 * row[K_N] * s, row[K_T] * s, zeta, m_eff)
+    zeta = row[D_N] / (2.0 * math.sqrt(row[K_N]))
+    return verlet_limit(row[K_N], row[K_T], zeta, m_eff)
+
+
+def rayleigh_time(radius: float, density: float, shear_modulus: float, poisson_ratio: float) -> float:
+    """pi r sqrt(rho/G)/(0.1631 nu + 0.8766) [s] (Li, Xu & Thornton 2005)."""
+    return math.pi * radius * math.sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
+
+
+def _label(tables: ContactTables, a: int) -> str:
+    return "the particles" if tables.names[a] == "" else f"material {tables.names[a]!r}"
+
+
+def stability_limit(
+    tables: ContactTables,
+    radius: np.ndarray,
+    mass: np.ndarray,
+    material: np.ndarray,
+    overlap: float,
+    wall_faces: list[str],
+) -> tuple[float, str]:
+    """(smallest stability limit of any possible contact [s], what sets it); inf if no contact
+    can occur. overlap: the largest initial overlap as a fraction of the smaller radius."""
+    hertz = tables.hertz
+    law = "Hertz-Mindlin" if hertz else "linear"
+    limits: list[tuple[float, str]] = []
+    lightest = {}  # material -> indices of its two lightest particles
+    for a in range(len(tables.names)):
+        members = np.flatnonzero(material == a)
+        if members.size:
+            lightest[a] = members[np.argsort(mass[members], kind="stable")[:2]]
+    for a, first in lightest.items():
+        if hertz:
+            mat = tables.materials[a]
+            r = float(radius[first[0]])
+            limits.append(
+                (
+                    rayleigh_time(r, mat.density, mat.shear_modulus, mat.poisson_ratio),
+                    f"Rayleigh time pi r sqrt(rho/G)/(0.1631 nu + 0.8766) of the smallest particle of "
+                    f"{_label(tables, a)}, r = {r:.4g} m",
+                )
+            )
+        for b, second in lightest.items():
+            if b < a:
+                continue
+            if a == b:
+                if first.size < 2:
+                    continue
+                i, j = int(first[0]), int(first[1])
+            else:
+                i, j = int(first[0]), int(second[0])
+            m_eff = float(mass[i] * mass[j] / (mass[i] + mass[j]))
+            r_eff = float(radius[i] * radius[j] / (radius[i] + radius[j]))
+            delta = overlap * float(min(radius[i], radius[j]))
+            what = (
+                f"{law} contact of {_label(tables, a)}"
+                + ("" if a == b else f" with {_label(tables, b)}")
+                + ", lightest pair"
+            )
+            limits.append((row_limit(tables.table[a, b], hertz, m_eff, r_eff, delta), what))
+        for w, face in enumerate(wall_faces):
+            i = int(first[0])
+            limits.append(
+                (
+                    row_limit(
+                        tables.wall_table[w, a], hertz, float(mass[i]), float(radius[i]), overlap * radius[i]
+                    ),
+                    f"{law} contact of the lightest particle of {_label(tables, a)} with the {face} wall",
+                )
+            )
+    if hertz:
+        suffix = f" (tangent stiffness at {overlap:g} of the radius, the largest initial overlap)"
+        limits = [(v, w + suffix if "contact" in w else w) for v, w in limits]
+    else:
+        limits = [
+            (v, w + ": 2(sqrt(1+zeta^2)-zeta)/omega, omega^2 = max(k_n, 3.5 k_t)/m*") for v, w in limits
+        ]
+    if not limits:
+        return math.inf, "no contact can occur"
+    value, what = min(limits, key=lambda item: item[0])
+    return float(value), what

@@ -47,4 +47,6 @@ class Motion:
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Particles.PROGNOSTIC:
+            if name == "material" and name not in arrays:
+                continue  # a checkpoint from before materials: one material, id 0 (as built)
             getattr(state.particles, name)[...] = arrays[name]

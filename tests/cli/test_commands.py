@@ -52,7 +52,7 @@ def test_validate_json_fills_in_defaults(tmp_path):
         "region_upper": None,
     }
     assert resolved["contact"]["tangential_stiffness"] is None
-    assert resolved["walls"] == [{"face": "z-", "mode": "fixed", "friction": None}]
+    assert resolved["walls"] == [{"face": "z-", "mode": "fixed", "friction": None, "material": None}]
     assert resolved["output"]["checkpoints"]["keep"] == 3
     assert resolved["domain"]["periodic"] == [False, False, False]
 
@@ -101,7 +101,7 @@ def test_schema_is_json_schema_naming_the_sections():
     assert_clean_error(result, 0)
     schema = json.loads(result.stdout)
     assert schema["type"] == "object"
-    sections = {"title", "simulation", "domain", "particles", "contact", "walls", "output"}
+    sections = {"title", "simulation", "domain", "particles", "contact", "materials", "walls", "output"}
     assert set(schema["properties"]) == sections
     assert set(schema["required"]) == {"simulation", "domain", "particles", "contact"}
     assert schema["additionalProperties"] is False  # typos are errors

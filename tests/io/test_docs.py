@@ -104,7 +104,9 @@ def test_units_are_shown():
     row = next(line for line in text.splitlines() if line.startswith("| `domain.gravity` |"))
     assert "| m/s^2 |" in row
     row = next(line for line in text.splitlines() if line.startswith("| `particles.density` |"))
-    assert "| kg/m^3 |" in row and "| > 0 |" in row and "*required*" in row
+    assert "| kg/m^3 |" in row and "| > 0 |" in row
+    row = next(line for line in text.splitlines() if line.startswith("| `simulation.duration` |"))
+    assert "| s |" in row and "| > 0 |" in row and "*required*" in row
 
 
 def test_check_mode(tmp_path, capsys):
