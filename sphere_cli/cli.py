@@ -178,6 +178,55 @@ def bench(
         _fail(exc)
 
 
+@app.command()
+def verify(
+    names: list[str] | None = typer.Argument(
+        None, metavar="[CASE]...", help="Cases to run, by name or prefix (default: all)."
+    ),
+    quick: bool = typer.Option(False, "--quick", help="Short resolution ladders (seconds, not minutes)."),
+    output: Path = typer.Option(
+        Path("verify-results"), "-o", "--output", help="Folder for verify.json, the tables and the plots."
+    ),
+    list_cases: bool = typer.Option(False, "--list", help="List the cases and exit."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Timed runs per resolution (median reported)."),
+) -> None:
+    """Verification: each case at a ladder of resolutions, errors against the analytic or
+    published reference beside wall time, observed orders of convergence, and the stability
+    suite. Exit 0 when every case passes, 70 when one misses its tolerance or order (or a
+    stability case does not refuse, run or report as it must)."""
+    from .errors import NumericalError
+    from .verify import all_names, run_verification
+
+    if list_cases:
+        for name, title in all_names().items():
+            typer.echo(f"{name:36s} {title}")
+        return
+    try:
+        report = run_verification(
+            names, quick=quick, out_dir=output, repeats=repeats, log=lambda msg: typer.echo(msg, err=True)
+        )
+    except SphereError as exc:
+        _fail(exc)
+    for record in report["cases"]:
+        orders = ", ".join(
+            f"{m} {record['orders'][m]:.2f}"
+            for m in record["order_metrics"]
+            if record["orders"].get(m) is not None
+        )
+        typer.echo(
+            f"{'pass' if record['passed'] else 'FAIL'}  {record['name']}"
+            + (f"  (order {orders}; formal {record['formal_order']:g})" if orders else "")
+        )
+    for record in report["stability"]:
+        typer.echo(f"{'pass' if record['passed'] else 'FAIL'}  {record['name']}  ({record['action']})")
+    for note in report["notes"]:
+        typer.echo(f"note: {note}", err=True)
+    typer.echo(f"results: {output}/verify.json, {output}/*.md ({report['total_s']:.0f} s)")
+    if not report["passed"]:
+        typer.echo(f"sphere: verification failed: {', '.join(report['failed'])}", err=True)
+        raise typer.Exit(NumericalError.exit_code)
+
+
 def _interrupted() -> None:
     typer.echo(
         "sphere: interrupted; the newest checkpoint is intact: continue with `sphere resume`", err=True
