@@ -38,3 +38,9 @@ lint: $(STAMP)
 clean:
 	rm -rf $(VENV) runs .pytest_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
+
+# Full verification run (error against run time, stability suite), then the report regenerated.
+.PHONY: verify
+verify: $(STAMP)
+	$(BIN)/sphere verify -o verify-results; status=$$?; \
+	$(BIN)/python -m sphere_cli.verify.docs verify-results docs/verification.md && exit $$status

@@ -415,7 +415,7 @@ register(
             f"(lowest point), g = {G} m/s^2; the first {BOUNCES} apexes"
         ),
         run=bouncing_ball,
-        ladder=(25, 50, 100, 200, 400),
+        ladder=(25, 50, 100, 200, 400, 800),
         quick_ladder=(50, 100),
         error_labels={
             "apex": "max_n |h_n - e^{2n} h0| / (e^{2n} h0)",
@@ -541,6 +541,7 @@ register(
             Tolerance("v_final", 1e-2, source=A4_SOURCE),
             Tolerance("slip", 1e-6, source="rolls without slip after t*"),
         ),
+        roundoff_floor=1e-11,
     )
 )
 

@@ -60,7 +60,8 @@ def case_markdown(record: dict, plot: str | None = None, heading: str = "##") ->
     order_text = "exact (no truncation error)" if formal is None else f"{formal:g}"
     if record["min_order"] is not None:
         order_text += f", required >= {record['min_order']:g} for " + ", ".join(record["order_metrics"])
-    lines.append(f"- Formal order: {order_text}. {record['order_note']}.")
+    note = record["order_note"]
+    lines.append(f"- Formal order: {order_text}. {note[:1].upper() + note[1:]}.")
     for t in record["tolerances"]:
         bound = f"{t['bound']:g}" if t["bound"] is not None else f"{t['ulps_per_step']:g} ulp x steps"
         where = f" at >= {t['min_resolution']:g} {record['resolution']}" if t["min_resolution"] else ""

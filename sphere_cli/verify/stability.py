@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import CaseError, NumericalError, SphereError
 from ..physics.energy import observables
+from ..physics.restitution import linear_damping_ratio
 from ..simulation import advance, check_stable
 from .scenes import case_text, linear_contact, particle_csv, particle_scene, sphere_mass
 
@@ -179,7 +180,7 @@ def _slip(scene) -> float:
 def _dt_limit_case(e: float, mode: str, quick: bool, kt: float | None = None) -> dict:
     build, coordinate, amplitude, omega = _resting_sphere(e, mode, kt)
     scene = build()
-    zeta = scene.contact.zeta * (math.sqrt(3.5) if mode == "tangential" else 1.0)
+    zeta = linear_damping_ratio(e) * (math.sqrt(3.5) if mode == "tangential" else 1.0)
     predicted = scheme_limit(omega, zeta) / scene.dt_limit
     safety = scene.case.simulation.dt_safety
     search = largest_stable_ratio(build, coordinate, amplitude, lo=0.25, iterations=10 if quick else 14)

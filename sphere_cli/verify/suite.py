@@ -63,6 +63,16 @@ def _git_commit() -> str | None:
     return head + ("-dirty" if dirty else "") if head else None
 
 
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def machine() -> dict:
     """What produced the numbers: host, cores, thread count, versions."""
     import numba
@@ -81,7 +91,7 @@ def machine() -> dict:
     return {
         "host": platform.node(),
         "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
+        "processor": _cpu_model(),
         "cpus": os.cpu_count(),
         "cpus_usable": usable,
         "threads": THREADS,
