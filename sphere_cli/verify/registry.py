@@ -83,7 +83,7 @@ def register(case: VerificationCase) -> VerificationCase:
 
 def cases() -> dict[str, VerificationCase]:
     """All registered cases (importing the modules that define them)."""
-    from . import dem_cases  # noqa: F401  (registers on import)
+    from . import dem_cases, hertz_cases  # noqa: F401  (register on import)
 
     return REGISTRY
 

@@ -27,7 +27,7 @@ from ..errors import CaseError, NumericalError, SphereError
 from ..physics.energy import observables
 from ..physics.restitution import linear_damping_ratio
 from ..simulation import advance, check_stable
-from .scenes import case_text, linear_contact, particle_csv, particle_scene, sphere_mass
+from .scenes import case_text, linear_contact, particle_csv, particle_scene, sphere_mass, toml_table
 
 R = 1.0e-3
 DENSITY = 2500.0
@@ -343,7 +343,7 @@ def mass_ratio(quick: bool) -> dict:
     """Two species of mass ratio 1e4 in persistent contact (the pair's omega^2 is 1e4 x that of
     the big sphere on the wall): dt = "auto" must take the limit from the reduced mass of the
     lightest pair; it runs stably (and conserves energy, e = 1), and the largest stable dt is
-    compared with that limit. Until per-species materials exist, mass stands in for stiffness."""
+    compared with that limit. One material: only the masses differ (stiffness ratios: below)."""
     build, deviation, m_small, m_big = _stack(1.0, 0.1)
     scene = build()
     e0 = observables(scene)
@@ -411,6 +411,160 @@ _register(
         "two species of mass ratio 1e4 stacked on a wall (reduced-mass pitfall), dt = auto",
         "ran",
         mass_ratio,
+    )
+)
+
+
+# ------------------------------------------------------- stiffness ratio 1e4 (materials)
+
+
+HARD_E, SOFT_E, NU = 7.0e10, 7.0e6, 0.3  # Pa: Young's moduli 1e4 apart (Hertz)
+HARD_K, SOFT_K = 1.0e5, 1.0e1  # N/m: stiffnesses 1e4 apart (linear)
+
+
+def _two_species(law: str, order: tuple[int, int], perturb: float):
+    """Two equal spheres of materials "soft" and "hard" (stiffness 1e4 apart) stacked on a rigid
+    wall, gravity on, at their static overlaps; `order` lists the particles bottom first (the
+    material of each particle is drawn by particles.seed). The bottom sphere is set oscillating
+    (perturb x its wall overlap)."""
+    if law == "linear":
+        contact = {"model": "linear", "restitution": 1.0, "friction": 0.5}
+        soft = {"name": "soft", "density": DENSITY, "normal_stiffness": SOFT_K}
+        hard = {"name": "hard", "density": DENSITY, "normal_stiffness": HARD_K}
+    else:
+        contact = {"model": "hertz-mindlin", "restitution": 1.0, "friction": 0.5, "poisson_ratio": NU}
+        soft = {"name": "soft", "density": DENSITY, "youngs_modulus": SOFT_E}
+        hard = {"name": "hard", "density": DENSITY, "youngs_modulus": HARD_E}
+    materials = "".join(toml_table("materials", m, array=True) for m in (soft, hard))
+
+    def overlap(force: float, k: float, r_eff: float) -> float:
+        if law == "linear":
+            return force / k
+        return (force / (4.0 / 3.0 * k * math.sqrt(r_eff))) ** (2.0 / 3.0)
+
+    return contact, materials, overlap
+
+
+def stiffness_ratio(law: str, quick: bool) -> dict:
+    """Two species whose stiffness differs by 1e4 (linear k_n or Hertz E), the hard one resting
+    on the wall under the soft one: dt = "auto" must follow the stiffest possible contact (hard
+    on the wall) and run stably, conserving energy (e = 1); the largest stable dt of the hard
+    sphere's mode is compared with the builder's limit."""
+    contact, materials, overlap = _two_species(law, (0, 1), PERTURB)
+    weight = MASS * G
+    if law == "linear":
+        k_wall, k_pair = HARD_K, 2.0 * HARD_K * SOFT_K / (HARD_K + SOFT_K)
+        omega = math.sqrt(HARD_K / MASS)
+    else:
+        e_hard = HARD_E / (1.0 - NU**2)
+        k_wall = e_hard
+        k_pair = 1.0 / ((1.0 - NU**2) / HARD_E + (1.0 - NU**2) / SOFT_E)
+        omega = math.sqrt(2.0 * e_hard * math.sqrt(R * overlap(2.0 * weight, k_wall, R)) / MASS)
+    d_wall = overlap(2.0 * weight, k_wall, R)
+    d_pair = overlap(weight, k_pair, 0.5 * R)
+    z = [R - d_wall, R - d_wall + 2.0 * R - d_pair]
+
+    def build(perturb: float, flip: bool = False):
+        pos = [[0.05, 0.05, z[0]], [0.05, 0.05, z[1]]]
+        vel = [[0.0, 0.0, perturb * d_wall * omega], [0.0, 0.0, 0.0]]
+        if flip:
+            pos, vel = pos[::-1], vel[::-1]
+        return particle_scene(
+            pos,
+            R,
+            vel,
+            contact=contact,
+            density=None,
+            extra_particles={"material": {"soft": 0.5, "hard": 0.5}},
+            extra_tables=materials,
+            gravity=(0.0, 0.0, -G),
+            walls=["z-"],
+        )
+
+    # the material of each particle comes from particles.seed: put the hard one at the bottom
+    flip = int(build(PERTURB).state.particles.material[0]) != 1
+
+    def bottom(scene) -> float:
+        return int(np.argmin(scene.state.particles.pos[:, 2]))
+
+    def deviation(scene) -> float:
+        return float(scene.state.particles.pos[bottom(scene), 2] - z[0])
+
+    scene = build(0.1, flip)
+    hard_below = int(scene.state.particles.material[bottom(scene)]) == 1
+    e0 = observables(scene)
+    scale = e0["kinetic_energy"] + e0["elastic_energy"]
+    steps = 5000 if quick else 20000
+    error, peak, energy_dev = None, 0.0, 0.0
+    try:
+        for n in range(steps):
+            advance(scene, 1)
+            peak = max(peak, abs(deviation(scene)))
+            if (n + 1) % 100 == 0:
+                check_stable(scene)
+                energy_dev = max(energy_dev, abs(observables(scene)["total_energy"] - e0["total_energy"]))
+    except NumericalError as exc:
+        error = str(exc)
+    amplitude = 0.1 * d_wall
+    search = largest_stable_ratio(
+        lambda: build(PERTURB, flip),
+        deviation,
+        PERTURB * d_wall,
+        lo=0.25,
+        hi=3.0 if law == "linear" else 100.0,
+        iterations=10 if quick else 14,
+    )
+    ratio = search["ratio"]
+    return {
+        "action": "ran" if error is None else "reported",
+        "theory": scene.dt_limit_reason if hasattr(scene, "dt_limit_reason") else "",
+        "theory_dt_s": search["theory_dt_s"],
+        "largest_stable_ratio": ratio,
+        "detail": (
+            f"{law}: dt = auto = {scene.state.clock.dt:.3g} s ran {steps} steps: the hard sphere's "
+            f"oscillation peaked at {peak / amplitude:.3f} x its initial amplitude, energy error "
+            f"{energy_dev / scale:.2e} of the oscillation energy. {search['detail']}"
+        ),
+        "checks": [
+            {"check": "the hard sphere rests on the wall", "passed": hard_below, "detail": ""},
+            {
+                "check": "dt = auto runs without a numerical failure",
+                "passed": error is None,
+                "detail": error or "",
+            },
+            {
+                "check": "the oscillation stays bounded (peak <= 1.1 x initial amplitude)",
+                "passed": peak <= 1.1 * amplitude,
+                "detail": f"{peak / amplitude:.4f}",
+            },
+            {
+                "check": "energy conserved to 1e-2 of the oscillation energy (e = 1)",
+                "passed": energy_dev <= 1e-2 * scale,
+                "detail": f"{energy_dev / scale:.3g}",
+            },
+            {
+                "check": "every dt the builder accepts is stable (largest stable ratio >= 0.99)",
+                "passed": ratio is not None and ratio >= 0.99,
+                "detail": search["detail"],
+            },
+        ],
+    }
+
+
+_register(
+    StabilityCase(
+        "stability-stiffness-ratio-linear",
+        "two species with k_n 1e4 apart (linear), the stiff one on a wall under the soft one, dt = auto",
+        "ran",
+        lambda quick: stiffness_ratio("linear", quick),
+    )
+)
+_register(
+    StabilityCase(
+        "stability-stiffness-ratio-hertz",
+        "two species with E 1e4 apart (Hertz-Mindlin), the stiff one on a wall under the soft one, dt = auto",
+        "ran",
+        lambda quick: stiffness_ratio("hertz", quick),
     )
 )
 
