@@ -16,8 +16,11 @@ k_t = 8 G* sqrt(R* delta), Mindlin 1949), D_N = 2 zeta sqrt(k_n) | c_h sqrt(4 E*
 D_T = 2 zeta sqrt(k_t) | c_h sqrt(16 G*/3). The tangential dashpot has the damping ratio of the
 normal one relative to its own stiffness (c_t/c_n = sqrt(k_t/(dF_n/d delta)) for both laws).
 Tangential: a spring xi, rotated into the current contact plane, grown by the slip velocity at
-the half step; F_t = -k_t xi - c_t u_t (u_t: slip at the predicted full step), capped at mu F_n,
-where xi is reset to the length consistent with the capped force (Luding 2008).
+the half step; F_t = -k_t xi - c_t u_t (u_t: slip at the predicted full step), capped at mu F_n.
+While sliding, xi is reset so that the spring alone carries the capped force, xi = -F_t/k_t (the
+dashpot damps sticking contacts only). Resetting it to -(F_t + c_t u_t)/k_t (Luding 2008) would
+store the dashpot force in the spring; with the Mindlin k_t ~ delta^{1/2} growing faster than
+c_t ~ delta^{1/4} that stored force then reverses the friction early in a sliding Hertz impact.
 Rolling resistance, model type A of Ai, Chen, Rotter & Ooi (2011, Powder Technol. 206:269):
 a torque M = -mu_r R* F_n w/|w| on i, w the rolling part (tangent to the contact plane) of the
 relative angular velocity w_i - w_j at the half step, limited to I* |w|/dt (1/I* = 1/I_i + 1/I_j)
@@ -106,9 +109,9 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
         f0 *= ratio
         f1 *= ratio
         f2 *= ratio
-        x0 = -(f0 + ct * ut0) / kt
-        x1 = -(f1 + ct * ut1) / kt
-        x2 = -(f2 + ct * ut2) / kt
+        x0 = -f0 / kt
+        x1 = -f1 / kt
+        x2 = -f2 / kt
     hist[i, k, 0] = x0
     hist[i, k, 1] = x1
     hist[i, k, 2] = x2

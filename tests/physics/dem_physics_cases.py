@@ -22,11 +22,26 @@ __all__ = [
     "clamped_contact_time",
     "linear_contact_time",
     "linear_damping_ratio",
+    "hertz_contact",
 ]
 
 
 def sphere_mass(radius: float, density: float) -> float:
     return density * 4.0 / 3.0 * math.pi * radius**3
+
+
+def hertz_contact(
+    youngs_modulus: float, poisson_ratio: float, e: float = 1.0, mu: float = 0.0, **more
+) -> dict:
+    """The [contact] keys of a Hertz-Mindlin law (for make_scene)."""
+    return {
+        "model": "hertz-mindlin",
+        "youngs_modulus": youngs_modulus,
+        "poisson_ratio": poisson_ratio,
+        "restitution": e,
+        "friction": mu,
+        **more,
+    }
 
 
 def clamped_contact_time(kn: float, m_eff: float, e: float) -> float:
@@ -36,6 +51,23 @@ def clamped_contact_time(kn: float, m_eff: float, e: float) -> float:
 
 def _vec(v) -> str:
     return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+
+def _toml(value) -> str:
+    """A Python value as a TOML value (floats written exactly, tables inline)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return repr(float(value))
+
+
+def _table(header: str, keys: dict) -> str:
+    return f"{header}\n" + "".join(f"{k} = {_toml(v)}\n" for k, v in keys.items())
 
 
 def make_scene(
@@ -60,11 +92,18 @@ def make_scene(
     skin: float = 0.4,
     overlap_tolerance: float = 0.05,
     name: str = "particles.csv",
+    contact: dict | None = None,
+    materials=(),
+    particle_material=None,
+    wall_material: dict | None = None,
 ):
     """Build a scene (advanced 0 steps) holding exactly the given particles.
 
     pos (N,3) [m], radius (N,) or scalar [m], vel (N,3) or None [m/s]; walls: faces like "z-";
     wall_friction: face -> mu for walls whose friction differs from the contact's.
+    contact: the keys of [contact] (e.g. a Hertz-Mindlin law), replacing the linear law built from
+    kn, kt, e, mu; materials: dicts, one [[materials]] table each; particle_material: the value of
+    particles.material (then `density` is not written); wall_material: face -> material name.
     """
     pos = np.atleast_2d(np.asarray(pos, dtype=np.float64))
     n = pos.shape[0]
@@ -77,14 +116,26 @@ def make_scene(
         rows.append(",".join(repr(float(x)) for x in (*p, r, *v)))
     csv.write_text("\n".join(rows) + "\n")
     dt_text = '"auto"' if dt == "auto" else repr(float(dt))
-    kt_text = "" if kt is None else f"tangential_stiffness = {float(kt)!r}\n"
     periodic_text = "[" + ", ".join("true" if p else "false" for p in periodic) + "]"
     wall_friction = wall_friction or {}
+    wall_material = wall_material or {}
     wall_text = ""
     for face in walls:
         wall_text += f'[[walls]]\nface = "{face}"\n'
         if face in wall_friction:
             wall_text += f"friction = {float(wall_friction[face])!r}\n"
+        if face in wall_material:
+            wall_text += f'material = "{wall_material[face]}"\n'
+    if contact is None:
+        contact = {"model": "linear", "normal_stiffness": kn, "restitution": e, "friction": mu}
+        if kt is not None:
+            contact["tangential_stiffness"] = kt
+    contact_text = _table("[contact]", contact)
+    contact_text += "".join(_table("[[materials]]", m) for m in materials)
+    if particle_material is None:
+        what = f"density = {float(density)!r}"
+    else:
+        what = f"material = {_toml(particle_material)}"
     text = f"""
 [simulation]
 duration = 1.0
@@ -99,16 +150,11 @@ periodic = {periodic_text}
 gravity = {_vec(gravity)}
 
 [particles]
-density = {float(density)!r}
+{what}
 overlap_tolerance = {float(overlap_tolerance)!r}
 placement = {{ method = "file", path = "{csv.name}" }}
 
-[contact]
-model = "linear"
-normal_stiffness = {float(kn)!r}
-{kt_text}restitution = {float(e)!r}
-friction = {float(mu)!r}
-
+{contact_text}
 {wall_text}
 """
     return run_in_memory(text, 0, base_dir=tmp_path)
