@@ -205,6 +205,16 @@ def linear_impact_any_phase(spc: float, e: float) -> Outcome:
     )
 
 
+def steps_per_contact_at_auto(e: float, m_eff: float, safety: float = 0.1) -> float:
+    """t_c/dt of dt = "auto" for the linear contact (k_n, k_t = 2/7 k_n) at this e: the builder's
+    limit 2 (sqrt(1 + zeta^2) - zeta)/omega0 times the default dt_safety."""
+    zeta = linear_damping_ratio(e)
+    limit = 2.0 * (math.sqrt(1.0 + zeta**2) - zeta) / math.sqrt(KN / m_eff)
+    return linear_contact_time(KN, m_eff, zeta, clamped=True) / (safety * limit)
+
+
+AUTO_SPC = round(steps_per_contact_at_auto(0.5, 0.5 * MASS), 1)
+
 register(
     VerificationCase(
         name="a1-touch-phase",
@@ -213,10 +223,11 @@ register(
         reference="as a1-linear-pair",
         description=(
             "the pair impact of a1-linear-pair run 8 times, the touch at 0, 1/8, ..., 7/8 of a step; "
-            "the worst error over the phases is reported (steps are the sum over the 8 runs)"
+            "the worst error over the phases is reported (steps are the sum over the 8 runs); "
+            f'{AUTO_SPC:g} steps per contact is what dt = "auto" (0.1 x the builder\'s limit) gives here'
         ),
         run=lambda spc: linear_impact_any_phase(spc, 0.5),
-        ladder=(25, 50, 100, 200, 400, 800),
+        ladder=(AUTO_SPC, 25, 50, 100, 200, 400, 800),
         quick_ladder=(50, 100, 200),
         error_labels={k: "worst phase: " + v for k, v in IMPACT_LABELS.items()},
         order_metrics=("e", "L2"),
