@@ -174,6 +174,9 @@ def plot_case(record: dict, path: Path) -> bool:
             ax1.loglog(xs, y0 * (xs / x0) ** (-formal), ":", color=color, lw=1)
     if formal is not None:
         ax1.plot([], [], "k:", lw=1, label=f"slope -{formal:g} (formal)")
+    ax1.set_xticks(res)
+    ax1.set_xticklabels([f"{r:g}" for r in res], fontsize=7)
+    ax1.xaxis.set_minor_formatter(plt.NullFormatter())
     ax1.set_xlabel(record["resolution"])
     ax1.set_ylabel("error")
     ax1.set_title("error vs resolution", fontsize=10)

@@ -837,7 +837,9 @@ _register(
 
 
 def _first_line(text: str) -> str:
-    return text.strip().splitlines()[0] if text.strip() else ""
+    """The first line of a message, without the temporary folders the cases run in."""
+    line = text.strip().splitlines()[0] if text.strip() else ""
+    return re.sub(r"\S*sphere-verify-[^/\s]+/", "", line)
 
 
 def run_stability_case(case: StabilityCase, quick: bool = False) -> dict:
