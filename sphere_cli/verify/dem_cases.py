@@ -542,10 +542,11 @@ register(
         },
         formal_order=None,
         order_note=(
-            "no dt-convergence: while sliding the friction is constant (mu m g), which velocity "
-            "Verlet integrates exactly; 5 v0/7 follows from angular momentum about the contact "
-            "point (round-off); the t* error left (~6e-4) is the tangential compliance of the "
-            "contact, independent of dt"
+            "no truncation error to converge: while sliding the friction is constant (mu m g), "
+            "which velocity Verlet integrates exactly, and 5 v0/7 follows from angular momentum about "
+            "the contact point (round-off); what is left of the t* error is the location of the "
+            "slip's zero crossing between two steps, and x(t) departs from the rigid-body path by "
+            "the elastic compliance of the contact, independent of dt"
         ),
         tolerances=(
             Tolerance("t_star", 1e-2, source=A4_SOURCE),
