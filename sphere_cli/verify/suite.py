@@ -42,17 +42,20 @@ def select(names: list[str] | None) -> tuple[list[str], list[str]]:
 
 
 def _git_commit() -> str | None:
+    """The last commit that changed the package (sphere_cli/), '-dirty' with uncommitted
+    changes there: what the numbers belong to (a report committed later names its code)."""
     root = Path(__file__).resolve().parents[2]
+    package = str(root / "sphere_cli")
     try:
         head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            ["git", "-C", str(root), "log", "-1", "--format=%h", "--", package],
             capture_output=True,
             text=True,
             timeout=10,
             check=True,
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no", "--", package],
             capture_output=True,
             text=True,
             timeout=10,
