@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from ..physics.contact import verlet_limit
 from ..physics.energy import observables
 from ..physics.restitution import linear_contact_time, linear_damping_ratio
 from .analytic import DampedImpact, bounce_apexes
@@ -206,10 +207,10 @@ def linear_impact_any_phase(spc: float, e: float) -> Outcome:
 
 
 def steps_per_contact_at_auto(e: float, m_eff: float, safety: float = 0.1) -> float:
-    """t_c/dt of dt = "auto" for the linear contact (k_n, k_t = 2/7 k_n) at this e: the builder's
-    limit 2 (sqrt(1 + zeta^2) - zeta)/omega0 times the default dt_safety."""
+    """t_c/dt of dt = "auto" for the linear contact (k_n, k_t = 2/7 k_n) at this e: the limit the
+    builder takes for the contact (physics/contact.verlet_limit) times the default dt_safety."""
     zeta = linear_damping_ratio(e)
-    limit = 2.0 * (math.sqrt(1.0 + zeta**2) - zeta) / math.sqrt(KN / m_eff)
+    limit = verlet_limit(KN, 2.0 / 7.0 * KN, zeta, m_eff)
     return linear_contact_time(KN, m_eff, zeta, clamped=True) / (safety * limit)
 
 

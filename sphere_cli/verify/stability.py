@@ -2,11 +2,11 @@
 
 For each case: what the program did (refused before the run, ran stably, reported a numerical
 failure with step, time and particle), and, where a persistent contact makes the question
-sharp, the largest stable dt found, as a multiple of the theoretical limit the builder enforces
-(velocity Verlet on k/m*: 2/omega, lowered by the dashpot to 2 (sqrt(1 + zeta^2) - zeta)/omega,
-omega^2 = max(k_n, 3.5 k_t)/m* for the stiffest contact and lightest pair). The builder refuses
-any dt above that limit, so the search sets the trial dt on the built scene directly, to find
-where the scheme itself goes unstable: a ratio >= 1 means every dt the program accepts is stable.
+sharp, the largest stable dt found, as a multiple of the limit the builder enforces (the
+stiffest contact and lightest pair, physics/contact.py; the theory of each mode is stated with
+its case). The builder refuses any dt above that limit, so the search sets the trial dt on the
+built scene directly, to find where the scheme itself goes unstable: a ratio >= 1 means every
+dt the program accepts is stable.
 A silent NaN or a plausible wrong answer is a failure.
 """
 
@@ -188,9 +188,9 @@ def _dt_limit_case(e: float, mode: str, quick: bool, kt: float | None = None) ->
     return {
         "action": "ran",
         "theory": (
-            "builder: 2 (sqrt(1 + zeta^2) - zeta)/omega, omega^2 = max(k_n, 3.5 k_t)/m*; this mode "
-            f"(zeta = {zeta:.4f}) under this scheme: 2 (sqrt(1 + 4 zeta^2) - 2 zeta)/omega = "
-            f"{predicted:.4f} x the builder's"
+            f"this mode (omega = {omega:.5g} rad/s, zeta = {zeta:.4f}) under velocity Verlet with the "
+            f"dashpot at v_n + dt a_n: 2 (sqrt(1 + 4 zeta^2) - 2 zeta)/omega = {predicted:.4f} x the "
+            f"builder's limit ({scene.dt_limit_reason})"
         ),
         "theory_dt_s": scene.dt_limit,
         "scheme_limit_ratio": predicted,
@@ -272,7 +272,7 @@ def dt_above_limit(quick: bool) -> dict:
     return {
         "action": "refused" if isinstance(exc, CaseError) else "ran",
         "exit_code": getattr(exc, "exit_code", 0),
-        "theory": "2 (sqrt(1 + zeta^2) - zeta)/omega0",
+        "theory": auto.dt_limit_reason,
         "theory_dt_s": limit,
         "largest_stable_ratio": None,
         "detail": _first_line(message) or "accepted dt = 3 x the limit",
@@ -517,7 +517,7 @@ def stiffness_ratio(law: str, quick: bool) -> dict:
     ratio = search["ratio"]
     return {
         "action": "ran" if error is None else "reported",
-        "theory": scene.dt_limit_reason if hasattr(scene, "dt_limit_reason") else "",
+        "theory": scene.dt_limit_reason,
         "theory_dt_s": search["theory_dt_s"],
         "largest_stable_ratio": ratio,
         "detail": (
