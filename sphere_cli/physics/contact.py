@@ -1,11 +1,16 @@
 """Particle-particle contacts (forces phase): the linear or Hertz-Mindlin law of kernels/contact.py
 with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
 
-Time-step limit (shared/validation E). Velocity Verlet is stable for a linear oscillator of
-angular frequency omega and damping ratio zeta while dt <= 2 (sqrt(1 + zeta^2) - zeta)/omega.
-For a contact the stiffest mode is normal (omega^2 = k_n/m*) or tangential coupled to the
-rotation of the spheres (omega^2 = 3.5 k_t/m*: 1/m* + r_i^2/I_i + r_j^2/I_j = 3.5/m*), so
-    dt_contact = 2 (sqrt(1 + zeta^2) - zeta) / sqrt(max(k_n, 3.5 k_t)/m*),
+Time-step limit (shared/validation E). The dashpots act at the predicted velocity
+v_n + dt a_n (kernels/motion.py): on a damped linear mode (omega, zeta) that velocity Verlet is
+stable while omega dt <= 2 (sqrt(1 + 4 zeta^2) - 2 zeta), the central-difference limit with zeta
+doubled (its amplification matrix of (x, v, a) has det(M + I) = 4 - h^2 - 8 zeta h, h = omega dt;
+found by the verification suite, sphere_cli/verify/stability.py). A contact has two modes: normal,
+omega^2 = k_n/m*, and tangential coupled to the rotation of the spheres, omega^2 = 3.5 k_t/m*
+(1/m* + r_i^2/I_i + r_j^2/I_j = 3.5/m*), whose damping ratio is sqrt(3.5) zeta since
+c_t = 2 zeta sqrt(k_t m*). So
+    dt_contact = min(f(zeta)/sqrt(k_n/m*), f(sqrt(3.5) zeta)/sqrt(3.5 k_t/m*)),
+    f(z) = 2 (sqrt(1 + 4 z^2) - 2 z),
 taken over every pair of materials that can meet (two particles of a material only if it has
 two) with the lightest particles of each, and over every wall and material (m* = m).
 Hertz-Mindlin has no constant stiffness: its limit is the smaller of
@@ -93,12 +98,24 @@ class PairContactForces:
         return float(energy), int(pairs)
 
 
+def scheme_factor(zeta: float) -> float:
+    """omega dt at the stability limit of velocity Verlet with the dashpot at the predicted
+    velocity: 2 (sqrt(1 + 4 zeta^2) - 2 zeta) (2 undamped)."""
+    return 2.0 * (math.sqrt(1.0 + 4.0 * zeta * zeta) - 2.0 * zeta)
+
+
 def verlet_limit(kn: float, kt: float, zeta: float, m_eff: float) -> float:
-    """2 (sqrt(1 + zeta^2) - zeta)/omega, omega^2 = max(k_n, 3.5 k_t)/m* [s] (inf without stiffness)."""
-    stiffest = max(kn, 3.5 * kt)
-    if not (stiffest > 0.0 and math.isfinite(m_eff)):
+    """Stability limit [s] of a contact with normal and tangential stiffness kn, kt [N/m], damping
+    ratio zeta and reduced mass m_eff [kg]: the smaller of its normal and rotation-coupled
+    tangential modes (inf without stiffness or mass)."""
+    if not math.isfinite(m_eff):
         return math.inf
-    return 2.0 * (math.sqrt(1.0 + zeta**2) - zeta) / math.sqrt(stiffest / m_eff)
+    limit = math.inf
+    if kn > 0.0:
+        limit = scheme_factor(zeta) / math.sqrt(kn / m_eff)
+    if kt > 0.0:
+        limit = min(limit, scheme_factor(math.sqrt(3.5) * zeta) / math.sqrt(3.5 * kt / m_eff))
+    return limit
 
 
 def row_limit(row: np.ndarray, hertz: bool, m_eff: float, r_eff: float, delta: float) -> float:

@@ -132,10 +132,10 @@ def test_run_writes_the_run_directory(tiny_run):
     assert status["state"] == "done"
     assert status["step"] == status["end_step"] == TINY_END_STEP
     checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
-    assert checkpoints == ["ckpt-000000000700.h5", "ckpt-000000000750.h5", "ckpt-000000000784.h5"]  # keep = 3
+    assert checkpoints == ["ckpt-000000001350.h5", "ckpt-000000001400.h5", "ckpt-000000001423.h5"]  # keep = 3
     assert "trajectory.h5:/particles/trajectory/position/value" in (run / "trajectory.xmf").read_text()
     log = (run / "run.log").read_text()
-    assert "running from step 0 to 784" in log and "done at step 784" in log
+    assert "running from step 0 to 1423" in log and "done at step 1423" in log
 
 
 def test_run_without_output_uses_runs_case_name(tmp_path):
@@ -166,7 +166,7 @@ def test_inspect_run_directory(tiny_run):
     result = sphere("inspect", run)
     assert_clean_error(result, 0)
     assert "kind: run directory" in result.stdout and "state: done" in result.stdout
-    assert "file=ckpt-000000000784.h5, step=784" in result.stdout
+    assert "file=ckpt-000000001423.h5, step=1423" in result.stdout
     summary = json.loads(sphere_inproc("inspect", run, "--json").stdout)
     assert summary["kind"] == "run directory"
     assert summary["status"]["state"] == "done"
@@ -192,14 +192,14 @@ def test_inspect_trajectory(tiny_run):
 
 def test_inspect_checkpoint(tiny_run):
     run, _ = tiny_run
-    path = run / "checkpoints" / "ckpt-000000000750.h5"
+    path = run / "checkpoints" / "ckpt-000000001400.h5"
     text = sphere_inproc("inspect", path)
     assert_clean_error(text, 0)
-    assert "kind: checkpoint" in text.stdout and "step: 750" in text.stdout
+    assert "kind: checkpoint" in text.stdout and "step: 1400" in text.stdout
     summary = json.loads(sphere_inproc("inspect", path, "--json").stdout)
     assert summary["kind"] == "checkpoint"
     assert summary["valid"] is True
-    assert summary["step"] == 750
+    assert summary["step"] == 1400
     assert summary["particles"] == 20
     assert summary["modules"] == ["neighbors", "particles", "walls"]
 

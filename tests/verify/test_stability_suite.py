@@ -2,14 +2,11 @@
 case: each must refuse, run stably or report a numerical failure as it promises, and the dt
 search must show that every dt the builder accepts is stable.
 
-Known defect, recorded as strict expected failures so that neither the check nor the bound is
-loosened, and the markers must go when it is fixed: the builder's contact limit
-2 (sqrt(1 + zeta^2) - zeta)/omega is the central-difference limit of a damped oscillator, but
-the dashpots act at the predicted velocity v_n + dt a_n, whose limit is
-2 (sqrt(1 + 4 zeta^2) - 2 zeta)/omega (det(M + I) = 4 - h^2 - 8 zeta h for the amplification
-matrix M of (x, v, a), h = omega dt), and the rolling-coupled tangential mode has damping ratio
-sqrt(3.5) zeta. At e = 0.5 a dt the builder accepts is unstable above 0.79 (normal) and 0.55
-(tangential) of its limit; dt = "auto" (0.1 of it) stays stable for every e.
+The builder's contact limit is that of velocity Verlet with the dashpots at the predicted
+velocity v_n + dt a_n, 2 (sqrt(1 + 4 zeta^2) - 2 zeta)/omega (det(M + I) = 4 - h^2 - 8 zeta h for
+the amplification matrix M of (x, v, a), h = omega dt), for the normal mode and for the
+rolling-coupled tangential mode with its damping ratio sqrt(3.5) zeta (physics/contact.py); the
+two damped "stability-limit" cases check that every dt it accepts is stable.
 """
 
 from __future__ import annotations
@@ -18,10 +15,7 @@ import pytest
 
 from sphere_cli.verify.stability import STABILITY, run_stability_case, scheme_limit
 
-KNOWN_DEFECTS = {
-    "stability-limit-normal-damped": "builder's dt limit ignores the predicted-velocity dashpot",
-    "stability-limit-tangential-damped": "builder's dt limit ignores the predicted-velocity dashpot",
-}
+KNOWN_DEFECTS: dict[str, str] = {}
 
 
 PARAMS = [
