@@ -1,0 +1,165 @@
+"""Stability through the command line (shared/validation E; design guide section 1, promise 2):
+a dt above the contact limit is refused before anything runs (exit 65, the limit named with its
+value), and a run that does blow up stops with exit 70 naming step, time and particle, while the
+newest checkpoint before the failure still verifies and resumes."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+from cli_test_support import assert_clean_error, line_of, sphere
+
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import load_case, parse_case
+from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+
+HERTZ_MIXTURE = """\
+[simulation]
+duration = 0.001
+dt = {dt}
+
+[domain]
+upper = [0.01, 0.01, 0.02]
+
+[particles]
+count = 40
+material = {{ soft = 0.5, hard = 0.5 }}
+radius = {{ distribution = "uniform", min = 0.0007, max = 0.0009 }}
+
+[contact]
+model = "hertz-mindlin"
+
+[[materials]]
+name = "soft"
+density = 1000.0
+youngs_modulus = 1.0e7
+poisson_ratio = 0.3
+
+[[materials]]
+name = "hard"
+density = 2500.0
+youngs_modulus = 1.0e11
+poisson_ratio = 0.25
+
+[[walls]]
+face = "z-"
+"""
+
+LINEAR = (
+    HERTZ_MIXTURE.replace(
+        """[contact]
+model = "hertz-mindlin"
+""",
+        """[contact]
+model = "linear"
+""",
+    )
+    .replace("youngs_modulus = 1.0e7\npoisson_ratio = 0.3", "normal_stiffness = 1.0e2")
+    .replace("youngs_modulus = 1.0e11\npoisson_ratio = 0.25", "normal_stiffness = 1.0e6")
+)
+
+
+@pytest.mark.parametrize("law", ["hertz-mindlin", "linear"])
+def test_dt_three_times_the_limit_is_refused(tmp_path, law):
+    """shared/validation E: with two materials 1e4 apart in stiffness, dt = 3 x the stability
+    limit is refused with exit 65, naming simulation.dt, its line, the limit and its value (the
+    value the scene computes for dt = "auto", printed to 4 digits), and what sets it; no run
+    directory is created."""
+    text = HERTZ_MIXTURE if law == "hertz-mindlin" else LINEAR
+    limit = build_scene(parse_case(text.format(dt='"auto"'))).dt_limit
+    case = text.format(dt=repr(3.0 * limit))
+    (tmp_path / "case.toml").write_text(case)
+    result = sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "simulation.dt", f"case.toml:{line_of(case, 'dt =')}:", "stability limit")
+    shown = float(re.search(r"stability limit ([0-9.eE+-]+) s", result.stderr).group(1))
+    assert shown == pytest.approx(limit, rel=1e-3)
+    assert "material 'hard'" in result.stderr  # the stiff material sets it
+    assert not (tmp_path / "out").exists()
+    # the limit itself is accepted
+    (tmp_path / "ok.toml").write_text(text.format(dt=repr(limit)))
+    assert build_scene(load_case(tmp_path / "ok.toml")).state.clock.dt == limit
+
+
+# Two spheres squeezed between the x- and x+ walls, each overlapping its neighbours by 4 % of the
+# radius (within overlap_tolerance), started with opposite velocities.
+R = 1.0e-3
+OVERLAP = 0.04 * R
+SQUEEZED = """\
+[simulation]
+duration = 0.01
+dt = {dt}
+blowup_check_every = 100
+
+[domain]
+upper = [{length!r}, 0.01, 0.01]
+gravity = [0.0, 0.0, 0.0]
+
+[particles]
+density = 2500.0
+placement = {{ method = "file", path = "spheres.csv" }}
+
+[contact]
+model = "linear"
+normal_stiffness = 1.0e3
+restitution = 1.0
+
+[[walls]]
+face = "x-"
+[[walls]]
+face = "x+"
+
+[output.frames]
+every_steps = 5
+
+[output.checkpoints]
+every_steps = 5
+keep = 3
+"""
+
+
+def test_blow_up_exits_70_and_the_last_checkpoint_resumes(tmp_path: Path):
+    """A real blow-up below the limit: two spheres squeezed between two walls form a chain
+    wall-sphere-sphere-wall whose fastest mode, omega^2 = 3 k/m, is sqrt(3/2) faster than any
+    single pair or wall contact the limit is computed from (omega^2 = 2 k/m for the pair), so
+    dt = 0.95 x dt_limit puts omega dt at 2.3 > 2 and velocity Verlet diverges (this is what
+    dt_safety guards against; the default 0.1 leaves a factor 10). Within a few steps a sphere
+    moves more than half its radius per step: the check that runs before every checkpoint (here
+    every 5 steps) stops the run with exit 70 naming the step, time and particle; status.json
+    says failed. The newest checkpoint predates the failure and verifies; `sphere resume` from it
+    fails again at exactly the same step (the run is deterministic), and `sphere resume --until`
+    a time before the failure completes (exit 0)."""
+    d = 2.0 * R - OVERLAP
+    length = 2.0 * (R - OVERLAP) + d
+    x0 = R - OVERLAP
+    (tmp_path / "spheres.csv").write_text(
+        f"x,y,z,r,vx,vy,vz\n{x0!r},0.005,0.005,{R!r},0.01,0.0,0.0\n"
+        f"{x0 + d!r},0.005,0.005,{R!r},-0.01,0.0,0.0\n"
+    )
+    probe = tmp_path / "probe.toml"
+    probe.write_text(SQUEEZED.format(dt='"auto"', length=length))
+    limit = build_scene(load_case(probe)).dt_limit
+    dt = 0.95 * limit
+    (tmp_path / "case.toml").write_text(SQUEEZED.format(dt=repr(dt), length=length))
+
+    result = sphere("run", "case.toml", "-o", "run", "-q", cwd=tmp_path)
+    assert_clean_error(result, 70, "numerical failure at step", "particle", "(t = ", "checkpoint")
+    failed_step = int(re.search(r"failure at step (\d+)", result.stderr).group(1))
+    assert 0 < failed_step <= 100
+    status = json.loads((tmp_path / "run" / "status.json").read_text())
+    assert status["state"] == "failed" and status["step"] == failed_step
+
+    ckpts = list_checkpoints(tmp_path / "run" / "checkpoints")
+    newest = read_checkpoint(ckpts[-1])  # verifies (checksums, completeness)
+    assert failed_step - 5 <= newest.step < failed_step
+
+    again = sphere("resume", "run", "-q", cwd=tmp_path)
+    assert_clean_error(again, 70, f"numerical failure at step {failed_step} ")
+    assert again.stderr == result.stderr
+
+    until = (newest.step + 2) * dt
+    done = sphere("resume", "run", "--until", repr(until), "-q", cwd=tmp_path)
+    assert_clean_error(done, 0)
+    assert json.loads((tmp_path / "run" / "status.json").read_text())["step"] == newest.step + 2
