@@ -192,7 +192,7 @@ def _register_chung_ooi(material: str, test: int, title: str) -> None:
     register(
         VerificationCase(
             name=f"a3-chung-ooi-{test}-{material}",
-            title=f"A3 Chung & Ooi test {test}: {title}",
+            title=f"A2/A3 Chung & Ooi test {test}: {title}",
             model="hertz",
             reference=(
                 f"Chung & Ooi (2011), Granular Matter 13:643, test {test}: F_max = {f_pub / 1e3:g} kN, "
