@@ -9,6 +9,7 @@ not deterministic across repeats, or crashes.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -68,3 +69,12 @@ def test_cli_verify_one_case_quick(tmp_path):
         png = out / "a1-linear-pair.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert png.stat().st_size < 200_000
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_coarsest_rung_of_the_full_ladder_runs(name):
+    """The full run (`make verify`) reaches resolutions the quick one does not: its coarsest
+    rung, the one closest to the builder's dt limit, must build and run."""
+    case = cases()[name]
+    outcome = case.run(min(case.ladder))
+    assert outcome.steps > 0 and all(math.isfinite(v) for v in outcome.errors.values())
