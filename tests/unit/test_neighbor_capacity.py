@@ -1,0 +1,55 @@
+"""Neighbour-list capacity: a row that overflows is never silently truncated; the list grows
+and the result equals a list that had room from the start (design guide §3)."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import parse_case
+from sphere_cli.physics import neighbors as neighbors_module
+from sphere_cli.simulation import advance
+
+CASE = textwrap.dedent(
+    """
+    [simulation]
+    duration = 1.0
+    [domain]
+    upper = [0.01, 0.01, 0.01]
+    periodic = [true, true, true]
+    gravity = [0.0, 0.0, 0.0]
+    [particles]
+    count = 300
+    density = 2500.0
+    seed = 3
+    radius = { distribution = "bimodal", small = 0.0003, large = 0.0012, large_fraction = 0.1 }
+    placement = { method = "random" }
+    velocity = [0.1, 0.05, 0.0]
+    [contact]
+    model = "linear"
+    normal_stiffness = 1.0e3
+    """
+)
+
+
+def _scene(capacity: int, monkeypatch):
+    monkeypatch.setattr(neighbors_module, "INITIAL_CAPACITY", capacity)
+    return build_scene(parse_case(CASE))
+
+
+def test_overflowing_rows_grow_and_match_a_roomy_list(monkeypatch):
+    tight = _scene(2, monkeypatch)
+    roomy = _scene(64, monkeypatch)
+    nl_t, nl_r = tight.state.neighbors, roomy.state.neighbors
+    assert nl_r.nbr_count.max() > 2, "the scene must overflow a capacity of 2"
+    assert nl_t.nbr.shape[1] >= nl_t.nbr_count.max()  # grew to hold every row
+    for i in range(nl_t.nbr_count.size):
+        k = nl_t.nbr_count[i]
+        assert k == nl_r.nbr_count[i]
+        assert np.array_equal(nl_t.nbr[i, :k], nl_r.nbr[i, :k])
+    advance(tight, 300)
+    advance(roomy, 300)
+    assert np.array_equal(tight.state.particles.pos, roomy.state.particles.pos)
+    assert np.array_equal(tight.state.particles.angvel, roomy.state.particles.angvel)
