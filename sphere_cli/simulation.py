@@ -136,6 +136,7 @@ class Loop:
                 check_stable(scene)
             now = wallclock.monotonic()
             if self.frames.due(step, now):
+                check_stable(scene)  # no frame with NaNs reaches the trajectory
                 self.output.frame(scene)
                 self.frames.done(now)
             if self.checkpoints.due(step, now) and step < self.end_step:

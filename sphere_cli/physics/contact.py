@@ -200,7 +200,12 @@ def stability_limit(
         limits = [(v, w + suffix if "contact" in w else w) for v, w in limits]
     else:
         limits = [
-            (v, w + ": 2(sqrt(1+zeta^2)-zeta)/omega, omega^2 = max(k_n, 3.5 k_t)/m*") for v, w in limits
+            (
+                v,
+                w + ": 2(sqrt(1+4 zeta^2)-2 zeta)/omega for the normal (omega^2 = k_n/m*) and the "
+                "rotation-coupled tangential mode (omega^2 = 3.5 k_t/m*, damping ratio sqrt(3.5) zeta)",
+            )
+            for v, w in limits
         ]
     if not limits:
         return math.inf, "no contact can occur"
