@@ -216,6 +216,33 @@ def _dt_limit_case(e: float, mode: str, quick: bool, kt: float | None = None) ->
     }
 
 
+def _oscillation_checks(error, peak, amplitude, energy_dev, scale, ratio, search) -> list[dict]:
+    """The checks every dt = auto oscillation case shares: it runs, stays bounded, conserves
+    energy (e = 1), and every dt the builder accepts is stable."""
+    return [
+        {
+            "check": "dt = auto runs without a numerical failure",
+            "passed": error is None,
+            "detail": error or "",
+        },
+        {
+            "check": "the oscillation stays bounded (peak <= 1.1 x initial amplitude)",
+            "passed": peak <= 1.1 * amplitude,
+            "detail": f"{peak / amplitude:.4f}",
+        },
+        {
+            "check": "energy conserved to 1e-2 of the oscillation energy (e = 1)",
+            "passed": energy_dev <= 1e-2 * scale,
+            "detail": f"{energy_dev / scale:.3g}",
+        },
+        {
+            "check": "every dt the builder accepts is stable (largest stable ratio >= 0.99)",
+            "passed": ratio is not None and ratio >= 0.99,
+            "detail": search["detail"],
+        },
+    ]
+
+
 _register(
     StabilityCase(
         "stability-limit-normal-elastic",
@@ -380,28 +407,7 @@ def mass_ratio(quick: bool) -> dict:
             f"the oscillation energy; a limit from the mean mass would be "
             f"{mean_limit / (2.0 / math.sqrt(KN / m_eff)):.0f} x too large. {search['detail']}"
         ),
-        "checks": [
-            {
-                "check": "dt = auto runs without a numerical failure",
-                "passed": error is None,
-                "detail": error or "",
-            },
-            {
-                "check": "the oscillation stays bounded (peak <= 1.1 x initial amplitude)",
-                "passed": peak <= 1.1 * amplitude,
-                "detail": f"{peak / amplitude:.4f}",
-            },
-            {
-                "check": "energy conserved to 1e-2 of the oscillation energy (e = 1)",
-                "passed": energy_dev <= 1e-2 * scale,
-                "detail": f"{energy_dev / scale:.3g}",
-            },
-            {
-                "check": "every dt the builder accepts is stable (largest stable ratio >= 0.99)",
-                "passed": ratio is not None and ratio >= 0.99,
-                "detail": search["detail"],
-            },
-        ],
+        "checks": _oscillation_checks(error, peak, amplitude, energy_dev, scale, ratio, search),
     }
 
 
@@ -527,26 +533,7 @@ def stiffness_ratio(law: str, quick: bool) -> dict:
         ),
         "checks": [
             {"check": "the hard sphere rests on the wall", "passed": hard_below, "detail": ""},
-            {
-                "check": "dt = auto runs without a numerical failure",
-                "passed": error is None,
-                "detail": error or "",
-            },
-            {
-                "check": "the oscillation stays bounded (peak <= 1.1 x initial amplitude)",
-                "passed": peak <= 1.1 * amplitude,
-                "detail": f"{peak / amplitude:.4f}",
-            },
-            {
-                "check": "energy conserved to 1e-2 of the oscillation energy (e = 1)",
-                "passed": energy_dev <= 1e-2 * scale,
-                "detail": f"{energy_dev / scale:.3g}",
-            },
-            {
-                "check": "every dt the builder accepts is stable (largest stable ratio >= 0.99)",
-                "passed": ratio is not None and ratio >= 0.99,
-                "detail": search["detail"],
-            },
+            *_oscillation_checks(error, peak, amplitude, energy_dev, scale, ratio, search),
         ],
     }
 
