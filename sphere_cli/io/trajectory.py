@@ -3,6 +3,7 @@
 /h5md                          version, author, creator
 /particles/trajectory/box      dimension, boundary, edges
 /particles/trajectory/radius   time-independent (N,) [m]
+/particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
 /observables/<name>            {step, time, value}: energies, contact counts
 /parameters                    the case file, the resolved case, the physics hash, dt
@@ -87,6 +88,8 @@ class Trajectory:
                 box.create_dataset("offset", data=state.box.lower).attrs["unit"] = "m"
                 part.create_dataset("radius", data=state.particles.radius).attrs["unit"] = "m"
                 part.create_dataset("mass", data=state.particles.mass).attrs["unit"] = "kg"
+                species = part.create_dataset("species", data=state.particles.material)
+                species.attrs["materials"] = np.array([name.encode() for name in scene.tables.names])
                 for field in self.fields:
                     _time_series(part, field, (n, 3), np.float64, FIELD_UNITS[field])
                 obs = f.create_group("observables")

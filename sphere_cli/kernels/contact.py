@@ -24,7 +24,9 @@ c_t ~ delta^{1/4} that stored force then reverses the friction early in a slidin
 Rolling resistance, model type A of Ai, Chen, Rotter & Ooi (2011, Powder Technol. 206:269):
 a torque M = -mu_r R* F_n w/|w| on i, w the rolling part (tangent to the contact plane) of the
 relative angular velocity w_i - w_j at the half step, limited to I* |w|/dt (1/I* = 1/I_i + 1/I_j)
-so that it stops, and never reverses, the relative rolling within one step.
+so that it stops, and never reverses, the relative rolling within one step. The limit is per
+contact: a sphere braked by several contacts at once can overshoot, leaving a jitter of its spin
+at rest bounded by one step's rolling impulse (sum of mu_r R* F_n) dt/I.
 
 Gather form: a prange over particles, each summing over its own neighbour row and writing only
 its own force, torque and history row. Every operation is antisymmetric in (i, j), so the

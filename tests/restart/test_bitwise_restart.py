@@ -219,6 +219,10 @@ def test_hertz_mixture_with_contacts_resumes_bitwise(tmp_path: Path):
     api.run(case, tmp_path / "split", until=4500 * dt)
     middle = _final_state(tmp_path / "split")
     assert set(middle["particles"]["material"]) == {0, 1}
+    with h5py.File(tmp_path / "split" / "trajectory.h5", "r") as f:  # H5MD species = material id
+        species = f["particles/trajectory/species"]
+        assert np.array_equal(species[...], middle["particles"]["material"])
+        assert [name.decode() for name in species.attrs["materials"]] == ["soft", "hard"]
     assert np.count_nonzero(middle["neighbors"]["hist"]) > 40  # springs in play at the stop
     assert np.count_nonzero(middle["walls"]["hist"]) > 4
     api.resume(tmp_path / "split")
