@@ -12,7 +12,11 @@ from pathlib import Path
 import numpy as np
 
 from sphere_cli.api import run_in_memory
-from sphere_cli.physics.restitution import linear_contact_time, linear_damping_ratio
+from sphere_cli.physics.restitution import (
+    HERTZ_ELASTIC_CONTACT_TIME_FACTOR,
+    linear_contact_time,
+    linear_damping_ratio,
+)
 from sphere_cli.simulation import advance
 
 __all__ = [
@@ -23,11 +27,22 @@ __all__ = [
     "linear_contact_time",
     "linear_damping_ratio",
     "hertz_contact",
+    "hertz_reference",
 ]
 
 
 def sphere_mass(radius: float, density: float) -> float:
     return density * 4.0 / 3.0 * math.pi * radius**3
+
+
+def hertz_reference(e_star: float, r_eff: float, m_eff: float, v: float) -> dict:
+    """A2: peak overlap [m], peak force [N] and duration [s] of the elastic impact at speed v."""
+    delta = (15.0 * m_eff * v**2 / (16.0 * e_star * math.sqrt(r_eff))) ** 0.4
+    return {
+        "delta_max": delta,
+        "force_max": 4.0 / 3.0 * e_star * math.sqrt(r_eff) * delta**1.5,
+        "contact_time": HERTZ_ELASTIC_CONTACT_TIME_FACTOR * delta / v,
+    }
 
 
 def hertz_contact(

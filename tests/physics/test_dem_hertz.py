@@ -15,26 +15,13 @@ O(dt^2)).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-from dem_physics_cases import advance, hertz_contact, make_scene, sphere_mass
+from dem_physics_cases import advance, hertz_contact, hertz_reference, make_scene, sphere_mass
 
 from sphere_cli.physics.energy import observables
-from sphere_cli.physics.restitution import HERTZ_ELASTIC_CONTACT_TIME_FACTOR
 
 LEAD_STEPS = 3
-
-
-def hertz_reference(e_star: float, r_eff: float, m_eff: float, v: float) -> dict:
-    """A2: peak overlap [m], peak force [N] and duration [s] of the elastic impact at speed v."""
-    delta = (15.0 * m_eff * v**2 / (16.0 * e_star * math.sqrt(r_eff))) ** 0.4
-    return {
-        "delta_max": delta,
-        "force_max": 4.0 / 3.0 * e_star * math.sqrt(r_eff) * delta**1.5,
-        "contact_time": HERTZ_ELASTIC_CONTACT_TIME_FACTOR * delta / v,
-    }
 
 
 def impact(

@@ -14,8 +14,7 @@ import math
 
 import numpy as np
 import pytest
-from dem_physics_cases import advance, hertz_contact, make_scene, sphere_mass
-from test_dem_hertz import hertz_reference
+from dem_physics_cases import advance, hertz_contact, hertz_reference, make_scene, sphere_mass
 
 from sphere_cli.kernels.contact import D_N, D_T, K_N, K_T, MU, MU_R
 from sphere_cli.physics.contact import rayleigh_time, row_limit
