@@ -151,6 +151,12 @@ def build_lists(
             else:
                 for a in range(3):
                     hist[i, k, a] = 0.0
+        # clear the unused tail, so the buffer holds nothing from older builds (checkpoints of
+        # a resumed and an uninterrupted run are then equal in every slot)
+        for k in range(kept, cap):
+            nbr[i, k] = 0
+            for a in range(3):
+                hist[i, k, a] = 0.0
 
 
 @njit(cache=True, parallel=True)
