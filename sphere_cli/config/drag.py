@@ -1,0 +1,46 @@
+"""The `[fluid.drag]` table of a Navier-Stokes case: which drag law couples particles and fluid.
+
+The laws and their forms are in sphere_cli/kernels/drag.py; docs/user-guide.md ("Drag and
+coupling") explains the choices.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from .schema import Flag, Real, Strict
+
+
+class DragConfig(Strict):
+    """Fluid-particle momentum exchange: the drag law, the pressure-gradient force, the porosity
+    floor of the drag correlations."""
+
+    law: Literal["gidaspow", "di-felice"] = Field(
+        "gidaspow",
+        description=(
+            '"gidaspow": Ergun (1952) for porosity <= 0.8, Wen & Yu (1966) above with the '
+            "Schiller-Naumann drag coefficient (0.44 for Re >= 1000), as in Gidaspow (1994); "
+            '"di-felice": Di Felice (1994), the law of the original CUDA code of sphere. Each '
+            "particle feels the drag of its own velocity and diameter relative to the fluid "
+            "velocity and porosity of its cell [-]."
+        ),
+    )
+    pressure_force: Flag = Field(
+        True,
+        description=(
+            "Add the pressure-gradient force -V_p grad(p) on every particle (with the hydrostatic "
+            "pressure in p this is the buoyancy). Off, particles feel drag only: no buoyancy, and "
+            "a bed carries only the drag share of the pressure drop [-]."
+        ),
+    )
+    porosity_floor: Real = Field(
+        0.1,
+        gt=0,
+        lt=1,
+        description=(
+            "Porosity below which the drag correlations take this value instead (Ergun diverges "
+            "as porosity -> 0); a warning names the first cell where it happens [-]."
+        ),
+    )

@@ -1,0 +1,168 @@
+"""Fluid-particle interaction of the Navier-Stokes model: drag and pressure-gradient force on each
+particle, the particles' semi-implicit velocity update, and the equal and opposite force density
+on the fluid (laws and scheme in kernels/drag.py).
+
+Called by the fluid module (physics/navier_stokes.py) in its phases, with its fluid state `fs`
+(cell-centred fs.v (nx,ny,nz,3) [m/s], fs.phi (nx,ny,nz) [-], fs.grad_p (nx,ny,nz,3) [Pa/m] of the
+last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] written here):
+- forces():        every DEM step, after contacts and walls: adds -V grad(p) and the drag to each
+                   particle's force;
+- kick():          replaces Motion.kick: the second half kick, exact for the drag relaxation;
+- fluid_forcing(): before each fluid step, after the kick: f_i, the force density of the fluid on
+                   the particles of each cell at the fluid velocity v they saw, and k_drag =
+                   d f_i/d v, so the fluid momentum update takes the drag semi-implicitly as
+                   -(f_i + k_drag (v_new - v)).
+Formulation A (pressure in both phases: fluid momentum -phi grad p - f_i) exchanges the drag
+alone, its -phi grad p already holding the reaction of the pressure-gradient force; formulation
+B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradient force.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from ..config.drag import DragConfig
+from ..kernels.drag import (
+    DI_FELICE,
+    GIDASPOW,
+    bin_particles,
+    drag_kick,
+    exchange,
+    particle_cells,
+    particle_drag,
+)
+from ..state import State
+
+LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
+
+
+class FluidParticleDrag:
+    def __init__(
+        self,
+        config: DragConfig,
+        density: float,
+        viscosity: float,
+        grid,
+        n_particles: int,
+        pressure_in_fluid_only: bool,
+    ):
+        """density [kg/m^3], viscosity [Pa s] of the fluid; grid: a FluidGrid (origin (3,) [m]
+        lower corner, spacing (3,) [m], shape (nx, ny, nz)); pressure_in_fluid_only: formulation B."""
+        self.config = config
+        self.law = LAWS[config.law]
+        self.density = float(density)
+        self.viscosity = float(viscosity)
+        self.floor = float(config.porosity_floor)
+        self.pressure_force = bool(config.pressure_force)
+        self.pressure_exchanged = self.pressure_force and pressure_in_fluid_only
+        self.origin = np.asarray(grid.origin, dtype=np.float64)
+        self.spacing = np.asarray(grid.spacing, dtype=np.float64)
+        self.shape = tuple(int(n) for n in grid.shape)
+        cells = self.shape[0] * self.shape[1] * self.shape[2]
+        self.inv_cell_volume = 1.0 / float(np.prod(self.spacing))
+        n = n_particles
+        self.cell_of = np.zeros(n, dtype=np.int64)
+        self.coef = np.zeros(n)  # K [kg/s]
+        self.f_other = np.zeros((n, 3))  # every force but the drag [N]
+        self.f_drag = np.zeros((n, 3))  # [N]
+        self.start = np.zeros(cells + 1, dtype=np.int64)
+        self.order = np.zeros(n, dtype=np.int64)
+        self.cursor = np.zeros(cells, dtype=np.int64)
+        self.warned = False
+
+    def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
+        """Add the fluid forces to state.particles.force (spring_dt is not used)."""
+        p = state.particles
+        nx, ny, nz = self.shape
+        particle_cells(p.pos, self.origin, self.spacing, nx, ny, nz, self.cell_of)
+        phi = fs.phi.reshape(-1)
+        below = particle_drag(
+            self.law,
+            self.density,
+            self.viscosity,
+            self.floor,
+            self.pressure_force,
+            self.cell_of,
+            p.vel,
+            p.radius,
+            p.inv_mass,
+            fs.v.reshape(-1, 3),
+            phi,
+            fs.grad_p.reshape(-1, 3),
+            state.clock.dt,
+            p.force,
+            self.f_other,
+            self.coef,
+            self.f_drag,
+        )
+        if below and not self.warned:
+            self.warned = True
+            cell = int(self.cell_of[np.flatnonzero(phi[self.cell_of] < self.floor)[0]])
+            warnings.warn(
+                f"step {state.clock.step}: porosity {phi[cell]:.3g} in fluid cell "
+                f"{np.unravel_index(cell, self.shape)} is below fluid.drag.porosity_floor = "
+                f"{self.floor}; the drag uses the floor there ({below} particle(s) this step, "
+                "not repeated)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+
+    def kick(self, state: State, fs) -> None:
+        """Second half kick of the particles with the drag of the last forces() call."""
+        p = state.particles
+        drag_kick(
+            p.vel,
+            p.angvel,
+            p.torque,
+            p.inv_mass,
+            p.inv_inertia,
+            self.cell_of,
+            fs.v.reshape(-1, 3),
+            self.coef,
+            self.f_other,
+            state.clock.dt,
+            p.force,
+            self.f_drag,
+        )
+
+    def fluid_forcing(self, state: State, fs) -> None:
+        """Fill fs.f_i and fs.k_drag from the forces of the last forces() and kick()."""
+        p = state.particles
+        bin_particles(self.cell_of, self.start, self.order, self.cursor)
+        exchange(
+            self.start,
+            self.order,
+            self.f_drag,
+            self.coef,
+            p.radius,
+            p.inv_mass,
+            fs.grad_p.reshape(-1, 3),
+            self.pressure_exchanged,
+            state.clock.dt,
+            self.inv_cell_volume,
+            fs.f_i.reshape(-1, 3),
+            fs.k_drag.reshape(-1),
+        )
+
+    def fluid_force(self, state: State, fs) -> np.ndarray:
+        """Total force of the fluid on all particles (drag and pressure-gradient force) [N]."""
+        total = self.f_drag.sum(axis=0)
+        if self.pressure_force:
+            volume = math.pi / 6.0 * (2.0 * state.particles.radius) ** 3
+            total = total - volume @ fs.grad_p.reshape(-1, 3)[self.cell_of]
+        return total
+
+    def shortest_relaxation_time(self, state: State) -> float:
+        """Smallest particle relaxation time m/K of the last forces() call [s] (inf if none)."""
+        p = state.particles
+        rate = self.coef * p.inv_mass
+        top = float(rate.max()) if rate.size else 0.0
+        return 1.0 / top if top > 0.0 else math.inf
+
+    @staticmethod
+    def dt_limit() -> tuple[float, str]:
+        """The drag puts no limit on dt: exact relaxation on the particles, implicit in the fluid."""
+        return math.inf, "none from the drag (exponential on the particles, implicit in the fluid)"
