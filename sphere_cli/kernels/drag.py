@@ -177,14 +177,14 @@ def exchange(
     inv_mass,
     grad_p,
     pressure_exchanged,
-    dt,
+    fluid_dt,
     inv_cell_volume,
     f_i,
     f_i_coef,
 ):
     """Per cell, in particle order: f_i = sum of the drag (plus -V grad(p) if
-    pressure_exchanged) on its particles / cell volume; f_i_coef = sum of phi1 K / cell volume."""
-    half = 0.5 * dt
+    pressure_exchanged) on its particles / cell volume; f_i_coef = sum of phi1(lambda fluid_dt) K
+    / cell volume."""
     for c in prange(f_i_coef.shape[0]):
         s0 = 0.0
         s1 = 0.0
@@ -196,7 +196,7 @@ def exchange(
             s0 += f_drag[i, 0]
             s1 += f_drag[i, 1]
             s2 += f_drag[i, 2]
-            sk += phi1(coef[i] * inv_mass[i] * half) * coef[i]
+            sk += phi1(coef[i] * inv_mass[i] * fluid_dt) * coef[i]
             d = 2.0 * radius[i]
             sv += math.pi / 6.0 * d * d * d
         if pressure_exchanged:

@@ -10,8 +10,8 @@ last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] 
 - kick():          replaces Motion.kick: the second half kick, exact for the drag relaxation;
 - fluid_forcing(): before each fluid step, after the kick: f_i, the force density of the fluid on
                    the particles of each cell at the fluid velocity v they saw, and k_drag =
-                   d f_i/d v, so the fluid momentum update takes the drag semi-implicitly as
-                   -(f_i + k_drag (v_new - v)).
+                   d f_i/d v averaged over the fluid step, so the fluid momentum update takes the
+                   drag semi-implicitly as -(f_i + k_drag (v_new - v)).
 Formulation A (pressure in both phases: fluid momentum -phi grad p - f_i) exchanges the drag
 alone, its -phi grad p already holding the reaction of the pressure-gradient force; formulation
 B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradient force.
@@ -128,8 +128,9 @@ class FluidParticleDrag:
             self.f_drag,
         )
 
-    def fluid_forcing(self, state: State, fs) -> None:
-        """Fill fs.f_i and fs.k_drag from the forces of the last forces() and kick()."""
+    def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
+        """Fill fs.f_i and fs.k_drag from the forces of the last forces() and kick(), for a
+        fluid step of fluid_dt [s]."""
         p = state.particles
         bin_particles(self.cell_of, self.start, self.order, self.cursor)
         exchange(
@@ -141,7 +142,7 @@ class FluidParticleDrag:
             p.inv_mass,
             fs.grad_p.reshape(-1, 3),
             self.pressure_exchanged,
-            state.clock.dt,
+            fluid_dt,
             self.inv_cell_volume,
             fs.f_i.reshape(-1, 3),
             fs.k_drag.reshape(-1),

@@ -131,7 +131,8 @@ def test_drag_relaxation_far_below_dt_is_stable_and_exact(tmp_path, law):
     dt = 100 tau_p explicit drag would diverge (factor 1 - dt/tau_p = -99 a step). Here the
     particle, started at 1 m/s across a fluid flowing at 0.01 m/s along x, is at the terminal
     velocity (u_x, and -v_t vertically, v_t from the law's own K at that speed) after one step
-    and stays there: no overshoot, no oscillation, to 1e-9 relative."""
+    and stays there: no overshoot, no oscillation, to 1e-9 relative. The fluid then carries the
+    particle's inertia in its implicit drag coefficient."""
     d = 10e-6
     tau = 2500.0 * d * d / (18.0 * MU)
     scene = single_sphere(tmp_path, d, 2500.0, 100.0 * tau, vel=(0.0, 1.0, 0.0))
@@ -148,6 +149,12 @@ def test_drag_relaxation_far_below_dt_is_stable_and_exact(tmp_path, law):
     expected = np.array([0.01, 0.0, -v_t])
     np.testing.assert_allclose(history[1:], np.tile(expected, (19, 1)), rtol=1e-9, atol=1e-9 * 0.01)
     assert np.all(np.isfinite(history))
+    # the fluid's implicit coefficient over a fluid step of 10 dt: the particle follows the fluid
+    # within it, so the fluid carries its inertia m/dt_f (to e^-1000), not K (1000 times more)
+    fluid_dt = 10 * scene.state.clock.dt
+    drag.fluid_forcing(scene.state, fs, fluid_dt)
+    carried = fs.k_drag.sum() * float(np.prod(fs.grid.spacing)) * fluid_dt
+    assert carried == pytest.approx(p.mass[0], rel=1e-12)
 
 
 def _random_bed(tmp_path, n=120, seed=3):
@@ -193,7 +200,7 @@ def test_newtons_third_law_per_cell_to_round_off(tmp_path, law, formulation_b):
     for stage in ("forces", "kick"):
         if stage == "kick":
             coupled_advance(scene, drag, fs, 1)
-        drag.fluid_forcing(scene.state, fs)
+        drag.fluid_forcing(scene.state, fs, 3e-6)
         exchanged = fs.f_i.reshape(-1, 3).sum(axis=0) * cell_volume
         on_particles = drag.f_drag.sum(axis=0)
         pressure = -(volume[:, None] * fs.grad_p.reshape(-1, 3)[drag.cell_of]).sum(axis=0)
@@ -220,7 +227,7 @@ def test_exchange_and_kick_do_not_depend_on_the_thread_count(tmp_path):
         with pytest.warns(RuntimeWarning):
             drag = drag_module(scene, fs, 1000.0, 1e-3, True)
         coupled_advance(scene, drag, fs, 3)
-        drag.fluid_forcing(scene.state, fs)
+        drag.fluid_forcing(scene.state, fs, 3e-6)
         p = scene.state.particles
         results.append((fs.f_i.copy(), fs.k_drag.copy(), p.vel.copy(), p.force.copy()))
     for a, b in zip(*results, strict=True):
