@@ -110,6 +110,9 @@ def _drive(
         clock.dt,
         scene.state.particles.count,
     )
+    log.info("time step limit %.6g s: %s", scene.dt_limit, scene.dt_limit_reason)
+    if scene.fluid is not None:
+        log.info("fluid: %s", ", ".join(f"{k} {v}" for k, v in scene.fluid.summary().items()))
     try:
         with _signal_handlers(stop, handle_signals):
             outcome = loop.run()

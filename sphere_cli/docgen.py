@@ -125,7 +125,8 @@ def _models_of(tp) -> tuple | None:
 def _classify(field: FieldInfo) -> _Kind:
     tp, disc, _ = _strip_annotated(field.annotation)
     tp, optional = _without_none(tp)
-    disc = _discriminator_name(field.discriminator) or disc
+    tp, inner_disc, _ = _strip_annotated(tp)  # an optional tagged union: `Annotated[A | B, ...] | None`
+    disc = _discriminator_name(field.discriminator) or disc or inner_disc
     models = _models_of(tp)
     if models is not None:
         if disc is not None or len(models) > 1:

@@ -1,6 +1,7 @@
 """The time loop: one step composes only the modules the scene holds, then the schedules run.
 
-Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick.
+Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick,
+then, with a fluid, the fluid's own step when it is due (physics/fluid.py).
 After the clock advances: stability guard (every `blowup_check_every` steps and before every
 checkpoint), trajectory frames, checkpoints and status, each on its own schedule. A stop
 request (signal, wall-time budget) writes a checkpoint at the next step boundary.
@@ -72,24 +73,34 @@ def end_step_for(duration: float, dt: float) -> int:
 def advance(scene, steps: int) -> None:
     """Advance the scene by `steps` steps with no output (library use and tests)."""
     state = scene.state
-    motion, neighbors = scene.motion, scene.neighbors
-    forces = scene.force_modules
+    motion, neighbors, kicker = scene.motion, scene.neighbors, scene.kicker
+    forces, after_step = scene.force_modules, scene.after_step_modules
     clock = state.clock
     for _ in range(steps):
         motion.kick_drift(state)
         neighbors.prepare(state)
         for module in forces:
             module.forces(state)
-        motion.kick(state)
+        kicker.kick(state)
         clock.step += 1
+        for module in after_step:
+            module.after_step(state)
 
 
 def check_stable(scene) -> None:
     """Raise NumericalError naming step, time and particle if the state has gone bad."""
+    clock = scene.state.clock
+    if scene.fluid is not None:
+        problem = scene.fluid.first_unstable(scene.state)
+        if problem is not None:
+            raise NumericalError(
+                f"numerical failure at step {clock.step} (t = {clock.time:.6g} s) in the fluid: {problem}. "
+                "The newest checkpoint before this step is intact; a smaller dt or a finer coupling "
+                "interval may help."
+            )
     i, reason = scene.motion.first_unstable(scene.state)
     if i >= 0:
         p = scene.state.particles
-        clock = scene.state.clock
         raise NumericalError(
             f"numerical failure at step {clock.step} (t = {clock.time:.6g} s): particle {i} at "
             f"{tuple(float(x) for x in p.pos[i])} m with velocity {tuple(float(x) for x in p.vel[i])} "

@@ -1,6 +1,7 @@
 """Case -> scene: radii, positions, walls, the physics modules in play, and the time step.
 
-Only what the case asks for is allocated: no walls, no wall arrays; a dry case, no fluid.
+Only what the case asks for is allocated: no walls, no wall arrays; a dry case, no fluid (the
+fluid model's module is not even imported).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlaceme
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
 from ..physics.contact import PairContactForces, stability_limit
+from ..physics.fluid import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.motion import Motion
 from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
@@ -32,8 +34,9 @@ class Scene:
     neighbors: NeighborSearch
     contact: PairContactForces
     walls: PlaneWallForces | None
-    dt_limit: float  # smallest stability limit of any possible contact [s]
+    dt_limit: float  # smallest stability limit of any possible contact or fluid process [s]
     dt_limit_reason: str = ""  # what sets it
+    fluid: FluidModule | None = None
 
     @property
     def tables(self) -> ContactTables:
@@ -41,7 +44,17 @@ class Scene:
 
     @property
     def force_modules(self) -> list:
-        return [m for m in (self.contact, self.walls) if m is not None]
+        return [m for m in (self.contact, self.walls, self.fluid) if m is not None]
+
+    @property
+    def after_step_modules(self) -> list:
+        """Modules with their own schedule after the clock advances (the fluid's step)."""
+        return [m for m in (self.fluid,) if m is not None]
+
+    @property
+    def kicker(self):
+        """What applies the second half kick: the fluid when it treats drag implicitly."""
+        return self.fluid if self.fluid is not None and self.fluid.replaces_kick else self.motion
 
     @property
     def stateful_modules(self) -> dict:
@@ -49,6 +62,8 @@ class Scene:
         modules = {"particles": self.motion, "neighbors": self.neighbors}
         if self.walls is not None:
             modules["walls"] = self.walls
+        if self.fluid is not None:
+            modules[self.fluid.name] = self.fluid
         return modules
 
     def compute_initial_forces(self) -> None:
@@ -108,19 +123,23 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     if case.walls:
         walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table)
         walls = PlaneWallForces(contact)
-    dt_limit, dt_reason = stability_limit(
-        tables, radius, mass, material, case.particles.overlap_tolerance, [w.face for w in case.walls]
-    )
-    dt = _resolve_dt(loaded, dt_limit, dt_reason)
-
     skin = case.simulation.neighbor_skin * float(radius.max())
     state = State(
-        clock=Clock(dt=dt),
+        clock=Clock(dt=math.nan),  # set below, once every module has stated its limit
         box=box,
         particles=particles,
         neighbors=allocate_neighbor_list(n, skin),
         walls=walls_state,
     )
+    fluid = build_fluid(loaded, state)
+    dt_limit, dt_reason = stability_limit(
+        tables, radius, mass, material, case.particles.overlap_tolerance, [w.face for w in case.walls]
+    )
+    if fluid is not None:
+        fluid_limit, fluid_reason = fluid.dt_limit()
+        if fluid_limit < dt_limit:
+            dt_limit, dt_reason = fluid_limit, fluid_reason
+    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason)
     neighbors = NeighborSearch(state)
     scene = Scene(
         case=case,
@@ -131,10 +150,15 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         walls=walls,
         dt_limit=dt_limit,
         dt_limit_reason=dt_reason,
+        fluid=fluid,
     )
+    if fluid is not None:
+        fluid.start(state)
     if restart is None:
         neighbors.rebuild(state)
         _check_overlaps(loaded, state)
+        if fluid is not None:
+            fluid.initialize(state)
         scene.compute_initial_forces()
     else:
         _restore(loaded, scene, restart)
@@ -227,13 +251,14 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str) -> float:
         if not math.isfinite(dt_limit):
             raise loaded.error(
                 ("simulation", "dt"),
-                'no contact can occur (one particle, no walls), so "auto" has no limit; give dt in seconds',
+                "no contact can occur (one particle, no walls) and nothing else limits the step, "
+                'so "auto" has no limit; give dt in seconds',
             )
         return sim.dt_safety * dt_limit
     if sim.dt > dt_limit:
         raise loaded.error(
             ("simulation", "dt"),
-            f"above the contact stability limit {dt_limit:.4g} s ({reason}); "
+            f"above the stability limit {dt_limit:.4g} s ({reason}); "
             f'use dt <= {dt_limit:.4g} s or dt = "auto"',
         )
     return float(sim.dt)

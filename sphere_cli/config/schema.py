@@ -11,29 +11,14 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-# Numbers and flags are strict: TOML `true` is not 1, and "2500" is not a number. An integer is
-# still accepted where a float is expected.
-Real = Annotated[float, Field(strict=True)]
-Count = Annotated[int, Field(strict=True)]
-Flag = Annotated[bool, Field(strict=True)]
-Vec3 = tuple[Real, Real, Real]
-FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+from .base import FACES, Count, Flag, Real, Strict, Vec3, _default_tag
+from .fluid_darcy import DarcyFluid
+from .fluid_navier_stokes import NavierStokesFluid
+from .fluid_vans1d import Vans1dFluid
 
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
-    # (file name, TOML text) the values came from, set by config.load.parse_case, so that a
-    # check made later (while building the scene) can still name the line of a key.
-    _source: tuple[str, str] | None = PrivateAttr(None)
-
-
-def _default_tag(data, field: str, tag: str, default: str):
-    """Fill in the tag of a tagged union given as a table without it (its declared default)."""
-    if isinstance(data, dict) and isinstance(data.get(field), dict) and tag not in data[field]:
-        data = {**data, field: {tag: default, **data[field]}}
-    return data
+__all__ = ["FACES", "Count", "Flag", "Real", "Strict", "Vec3"]
 
 
 class Simulation(Strict):
@@ -425,6 +410,9 @@ class Output(Strict):
     )
 
 
+Fluid = Annotated[NavierStokesFluid | DarcyFluid | Vans1dFluid, Field(discriminator="model")]
+
+
 class Case(Strict):
     """A complete case file."""
 
@@ -438,6 +426,10 @@ class Case(Strict):
         description="Materials of particles and walls, referred to by name (one table per material).",
     )
     walls: list[Wall] = Field(default_factory=list, description="Plane walls, one table per wall.")
+    fluid: Fluid | None = Field(
+        None,
+        description="The fluid saturating the particles, if any (a dry scene has no [fluid] section).",
+    )
     output: Output = Field(default_factory=Output)
 
     @model_validator(mode="before")

@@ -78,12 +78,30 @@ def _trajectory(path: Path) -> dict:
                 "contact_model": resolved["contact"]["model"],
                 "walls": [w["face"] for w in resolved.get("walls", [])],
                 "periodic": resolved["domain"]["periodic"],
-                "fluid": None,
+                "fluid": _fluid(f),
                 "last_observables": obs,
                 "provenance": dict(f["sphere/provenance"].attrs.items()),
             }
     except (OSError, KeyError) as exc:
         raise OutputError(f"{path}: not a readable sphere trajectory ({exc})") from None
+
+
+def _fluid(f: h5py.File) -> dict | None:
+    """The fluid model, its grid and the range of each field in the last frame."""
+    if "fluid" not in f:
+        return None
+    group = f["fluid"]
+    out = {"model": str(group.attrs["model"])}
+    if "shape" in group.attrs:
+        out["grid_cells"] = [int(c) for c in group.attrs["shape"]]
+        out["cell_size"] = [float(c) for c in group.attrs["spacing"]]
+    for name, series in group.items():
+        values = series["value"]
+        unit = values.attrs.get("unit", "")
+        if values.shape[0]:
+            last = values[-1]
+            out[name] = f"min {last.min():.6g}, max {last.max():.6g} {unit}".rstrip()
+    return out
 
 
 def _checkpoint(path: Path) -> dict:

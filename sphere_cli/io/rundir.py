@@ -20,7 +20,7 @@ from ..errors import OutputError, UsageError
 from ..physics.energy import observables
 from .atomic import write_text_atomic
 from .checkpoint import remove_stale_temporaries, write_checkpoint
-from .trajectory import Trajectory
+from .trajectory import Trajectory, is_grid_field
 from .xdmf import write_xdmf
 
 MARKERS = ("case.toml", "trajectory.h5", "checkpoints", "status.json")
@@ -111,7 +111,11 @@ class RunOutput:
         self.frame_times: list[float] = []
 
     def frame(self, scene) -> None:
-        self.trajectory.append(scene, observables(scene))
+        values = observables(scene)
+        if scene.fluid is not None:
+            fluid_values = scene.fluid.observables(scene.state)
+            values.update({name: value for name, (value, _unit) in fluid_values.items()})
+        self.trajectory.append(scene, values)
         self._refresh_xdmf(scene)
 
     def _refresh_xdmf(self, scene) -> None:
@@ -125,6 +129,7 @@ class RunOutput:
             times,
             scene.state.particles.count,
             self.fields,
+            fluid=_xdmf_fluid(scene),
         )
 
     def checkpoint(self, scene) -> None:
@@ -135,3 +140,16 @@ class RunOutput:
             self.rundir.checkpoints, scene, self.case_text, self.resolved, self.physics_hash, self.keep
         )
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)
+
+
+def _xdmf_fluid(scene):
+    """(grid, {field name: components}) of the fluid's 3D fields, or None."""
+    fluid = scene.fluid
+    grid = fluid.grid() if fluid is not None else None
+    if grid is None:
+        return None
+    fields = {}
+    for name, (value, _unit) in fluid.output_fields(scene.state).items():
+        if is_grid_field(value, grid):
+            fields[name] = 1 if value.ndim == 3 else value.shape[3]
+    return grid, fields

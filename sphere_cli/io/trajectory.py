@@ -5,7 +5,11 @@
 /particles/trajectory/radius   time-independent (N,) [m]
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
-/observables/<name>            {step, time, value}: energies, contact counts
+/observables/<name>            {step, time, value}: energies, contact counts (and the fluid's)
+/fluid/<name>                  {step, time, value}: fluid fields (only when the case has a fluid);
+                               @model; on a 3D grid also @origin, @spacing, @shape = (nx, ny, nz),
+                               cell-centred values stored as value[frame, k, j, i(, component)]
+                               (z slowest, x fastest: the order XDMF/ParaView read)
 /parameters                    the case file, the resolved case, the physics hash, dt
 /sphere/provenance             versions, threads, host, job id (attributes)
 
@@ -95,6 +99,8 @@ class Trajectory:
                 obs = f.create_group("observables")
                 for name, unit in UNITS.items():
                     _time_series(obs, name, (), np.float64, unit)
+                if scene.fluid is not None:
+                    _create_fluid(f, scene)
                 params = f.create_group("parameters")
                 params.attrs["case_toml"] = case_text
                 params.attrs["resolved_case"] = json.dumps(resolved)
@@ -119,6 +125,10 @@ class Trajectory:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
                 for name, value in observables.items():
                     _append(f["observables"][name], step, time, value)
+                if scene.fluid is not None:
+                    grid = scene.fluid.grid()
+                    for name, (value, _unit) in scene.fluid.output_fields(state).items():
+                        _append(f["fluid"][name], step, time, _file_order(value, grid))
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot append a frame ({exc})") from None
 
@@ -148,8 +158,37 @@ class Trajectory:
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
 
 
+def _create_fluid(f: h5py.File, scene) -> None:
+    fluid, state = scene.fluid, scene.state
+    group = f.create_group("fluid")
+    group.attrs["model"] = fluid.model
+    grid = fluid.grid()
+    if grid is not None:
+        group.attrs["origin"] = np.asarray(grid.origin, dtype=np.float64)
+        group.attrs["spacing"] = np.asarray(grid.spacing, dtype=np.float64)
+        group.attrs["shape"] = np.asarray(grid.shape, dtype=np.int64)
+    for name, (value, unit) in fluid.output_fields(state).items():
+        value = _file_order(value, grid)
+        _time_series(group, name, value.shape, value.dtype, unit)
+    for name, (_value, unit) in fluid.observables(state).items():
+        _time_series(f["observables"], name, (), np.float64, unit)
+
+
+def is_grid_field(value: np.ndarray, grid) -> bool:
+    return grid is not None and value.ndim in (3, 4) and tuple(value.shape[:3]) == tuple(grid.shape)
+
+
+def _file_order(value, grid) -> np.ndarray:
+    """Grid fields (nx, ny, nz[, 3]) are stored (nz, ny, nx[, 3]); anything else as it is."""
+    value = np.asarray(value)
+    if is_grid_field(value, grid):
+        return np.ascontiguousarray(np.swapaxes(value, 0, 2))
+    return value
+
+
 def _series_groups(f: h5py.File):
-    for parent in (f[GROUP], f["observables"]):
+    parents = [f[GROUP], f["observables"]] + ([f["fluid"]] if "fluid" in f else [])
+    for parent in parents:
         for name in parent:
             item = parent[name]
             if isinstance(item, h5py.Group) and "step" in item:

@@ -101,7 +101,17 @@ def test_schema_is_json_schema_naming_the_sections():
     assert_clean_error(result, 0)
     schema = json.loads(result.stdout)
     assert schema["type"] == "object"
-    sections = {"title", "simulation", "domain", "particles", "contact", "materials", "walls", "output"}
+    sections = {
+        "title",
+        "simulation",
+        "domain",
+        "particles",
+        "contact",
+        "materials",
+        "walls",
+        "fluid",
+        "output",
+    }
     assert set(schema["properties"]) == sections
     assert set(schema["required"]) == {"simulation", "domain", "particles", "contact"}
     assert schema["additionalProperties"] is False  # typos are errors

@@ -1,0 +1,105 @@
+"""The fluid of a scene, whichever model the case picks, seen by the rest of the program.
+
+A fluid model is one `FluidModule` subclass; the scene holds at most one. The builder imports
+the model's module only when the case has a `[fluid]` section, so a dry scene imports, allocates,
+compiles and writes nothing of any fluid. Where the module's hooks run in a step:
+
+    kick-drift -> neighbour list -> forces (contacts, walls, then fluid.forces)
+    -> kick (Motion.kick, or fluid.kick when the model treats drag semi-implicitly)
+    -> clock advances -> fluid.after_step (advance the fluid when its schedule says so)
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import numpy as np
+
+# model tag -> "module:class", imported on demand
+MODELS = {
+    "navier-stokes": "sphere_cli.physics.navier_stokes:NavierStokes",
+    "darcy": "sphere_cli.physics.darcy:Darcy",
+    "vans1d": "sphere_cli.physics.vans1d:Vans1d",
+}
+
+
+class FluidModule:
+    """Base class of the fluid models; each hook's default does nothing."""
+
+    model = ""  # the [fluid] model tag, written to the trajectory
+    name = "fluid"  # the checkpoint group of its prognostic state
+    replaces_kick = False  # True when the model defines kick() (semi-implicit drag)
+
+    def __init__(self, loaded, state):
+        """Check the model against the rest of the case (raise loaded.error(...)) and allocate
+        its arrays into a container set as state.fluid."""
+        self.loaded = loaded
+
+    def dt_limit(self) -> tuple[float, str]:
+        """The most restrictive limit on the DEM step [s] that this model imposes, and a phrase
+        naming it; math.inf when every stiff term is implicit."""
+        return math.inf, ""
+
+    def start(self, state) -> None:
+        """Called once state.clock.dt is known, for a new run and a resumed one alike."""
+
+    def initialize(self, state) -> None:
+        """New runs only, after start(): the initial fluid state."""
+
+    def forces(self, state, spring_dt: float | None = None) -> None:
+        """Add the fluid's forces and torques on the particles (spring_dt = 0: initial forces)."""
+
+    def kick(self, state) -> None:
+        """Second half kick of velocity Verlet with the model's implicit drag (replaces_kick)."""
+        raise NotImplementedError
+
+    def after_step(self, state) -> None:
+        """After the clock advances: advance the fluid when it is due."""
+
+    def prognostic_state(self, state) -> dict[str, np.ndarray]:
+        """Everything a bitwise restart needs (scalars as 0-d arrays)."""
+        return {}
+
+    def restore(self, state, arrays: dict) -> None:
+        """Put back what prognostic_state() returned."""
+
+    def first_unstable(self, state) -> str | None:
+        """A message naming the cell (or level), the quantity and its value when the fluid state
+        has gone bad; None when it is fine."""
+        return None
+
+    def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
+        """name -> (array, unit) written with every frame under /fluid/<name>. Fields on a 3D
+        grid are cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3)."""
+        return {}
+
+    def grid(self):
+        """The FluidGrid (physics/fluid_grid.py) of 3D fields, for the XDMF sidecar; None for
+        a model without a 3D grid."""
+        return None
+
+    def observables(self, state) -> dict[str, tuple[float, str]]:
+        """Scalar observables written with every frame: name -> (value, unit)."""
+        return {}
+
+    def summary(self) -> dict[str, str]:
+        """A few facts for run.log and `sphere inspect` (model, grid, solver)."""
+        return {}
+
+
+def build_fluid(loaded, state) -> FluidModule | None:
+    """The fluid module of the case, or None for a dry scene (nothing fluid is imported)."""
+    spec = loaded.case.fluid
+    if spec is None:
+        return None
+    module_name, class_name = MODELS[spec.model].split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name != module_name:
+            raise
+        raise loaded.error(
+            ("fluid", "model"), f'the fluid model "{spec.model}" is not available in this version'
+        ) from None
+    return getattr(module, class_name)(loaded, state)
