@@ -1,0 +1,80 @@
+"""Benchmark of the shared Poisson solver (physics/poisson.py): iterations and time of "pcg" and
+"jacobi" at the same tolerance (never part of the tests).
+
+    python -m sphere_cli.bench_poisson [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
+
+The problem is the pressure equation of the Navier-Stokes model: -div(a grad x) = b on the unit
+cube, periodic in x and y, Dirichlet (x = 0) at the bottom face, no-flux at the top, c = 0, from
+x = 0. Two coefficient fields: a = 1 (the plain Poisson equation) and a "porosity" a drawn
+uniformly in [0.35, 1] per cell (seed 1) with harmonic face means. b is a smooth mode plus
+white noise (seed 1), so every wavelength is present. Times are the best of `repeats` solves
+after one solve that compiles or loads the kernels.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numba
+import numpy as np
+
+from .kernels.poisson import face_means
+from .physics.fluid_grid import FluidGrid
+from .physics.poisson import PoissonSolver
+
+
+def problem(n: int, variable: bool):
+    grid = FluidGrid(np.zeros(3), np.full(3, 1.0 / n), (n, n, n), np.array([True, True, False]))
+    x, y, z = (grid.centres(a) for a in range(3))
+    rng = np.random.default_rng(1)
+    b = np.sin(2 * np.pi * x)[:, None, None] * np.cos(2 * np.pi * y)[None, :, None] * np.sin(np.pi * z)
+    b = b + 0.1 * rng.standard_normal(grid.shape)
+    cell = rng.uniform(0.35, 1.0, grid.shape) if variable else np.ones(grid.shape)
+    return grid, b, cell
+
+
+def time_solve(grid, b, cell, method, tolerance, repeats):
+    solver = PoissonSolver(grid, "dirichlet", "no-flux", method=method, tolerance=tolerance, max_iterations=10**6)
+    ax, ay, az = solver.face_arrays()
+    face_means(cell, np.uint8(1), np.uint8(1), np.uint8(1), ax, ay, az)
+    c = np.zeros(grid.shape)
+    x = np.zeros(grid.shape)
+    solver.solve(x, b, c, ax, ay, az)
+    best = np.inf
+    for _ in range(repeats):
+        x[:] = 0.0
+        start = time.perf_counter()
+        result = solver.solve(x, b, c, ax, ay, az)
+        best = min(best, time.perf_counter() - start)
+    return result, best
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", default="32,64")
+    parser.add_argument("--threads", default="1,2")
+    parser.add_argument("--tolerance", type=float, default=1e-8)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--methods", default="pcg,jacobi")
+    args = parser.parse_args(argv)
+    print(f"numba {numba.__version__}, threading layer after first use; tolerance {args.tolerance:g}")
+    print("n^3 | coefficient | method | threads | iterations | time [s] | ms/iteration | M cell-updates/s")
+    for n in (int(s) for s in args.sizes.split(",")):
+        for variable in (False, True):
+            grid, b, cell = problem(n, variable)
+            for method in args.methods.split(","):
+                for threads in (int(t) for t in args.threads.split(",")):
+                    numba.set_num_threads(threads)
+                    result, seconds = time_solve(grid, b, cell, method, args.tolerance, args.repeats)
+                    its = max(result.iterations, 1)
+                    print(
+                        f"{n}^3 | {'porosity' if variable else 'a = 1'} | {method} | {threads} | "
+                        f"{result.iterations} | {seconds:.3f} | {1e3 * seconds / its:.2f} | "
+                        f"{n**3 * its / seconds / 1e6:.1f}",
+                        flush=True,
+                    )
+
+
+if __name__ == "__main__":
+    main()

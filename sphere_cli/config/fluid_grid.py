@@ -1,0 +1,48 @@
+"""The regular fluid grid shared by the 3D fluid models (`[fluid.grid]` of "navier-stokes" and
+"darcy"): how many cells the domain box is cut into.
+
+The grid spans the whole box: cell edge along an axis = box length / cells along it. What the
+porosity estimate needs (physics/porosity.py) is checked when the scene is built, against the
+particles actually made (physics/fluid_grid.py): the smallest cell edge must be at least the
+largest particle diameter, so that the spherical sampling volume of a cell (diameter = the
+smallest cell edge) is never smaller than a particle.
+"""
+
+from __future__ import annotations
+
+from pydantic import Field, model_validator
+
+from .schema import Count, Real, Strict
+
+# cell edge chosen when neither `cells` nor `cell_size` is given, in largest particle diameters
+AUTO_CELL_DIAMETERS = 3.0
+
+
+class FluidGridConfig(Strict):
+    """Cells of the fluid grid: give `cells` or `cell_size`, or neither for the automatic size."""
+
+    cells: tuple[Count, Count, Count] | None = Field(
+        None,
+        description=(
+            "Number of cells along x, y and z; the cell edge along an axis is the box length "
+            "divided by this number. Exclusive with cell_size [-]."
+        ),
+    )
+    cell_size: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Smallest acceptable cell edge: each axis gets floor(box length / cell_size) cells "
+            "(at least one), so every edge is at least this long. Exclusive with cells. Neither "
+            "given: three largest particle diameters. Whichever way, the smallest edge must be "
+            "at least the largest particle diameter [m]."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if self.cells is not None and self.cell_size is not None:
+            raise ValueError("give either cells or cell_size, not both")
+        if self.cells is not None and min(self.cells) < 1:
+            raise ValueError(f"cells must be at least 1 along every axis, got {list(self.cells)}")
+        return self

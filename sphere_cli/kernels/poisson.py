@@ -1,0 +1,299 @@
+"""Kernels of the cell-centred variable-coefficient Poisson/Helmholtz system
+
+    c_i x_i - div(a grad x)_i = b_i
+
+on a regular grid, discretised by finite volumes with the 7-point stencil (the discrete
+Laplacian of sphere-fluid-particle-interaction.md, "Fluid dynamics solution procedure", with a
+coefficient on every face): (A x)_i = c_i x_i + sum over the six faces f of
+a_f (x_i - x_neighbour) / h_f^2. A is symmetric; positive definite unless c = 0 everywhere
+and no boundary is Dirichlet (then its null space is the constant field).
+
+Boundaries: x and y each periodic or no-flux; z bottom and top each Dirichlet (value g given
+at the boundary face, half a cell from the centre of the boundary cell: the face term is
+2 a_f (x_i - g) / h_z^2, its g part moved to the right-hand side) or no-flux.
+
+Arguments (grid nx, ny, nz):
+  x, b, c, diag, inv_diag, r, z, p, q: (nx, ny, nz) float64, units of the caller's equation;
+  ax (nx+1, ny, nz), ay (nx, ny+1, nz), az (nx, ny, nz+1): face coefficients a; face k along
+  an axis lies between cells k-1 and k, faces 0 and n are the boundary faces. On a periodic
+  axis faces 0 and n are the same face and face 0 is used;
+  ih2 (3,): 1/h^2 per axis [1/m^2]; periodic_x, periodic_y, dirichlet_bottom, dirichlet_top:
+  0/1; partial (nx*ny,): one partial sum per grid column (i, j).
+
+Deterministic: every prange writes only its own cells and its own column's partial sum; the
+partial sums are added in column order by `ordered_sum`, so results do not depend on the
+number of threads.
+"""
+
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k):
+    """sum over the interior/periodic faces of cell (i,j,k) of a_f x_neighbour / h^2."""
+    nx, ny, nz = x.shape
+    s = 0.0
+    if i > 0:
+        s += ax[i, j, k] * ih2[0] * x[i - 1, j, k]
+    elif periodic_x:
+        s += ax[0, j, k] * ih2[0] * x[nx - 1, j, k]
+    if i < nx - 1:
+        s += ax[i + 1, j, k] * ih2[0] * x[i + 1, j, k]
+    elif periodic_x:
+        s += ax[0, j, k] * ih2[0] * x[0, j, k]
+    if j > 0:
+        s += ay[i, j, k] * ih2[1] * x[i, j - 1, k]
+    elif periodic_y:
+        s += ay[i, 0, k] * ih2[1] * x[i, ny - 1, k]
+    if j < ny - 1:
+        s += ay[i, j + 1, k] * ih2[1] * x[i, j + 1, k]
+    elif periodic_y:
+        s += ay[i, 0, k] * ih2[1] * x[i, 0, k]
+    if k > 0:
+        s += az[i, j, k] * ih2[2] * x[i, j, k - 1]
+    if k < nz - 1:
+        s += az[i, j, k + 1] * ih2[2] * x[i, j, k + 1]
+    return s
+
+
+@njit(cache=True, parallel=True)
+def prepare_system(
+    b,
+    c,
+    ax,
+    ay,
+    az,
+    periodic_x,
+    periodic_y,
+    dirichlet_bottom,
+    dirichlet_top,
+    bottom_value,
+    top_value,
+    ih2,
+    rhs,
+    diag,
+    inv_diag,
+    partial,
+):
+    """Diagonal of A (and its inverse), right-hand side with the Dirichlet face values moved
+    over; partial = column sums of rhs^2."""
+    nx, ny, nz = b.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            d = c[i, j, k]
+            if i > 0 or periodic_x:
+                d += ax[i, j, k] * ih2[0] if i > 0 else ax[0, j, k] * ih2[0]
+            if i < nx - 1 or periodic_x:
+                d += ax[i + 1, j, k] * ih2[0] if i < nx - 1 else ax[0, j, k] * ih2[0]
+            if j > 0 or periodic_y:
+                d += ay[i, j, k] * ih2[1] if j > 0 else ay[i, 0, k] * ih2[1]
+            if j < ny - 1 or periodic_y:
+                d += ay[i, j + 1, k] * ih2[1] if j < ny - 1 else ay[i, 0, k] * ih2[1]
+            value = b[i, j, k]
+            if k > 0:
+                d += az[i, j, k] * ih2[2]
+            elif dirichlet_bottom:
+                w = 2.0 * az[i, j, 0] * ih2[2]
+                d += w
+                value += w * bottom_value
+            if k < nz - 1:
+                d += az[i, j, k + 1] * ih2[2]
+            elif dirichlet_top:
+                w = 2.0 * az[i, j, nz] * ih2[2]
+                d += w
+                value += w * top_value
+            diag[i, j, k] = d
+            inv_diag[i, j, k] = 1.0 / d if d > 0.0 else 0.0
+            rhs[i, j, k] = value
+            acc += value * value
+        partial[col] = acc
+
+
+@njit(cache=True, parallel=True)
+def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial):
+    """out = A x; partial = column sums of x * out."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            v = diag[i, j, k] * x[i, j, k] - _neighbour_sum(
+                x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k
+            )
+            out[i, j, k] = v
+            acc += x[i, j, k] * v
+        partial[col] = acc
+
+
+@njit(cache=True, parallel=True)
+def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial):
+    """r = rhs - A x; partial = column sums of r^2."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            v = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
+            v += _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k)
+            r[i, j, k] = v
+            acc += v * v
+        partial[col] = acc
+
+
+@njit(cache=True)
+def ordered_sum(partial):
+    """Sum of the column partial sums in column order (thread-count independent)."""
+    s = 0.0
+    for col in range(partial.shape[0]):
+        s += partial[col]
+    return s
+
+
+@njit(cache=True, parallel=True)
+def column_sums(x, partial):
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            acc += x[i, j, k]
+        partial[col] = acc
+
+
+@njit(cache=True, parallel=True)
+def column_squares(x, partial):
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            acc += x[i, j, k] * x[i, j, k]
+        partial[col] = acc
+
+
+@njit(cache=True, parallel=True)
+def shift(x, amount):
+    """x -= amount (removes the mean of a field in the singular case)."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        for k in range(nz):
+            x[i, j, k] -= amount
+
+
+@njit(cache=True, parallel=True)
+def precondition(r, inv_diag, z, partial_rz, partial_z):
+    """Jacobi preconditioner z = D^-1 r; partial_rz = column sums of r z, partial_z of z."""
+    nx, ny, nz = r.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        rz = 0.0
+        zs = 0.0
+        for k in range(nz):
+            v = inv_diag[i, j, k] * r[i, j, k]
+            z[i, j, k] = v
+            rz += r[i, j, k] * v
+            zs += v
+        partial_rz[col] = rz
+        partial_z[col] = zs
+
+
+@njit(cache=True, parallel=True)
+def cg_step(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z):
+    """x += alpha p; r -= alpha q; z = D^-1 r; column sums of r^2, r z and z."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        rr = 0.0
+        rz = 0.0
+        zs = 0.0
+        for k in range(nz):
+            x[i, j, k] += alpha * p[i, j, k]
+            rv = r[i, j, k] - alpha * q[i, j, k]
+            r[i, j, k] = rv
+            zv = inv_diag[i, j, k] * rv
+            z[i, j, k] = zv
+            rr += rv * rv
+            rz += rv * zv
+            zs += zv
+        partial_rr[col] = rr
+        partial_rz[col] = rz
+        partial_z[col] = zs
+
+
+@njit(cache=True, parallel=True)
+def new_direction(p, z, beta, z_mean):
+    """p = (z - z_mean) + beta p (z_mean = 0 unless the system is singular: the direction then
+    stays orthogonal to the constant null vector)."""
+    nx, ny, nz = p.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        for k in range(nz):
+            # beta = 0 (a restart) overwrites p without reading it
+            p[i, j, k] = (z[i, j, k] - z_mean) + (beta * p[i, j, k] if beta != 0.0 else 0.0)
+
+
+@njit(cache=True, parallel=True)
+def jacobi_sweep(rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, x_new, partial):
+    """One Jacobi iteration x_new = D^-1 (rhs + N x) (the reference's update); partial = column
+    sums of the squared residual (rhs - A x)^2 of the old iterate."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        acc = 0.0
+        for k in range(nz):
+            s = rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k)
+            rv = s - diag[i, j, k] * x[i, j, k]
+            acc += rv * rv
+            x_new[i, j, k] = inv_diag[i, j, k] * s
+        partial[col] = acc
+
+
+@njit(cache=True, parallel=True)
+def face_means(cell, periodic_x, periodic_y, harmonic, ax, ay, az):
+    """Face coefficients from a cell field: the harmonic (harmonic = 1) or arithmetic mean of
+    the two cells beside a face; a boundary face takes its cell's value (x/y: the wrap-around
+    mean where periodic)."""
+    nx, ny, nz = cell.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        for k in range(nz):
+            here = cell[i, j, k]
+            if i > 0:
+                ax[i, j, k] = _mean(cell[i - 1, j, k], here, harmonic)
+            else:
+                other = cell[nx - 1, j, k] if periodic_x else here
+                ax[0, j, k] = _mean(other, here, harmonic)
+                ax[nx, j, k] = ax[0, j, k] if periodic_x else cell[nx - 1, j, k]
+            if j > 0:
+                ay[i, j, k] = _mean(cell[i, j - 1, k], here, harmonic)
+            else:
+                other = cell[i, ny - 1, k] if periodic_y else here
+                ay[i, 0, k] = _mean(other, here, harmonic)
+                ay[i, ny, k] = ay[i, 0, k] if periodic_y else cell[i, ny - 1, k]
+            if k > 0:
+                az[i, j, k] = _mean(cell[i, j, k - 1], here, harmonic)
+            else:
+                az[i, j, 0] = here
+                az[i, j, nz] = cell[i, j, nz - 1]
+
+
+@njit(cache=True, inline="always")
+def _mean(a, b, harmonic):
+    if harmonic:
+        s = a + b
+        return 2.0 * a * b / s if s > 0.0 else 0.0
+    return 0.5 * (a + b)

@@ -1,0 +1,88 @@
+"""The regular cell-centred fluid grid of the 3D fluid models, made from `[fluid.grid]`
+(config/fluid_grid.py) and the domain box.
+
+Cell (i, j, k) spans origin + (i, j, k) * spacing to origin + (i+1, j+1, k+1) * spacing; its
+centre is at origin + (i + 1/2, j + 1/2, k + 1/2) * spacing. Fields on the grid are arrays of
+shape (nx, ny, nz) (scalars) or (nx, ny, nz, 3) (vectors), C order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config.fluid_grid import AUTO_CELL_DIAMETERS, FluidGridConfig
+
+
+@dataclass(frozen=True)
+class FluidGrid:
+    origin: np.ndarray  # (3,) [m] lower corner of the grid (= the domain box's)
+    spacing: np.ndarray  # (3,) [m] cell edges dx, dy, dz
+    shape: tuple[int, int, int]  # (nx, ny, nz)
+    periodic: np.ndarray  # (3,) bool, as the domain box
+
+    @property
+    def cell_volume(self) -> float:
+        """[m^3]"""
+        return float(np.prod(self.spacing))
+
+    @property
+    def cell_count(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def sampling_radius(self) -> float:
+        """Radius of the cell-centred spherical volume the porosity is sampled in: half the
+        smallest cell edge (sphere-fluid-particle-interaction.md, "Porosity estimation") [m]."""
+        return 0.5 * float(self.spacing.min())
+
+    def centres(self, axis: int) -> np.ndarray:
+        """Coordinates of the cell centres along one axis (0, 1, 2) [m]."""
+        n = self.shape[axis]
+        return self.origin[axis] + (np.arange(n) + 0.5) * self.spacing[axis]
+
+    def describe(self) -> str:
+        nx, ny, nz = self.shape
+        dx, dy, dz = self.spacing
+        return f"{nx} x {ny} x {nz} cells of {dx:.4g} x {dy:.4g} x {dz:.4g} m"
+
+
+def fluid_grid(config: FluidGridConfig, box, radius: np.ndarray, loaded=None) -> FluidGrid:
+    """The grid over the domain box (state.box: lower, upper, periodic) for particles of these
+    radii [m]. A grid that breaks what the porosity estimate needs (smallest cell edge at least
+    the largest particle diameter) is refused: with `loaded` (the LoadedCase) as its error naming
+    the key under [fluid.grid] (exit 65), without it as a ValueError."""
+
+    def refuse(key: str, message: str):
+        if loaded is not None:
+            raise loaded.error(("fluid", "grid", key), message)
+        raise ValueError(f"fluid.grid.{key}: {message}")
+
+    lower = np.asarray(box.lower, dtype=np.float64)
+    length = np.asarray(box.upper, dtype=np.float64) - lower
+    diameter = 2.0 * float(np.max(radius)) if len(radius) else 0.0
+    if config.cells is not None:
+        key = "cells"
+        shape = tuple(int(n) for n in config.cells)
+    else:
+        key = "cell_size"
+        size = config.cell_size if config.cell_size is not None else AUTO_CELL_DIAMETERS * diameter
+        # a length that is a whole number of cells up to round-off gets that number
+        shape = tuple(max(1, math.floor(float(L) / size * (1.0 + 1e-12))) for L in length)
+    spacing = length / np.array(shape, dtype=np.float64)
+    if spacing.min() < diameter:
+        ax = int(np.argmin(spacing))
+        refuse(
+            key,
+            f"cells of {spacing[ax]:g} m along {'xyz'[ax]} are smaller than the largest particle "
+            f"diameter {diameter:g} m; the porosity estimate needs every cell edge at least that "
+            f"long (at most {math.floor(length[ax] / diameter)} cells along {'xyz'[ax]})",
+        )
+    return FluidGrid(
+        origin=lower.copy(),
+        spacing=spacing,
+        shape=shape,
+        periodic=np.asarray(box.periodic, dtype=bool).copy(),
+    )
