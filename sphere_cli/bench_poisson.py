@@ -35,7 +35,9 @@ def problem(n: int, variable: bool):
 
 
 def time_solve(grid, b, cell, method, tolerance, repeats):
-    solver = PoissonSolver(grid, "dirichlet", "no-flux", method=method, tolerance=tolerance, max_iterations=10**6)
+    solver = PoissonSolver(
+        grid, "dirichlet", "no-flux", method=method, tolerance=tolerance, max_iterations=10**6
+    )
     ax, ay, az = solver.face_arrays()
     face_means(cell, np.uint8(1), np.uint8(1), np.uint8(1), ax, ay, az)
     c = np.zeros(grid.shape)

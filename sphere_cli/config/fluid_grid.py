@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
-from .schema import Count, Real, Strict
+from .base import Count, Real, Strict
 
 # cell edge chosen when neither `cells` nor `cell_size` is given, in largest particle diameters
 AUTO_CELL_DIAMETERS = 3.0
