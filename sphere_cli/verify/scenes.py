@@ -62,6 +62,7 @@ def case_text(
     density: float | None = 2500.0,
     walls=(),
     wall_friction: dict | None = None,
+    wall_material: dict | None = None,
     gravity=(0.0, 0.0, 0.0),
     lower=(0.0, 0.0, 0.0),
     upper=(0.1, 0.1, 0.1),
@@ -77,11 +78,18 @@ def case_text(
 ) -> str:
     """Case-file text for explicit particles read from `placement_file` (CSV next to the case).
 
+    wall_friction, wall_material: face -> the wall's friction / material name where given;
     extra_particles: more keys of [particles] (e.g. species); extra_tables: TOML appended as is
     (materials and other tables of models that need them)."""
     wall_friction = wall_friction or {}
+    wall_material = wall_material or {}
     walls_text = "".join(
-        toml_table("walls", {"face": face, "friction": wall_friction.get(face)}, array=True) for face in walls
+        toml_table(
+            "walls",
+            {"face": face, "friction": wall_friction.get(face), "material": wall_material.get(face)},
+            array=True,
+        )
+        for face in walls
     )
     particles = {
         "density": density,

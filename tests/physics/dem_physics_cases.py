@@ -9,8 +9,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-
 from sphere_cli.api import run_in_memory
 from sphere_cli.physics.restitution import (
     HERTZ_ELASTIC_CONTACT_TIME_FACTOR,
@@ -18,6 +16,7 @@ from sphere_cli.physics.restitution import (
     linear_damping_ratio,
 )
 from sphere_cli.simulation import advance
+from sphere_cli.verify.scenes import case_text, linear_contact, particle_csv, sphere_mass, toml_table
 
 __all__ = [
     "advance",
@@ -29,10 +28,6 @@ __all__ = [
     "hertz_contact",
     "hertz_reference",
 ]
-
-
-def sphere_mass(radius: float, density: float) -> float:
-    return density * 4.0 / 3.0 * math.pi * radius**3
 
 
 def hertz_reference(e_star: float, r_eff: float, m_eff: float, v: float) -> dict:
@@ -62,27 +57,6 @@ def hertz_contact(
 def clamped_contact_time(kn: float, m_eff: float, e: float) -> float:
     """Duration of the clamped linear contact calibrated to restitution e [s]."""
     return linear_contact_time(kn, m_eff, linear_damping_ratio(e), clamped=True)
-
-
-def _vec(v) -> str:
-    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
-
-
-def _toml(value) -> str:
-    """A Python value as a TOML value (floats written exactly, tables inline)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f'"{value}"'
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    return repr(float(value))
-
-
-def _table(header: str, keys: dict) -> str:
-    return f"{header}\n" + "".join(f"{k} = {_toml(v)}\n" for k, v in keys.items())
 
 
 def make_scene(
@@ -120,56 +94,28 @@ def make_scene(
     kn, kt, e, mu; materials: dicts, one [[materials]] table each; particle_material: the value of
     particles.material (then `density` is not written); wall_material: face -> material name.
     """
-    pos = np.atleast_2d(np.asarray(pos, dtype=np.float64))
-    n = pos.shape[0]
-    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,))
-    vel = np.zeros((n, 3)) if vel is None else np.broadcast_to(np.asarray(vel, dtype=np.float64), (n, 3))
-    csv = tmp_path / name
-    rows = ["x,y,z,r,vx,vy,vz"]
-    for p, r, v in zip(pos, radius, vel, strict=True):
-        # repr round-trips float64 exactly, so the scene holds exactly these numbers
-        rows.append(",".join(repr(float(x)) for x in (*p, r, *v)))
-    csv.write_text("\n".join(rows) + "\n")
-    dt_text = '"auto"' if dt == "auto" else repr(float(dt))
-    periodic_text = "[" + ", ".join("true" if p else "false" for p in periodic) + "]"
-    wall_friction = wall_friction or {}
-    wall_material = wall_material or {}
-    wall_text = ""
-    for face in walls:
-        wall_text += f'[[walls]]\nface = "{face}"\n'
-        if face in wall_friction:
-            wall_text += f"friction = {float(wall_friction[face])!r}\n"
-        if face in wall_material:
-            wall_text += f'material = "{wall_material[face]}"\n'
     if contact is None:
-        contact = {"model": "linear", "normal_stiffness": kn, "restitution": e, "friction": mu}
-        if kt is not None:
-            contact["tangential_stiffness"] = kt
-    contact_text = _table("[contact]", contact)
-    contact_text += "".join(_table("[[materials]]", m) for m in materials)
-    if particle_material is None:
-        what = f"density = {float(density)!r}"
-    else:
-        what = f"material = {_toml(particle_material)}"
-    text = f"""
-[simulation]
-duration = 1.0
-dt = {dt_text}
-dt_safety = {float(dt_safety)!r}
-neighbor_skin = {float(skin)!r}
-
-[domain]
-lower = {_vec(lower)}
-upper = {_vec(upper)}
-periodic = {periodic_text}
-gravity = {_vec(gravity)}
-
-[particles]
-{what}
-overlap_tolerance = {float(overlap_tolerance)!r}
-placement = {{ method = "file", path = "{csv.name}" }}
-
-{contact_text}
-{wall_text}
-"""
+        contact = linear_contact(kn, e, mu, kt)
+    extra_particles = None
+    if particle_material is not None:
+        density, extra_particles = None, {"material": particle_material}
+    text = case_text(
+        placement_file=name,
+        contact=contact,
+        density=density,
+        walls=walls,
+        wall_friction=wall_friction,
+        wall_material=wall_material,
+        gravity=gravity,
+        lower=lower,
+        upper=upper,
+        periodic=periodic,
+        dt=dt,
+        dt_safety=dt_safety,
+        skin=skin,
+        overlap_tolerance=overlap_tolerance,
+        extra_particles=extra_particles,
+        extra_tables="".join(toml_table("materials", m, array=True) for m in materials),
+    )
+    (tmp_path / name).write_text(particle_csv(pos, radius, vel))
     return run_in_memory(text, 0, base_dir=tmp_path)
