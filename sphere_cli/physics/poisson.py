@@ -1,7 +1,8 @@
 """Solver of the symmetric cell-centred system c_i x_i - div(a grad x)_i = b_i on a FluidGrid
 (kernels/poisson.py has the discretisation), shared by the fluid models: the pressure Poisson
 equation of Navier-Stokes (div(phi grad eps) = phi f: c = 0, a = phi) and the implicit pore
-pressure diffusion of Darcy (c = 1/dt, a = k / (beta_f phi mu)).
+pressure step of Darcy (multiplied through so that it stays symmetric: c = beta_f phi mu / dt,
+a = k).
 
 Methods:
 - "pcg": conjugate gradient preconditioned with the diagonal (Jacobi) of A;

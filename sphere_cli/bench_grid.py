@@ -1,7 +1,9 @@
-"""Benchmark of the shared Poisson solver (physics/poisson.py): iterations and time of "pcg" and
-"jacobi" at the same tolerance (never part of the tests).
+"""Benchmarks of the shared fluid plumbing (never part of the tests): the Poisson solver
+(physics/poisson.py), iterations and time of "pcg" and "jacobi" at the same tolerance, and the
+porosity estimate (physics/porosity.py).
 
-    python -m sphere_cli.bench_poisson [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
+    python -m sphere_cli.bench_grid [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
+    python -m sphere_cli.bench_grid --porosity [--threads 1,2]
 
 The problem is the pressure equation of the Navier-Stokes model: -div(a grad x) = b on the unit
 cube, periodic in x and y, Dirichlet (x = 0) at the bottom face, no-flux at the top, c = 0, from
@@ -9,6 +11,10 @@ x = 0. Two coefficient fields: a = 1 (the plain Poisson equation) and a "porosit
 uniformly in [0.35, 1] per cell (seed 1) with harmonic face means. b is a smooth mode plus
 white noise (seed 1), so every wavelength is present. Times are the best of `repeats` solves
 after one solve that compiles or loads the kernels.
+
+Porosity: 20 000 spheres of radius 1 mm at random (non-overlapping not needed for timing) in the
+lower 30 % of a 64 x 64 x 64 grid of 2 mm cells (the cell edge at the limit of one diameter),
+periodic in x and y; time of one measure() with the mean velocity and diameter, best of 5.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import numpy as np
 from .kernels.poisson import face_means
 from .physics.fluid_grid import FluidGrid
 from .physics.poisson import PoissonSolver
+from .physics.porosity import Porosity
 
 
 def problem(n: int, variable: bool):
@@ -52,6 +59,28 @@ def time_solve(grid, b, cell, method, tolerance, repeats):
     return result, best
 
 
+def porosity_benchmark(threads: list[int], repeats: int = 5) -> None:
+    from types import SimpleNamespace
+
+    n, edge, count = 64, 2e-3, 20_000
+    grid = FluidGrid(np.zeros(3), np.full(3, edge), (n, n, n), np.array([True, True, False]))
+    rng = np.random.default_rng(1)
+    pos = rng.uniform(0.0, 1.0, (count, 3)) * [n * edge, n * edge, 0.3 * n * edge]
+    particles = SimpleNamespace(pos=pos, vel=rng.standard_normal((count, 3)), radius=np.full(count, 1e-3))
+    porosity = Porosity(grid, count)
+    phi, vbar, dbar = np.zeros(grid.shape), np.zeros(grid.shape + (3,)), np.zeros(grid.shape)
+    print("porosity: 64^3 cells, 20 000 particles | threads | ms per measure | M cell-updates/s")
+    for t in threads:
+        numba.set_num_threads(t)
+        porosity.measure(particles, phi, vbar, dbar)
+        best = np.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            porosity.measure(particles, phi, vbar, dbar)
+            best = min(best, time.perf_counter() - start)
+        print(f"porosity | {t} | {1e3 * best:.1f} | {n**3 / best / 1e6:.1f}", flush=True)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", default="32,64")
@@ -59,7 +88,11 @@ def main(argv=None) -> None:
     parser.add_argument("--tolerance", type=float, default=1e-8)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--methods", default="pcg,jacobi")
+    parser.add_argument("--porosity", action="store_true", help="time the porosity estimate instead")
     args = parser.parse_args(argv)
+    if args.porosity:
+        porosity_benchmark([int(t) for t in args.threads.split(",")])
+        return
     print(f"numba {numba.__version__}, threading layer after first use; tolerance {args.tolerance:g}")
     print("n^3 | coefficient | method | threads | iterations | time [s] | ms/iteration | M cell-updates/s")
     for n in (int(s) for s in args.sizes.split(",")):

@@ -1,0 +1,182 @@
+"""Porosity of the fluid cells from the particles (sphere-fluid-particle-interaction.md,
+"Porosity estimation").
+
+Each cell i samples the solid in a sphere of radius R centred on the cell centre (R = half the
+smallest cell edge, the reference's choice): V_s,i = sum over particles j of the exact volume
+common to that sphere and particle j (`lens_volume`), and phi_i = 1 - V_s,i / (4/3 pi R^3).
+A lens volume is a continuous function of the centre distance, so phi is continuous in time as
+particles move. The same lens volumes weight the per-cell mean particle velocity and diameter.
+
+Gather form: the particles are binned into the grid cells once per call (`bin_particles`, then
+a stable counting sort), and a prange over cells visits the bins within reach of its sampling
+sphere in a fixed order, so the sums do not depend on the number of threads. Along a periodic
+axis the bins are visited by unwrapped index, each unwrapped bin standing for one periodic
+image, so every image of a particle within reach is counted once, whatever the cell count.
+
+Arguments (N particles, grid nx, ny, nz):
+  pos, wrapped (N,3) [m] centres as given and brought into the box along periodic axes;
+  vel (N,3) [m/s], radius (N,) [m]; origin, spacing (3,) [m]; shape (3,) int64;
+  periodic (3,) uint8; bin_of (N,) int64 flat cell index (i*ny + j)*nz + k of each particle;
+  cell_start (nx*ny*nz+1,) int64, order (N,) int64 (kernels/neighbors.counting_sort);
+  reach (3,) int64 bins searched on either side; porosity, mean_diameter (nx,ny,nz) [-, m];
+  mean_velocity (nx,ny,nz,3) [m/s].
+"""
+
+import math
+
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def lens_volume(big_r, r, d):
+    """Volume common to two spheres of radii big_r and r whose centres are d apart [m^3]:
+    0 apart, the smaller sphere when one contains the other, otherwise the lens
+    pi (R + r - d)^2 (d^2 + 2 d r - 3 r^2 + 2 d R + 6 r R - 3 R^2) / (12 d)."""
+    if d >= big_r + r:
+        return 0.0
+    if d <= abs(big_r - r):
+        small = min(big_r, r)
+        return 4.0 / 3.0 * math.pi * small * small * small
+    gap = big_r + r - d
+    return (
+        math.pi
+        * gap
+        * gap
+        * (d * d + 2.0 * d * r - 3.0 * r * r + 2.0 * d * big_r + 6.0 * r * big_r - 3.0 * big_r * big_r)
+        / (12.0 * d)
+    )
+
+
+@njit(cache=True, inline="always")
+def _wrapped(x, lower, length, periodic):
+    """A coordinate brought into [lower, lower + length) along a periodic axis."""
+    if periodic:
+        return x - math.floor((x - lower) / length) * length
+    return x
+
+
+@njit(cache=True, parallel=True)
+def bin_particles(pos, origin, spacing, shape, periodic, bin_of, wrapped):
+    """Flat index of the cell holding each particle centre (periodic axes wrapped, others
+    clamped to the grid, so a particle outside a bounded axis takes the nearest cell), and the
+    centre brought into the box along the periodic axes (wrapped (N,3) [m])."""
+    for p in prange(pos.shape[0]):
+        flat = 0
+        for a in range(3):
+            length = spacing[a] * shape[a]
+            x = _wrapped(pos[p, a], origin[a], length, periodic[a])
+            wrapped[p, a] = x
+            c = int(math.floor((x - origin[a]) / spacing[a]))
+            if c < 0:
+                c = 0
+            elif c >= shape[a]:
+                c = shape[a] - 1
+            flat = flat * shape[a] + c
+        bin_of[p] = flat
+
+
+@njit(cache=True, inline="always")
+def _image(u, n):
+    """(cell, image) of the unwrapped cell index u along an axis of n cells: u = cell + image n."""
+    image = 0
+    while u < 0:
+        u += n
+        image -= 1
+    while u >= n:
+        u -= n
+        image += 1
+    return u, image
+
+
+@njit(cache=True, inline="always")
+def _add_particles(first, last, order, wrapped, vel, radius, sx, sy, sz, cx, cy, cz, big_r, want_means, sums):
+    """sums (solid, three velocity moments, diameter moment) with the lens volumes of the
+    particles order[first:last], shifted by the image (sx, sy, sz), added."""
+    solid, m0, m1, m2, md = sums
+    for s in range(first, last):
+        p = order[s]
+        dx = wrapped[p, 0] + sx - cx
+        dy = wrapped[p, 1] + sy - cy
+        dz = wrapped[p, 2] + sz - cz
+        v = lens_volume(big_r, radius[p], math.sqrt(dx * dx + dy * dy + dz * dz))
+        if v > 0.0:
+            solid += v
+            if want_means:
+                m0 += v * vel[p, 0]
+                m1 += v * vel[p, 1]
+                m2 += v * vel[p, 2]
+                md += v * 2.0 * radius[p]
+    return solid, m0, m1, m2, md
+
+
+@njit(cache=True, parallel=True)
+def sample_cells(
+    wrapped,
+    vel,
+    radius,
+    origin,
+    spacing,
+    shape,
+    periodic,
+    sampling_radius,
+    reach,
+    cell_start,
+    order,
+    want_means,
+    porosity,
+    mean_velocity,
+    mean_diameter,
+):
+    """phi = 1 - V_s / V_c per cell, clamped to [0, 1] (below 0 only where particles overlap);
+    with want_means also the lens-volume-weighted mean particle velocity and diameter (0 where no
+    particle reaches the sampling sphere). Returns the number of cells clamped."""
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    big_r = sampling_radius
+    sample_volume = 4.0 / 3.0 * math.pi * big_r * big_r * big_r
+    lx, ly, lz = spacing[0] * nx, spacing[1] * ny, spacing[2] * nz
+    clamped = 0
+    for cell in prange(nx * ny * nz):
+        i = cell // (ny * nz)
+        j = (cell // nz) % ny
+        k = cell % nz
+        cx = origin[0] + (i + 0.5) * spacing[0]
+        cy = origin[1] + (j + 0.5) * spacing[1]
+        cz = origin[2] + (k + 0.5) * spacing[2]
+        sums = (0.0, 0.0, 0.0, 0.0, 0.0)
+        for ux in range(i - reach[0], i + reach[0] + 1):
+            gx, ix = _image(ux, nx)
+            if ix != 0 and not periodic[0]:
+                continue
+            for uy in range(j - reach[1], j + reach[1] + 1):
+                gy, iy = _image(uy, ny)
+                if iy != 0 and not periodic[1]:
+                    continue
+                column = (gx * ny + gy) * nz
+                if periodic[2]:
+                    for uz in range(k - reach[2], k + reach[2] + 1):
+                        gz, iz = _image(uz, nz)
+                        g = column + gz
+                        sums = _add_particles(
+                            cell_start[g], cell_start[g + 1], order, wrapped, vel, radius,
+                            ix * lx, iy * ly, iz * lz, cx, cy, cz, big_r, want_means, sums,
+                        )  # fmt: skip
+                else:
+                    # the bins of a bounded z range are contiguous in the sorted order
+                    lo = max(k - reach[2], 0)
+                    hi = min(k + reach[2], nz - 1)
+                    sums = _add_particles(
+                        cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
+                        ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
+                    )  # fmt: skip
+        phi = 1.0 - sums[0] / sample_volume
+        if phi < 0.0:
+            phi = 0.0
+            clamped += 1
+        porosity[i, j, k] = phi
+        if want_means:
+            w = 1.0 / sums[0] if sums[0] > 0.0 else 0.0
+            mean_velocity[i, j, k, 0] = sums[1] * w
+            mean_velocity[i, j, k, 1] = sums[2] * w
+            mean_velocity[i, j, k, 2] = sums[3] * w
+            mean_diameter[i, j, k] = sums[4] * w
+    return clamped
