@@ -10,7 +10,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from .schema import Flag, Real, Strict
+from .base import Flag, Real, Strict
 
 
 class DragConfig(Strict):
