@@ -25,13 +25,25 @@ lambda (u - v), lambda = K/m, has the exact solution
 stable and exact at the terminal velocity u + F_o/K for any lambda dt (tau_p = 1/lambda may be
 far below dt). The force stored for the next first half kick is the one that makes that kick
 this same exact update:  F_drag = phi1 K (u - v) + (phi1 - 1) F_o  (-> K (u - v) as
-lambda h -> 0). The fluid receives -F_drag (per cell, gathered in particle order: bitwise
-independent of the thread count), and its implicit coefficient d(F_drag)/du = phi1 K.
+lambda h -> 0).
 
-Arrays: pos, vel, force, f_other, f_drag (N,3) [m, m/s, N, N, N]; radius, inv_mass (N,) [m, 1/kg];
+Momentum exchange. Each particle accumulates the drag impulse J its two half kicks gave it;
+before a fluid step of length dt_f the fluid of each cell receives minus the sum over its
+particles, as the force density f_i = sum J / (V_cell dt_f) (gathered in particle order:
+bitwise independent of the thread count), with the implicit coefficient k_drag = sum
+phi1(lambda dt_f) K / V_cell: the mean over dt_f of the drag's response to a change of u while
+the particle follows (K when lambda dt_f << 1; m/dt_f, the inertia of a particle carried along,
+when >> 1). The fluid step takes -(f_i + k_drag (u_new - u)); the part k_drag (u_new - u) it
+took ahead of the particles (who feel the new u only afterwards, in J) is deducted from the next
+f_i, so over any number of steps the fluid receives exactly minus what the particles received,
+up to the one pending deduction.
+
+Arrays: pos, vel, force, f_other, f_drag (N,3) [m, m/s, N, N, N]; impulse (N,3) [N s] the drag
+impulse since the last fluid step; radius, inv_mass (N,) [m, 1/kg];
 coef (N,) [kg/s] the particle's K; cell_of (N,) int64 flat index (ix ny + iy) nz + iz of its
 fluid cell; fluid arrays flattened over cells: u (C,3) [m/s], phi (C,) [-], grad_p (C,3) [Pa/m],
-f_i (C,3) [N/m^3] force density of the fluid on the particles, f_i_coef (C,) [kg/(m^3 s)].
+f_i (C,3) [N/m^3] force density of the fluid on the particles, f_i_coef (C,) [kg/(m^3 s)],
+f_exchange (C,3) [N/m^3] what the last fluid step took, f_i + f_i_coef (u_new - u).
 """
 
 import math
@@ -114,15 +126,17 @@ def particle_drag(
     phi,
     grad_p,
     dt,
+    initial,
     force,
     f_other,
     coef,
     f_drag,
 ):
     """Forces phase: add the pressure-gradient force -V grad(p) (if pressure_force) and the drag
-    to `force` (which holds every other force); keep the non-drag force in f_other, K in coef
-    and the drag in f_drag for the kick and the exchange. Returns the number of particles in
-    cells below the porosity floor."""
+    to `force` (which holds every other force); keep the non-drag force in f_other and K in coef
+    for the kick. `initial` (the forces of the initial state): also keep the drag in f_drag, for
+    the first half kick (later the kick sets it). Returns the number of particles in cells below
+    the porosity floor."""
     half = 0.5 * dt
     below = 0
     for i in prange(vel.shape[0]):
@@ -143,15 +157,19 @@ def particle_drag(
                 fo -= volume * grad_p[c, a]
             fd = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo
             f_other[i, a] = fo
-            f_drag[i, a] = fd
+            if initial:
+                f_drag[i, a] = fd
             force[i, a] = fo + fd
     return below
 
 
 @njit(cache=True, parallel=True)
-def drag_kick(vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag):
+def drag_kick(
+    vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse
+):
     """Second half kick, exact for the drag at frozen K, u and other forces (see the module
-    docstring); then the drag force that makes the next first half kick exact too."""
+    docstring); then the drag force that makes the next first half kick exact too. The drag
+    impulse of both half kicks of this step is added to `impulse`."""
     half = 0.5 * dt
     for i in prange(vel.shape[0]):
         c = cell_of[i]
@@ -160,7 +178,9 @@ def drag_kick(vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_ot
         g = phi1(k * im * half)
         for a in range(3):
             fo = f_other[i, a]
-            vel[i, a] += half * g * (fo + k * (u[c, a] - vel[i, a])) * im
+            now = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo  # drag of this half kick
+            impulse[i, a] += half * (f_drag[i, a] + now)
+            vel[i, a] += half * (fo + now) * im
             fd = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo
             f_drag[i, a] = fd
             force[i, a] = fo + fd
@@ -171,7 +191,7 @@ def drag_kick(vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_ot
 def exchange(
     start,
     order,
-    f_drag,
+    impulse,
     coef,
     radius,
     inv_mass,
@@ -181,10 +201,13 @@ def exchange(
     inv_cell_volume,
     f_i,
     f_i_coef,
+    f_exchange,
 ):
-    """Per cell, in particle order: f_i = sum of the drag (plus -V grad(p) if
-    pressure_exchanged) on its particles / cell volume; f_i_coef = sum of phi1(lambda fluid_dt) K
-    / cell volume."""
+    """Per cell, in particle order: f_i = (sum of the drag impulses of its particles / fluid_dt,
+    plus -V grad(p) if pressure_exchanged) / cell volume, less what the last fluid step took
+    ahead (f_exchange - f_i, read before f_i is overwritten); f_i_coef = sum of
+    phi1(lambda fluid_dt) K / cell volume. The impulses are reset to zero."""
+    inv_dt = 1.0 / fluid_dt
     for c in prange(f_i_coef.shape[0]):
         s0 = 0.0
         s1 = 0.0
@@ -193,19 +216,28 @@ def exchange(
         sv = 0.0
         for j in range(start[c], start[c + 1]):
             i = order[j]
-            s0 += f_drag[i, 0]
-            s1 += f_drag[i, 1]
-            s2 += f_drag[i, 2]
+            s0 += impulse[i, 0]
+            s1 += impulse[i, 1]
+            s2 += impulse[i, 2]
+            impulse[i, 0] = 0.0
+            impulse[i, 1] = 0.0
+            impulse[i, 2] = 0.0
             sk += phi1(coef[i] * inv_mass[i] * fluid_dt) * coef[i]
             d = 2.0 * radius[i]
             sv += math.pi / 6.0 * d * d * d
+        s0 *= inv_dt
+        s1 *= inv_dt
+        s2 *= inv_dt
         if pressure_exchanged:
             s0 -= sv * grad_p[c, 0]
             s1 -= sv * grad_p[c, 1]
             s2 -= sv * grad_p[c, 2]
-        f_i[c, 0] = s0 * inv_cell_volume
-        f_i[c, 1] = s1 * inv_cell_volume
-        f_i[c, 2] = s2 * inv_cell_volume
+        ahead0 = f_exchange[c, 0] - f_i[c, 0]
+        ahead1 = f_exchange[c, 1] - f_i[c, 1]
+        ahead2 = f_exchange[c, 2] - f_i[c, 2]
+        f_i[c, 0] = s0 * inv_cell_volume - ahead0
+        f_i[c, 1] = s1 * inv_cell_volume - ahead1
+        f_i[c, 2] = s2 * inv_cell_volume - ahead2
         f_i_coef[c] = sk * inv_cell_volume
 
 

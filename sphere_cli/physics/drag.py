@@ -9,9 +9,10 @@ last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] 
                    particle's force;
 - kick():          replaces Motion.kick: the second half kick, exact for the drag relaxation;
 - fluid_forcing(): before each fluid step, after the kick: f_i, the force density of the fluid on
-                   the particles of each cell at the fluid velocity v they saw, and k_drag =
+                   the particles of each cell over the last fluid interval (the drag impulses the
+                   particles received, less what the last fluid step took ahead), and k_drag =
                    d f_i/d v averaged over the fluid step, so the fluid momentum update takes the
-                   drag semi-implicitly as -(f_i + k_drag (v_new - v)).
+                   drag semi-implicitly as -(f_i + k_drag (v_new - v)) (fs.f_exchange).
 Formulation A (pressure in both phases: fluid momentum -phi grad p - f_i) exchanges the drag
 alone, its -phi grad p already holding the reaction of the pressure-gradient force; formulation
 B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradient force.
@@ -67,14 +68,15 @@ class FluidParticleDrag:
         self.cell_of = np.zeros(n, dtype=np.int64)
         self.coef = np.zeros(n)  # K [kg/s]
         self.f_other = np.zeros((n, 3))  # every force but the drag [N]
-        self.f_drag = np.zeros((n, 3))  # [N]
+        self.f_drag = np.zeros((n, 3))  # drag for the next first half kick [N]
+        self.impulse = np.zeros((n, 3))  # drag impulse since the last fluid step [N s]
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.cursor = np.zeros(cells, dtype=np.int64)
         self.warned = False
 
     def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
-        """Add the fluid forces to state.particles.force (spring_dt is not used)."""
+        """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
         p = state.particles
         nx, ny, nz = self.shape
         particle_cells(p.pos, self.origin, self.spacing, nx, ny, nz, self.cell_of)
@@ -93,6 +95,7 @@ class FluidParticleDrag:
             phi,
             fs.grad_p.reshape(-1, 3),
             state.clock.dt,
+            spring_dt == 0.0,
             p.force,
             self.f_other,
             self.coef,
@@ -126,17 +129,19 @@ class FluidParticleDrag:
             state.clock.dt,
             p.force,
             self.f_drag,
+            self.impulse,
         )
 
     def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
-        """Fill fs.f_i and fs.k_drag from the forces of the last forces() and kick(), for a
-        fluid step of fluid_dt [s]."""
+        """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (the time since the last
+        call): the drag impulses since then, less the part of fs.f_exchange the last fluid step
+        took ahead; the impulses restart from zero."""
         p = state.particles
         bin_particles(self.cell_of, self.start, self.order, self.cursor)
         exchange(
             self.start,
             self.order,
-            self.f_drag,
+            self.impulse,
             self.coef,
             p.radius,
             p.inv_mass,
@@ -146,6 +151,7 @@ class FluidParticleDrag:
             self.inv_cell_volume,
             fs.f_i.reshape(-1, 3),
             fs.k_drag.reshape(-1),
+            fs.f_exchange.reshape(-1, 3),
         )
 
     def fluid_force(self, state: State, fs) -> np.ndarray:
@@ -162,6 +168,15 @@ class FluidParticleDrag:
         rate = self.coef * p.inv_mass
         top = float(rate.max()) if rate.size else 0.0
         return 1.0 / top if top > 0.0 else math.inf
+
+    def prognostic_state(self) -> dict[str, np.ndarray]:
+        """What a bitwise restart needs: the drag of the next first half kick and the impulses
+        not yet handed to the fluid."""
+        return {"force": self.f_drag, "impulse": self.impulse}
+
+    def restore(self, arrays: dict) -> None:
+        self.f_drag[...] = arrays["force"]
+        self.impulse[...] = arrays["impulse"]
 
     @staticmethod
     def dt_limit() -> tuple[float, str]:
