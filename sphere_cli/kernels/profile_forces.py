@@ -1,0 +1,168 @@
+"""Fluid forces on spheres from a vertical profile of streamwise fluid velocity u(z) and solid
+fraction phi(z) (YADE HydroForceEngine::action; Maurin et al. 2015).
+
+Drag      f_D = K (u(z_p) e_x - v_p),  K = 1/2 rho_f (pi d^2/4) (0.44 |u_r| + 24 nu/d) (1 - phi_p)^-n
+          i.e. C_d = (0.44 + 24/Re_p)(1 - phi_p)^-n with Re_p = |u_r| d/nu (Dallavalle 1948,
+          Richardson & Zaki 1954); phi_p is capped at phi_max.
+Buoyancy  f_B = -rho_f V g (full) or -rho_f V g_z e_z (wall-normal part only, steady flow).
+Lift      f_L = 1/2 rho_f C_L (pi d^2/4) (u_r,top^2 - u_r,bottom^2) e_z, u_r = u - v_x taken at the
+          top and the bottom of the sphere (Wiberg & Smith 1985).
+All three scale with the submerged fraction of the sphere (the part below the surface).
+
+The profiles live at the layer centres; between centres they are linear. Below the first centre
+u goes linearly to 0 at the bottom (no-slip); above the last centre it is constant (free surface)
+or goes linearly to 0 at the lid (no-slip top). phi is constant beyond the end centres.
+
+Arguments: pos, vel (N,3) [m, m/s]; radius (N,) [m]; selected (N,) uint8; faces (n+1,) [m];
+centres (n,) [m]; u (n,) [m/s]; phi (n,) [-]; top_no_slip (bool); rho [kg/m^3]; nu [m^2/s];
+exponent n [-]; phi_max [-]; gravity (3,) [m/s^2]; buoyancy_full (bool); lift_coef [-];
+force (N,3) [N] (added to); drag_coef (N,) [kg/s] and drag_x (N,) [N] (written).
+"""
+
+import math
+
+from numba import njit, prange
+
+from .layer_averaging import slice_volume
+
+
+@njit(cache=True)
+def interpolate_centres(centres, values, z):
+    """Linear between the centres, constant beyond the first and the last one."""
+    n = centres.shape[0]
+    if z <= centres[0]:
+        return values[0]
+    if z >= centres[n - 1]:
+        return values[n - 1]
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if centres[mid] <= z:
+            lo = mid
+        else:
+            hi = mid
+    w = (z - centres[lo]) / (centres[hi] - centres[lo])
+    return (1.0 - w) * values[lo] + w * values[hi]
+
+
+@njit(cache=True)
+def fluid_velocity_at(faces, centres, u, top_no_slip, z):
+    """u(z) with the boundary conditions: 0 at and below the bottom, and at a no-slip lid."""
+    n = centres.shape[0]
+    bottom = faces[0]
+    if z <= bottom:
+        return 0.0
+    if z < centres[0]:
+        return u[0] * (z - bottom) / (centres[0] - bottom)
+    if z > centres[n - 1] and top_no_slip:
+        top = faces[n]
+        if z >= top:
+            return 0.0
+        return u[n - 1] * (top - z) / (top - centres[n - 1])
+    return interpolate_centres(centres, u, z)
+
+
+@njit(cache=True, inline="always")
+def _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max):
+    hindrance = (1.0 - min(max(phi_p, 0.0), phi_max)) ** (-exponent)
+    return 0.5 * rho * math.pi * r * r * (0.44 * speed + 12.0 * nu / r) * hindrance
+
+
+@njit(cache=True, parallel=True)
+def profile_forces(
+    pos,
+    vel,
+    radius,
+    selected,
+    faces,
+    centres,
+    u,
+    phi,
+    top_no_slip,
+    rho,
+    nu,
+    exponent,
+    phi_max,
+    gravity,
+    buoyancy_full,
+    lift_coef,
+    force,
+    drag_coef,
+    drag_x,
+):
+    n = centres.shape[0]
+    top = faces[n]
+    for i in prange(pos.shape[0]):
+        drag_coef[i] = 0.0
+        drag_x[i] = 0.0
+        if not selected[i]:
+            continue
+        z = pos[i, 2]
+        r = radius[i]
+        volume = 4.0 / 3.0 * math.pi * r * r * r
+        submerged = slice_volume(z, r, z - r, top)
+        if submerged <= 0.0:
+            continue
+        frac = submerged / volume
+        ur = fluid_velocity_at(faces, centres, u, top_no_slip, z) - vel[i, 0]
+        vr = -vel[i, 1]
+        wr = -vel[i, 2]
+        speed = math.sqrt(ur * ur + vr * vr + wr * wr)
+        phi_p = interpolate_centres(centres, phi, z)
+        k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
+        drag_coef[i] = k
+        drag_x[i] = k * ur
+        force[i, 0] += k * ur
+        force[i, 1] += k * vr
+        force[i, 2] += k * wr
+        if buoyancy_full:
+            force[i, 0] -= rho * submerged * gravity[0]
+            force[i, 1] -= rho * submerged * gravity[1]
+        force[i, 2] -= rho * submerged * gravity[2]
+        if lift_coef > 0.0:
+            u_top = fluid_velocity_at(faces, centres, u, top_no_slip, z + r) - vel[i, 0]
+            u_bottom = fluid_velocity_at(faces, centres, u, top_no_slip, z - r) - vel[i, 0]
+            force[i, 2] += (
+                frac * 0.5 * rho * lift_coef * math.pi * r * r * (u_top * u_top - u_bottom * u_bottom)
+            )
+
+
+@njit(cache=True, parallel=True)
+def drag_coefficients(
+    pos,
+    vel,
+    radius,
+    selected,
+    faces,
+    centres,
+    u,
+    phi,
+    top_no_slip,
+    rho,
+    nu,
+    exponent,
+    phi_max,
+    drag_coef,
+    drag_x,
+):
+    """K_p and the streamwise drag K_p u_r of each particle, without touching the forces."""
+    n = centres.shape[0]
+    top = faces[n]
+    for i in prange(pos.shape[0]):
+        drag_coef[i] = 0.0
+        drag_x[i] = 0.0
+        if not selected[i]:
+            continue
+        z = pos[i, 2]
+        r = radius[i]
+        submerged = slice_volume(z, r, z - r, top)
+        if submerged <= 0.0:
+            continue
+        frac = submerged / (4.0 / 3.0 * math.pi * r * r * r)
+        ur = fluid_velocity_at(faces, centres, u, top_no_slip, z) - vel[i, 0]
+        speed = math.sqrt(ur * ur + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
+        phi_p = interpolate_centres(centres, phi, z)
+        k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
+        drag_coef[i] = k
+        drag_x[i] = k * ur

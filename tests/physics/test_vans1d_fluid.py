@@ -1,0 +1,126 @@
+"""The 1D fluid momentum balance of the vans1d model alone, against exact solutions
+(shared/validation C; Maurin et al. 2018, fluid validation of YADE's HydroForceEngine).
+
+Errors are measured at the layer centres against the exact profile, and the observed order of
+the spatial error is log2 of the ratio of errors at n and 2n layers; the scheme is second order
+(central fluxes on a smoothly stretched mesh), so it must lie within 0.15 of 2.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import vans1d_exact as exact
+
+from sphere_cli.physics.vans1d import FluidColumn
+
+RHO = 1000.0
+
+
+def steady(column: FluidColumn, phi, vel_p, beta, source, dt, chunk=50, tol=1e-13, max_chunks=400):
+    """Implicit steps of dt until the profile changes by less than tol (relative) per chunk."""
+    column.update_mixing_length(phi)
+    for _ in range(max_chunks):
+        before = column.u.copy()
+        column.advance(phi, vel_p, beta, source, dt, chunk)
+        if np.abs(column.u - before).max() <= tol * max(np.abs(column.u).max(), 1e-300):
+            return column
+    raise AssertionError("no steady state")
+
+
+def observed_orders(errors):
+    return [math.log2(a / b) for a, b in zip(errors, errors[1:], strict=False)]
+
+
+@pytest.mark.parametrize("stretching", [1.0, 4.0])
+def test_laminar_channel_parabola(stretching):
+    """Poiseuille flow between no-slip walls at 0 and h = 1 m, dp/dx = -0.1 Pa/m,
+    mu = 1e-3 Pa s: u = (-dp/dx)/(2 mu) z (h - z), u_max = 12.5 m/s (validation C). Error at
+    100 layers within 0.5 % of u_max (the validation's bound), order 2."""
+    errors = []
+    for cells in (25, 50, 100):
+        column = FluidColumn.regular(0.0, 1.0, cells, stretching, rho=RHO, nu=1e-6, top_no_slip=True)
+        zero = np.zeros(cells)
+        column.update_mixing_length(zero)
+        column.advance(zero, zero, zero, 0.1, 1e12, 2)  # laminar: linear, dt -> inf is the steady solve
+        z = column.centres
+        errors.append(np.abs(column.u - 0.1 / (2 * 1e-3) * z * (1 - z)).max() / 12.5)
+    assert errors[-1] < 0.005
+    for order in observed_orders(errors):
+        assert abs(order - 2.0) < 0.15, errors
+
+
+@pytest.mark.parametrize("kind", ["prandtl", "parabolic"])
+def test_turbulent_free_surface_exact_solution(kind):
+    """Free-surface flow down a 0.05 rad slope, h = 0.1 m, nu = 1e-6 m^2/s, kappa = 0.41,
+    u* = 0.2214 m/s (validation C), compared with the exact solution of the same mixing length,
+    viscous sublayer included (tests/physics/vans1d_exact.py). The mesh is stretched (top layer
+    1e4 x the bottom one, which is then 0.2 viscous lengths nu/u* at 100 layers) so that the
+    sublayer is resolved. Error at 100 layers below 0.3 % of the surface velocity, order 2."""
+    errors = []
+    for cells in (50, 100, 200):
+        column = FluidColumn.regular(0.0, exact.DEPTH, cells, 1e4, rho=RHO, nu=exact.NU, mixing=kind)
+        zero = np.zeros(cells)
+        steady(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        u = exact.free_surface_velocity(kind, column.centres)
+        errors.append(np.abs(column.u - u).max() / u.max())
+    assert errors[1] < 0.003
+    for order in observed_orders(errors):
+        assert abs(order - 2.0) < 0.15, errors
+
+
+def test_parabolic_exact_solution_is_the_log_law():
+    """Validation C: with l = kappa z sqrt(1 - z/h) the profile is the log law over the whole depth
+    above the sublayer, u(z2) - u(z1) = u*/kappa ln(z2/z1); with Prandtl's l = kappa z it is not
+    (here it falls short by 16 %). Checks the exact helper itself. The viscous correction
+    to the log-law increment between z1 = 0.05 h and z2 = 0.8 h is about nu/(2 kappa^2 z1) =
+    6e-4 m/s, 3e-4 of it, inside the 1e-3 tolerance."""
+    z1, z2 = 0.05 * exact.DEPTH, 0.8 * exact.DEPTH
+    log_law = exact.U_STAR / exact.KAPPA * math.log(z2 / z1)
+    du_par = np.diff(exact.free_surface_velocity("parabolic", np.array([z1, z2])))[0]
+    du_pra = np.diff(exact.free_surface_velocity("prandtl", np.array([z1, z2])))[0]
+    assert du_par == pytest.approx(log_law, rel=1e-3)
+    assert du_pra < 0.9 * log_law
+
+
+def test_uniform_porous_layer_with_drag():
+    """Laminar free-surface flow through a fixed porous layer filling the depth H: uniform
+    solid fraction phi, exchange coefficient beta, particles at rest:
+    rho eps nu u'' + eps S - beta u = 0, u(0) = 0, u'(H) = 0, eps = 1 - phi, so
+    u = (eps S / beta) (1 - cosh(k (H - z)) / cosh(k H)), k = sqrt(beta / (rho eps nu)).
+    Checks the drag and porosity terms; order 2 on a stretched mesh."""
+    depth, nu, phi, beta, source = 0.01, 1e-3, 0.4, 2.0e5, 500.0
+    eps = 1.0 - phi
+    k = math.sqrt(beta / (RHO * eps * nu))
+    errors = []
+    for cells in (20, 40, 80):
+        column = FluidColumn.regular(0.0, depth, cells, 3.0, rho=RHO, nu=nu)
+        ones = np.ones(cells)
+        column.update_mixing_length(phi * ones)
+        column.advance(phi * ones, 0.0 * ones, beta * ones, source, 1e12, 2)
+        z = column.centres
+        u = eps * source / beta * (1.0 - np.cosh(k * (depth - z)) / np.cosh(k * depth))
+        errors.append(np.abs(column.u - u).max() / u.max())
+    assert errors[-1] < 1e-3
+    for order in observed_orders(errors):
+        assert abs(order - 2.0) < 0.15, errors
+
+
+def test_li_sawamoto_mixing_length():
+    """Li & Sawamoto (1995): l = kappa * integral of (phi_max - phi)/phi_max: equal to Prandtl's
+    kappa z in clear water (bitwise here), 0 through a bed packed at phi_max, and kappa (z - z_bed)
+    above it; half the rate in a layer at phi_max / 2."""
+    faces = np.linspace(0.0, 0.1, 11)
+    clear = FluidColumn(faces, RHO, 1e-6, mixing="li-sawamoto", phi_max=0.6)
+    prandtl = FluidColumn(faces, RHO, 1e-6, mixing="prandtl")
+    clear.update_mixing_length(np.zeros(10))
+    prandtl.update_mixing_length(np.zeros(10))
+    np.testing.assert_allclose(clear.mixing, prandtl.mixing, rtol=1e-15, atol=0)
+    phi = np.zeros(10)
+    phi[:4] = 0.6  # packed bed up to z = 0.04 m
+    phi[4] = 0.3
+    clear.update_mixing_length(phi)
+    np.testing.assert_allclose(clear.mixing[:5], 0.0, atol=0)
+    np.testing.assert_allclose(clear.mixing[5:], 0.41 * (faces[5:] - 0.045), rtol=1e-13)
