@@ -1,19 +1,174 @@
-"""Case-file section `[fluid]` with `model = "vans1d"`:
-A 1D vertical fluid velocity profile (VANS with mixing-length turbulence) coupled to the particles,
-for bedload transport.
+"""Case-file schema of `[fluid] model = "vans1d"`: a vertical profile of a streamwise (x) flow
+over a granular bed in a laterally periodic cell (YADE HydroForceEngine-like, see
+physics/vans1d.py). The flow is either solved (two-way coupling) or prescribed (one way).
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from .base import Strict
+from .base import Count, Real, Strict
+
+
+class SolvedFlow(Strict):
+    """The 1D streamwise momentum balance of the fluid, solved (two-way coupling)."""
+
+    kind: Literal["solved"] = "solved"
+    mixing_length: Literal["none", "prandtl", "parabolic", "li-sawamoto"] = Field(
+        "li-sawamoto",
+        description=(
+            'Eddy viscosity nu_t = l^2 |du/dz| with the mixing length l: "none" (laminar), "prandtl" '
+            'l = kappa s, "parabolic" l = kappa s sqrt(1 - s/H) (s: height above the fluid bottom, H: '
+            'flow depth), "li-sawamoto" l = kappa * integral of (phi_max - phi)/phi_max dz from the '
+            "bottom, which damps it inside the bed (Li & Sawamoto 1995) [-]."
+        ),
+    )
+    kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")
+    top: Literal["free-surface", "no-slip"] = Field(
+        "free-surface",
+        description=(
+            'Boundary at fluid.surface: "free-surface" (no shear stress) or "no-slip" (a fixed lid: a '
+            'channel between two walls; laminar only, mixing_length = "none") [-].'
+        ),
+    )
+    pressure_gradient: Real = Field(
+        0.0,
+        description=(
+            "Imposed streamwise pressure gradient dp/dx driving the flow besides gravity's x "
+            "component (negative pushes towards +x) [Pa/m]."
+        ),
+    )
+    dt: Real = Field(
+        1.0e-5,
+        gt=0,
+        description=(
+            "Fluid time step (implicit in time, so it sets accuracy, not stability); each coupling "
+            "interval is split into equal steps no longer than this [s]."
+        ),
+    )
+    initial: Literal["rest", "steady"] = Field(
+        "steady",
+        description=(
+            'Fluid velocity at t = 0: "rest", or "steady": the steady profile over the initial bed '
+            "(particles held fixed while it is found) [-]."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _lid_is_laminar(self):
+        if self.top == "no-slip" and self.mixing_length != "none":
+            raise ValueError(
+                'top = "no-slip" (a channel between two walls) is laminar only: the mixing lengths '
+                'are measured from the bottom; set mixing_length = "none"'
+            )
+        return self
+
+
+class LogLawFlow(Strict):
+    """A prescribed logarithmic profile u = (u*/kappa) ln((z - bed_level)/roughness_length),
+    0 below bed_level + roughness_length (one-way coupling)."""
+
+    kind: Literal["log-law"]
+    friction_velocity: Real = Field(gt=0, description="Friction velocity u* [m/s].")
+    bed_level: Real = Field(description="Height of the log law's origin (the bed surface) [m].")
+    roughness_length: Real = Field(gt=0, description="Roughness length z0 where u = 0 [m].")
+    kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")
+
+
+class ProfileFlow(Strict):
+    """A prescribed profile u(z), linear between the given points and constant beyond the first
+    and last one (one-way coupling)."""
+
+    kind: Literal["profile"]
+    z: list[Real] = Field(min_length=2, description="Heights of the points, increasing [m].")
+    u: list[Real] = Field(min_length=2, description="Streamwise fluid velocity at each height [m/s].")
+
+    @model_validator(mode="after")
+    def _matching(self):
+        if len(self.z) != len(self.u):
+            raise ValueError(f"z has {len(self.z)} points but u has {len(self.u)}")
+        if any(b <= a for a, b in zip(self.z, self.z[1:], strict=False)):
+            raise ValueError("z must increase strictly")
+        return self
+
+
+Flow = Annotated[SolvedFlow | LogLawFlow | ProfileFlow, Field(discriminator="kind")]
 
 
 class Vans1dFluid(Strict):
-    """A 1D vertical fluid velocity profile (VANS with
-    mixing-length turbulence) coupled to the particles, for bedload transport."""
+    """A 1D vertical fluid velocity profile coupled to the particles (bedload transport)."""
 
     model: Literal["vans1d"] = Field(description="Selects this fluid model.")
+    density: Real = Field(1000.0, gt=0, description="Fluid density rho_f [kg/m^3].")
+    viscosity: Real = Field(1.0e-6, gt=0, description="Kinematic viscosity nu of the fluid [m^2/s].")
+    surface: Real = Field(
+        description=(
+            'Height of the free surface (or of the lid with top = "no-slip"); the fluid fills '
+            "domain.lower z .. surface, which must lie inside the box [m]."
+        )
+    )
+    cells: Count = Field(
+        100, ge=2, description="Number of layers (fluid cells) between the bottom and the surface [-]."
+    )
+    stretching: Real = Field(
+        1.0,
+        ge=1.0,
+        description=(
+            "Thickness of the top layer over that of the bottom layer; layer thicknesses grow "
+            "geometrically (1 = regular mesh) [-]."
+        ),
+    )
+    flow: Flow = Field(
+        default_factory=SolvedFlow, description="How the fluid velocity is found: solved or prescribed."
+    )
+    coupling_interval: Real = Field(
+        1.0e-3,
+        gt=0,
+        description=(
+            "Simulated time between two fluid updates: the particles move this long in a frozen "
+            "profile, then the solid profiles are averaged and the fluid advanced over the same "
+            "time (rounded to whole DEM steps) [s]."
+        ),
+    )
+    drag_exponent: Real = Field(
+        3.1,
+        ge=0,
+        description=(
+            "Richardson-Zaki exponent n of the hindrance (1 - phi)^-n in the drag coefficient "
+            "C_d = (0.44 + 24/Re_p)(1 - phi)^-n [-]."
+        ),
+    )
+    phi_max: Real = Field(
+        0.61,
+        gt=0,
+        lt=1,
+        description=(
+            "Solid fraction of the packed bed: the Li-Sawamoto mixing length vanishes at it, and "
+            "the hindrance uses min(phi, phi_max) [-]."
+        ),
+    )
+    buoyancy: Literal["wall-normal", "full"] = Field(
+        "wall-normal",
+        description=(
+            '"full": -rho_f V g; "wall-normal": only its z part, for a steady uniform flow whose '
+            "pressure has no streamwise gradient [-]."
+        ),
+    )
+    lift_coefficient: Real = Field(
+        0.0,
+        ge=0,
+        description=(
+            "C_L of the lift 0.5 rho_f C_L (pi d^2/4) (u_r,top^2 - u_r,bottom^2) along z, from the "
+            "relative velocity at the top and the bottom of the particle (Wiberg & Smith 1985; 0.2 "
+            "in their work); 0 = no lift [-]."
+        ),
+    )
+    materials: list[str] = Field(
+        default_factory=list,
+        description=(
+            "Names of the materials (from `materials`) whose particles feel the fluid; empty = "
+            "every particle [-]."
+        ),
+    )

@@ -114,7 +114,10 @@ DRY_RUN = """
 import sys
 from sphere_cli import api
 api.run({case!r}, {run!r})
-fluid_words = ("navier_stokes", "darcy", "vans1d", "porosity", "poisson", "drag", "fluid_grid")
+fluid_words = (
+    "navier_stokes", "darcy", "vans1d", "porosity", "poisson", "drag", "fluid_grid", "layer_averaging",
+    "profile_forces",
+)
 loaded = sorted(
     m for m in sys.modules
     if m.startswith(("sphere_cli.physics.", "sphere_cli.kernels.")) and m.rsplit(".", 1)[1] in fluid_words

@@ -1,0 +1,138 @@
+"""Bad input to `[fluid] model = "vans1d"`: a short message naming the key and its line, exit 65,
+no traceback (design guide section 6)."""
+
+from __future__ import annotations
+
+import pytest
+from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+
+CASE = """\
+[simulation]
+duration = 0.0002
+dt = "auto"
+
+[domain]
+upper = [0.006, 0.006, 0.01]
+periodic = [true, true, false]
+gravity = [0.5, 0.0, -9.8]
+
+[particles]
+count = 8
+density = 2500.0
+radius = { distribution = "fixed", value = 0.001 }
+placement = { method = "lattice" }
+
+[contact]
+normal_stiffness = 1.0e4
+
+[[walls]]
+face = "z-"
+
+[fluid]
+model = "vans1d"
+viscosity = 1.0e-6
+surface = 0.008
+cells = 20
+flow = { kind = "solved", mixing_length = "li-sawamoto" }
+"""
+
+# (id, text to replace, replacement, key named, text on the line named, other fragments)
+ERRORS = [
+    (
+        "negative-viscosity",
+        "viscosity = 1.0e-6",
+        "viscosity = -1.0e-6",
+        "fluid.viscosity",
+        "viscosity",
+        ["greater than 0"],
+    ),
+    (
+        "not-periodic-in-x",
+        "periodic = [true, true, false]",
+        "periodic = [false, true, false]",
+        "domain.periodic",
+        "periodic",
+        ["laterally periodic"],
+    ),
+    (
+        "surface-above-the-box",
+        "surface = 0.008",
+        "surface = 0.02",
+        "fluid.surface",
+        "surface",
+        ["inside the box"],
+    ),
+    (
+        "gravity-along-y",
+        "gravity = [0.5, 0.0, -9.8]",
+        "gravity = [0.5, 0.1, -9.8]",
+        "domain.gravity",
+        "gravity",
+        ["y"],
+    ),
+    (
+        "lid-with-turbulence",
+        'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
+        'flow = { kind = "solved", mixing_length = "li-sawamoto", top = "no-slip" }',
+        "fluid.flow",
+        "flow =",
+        ["laminar only"],
+    ),
+    (
+        "profile-not-increasing",
+        'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
+        'flow = { kind = "profile", z = [0.0, 0.005, 0.004], u = [0.0, 0.1, 0.2] }',
+        "fluid.flow",
+        "flow =",
+        ["increase"],
+    ),
+    (
+        "unknown-material",
+        "cells = 20",
+        'cells = 20\nmaterials = ["sand"]',
+        "fluid.materials",
+        "materials",
+        ["sand"],
+    ),
+    ("few-cells", "cells = 20", "cells = 1", "fluid.cells", "cells", ["greater than or equal to 2"]),
+]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "marker", "fragments"), [e[1:] for e in ERRORS], ids=[e[0] for e in ERRORS]
+)
+def test_vans1d_bad_input_names_key_and_line(tmp_path, old, new, key, marker, fragments):
+    text = edit(CASE, old, new)
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_valid_case_runs(tmp_path):
+    (tmp_path / "case.toml").write_text(CASE)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+
+
+def test_dt_above_the_drag_relaxation_limit_is_refused(tmp_path):
+    """A very viscous fluid (nu = 1 m^2/s): the viscous drag relaxes a 2 mm bead in about 3e-8 s,
+    so dt = 1e-5 s is refused naming that limit."""
+    text = edit(edit(CASE, "viscosity = 1.0e-6", "viscosity = 1.0"), 'dt = "auto"', "dt = 1.0e-5")
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "simulation.dt", "explicit drag", "relaxation time")
+
+
+def test_runaway_drag_is_caught_and_named(tmp_path):
+    """A prescribed 2000 m/s stream: the quadratic drag relaxes the beads in about 8e-6 s, below
+    dt = 1.5e-5 s (under the contact limit); the stability guard stops the run (exit 70) naming
+    the particle and the cause."""
+    text = edit(
+        edit(CASE, 'dt = "auto"', "dt = 1.5e-5\nblowup_check_every = 1"),
+        'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
+        'flow = { kind = "profile", z = [0.0, 0.008], u = [2000.0, 2000.0] }',
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 70, "drag relaxation time", "particle")
