@@ -38,7 +38,7 @@ took ahead of the particles (who feel the new u only afterwards, in J) is deduct
 f_i, so over any number of steps the fluid receives exactly minus what the particles received,
 up to the one pending deduction.
 
-Arrays: pos, vel, force, f_other, f_drag (N,3) [m, m/s, N, N, N]; impulse (N,3) [N s] the drag
+Arrays: vel, force, f_other, f_drag (N,3) [m, m/s, N, N, N]; impulse (N,3) [N s] the drag
 impulse since the last fluid step; radius, inv_mass (N,) [m, 1/kg];
 coef (N,) [kg/s] the particle's K; cell_of (N,) int64 flat index (ix ny + iy) nz + iz of its
 fluid cell; fluid arrays flattened over cells: u (C,3) [m/s], phi (C,) [-], grad_p (C,3) [Pa/m],
@@ -82,33 +82,6 @@ def phi1(x):
     if x < 1e-12:
         return 1.0 - 0.5 * x
     return -math.expm1(-x) / x
-
-
-@njit(cache=True, parallel=True)
-def particle_cells(pos, origin, spacing, nx, ny, nz, cell_of):
-    """Flat index of the fluid cell holding each particle (positions outside the grid are
-    clamped to its edge cells)."""
-    for i in prange(pos.shape[0]):
-        ix = min(max(int(math.floor((pos[i, 0] - origin[0]) / spacing[0])), 0), nx - 1)
-        iy = min(max(int(math.floor((pos[i, 1] - origin[1]) / spacing[1])), 0), ny - 1)
-        iz = min(max(int(math.floor((pos[i, 2] - origin[2]) / spacing[2])), 0), nz - 1)
-        cell_of[i] = (ix * ny + iy) * nz + iz
-
-
-@njit(cache=True)
-def bin_particles(cell_of, start, order, cursor):
-    """Counting sort: the particles of cell c are order[start[c]:start[c+1]], ascending.
-    start (C+1,), order (N,), cursor (C,) int64 scratch."""
-    start[:] = 0
-    for i in range(cell_of.shape[0]):
-        start[cell_of[i] + 1] += 1
-    for c in range(cursor.shape[0]):
-        start[c + 1] += start[c]
-        cursor[c] = start[c]
-    for i in range(cell_of.shape[0]):
-        c = cell_of[i]
-        order[cursor[c]] = i
-        cursor[c] += 1
 
 
 @njit(cache=True, parallel=True)

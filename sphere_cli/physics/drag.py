@@ -26,15 +26,9 @@ import warnings
 import numpy as np
 
 from ..config.drag import DragConfig
-from ..kernels.drag import (
-    DI_FELICE,
-    GIDASPOW,
-    bin_particles,
-    drag_kick,
-    exchange,
-    particle_cells,
-    particle_drag,
-)
+from ..kernels.drag import DI_FELICE, GIDASPOW, drag_kick, exchange, particle_drag
+from ..kernels.neighbors import counting_sort
+from ..kernels.porosity import bin_particles
 from ..state import State
 
 LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
@@ -50,8 +44,9 @@ class FluidParticleDrag:
         n_particles: int,
         pressure_in_fluid_only: bool,
     ):
-        """density [kg/m^3], viscosity [Pa s] of the fluid; grid: a FluidGrid (origin (3,) [m]
-        lower corner, spacing (3,) [m], shape (nx, ny, nz)); pressure_in_fluid_only: formulation B."""
+        """density [kg/m^3], viscosity [Pa s] of the fluid; grid: the FluidGrid (origin (3,) [m]
+        lower corner, spacing (3,) [m], shape (nx, ny, nz), periodic (3,)); pressure_in_fluid_only:
+        formulation B."""
         self.config = config
         self.law = LAWS[config.law]
         self.density = float(density)
@@ -62,24 +57,25 @@ class FluidParticleDrag:
         self.origin = np.asarray(grid.origin, dtype=np.float64)
         self.spacing = np.asarray(grid.spacing, dtype=np.float64)
         self.shape = tuple(int(n) for n in grid.shape)
+        self.cells = np.asarray(self.shape, dtype=np.int64)
+        self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
         cells = self.shape[0] * self.shape[1] * self.shape[2]
         self.inv_cell_volume = 1.0 / float(np.prod(self.spacing))
         n = n_particles
-        self.cell_of = np.zeros(n, dtype=np.int64)
+        self.cell_of = np.zeros(n, dtype=np.int64)  # cell of each particle centre (flat index)
+        self.wrapped = np.zeros((n, 3))  # centres wrapped into the periodic box (scratch) [m]
         self.coef = np.zeros(n)  # K [kg/s]
         self.f_other = np.zeros((n, 3))  # every force but the drag [N]
         self.f_drag = np.zeros((n, 3))  # drag for the next first half kick [N]
         self.impulse = np.zeros((n, 3))  # drag impulse since the last fluid step [N s]
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
-        self.cursor = np.zeros(cells, dtype=np.int64)
         self.warned = False
 
     def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
         """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
         p = state.particles
-        nx, ny, nz = self.shape
-        particle_cells(p.pos, self.origin, self.spacing, nx, ny, nz, self.cell_of)
+        bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
         phi = fs.phi.reshape(-1)
         below = particle_drag(
             self.law,
@@ -137,7 +133,7 @@ class FluidParticleDrag:
         call): the drag impulses since then, less the part of fs.f_exchange the last fluid step
         took ahead; the impulses restart from zero."""
         p = state.particles
-        bin_particles(self.cell_of, self.start, self.order, self.cursor)
+        counting_sort(self.cell_of, self.start.size - 1, self.start, self.order)
         exchange(
             self.start,
             self.order,

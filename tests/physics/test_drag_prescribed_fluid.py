@@ -24,7 +24,12 @@ def fluid_state(shape, spacing, origin=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), phi=1
     """A uniform cell-centred fluid state with the fields the drag module reads and writes."""
     cells = tuple(shape)
     return SimpleNamespace(
-        grid=SimpleNamespace(origin=np.array(origin, float), spacing=np.array(spacing, float), shape=cells),
+        grid=SimpleNamespace(
+            origin=np.array(origin, float),
+            spacing=np.array(spacing, float),
+            shape=cells,
+            periodic=np.ones(3, bool),
+        ),
         v=np.tile(np.array(v, float), (*cells, 1)),
         phi=np.full(cells, float(phi)),
         grad_p=np.tile(np.array(grad_p, float), (*cells, 1)),
