@@ -27,13 +27,14 @@ from .layer_averaging import slice_volume
 
 
 @njit(cache=True)
-def interpolate_centres(centres, values, z):
-    """Linear between the centres, constant beyond the first and the last one."""
+def bracket(centres, z):
+    """(lo, hi, w): z lies between centres[lo] and centres[hi] at the fraction w; lo = hi and
+    w = 0 beyond the first or the last centre."""
     n = centres.shape[0]
     if z <= centres[0]:
-        return values[0]
+        return 0, 0, 0.0
     if z >= centres[n - 1]:
-        return values[n - 1]
+        return n - 1, n - 1, 0.0
     lo = 0
     hi = n - 1
     while hi - lo > 1:
@@ -42,25 +43,28 @@ def interpolate_centres(centres, values, z):
             lo = mid
         else:
             hi = mid
-    w = (z - centres[lo]) / (centres[hi] - centres[lo])
-    return (1.0 - w) * values[lo] + w * values[hi]
+    return lo, hi, (z - centres[lo]) / (centres[hi] - centres[lo])
+
+
+@njit(cache=True, inline="always")
+def _velocity(faces, centres, u, top_no_slip, z, lo, hi, w):
+    """u(z) given z's bracket, with the boundary conditions: 0 at and below the bottom, and at
+    a no-slip lid."""
+    n = centres.shape[0]
+    if z < centres[0]:
+        bottom = faces[0]
+        return u[0] * (z - bottom) / (centres[0] - bottom) if z > bottom else 0.0
+    if z > centres[n - 1] and top_no_slip:
+        top = faces[n]
+        return u[n - 1] * (top - z) / (top - centres[n - 1]) if z < top else 0.0
+    return (1.0 - w) * u[lo] + w * u[hi]
 
 
 @njit(cache=True)
 def fluid_velocity_at(faces, centres, u, top_no_slip, z):
-    """u(z) with the boundary conditions: 0 at and below the bottom, and at a no-slip lid."""
-    n = centres.shape[0]
-    bottom = faces[0]
-    if z <= bottom:
-        return 0.0
-    if z < centres[0]:
-        return u[0] * (z - bottom) / (centres[0] - bottom)
-    if z > centres[n - 1] and top_no_slip:
-        top = faces[n]
-        if z >= top:
-            return 0.0
-        return u[n - 1] * (top - z) / (top - centres[n - 1])
-    return interpolate_centres(centres, u, z)
+    """u(z) with the boundary conditions (see _velocity)."""
+    lo, hi, w = bracket(centres, z)
+    return _velocity(faces, centres, u, top_no_slip, z, lo, hi, w)
 
 
 @njit(cache=True, inline="always")
@@ -105,11 +109,12 @@ def profile_forces(
         if submerged <= 0.0:
             continue
         frac = submerged / volume
-        ur = fluid_velocity_at(faces, centres, u, top_no_slip, z) - vel[i, 0]
+        lo, hi, w = bracket(centres, z)
+        ur = _velocity(faces, centres, u, top_no_slip, z, lo, hi, w) - vel[i, 0]
         vr = -vel[i, 1]
         wr = -vel[i, 2]
         speed = math.sqrt(ur * ur + vr * vr + wr * wr)
-        phi_p = interpolate_centres(centres, phi, z)
+        phi_p = (1.0 - w) * phi[lo] + w * phi[hi]
         k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
         drag_coef[i] = k
         drag_x[i] = k * ur
@@ -160,9 +165,10 @@ def drag_coefficients(
         if submerged <= 0.0:
             continue
         frac = submerged / (4.0 / 3.0 * math.pi * r * r * r)
-        ur = fluid_velocity_at(faces, centres, u, top_no_slip, z) - vel[i, 0]
+        lo, hi, w = bracket(centres, z)
+        ur = _velocity(faces, centres, u, top_no_slip, z, lo, hi, w) - vel[i, 0]
         speed = math.sqrt(ur * ur + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
-        phi_p = interpolate_centres(centres, phi, z)
+        phi_p = (1.0 - w) * phi[lo] + w * phi[hi]
         k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
         drag_coef[i] = k
         drag_x[i] = k * ur

@@ -84,3 +84,28 @@ def test_profile_boundaries():
     assert fluid_velocity_at(faces, centres, u, False, 0.95) == 4.0
     assert fluid_velocity_at(faces, centres, u, True, 0.9375) == pytest.approx(2.0)
     assert fluid_velocity_at(faces, centres, u, True, 1.0) == 0.0
+
+
+def test_forces_do_not_depend_on_the_thread_count():
+    """Each particle's forces are computed by itself (gather): 1 and 2 threads agree bitwise."""
+    import numba
+
+    rng = np.random.default_rng(2)
+    n = 400
+    faces = layer_faces(0.0, 0.02, 30, 3.0)
+    centres = 0.5 * (faces[1:] + faces[:-1])
+    pos = rng.uniform(0.0, 0.021, (n, 3))
+    vel = rng.normal(0.0, 0.1, (n, 3))
+    radius = rng.uniform(0.4e-3, 0.6e-3, n)
+    u, phi = rng.uniform(0, 1, centres.size), rng.uniform(0, 0.6, centres.size)
+    results = []
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        numba.set_num_threads(threads)
+        force, coef, drag_x = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+        profile_forces(
+            pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, phi, False, RHO, NU, 3.1, 0.61,
+            GRAVITY, True, 0.2, force, coef, drag_x,
+        )  # fmt: skip
+        results.append((force, coef, drag_x))
+    for a, b in zip(*results, strict=True):
+        assert np.array_equal(a, b)
