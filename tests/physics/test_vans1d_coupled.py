@@ -85,7 +85,7 @@ gravity = [0.0, 0.0, -9.81]
 count = 2
 density = 2500.0
 radius = { distribution = "fixed", value = 0.001 }
-placement = { method = "lattice", spacing = 2.0, region_lower = [0.0, 0.0, 0.008] }
+placement = { method = "lattice", spacing = 1.2, region_lower = [0.0, 0.0, 0.008] }
 [contact]
 normal_stiffness = 1.0e4
 [fluid]
@@ -110,3 +110,27 @@ def test_prescribed_log_law_is_one_way():
     assert np.array_equal(column.u, before)
     p = scene.state.particles
     assert np.all(p.vel[:, 0] > 0.0)
+
+
+def test_only_the_selected_materials_feel_the_fluid():
+    """fluid.materials = ["glass"]: in a uniform 0.5 m/s stream the glass beads are dragged
+    along x and buoyed, the steel ones (not selected) fall as in vacuum."""
+    text = ONE_WAY.replace(
+        'flow = { kind = "log-law", friction_velocity = 0.05, bed_level = 0.002, roughness_length = 1.0e-4 }',
+        'flow = { kind = "profile", z = [0.0, 0.02], u = [0.5, 0.5] }\nmaterials = ["glass"]',
+    ).replace("count = 2\ndensity = 2500.0", 'count = 8\nmaterial = { glass = 0.5, steel = 0.5 }')
+    text = text.replace(
+        "[fluid]",
+        '[[materials]]\nname = "glass"\ndensity = 2500.0\n[[materials]]\nname = "steel"\ndensity = 7800.0\n[fluid]',
+    )
+    text = text.replace('region_lower = [0.0, 0.0, 0.008]', "region_lower = [0.0, 0.0, 0.004]")
+    scene = build_scene(parse_case(text))
+    p = scene.state.particles
+    steps = 200
+    advance(scene, steps)
+    glass, steel = p.material == 0, p.material == 1
+    assert glass.sum() == steel.sum() == 4
+    assert np.all(p.vel[glass, 0] > 0.0)
+    assert np.all(p.vel[steel, 0] == 0.0)
+    np.testing.assert_allclose(p.vel[steel, 2], -9.81 * steps * 1.0e-5, rtol=1e-12)
+    assert np.all(p.vel[glass, 2] > -9.81 * steps * 1.0e-5 * (1 - 1000 / 2500) * 1.0001)
