@@ -26,6 +26,15 @@ class SolvedFlow(Strict):
         ),
     )
     kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")
+    van_driest: Real = Field(
+        0.0,
+        ge=0,
+        description=(
+            "A+ of van Driest's damping of the mixing length in the viscous sublayer of a smooth "
+            "floor, l (1 - exp(-z+/A+)) with z+ = (l/kappa) u*/nu and u* from the largest fluid "
+            "shear stress; 26 is the classic value; 0 = no damping [-]."
+        ),
+    )
     top: Literal["free-surface", "no-slip"] = Field(
         "free-surface",
         description=(

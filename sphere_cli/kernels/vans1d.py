@@ -19,10 +19,14 @@ Mixing lengths at the faces (s = z - z_0 height above the bottom, H the depth):
   2 "parabolic"   l = kappa s sqrt(1 - s/H)
   3 "li-sawamoto" l = kappa * integral_0^s (phi_max - phi)/phi_max dz  (Li & Sawamoto 1995),
                   the integrand taken as 0 where phi > phi_max.
+Optionally damped in the viscous sublayer (van Driest 1956): l (1 - exp(-z+/A+)), z+ = (l/kappa)
+u*/nu, u* = sqrt(tau_b/rho) with tau_b the largest fluid shear stress of the previous step (A+ = 0:
+no damping). The solve uses the damped length `damped`, kept equal to damp(mixing, u*).
 
 Arguments: faces (n+1,) [m]; centres (n,) [m]; u (n,) [m/s] (advanced in place); phi, vel_p,
-beta (n,) [-, m/s, kg/(m^3 s)]; mixing (n+1,) [m]; rho [kg/m^3]; nu [m^2/s]; source S [N/m^3];
-top_no_slip (bool); dt [s]; scratch arrays of n+1 (coef) and n (lower, diag, upper, rhs, work).
+beta (n,) [-, m/s, kg/(m^3 s)]; mixing, damped (n+1,) [m]; kappa [-]; a_plus [-]; u_star (1,)
+[m/s] (updated in place); rho [kg/m^3]; nu [m^2/s]; source S [N/m^3]; top_no_slip (bool); dt [s];
+scratch arrays of n+1 (coef) and n (lower, diag, upper, rhs, work).
 """
 
 import math
@@ -49,6 +53,16 @@ def mixing_length(faces, phi, kind, kappa, phi_max, out):
             out[f] = kappa * fluid_height
             if f < n:
                 fluid_height += max(0.0, phi_max - phi[f]) / phi_max * (faces[f + 1] - faces[f])
+
+
+@njit(cache=True)
+def damp_mixing_length(mixing, kappa, a_plus, u_star, nu, out):
+    """van Driest damping: out = l (1 - exp(-(l/kappa) u*/(A+ nu))); out = l when A+ = 0."""
+    for f in range(mixing.shape[0]):
+        if a_plus > 0.0:
+            out[f] = mixing[f] * (1.0 - math.exp(-mixing[f] / kappa * u_star / (a_plus * nu)))
+        else:
+            out[f] = mixing[f]
 
 
 @njit(cache=True)
@@ -94,6 +108,10 @@ def advance_fluid(
     vel_p,
     beta,
     mixing,
+    damped,
+    kappa,
+    a_plus,
+    u_star,
     rho,
     nu,
     source,
@@ -110,7 +128,7 @@ def advance_fluid(
     """`steps` implicit Euler steps of dt with phi, vel_p, beta held fixed."""
     n = centres.shape[0]
     for _ in range(steps):
-        face_coefficients(faces, centres, u, phi, mixing, rho, nu, top_no_slip, coef)
+        face_coefficients(faces, centres, u, phi, damped, rho, nu, top_no_slip, coef)
         for k in range(n):
             dz = faces[k + 1] - faces[k]
             eps = 1.0 - phi[k]
@@ -120,6 +138,13 @@ def advance_fluid(
             diag[k] = m + coef[k] + coef[k + 1] + beta[k] * dz
             rhs[k] = m * u[k] + dz * (eps * source + beta[k] * vel_p[k])
         solve_tridiagonal(lower, diag, upper, rhs, work, u)
+        if a_plus > 0.0:
+            shear_stress(faces, centres, u, phi, damped, rho, nu, top_no_slip, coef)
+            largest = 0.0
+            for f in range(n + 1):
+                largest = max(largest, coef[f])
+            u_star[0] = math.sqrt(largest / rho)
+            damp_mixing_length(mixing, kappa, a_plus, u_star[0], nu, damped)
 
 
 @njit(cache=True)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
 from ..kernels.profile_forces import drag_coefficients, profile_forces
-from ..kernels.vans1d import MIXING_KINDS, advance_fluid, mixing_length, shear_stress
+from ..kernels.vans1d import MIXING_KINDS, advance_fluid, damp_mixing_length, mixing_length, shear_stress
 from .fluid import FluidModule
 from .layer_averaging import LayerProfiles, layer_faces
 
@@ -35,6 +35,7 @@ class FluidColumn:
         kappa: float = 0.41,
         phi_max: float = 0.61,
         top_no_slip: bool = False,
+        van_driest: float = 0.0,
     ):
         self.faces = np.ascontiguousarray(faces, dtype=np.float64)
         self.centres = 0.5 * (self.faces[1:] + self.faces[:-1])
@@ -43,8 +44,11 @@ class FluidColumn:
         self.kind = MIXING_KINDS[mixing]
         self.kappa, self.phi_max = float(kappa), float(phi_max)
         self.top_no_slip = bool(top_no_slip)
+        self.van_driest = float(van_driest)
         self.u = np.zeros(n)
-        self.mixing = np.zeros(n + 1)
+        self.mixing = np.zeros(n + 1)  # mixing length at the faces [m]
+        self.damped = np.zeros(n + 1)  # the same, damped near the wall (van Driest) [m]
+        self.u_star = np.zeros(1)  # friction velocity of the damping [m/s]
         self._coef = np.zeros(n + 1)
         self._scratch = tuple(np.zeros(n) for _ in range(5))
 
@@ -58,19 +62,21 @@ class FluidColumn:
 
     def update_mixing_length(self, phi: np.ndarray) -> None:
         mixing_length(self.faces, phi, self.kind, self.kappa, self.phi_max, self.mixing)
+        damp_mixing_length(self.mixing, self.kappa, self.van_driest, self.u_star[0], self.nu, self.damped)
 
     def advance(self, phi, vel_p, beta, source: float, dt: float, steps: int) -> None:
         """`steps` implicit steps of dt [s] with the solid profiles fixed; source = rho g_x - dp/dx
         [N/m^3]. The mixing length must be up to date with phi."""
         advance_fluid(
-            self.faces, self.centres, self.u, phi, vel_p, beta, self.mixing, self.rho, self.nu,
-            float(source), self.top_no_slip, float(dt), int(steps), self._coef, *self._scratch,
+            self.faces, self.centres, self.u, phi, vel_p, beta, self.mixing, self.damped, self.kappa,
+            self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip, float(dt),
+            int(steps), self._coef, *self._scratch,
         )  # fmt: skip
 
     def shear_stress(self, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Fluid shear stress at the n+1 faces [Pa] into `out`."""
         shear_stress(
-            self.faces, self.centres, self.u, phi, self.mixing, self.rho, self.nu, self.top_no_slip, out
+            self.faces, self.centres, self.u, phi, self.damped, self.rho, self.nu, self.top_no_slip, out
         )
         return out
 
@@ -85,8 +91,6 @@ class Vans1dState:
     selected: np.ndarray  # (N,) uint8: 1 = feels the fluid
     drag_coef: np.ndarray  # (N,) K_p of the last force evaluation [kg/s]
     drag_x: np.ndarray  # (N,) streamwise drag of the last force evaluation [N]
-
-    PROGNOSTIC = ("u", "phi", "vel", "beta", "drag")
 
 
 class Vans1d(FluidModule):
@@ -118,6 +122,7 @@ class Vans1d(FluidModule):
             kappa=flow.kappa if solved else 0.41,
             phi_max=cfg.phi_max,
             top_no_slip=solved and flow.top == "no-slip",
+            van_driest=flow.van_driest if solved else 0.0,
         )
         self.solved = solved
         self.area = float(box.length[0] * box.length[1])
@@ -263,11 +268,19 @@ class Vans1d(FluidModule):
     def prognostic_state(self, state) -> dict:
         f = state.fluid
         prof = f.profiles
-        return {"u": f.column.u, "phi": prof.phi, "vel": prof.vel, "beta": prof.beta, "drag": prof.drag}
+        return {
+            "u": f.column.u,
+            "u_star": f.column.u_star,
+            "phi": prof.phi,
+            "vel": prof.vel,
+            "beta": prof.beta,
+            "drag": prof.drag,
+        }
 
     def restore(self, state, arrays) -> None:
         f = state.fluid
         f.column.u[...] = arrays["u"]
+        f.column.u_star[...] = arrays["u_star"]
         for name in ("phi", "vel", "beta", "drag"):
             getattr(f.profiles, name)[...] = arrays[name]
         f.column.update_mixing_length(f.profiles.phi)

@@ -121,7 +121,8 @@ def test_only_the_selected_materials_feel_the_fluid():
     ).replace("count = 2\ndensity = 2500.0", 'count = 8\nmaterial = { glass = 0.5, steel = 0.5 }')
     text = text.replace(
         "[fluid]",
-        '[[materials]]\nname = "glass"\ndensity = 2500.0\n[[materials]]\nname = "steel"\ndensity = 7800.0\n[fluid]',
+        '[[materials]]\nname = "glass"\ndensity = 2500.0\n'
+        '[[materials]]\nname = "steel"\ndensity = 7800.0\n[fluid]',
     )
     text = text.replace('region_lower = [0.0, 0.0, 0.008]', "region_lower = [0.0, 0.0, 0.004]")
     scene = build_scene(parse_case(text))

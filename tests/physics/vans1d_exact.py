@@ -20,30 +20,36 @@ KAPPA = 0.41
 U_STAR = float(np.sqrt(G * np.sin(SLOPE) * DEPTH))  # 0.2214 m/s
 
 
-def mixing_length(kind: str, s, depth: float = DEPTH, kappa: float = KAPPA):
+def mixing_length(kind: str, s, depth=DEPTH, kappa=KAPPA, a_plus=0.0, u_star=U_STAR, nu=NU):
+    """Prandtl or parabolic mixing length, damped by van Driest's factor when a_plus > 0."""
     s = np.asarray(s, dtype=float)
     if kind == "prandtl":
-        return kappa * s
-    if kind == "parabolic":
-        return kappa * s * np.sqrt(np.maximum(0.0, 1.0 - s / depth))
-    raise ValueError(kind)
+        ell = kappa * s
+    elif kind == "parabolic":
+        ell = kappa * s * np.sqrt(np.maximum(0.0, 1.0 - s / depth))
+    else:
+        raise ValueError(kind)
+    if a_plus > 0.0:
+        ell = ell * (1.0 - np.exp(-ell / kappa * u_star / (a_plus * nu)))
+    return ell
 
 
-def velocity_gradient(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU):
+def velocity_gradient(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0):
     tau = u_star**2 * (1.0 - np.asarray(s, dtype=float) / depth)
-    ell = mixing_length(kind, s, depth)
+    ell = mixing_length(kind, s, depth, a_plus=a_plus, u_star=u_star, nu=nu)
     return 2.0 * tau / (nu + np.sqrt(nu * nu + 4.0 * ell * ell * tau))
 
 
-def free_surface_velocity(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU) -> np.ndarray:
-    """u(s) of the steady turbulent free-surface flow of the mixing-length model `kind`."""
+def free_surface_velocity(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0) -> np.ndarray:
+    """u(s) of the steady turbulent free-surface flow of the mixing-length model `kind` (with
+    van Driest's damping of constant a_plus when it is > 0)."""
     x, w = np.polynomial.legendre.leggauss(12)
     nodes = np.concatenate([[0.0], np.geomspace(1e-10 * depth, depth, 3000)])
 
     def integral(a, b):
         mid, half = 0.5 * (a + b), 0.5 * (b - a)
         pts = mid[:, None] + half[:, None] * x[None, :]
-        return half * (velocity_gradient(kind, pts, u_star, depth, nu) @ w)
+        return half * (velocity_gradient(kind, pts, u_star, depth, nu, a_plus) @ w)
 
     cumulative = np.concatenate([[0.0], np.cumsum(integral(nodes[:-1], nodes[1:]))])
     s = np.asarray(s, dtype=float)
