@@ -1,10 +1,13 @@
 """The time loop: one step composes only the modules the scene holds, then the schedules run.
 
 Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick,
-then, with a fluid, the fluid's own step when it is due (physics/fluid.py).
-After the clock advances: stability guard (every `blowup_check_every` steps and before every
-checkpoint), trajectory frames, checkpoints and status, each on its own schedule. A stop
-request (signal, wall-time budget) writes a checkpoint at the next step boundary.
+then, with a fluid, the fluid's own step when it is due (physics/fluid.py). Moving walls are
+kicked and drifted just before the particles (their glued particles take the wall's velocity)
+and kicked after the forces. After the clock advances the stages test their end
+(physics/stages.py); the run is done when the last stage ends. Then: stability guard (every
+`blowup_check_every` steps and before every checkpoint), trajectory frames, checkpoints and
+status, each on its own schedule. A stop request (signal, wall-time budget) writes a checkpoint
+at the next step boundary.
 """
 
 from __future__ import annotations
@@ -70,21 +73,33 @@ def end_step_for(duration: float, dt: float) -> int:
     return max(0, math.ceil(duration / dt - 1e-9))
 
 
-def advance(scene, steps: int) -> None:
-    """Advance the scene by `steps` steps with no output (library use and tests)."""
+def advance(scene, steps: int) -> bool:
+    """Advance the scene by `steps` steps with no output (library use and tests), or until the
+    last stage ends. Returns True if a stage ended on the last step taken."""
     state = scene.state
     motion, neighbors, kicker = scene.motion, scene.neighbors, scene.kicker
     forces, after_step = scene.force_modules, scene.after_step_modules
+    walls = [] if scene.wall_motion is None else [scene.wall_motion]
+    stages = scene.stages
     clock = state.clock
+    ended = False
     for _ in range(steps):
+        if scene.finished:
+            break
+        for module in walls:
+            module.kick_drift(state)
         motion.kick_drift(state)
         neighbors.prepare(state)
         for module in forces:
             module.forces(state)
+        for module in walls:
+            module.kick(state)
         kicker.kick(state)
         clock.step += 1
         for module in after_step:
             module.after_step(state)
+        ended = stages is not None and stages.after_step(state)
+    return ended
 
 
 def check_stable(scene) -> None:
@@ -135,14 +150,16 @@ class Loop:
         clock = state.clock
         started = wallclock.monotonic()
         start_step = clock.step
-        while clock.step < self.end_step:
+        while clock.step < self.end_step and not scene.finished:
             if self.stop.reason is not None:
                 break
             if self.max_wall_seconds is not None and wallclock.monotonic() - started >= self.max_wall_seconds:
                 self.stop.request("wall-time budget (--max-wall-time) reached")
                 break
-            advance(scene, 1)
+            stage_ended = advance(scene, 1)
             step = clock.step
+            if stage_ended:
+                self._stage_ended(scene)
             if step % self.check_every == 0:
                 check_stable(scene)
             now = wallclock.monotonic()
@@ -160,7 +177,7 @@ class Loop:
         check_stable(scene)
         self.output.frame(scene)
         self.output.checkpoint(scene)
-        finished = clock.step >= self.end_step
+        finished = clock.step >= self.end_step or scene.finished
         self.progress.update(
             scene,
             clock.step - start_step,
@@ -168,3 +185,17 @@ class Loop:
             state="done" if finished else "stopped",
         )
         return "done" if finished else self.stop.reason
+
+    def _stage_ended(self, scene) -> None:
+        """A stage ended at this step: frame and checkpoint (a resume can start any stage)."""
+        stages = scene.stages
+        clock = scene.state.clock
+        log = getattr(self.output, "log", None)
+        if log is not None:
+            ended = stages.names[stages.index - 1]
+            log.info(
+                "stage %r ended at step %d (t = %.6g s); now: %s", ended, clock.step, clock.time, stages.name
+            )
+        check_stable(scene)
+        self.output.frame(scene)
+        self.output.checkpoint(scene)

@@ -90,14 +90,31 @@ class NeighborList:
 
 @dataclass
 class Walls:
+    """Plane walls and their motion (physics/walls.py). `force` and `vel` are those of the
+    current step whenever a wall moves (energy budgets integrate force . velocity from them);
+    with every wall fixed, `force` is refreshed only when observed."""
+
     faces: list[str]
     axis: np.ndarray  # (W,) int64
     sign: np.ndarray  # (W,) float64, +1 lower face, -1 upper face
-    coord: np.ndarray  # (W,) [m]
+    coord: np.ndarray  # (W,) [m] position along the axis
     table: np.ndarray  # (W,M,6) contact parameters of each wall against each material
     hist: np.ndarray  # (N,W,3) [m]
+    vel: np.ndarray  # (W,3) [m/s] velocity at the current step (a half step after kick_drift)
+    acc: np.ndarray  # (W,3) [m/s^2] acceleration of the driven directions
+    shift: np.ndarray  # (W,3) [m] displacement since the start of the run
+    force: np.ndarray  # (W,3) [N] force of the particles on each wall
+    area: np.ndarray  # (W,) [m^2]
+    mode: np.ndarray  # (W,2) int64 normal and shear mode (kernels/walls.py)
+    control: np.ndarray  # (W,NC) parameters of the modes (kernels/walls.py)
+    attached: np.ndarray  # (K,) int64 particles glued to a wall (rough walls)
+    attached_wall: np.ndarray  # (K,) int64 their wall
+    # scratch: predicted velocity (W,3); each particle's wall forces (N,W,3) while `record`
+    vel_pred: np.ndarray = None
+    pforce: np.ndarray = None
+    record: bool = False
 
-    PROGNOSTIC = ("coord", "hist")
+    PROGNOSTIC = ("coord", "hist", "vel", "acc", "shift", "force", "attached", "attached_wall")
 
 
 @dataclass

@@ -20,7 +20,16 @@ from ..physics.fluid import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.motion import Motion
 from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
-from ..physics.walls import PlaneWallForces, allocate_walls
+from ..physics.stages import Stages
+from ..physics.walls import (
+    PlaneWallForces,
+    WallMotion,
+    WallScales,
+    allocate_walls,
+    apply_groups,
+    apply_modes,
+    rough_layers,
+)
 from ..state import Box, Clock, Particles, State
 from .packing import lattice_positions, random_positions, read_particle_file
 from .radii import draw_radii
@@ -37,6 +46,8 @@ class Scene:
     dt_limit: float  # smallest stability limit of any possible contact or fluid process [s]
     dt_limit_reason: str = ""  # what sets it
     fluid: FluidModule | None = None
+    wall_motion: WallMotion | None = None  # only if some wall moves in some stage
+    stages: Stages | None = None  # only if the case has [[stages]]
 
     @property
     def tables(self) -> ContactTables:
@@ -64,7 +75,14 @@ class Scene:
             modules["walls"] = self.walls
         if self.fluid is not None:
             modules[self.fluid.name] = self.fluid
+        if self.stages is not None:
+            modules["stages"] = self.stages
         return modules
+
+    @property
+    def finished(self) -> bool:
+        """True once the last stage has ended (never without stages)."""
+        return self.stages is not None and self.stages.finished
 
     def compute_initial_forces(self) -> None:
         """Forces of the initial state, for the first half kick: no time has passed, so the
@@ -79,9 +97,17 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     case = loaded.case
     rng = np.random.default_rng(case.particles.seed)
     tables = contact_tables(case)
+    n_placed = None
     if restart is None:
         pos, radius, vel = _initial_particles(loaded, rng)
         material = assign_materials(tables.fractions, radius.size, rng)
+        n_placed = radius.size
+        rough_pos, rough_radius, rough_wall = rough_layers(case, case.domain.lower, case.domain.upper)
+        if rough_radius.size:
+            pos = np.concatenate([pos, rough_pos])
+            radius = np.concatenate([radius, rough_radius])
+            vel = np.concatenate([vel, np.zeros_like(rough_pos)])
+            material = np.concatenate([material, np.zeros(rough_radius.size, dtype=np.int32)])
     else:
         saved = restart.arrays["particles"]
         pos, radius, vel = saved["pos"], saved["radius"], saved["vel"]
@@ -115,14 +141,30 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         body_acc=np.array(dom.gravity, dtype=np.float64),
     )
     if restart is None:
-        _check_inside(loaded, box, particles)
+        _check_inside(loaded, box, pos[:n_placed], radius[:n_placed])
+        placed = slice(0, n_placed)
+        apply_groups(
+            case, pos[placed], vel[placed], particles.inv_mass[placed], particles.inv_inertia[placed]
+        )
+        particles.inv_mass[n_placed:] = 0.0
+        particles.inv_inertia[n_placed:] = 0.0
+        particles.vel_pred[:] = vel
 
     contact = PairContactForces(tables)
     walls_state = None
     walls = None
+    wall_motion = None
+    stages = None
+    scales = None
     if case.walls:
-        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table)
+        moving = any(w.moves for w in case.walls) or any(w.moves for s in case.stages for w in s.walls)
+        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table, moving)
+        if restart is None and n > n_placed:
+            walls_state.attached = np.arange(n_placed, n, dtype=np.int64)
+            walls_state.attached_wall = rough_wall
         walls = PlaneWallForces(contact)
+        wall_motion = WallMotion() if moving else None
+        scales = WallScales(case, tables, radius, mass, particles.inv_mass)
     skin = case.simulation.neighbor_skin * float(radius.max())
     state = State(
         clock=Clock(dt=math.nan),  # set below, once every module has stated its limit
@@ -135,11 +177,17 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     dt_limit, dt_reason = stability_limit(
         tables, radius, mass, material, case.particles.overlap_tolerance, [w.face for w in case.walls]
     )
+    if walls_state is not None:
+        dt_limit, dt_reason = _driven_wall_limit(case, walls_state, scales, box, dt_limit, dt_reason)
     if fluid is not None:
         fluid_limit, fluid_reason = fluid.dt_limit()
         if fluid_limit < dt_limit:
             dt_limit, dt_reason = fluid_limit, fluid_reason
     state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason)
+    if case.stages:
+        stages = Stages(case, walls_state, scales, contact)
+    elif walls_state is not None:
+        apply_modes(walls_state, dict(enumerate(case.walls)), scales, box, 0.0, walls_state.coord)
     neighbors = NeighborSearch(state)
     scene = Scene(
         case=case,
@@ -151,10 +199,14 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         dt_limit=dt_limit,
         dt_limit_reason=dt_reason,
         fluid=fluid,
+        wall_motion=wall_motion,
+        stages=stages,
     )
     if fluid is not None:
         fluid.start(state)
     if restart is None:
+        if stages is not None:
+            stages.begin(state, 0)
         neighbors.rebuild(state)
         _check_overlaps(loaded, state)
         if fluid is not None:
@@ -163,6 +215,29 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     else:
         _restore(loaded, scene, restart)
     return scene
+
+
+def _driven_wall_limit(case: Case, walls, scales: WallScales, box: Box, limit: float, reason: str):
+    """The smaller of `limit` and the stability limit of every stress-driven wall mode of the
+    case (against one layer of contacts, physics/walls.py), with what sets it."""
+    from ..kernels.walls import wall_areas
+
+    area = np.zeros(len(walls.faces))
+    wall_areas(walls.axis, walls.sign, walls.coord, box.lower, box.upper, area)
+    index = {w.face: k for k, w in enumerate(case.walls)}
+    specs = [(w, "walls") for w in case.walls] + [(w, "stages") for s in case.stages for w in s.walls]
+    for spec, where in specs:
+        if not spec.driven:
+            continue
+        k = index[spec.face]
+        value = scales.dt_limit(spec, k, float(area[k]))
+        if value < limit:
+            limit = value
+            reason = (
+                f"stress-driven {spec.face} wall ({where}): mass {scales.mass(spec, float(area[k])):.4g} kg "
+                "against one layer of contacts, 2/omega (its damping is implicit)"
+            )
+    return limit, reason
 
 
 def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
@@ -205,28 +280,29 @@ def _initial_particles(loaded: LoadedCase, rng):
     )
 
 
-def _check_inside(loaded: LoadedCase, box: Box, p: Particles) -> None:
+def _check_inside(loaded: LoadedCase, box: Box, pos: np.ndarray, radius: np.ndarray) -> None:
+    """The placed particles (not the glued layers of rough walls, which follow) lie in the box."""
     for a in range(3):
         if box.periodic[a]:
             continue
-        outside = np.flatnonzero((p.pos[:, a] < box.lower[a]) | (p.pos[:, a] > box.upper[a]))
+        outside = np.flatnonzero((pos[:, a] < box.lower[a]) | (pos[:, a] > box.upper[a]))
         if outside.size:
             i = int(outside[0])
             raise loaded.error(
                 ("particles", "placement"),
-                f"particle {i} starts outside the box along {'xyz'[a]} (at {p.pos[i, a]:g} m, box "
+                f"particle {i} starts outside the box along {'xyz'[a]} (at {pos[i, a]:g} m, box "
                 f"{box.lower[a]:g} .. {box.upper[a]:g} m); {outside.size} particle(s) in all",
             )
     tol = loaded.case.particles.overlap_tolerance
     for w in loaded.case.walls:
         a = "xyz".index(w.face[0])
-        gap = p.pos[:, a] - box.lower[a] if w.face[1] == "-" else box.upper[a] - p.pos[:, a]
-        deep = np.flatnonzero(p.radius - gap > tol * p.radius)
+        gap = pos[:, a] - box.lower[a] if w.face[1] == "-" else box.upper[a] - pos[:, a]
+        deep = np.flatnonzero(radius - gap > tol * radius)
         if deep.size:
             i = int(deep[0])
             raise loaded.error(
                 ("particles", "placement"),
-                f"particle {i} overlaps the {w.face} wall by {(p.radius[i] - gap[i]) / p.radius[i]:.3g} of "
+                f"particle {i} overlaps the {w.face} wall by {(radius[i] - gap[i]) / radius[i]:.3g} of "
                 f"its radius, more than particles.overlap_tolerance = {tol}",
             )
 

@@ -24,15 +24,19 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
     for i, wall in enumerate(case.walls):
         axis = AXIS[wall.face[0]]
         if dom.periodic[axis]:
+            what = "stress control" if wall.mode == "stress" else "a wall"
             problems.append(
                 (
                     ("walls", i, "face"),
-                    f"axis {wall.face[0]} is periodic (domain.periodic); it cannot have a wall",
+                    f"axis {wall.face[0]} is periodic (domain.periodic); it cannot have {what}",
                 )
             )
         if wall.face in seen:
             problems.append((("walls", i, "face"), f"walls[{seen[wall.face]}] is already on this face"))
         seen[wall.face] = i
+        problems += wall_motion_problems(wall, ("walls", i))
+    problems += _stage_problems(case, seen)
+    problems += _group_problems(case)
 
     for ax in range(3):
         if extent[ax] < diameter:
@@ -196,4 +200,131 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
                 (("contact", "pairs", i, "materials"), f"contact.pairs[{seen[key]}] already sets this pair")
             )
         seen.setdefault(key, i)
+    return problems
+
+
+def wall_motion_problems(motion, loc: tuple) -> list[tuple[tuple, str]]:
+    """Keys of a wall's mode (a [[walls]] or [[stages.walls]] table) that contradict each other."""
+    problems: list[tuple[tuple, str]] = []
+    mode = motion.mode
+    if mode == "velocity" and motion.velocity is None:
+        problems.append(((*loc, "velocity"), 'required key is missing (mode = "velocity" needs it)'))
+    if mode != "velocity" and motion.velocity is not None:
+        problems.append(((*loc, "velocity"), f'only for mode = "velocity"; this wall has mode = "{mode}"'))
+    if mode == "stress":
+        if motion.stress is None:
+            problems.append(((*loc, "stress"), 'required key is missing (mode = "stress" needs it)'))
+        sine = {k: getattr(motion, k) is not None for k in ("stress_amplitude", "frequency")}
+        if any(sine.values()) and not all(sine.values()):
+            have, lack = (
+                ("stress_amplitude", "frequency")
+                if sine["stress_amplitude"]
+                else ("frequency", "stress_amplitude")
+            )
+            problems.append(((*loc, have), f"a sinusoidal modulation needs {lack} as well"))
+        if motion.phase is not None and not sine["stress_amplitude"]:
+            problems.append(
+                ((*loc, "phase"), "only with a sinusoidal modulation (stress_amplitude, frequency)")
+            )
+    else:
+        for key in type(motion).STRESS_KEYS:
+            if getattr(motion, key) is not None:
+                problems.append(((*loc, key), f'only for mode = "stress"; this wall has mode = "{mode}"'))
+    if motion.shear_velocity is not None and motion.shear_stress is not None:
+        problems.append(
+            ((*loc, "shear_stress"), "contradicts shear_velocity: the tangential motion is one or the other")
+        )
+    shearing = motion.shear_velocity is not None or motion.shear_stress is not None
+    if shearing and motion.shear_axis is None:
+        problems.append(
+            ((*loc, "shear_axis"), "required key is missing (shear_velocity/shear_stress need it)")
+        )
+    if motion.shear_axis is not None:
+        if not shearing:
+            problems.append(((*loc, "shear_axis"), "needs shear_velocity or shear_stress"))
+        face = getattr(motion, "face", None)
+        if face is not None and motion.shear_axis == face[0]:
+            problems.append(
+                ((*loc, "shear_axis"), f"must be tangential to the wall; {face} is normal to {face[0]}")
+            )
+    if not motion.driven:
+        for key in ("mass", "damping"):
+            if getattr(motion, key) is not None:
+                problems.append(
+                    ((*loc, key), 'only for a stress-driven wall (mode = "stress" or shear_stress)')
+                )
+    return problems
+
+
+def _stage_problems(case: Case, walls: dict[str, int]) -> list[tuple[tuple, str]]:
+    problems: list[tuple[tuple, str]] = []
+    periodic = case.domain.periodic
+    for s, stage in enumerate(case.stages):
+        stop = stage.stop_when
+        criteria = []
+        if stop is not None:
+            criteria = [
+                k
+                for k in ("kinetic_energy_below", "displacement", "shear_displacement")
+                if getattr(stop, k) is not None
+            ]
+            if stop.min_time > 0 and stop.kinetic_energy_below is None:
+                problems.append((("stages", s, "stop_when", "min_time"), "only with kinetic_energy_below"))
+            if (stop.displacement is not None or stop.shear_displacement is not None) and stop.wall is None:
+                problems.append(
+                    (
+                        ("stages", s, "stop_when", "wall"),
+                        "required key is missing (the displacement criteria need it)",
+                    )
+                )
+            if stop.wall is not None:
+                if stop.wall not in walls:
+                    problems.append(
+                        (("stages", s, "stop_when", "wall"), "no wall on this face (walls[].face)")
+                    )
+                if stop.displacement is None and stop.shear_displacement is None:
+                    problems.append(
+                        (("stages", s, "stop_when", "wall"), "needs displacement or shear_displacement")
+                    )
+        if stage.duration is None and not criteria:
+            problems.append(
+                (
+                    ("stages", s),
+                    "a stage needs a stop condition: duration, or stop_when with kinetic_energy_below, "
+                    "displacement or shear_displacement",
+                )
+            )
+        seen: dict[str, int] = {}
+        for j, wall in enumerate(stage.walls):
+            loc = ("stages", s, "walls", j)
+            axis = AXIS[wall.face[0]]
+            if periodic[axis]:
+                what = "stress control" if wall.mode == "stress" else "a wall"
+                problems.append(
+                    (
+                        (*loc, "face"),
+                        f"axis {wall.face[0]} is periodic (domain.periodic); it cannot have {what}",
+                    )
+                )
+            elif wall.face not in walls:
+                problems.append(((*loc, "face"), "no wall on this face (add it to [[walls]])"))
+            if wall.face in seen:
+                problems.append(
+                    ((*loc, "face"), f"stages[{s}].walls[{seen[wall.face]}] already sets this wall")
+                )
+            seen.setdefault(wall.face, j)
+            problems += wall_motion_problems(wall, loc)
+    return problems
+
+
+def _group_problems(case: Case) -> list[tuple[tuple, str]]:
+    problems: list[tuple[tuple, str]] = []
+    for g, group in enumerate(case.particles.groups):
+        loc = ("particles", "groups", g)
+        if group.motion == "velocity" and group.velocity is None:
+            problems.append(((*loc, "velocity"), 'required key is missing (motion = "velocity" needs it)'))
+        if group.motion != "velocity" and group.velocity is not None:
+            problems.append(((*loc, "velocity"), f'only for motion = "velocity", not "{group.motion}"'))
+        if any(hi <= lo for lo, hi in zip(group.region_lower, group.region_upper, strict=True)):
+            problems.append(((*loc, "region_upper"), "must exceed region_lower along every axis"))
     return problems

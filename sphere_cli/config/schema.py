@@ -9,7 +9,7 @@ Cross-field rules (walls against periodic axes, particles against the box) live 
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -81,13 +81,105 @@ class Domain(Strict):
         return self
 
 
-class Wall(Strict):
-    """A plane wall on one face of the box, its normal pointing into the box."""
+_WALL_MODE = (
+    'How the wall moves along its normal: "fixed" (in place), "velocity" (at `velocity`) or '
+    '"stress" (a rigid body of mass `mass` driven towards the normal stress `stress`, '
+    "optionally modulated by a sine; see the user guide for the control law)."
+)
 
+
+class WallMotion(Strict):
+    """How a wall moves: its normal mode and an optional tangential (shear) drive. The keys a mode
+    does not use must be left out (a contradiction is an error)."""
+
+    mode: Literal["fixed", "velocity", "stress"] = Field("fixed", description=_WALL_MODE)
+    velocity: Real | None = Field(
+        None, description='Normal velocity of a "velocity" wall, positive into the box [m/s].'
+    )
+    stress: Real | None = Field(
+        None,
+        gt=0,
+        description='Target normal stress of a "stress" wall, compressive positive (mean of the sine) [Pa].',
+    )
+    stress_amplitude: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Amplitude of a sinusoidal modulation of the target stress, "
+            "stress + stress_amplitude sin(2 pi frequency t + phase), t from the start of the stage [Pa]."
+        ),
+    )
+    frequency: Real | None = Field(None, gt=0, description="Frequency of the modulation [Hz].")
+    phase: Real | None = Field(None, description="Phase of the modulation at the start of the stage [rad].")
+    shear_axis: Literal["x", "y", "z"] | None = Field(
+        None, description="Axis of the tangential motion (not the wall's own axis)."
+    )
+    shear_velocity: Real | None = Field(
+        None, description="Prescribed tangential velocity along shear_axis [m/s]."
+    )
+    shear_stress: Real | None = Field(
+        None,
+        description=(
+            "Target shear stress along shear_axis, the traction the wall exerts on the particles; "
+            "the wall is driven tangentially like a stress wall [Pa]."
+        ),
+    )
+    mass: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Mass of a stress-driven wall (default: one layer of mean particles covering the wall, "
+            "m_mean A / d_mean^2) [kg]."
+        ),
+    )
+    damping: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Damping of a stress-driven wall as a fraction of critical damping against the bed, "
+            "estimated as H/d_mean layers of contacts in series, each k A/d_mean^2 (H: distance "
+            "to the opposite wall when the mode is set; default 1) [-]."
+        ),
+    )
+
+    STRESS_KEYS: ClassVar[tuple[str, ...]] = ("stress", "stress_amplitude", "frequency", "phase")
+
+    @property
+    def driven(self) -> bool:
+        """True if the wall obeys a force balance (normal or tangential stress control)."""
+        return self.mode == "stress" or self.shear_stress is not None
+
+    @property
+    def moves(self) -> bool:
+        return self.mode != "fixed" or self.shear_velocity is not None or self.shear_stress is not None
+
+
+class RoughLayer(Strict):
+    """Spheres glued to a wall (a square lattice with their centres on the plane), moving with it."""
+
+    radius: Real | None = Field(
+        None, gt=0, description="Radius of the glued spheres (default: the largest particle radius) [m]."
+    )
+    spacing: Real = Field(
+        1.0,
+        ge=1.0,
+        description=(
+            "Centre spacing as a multiple of their diameter; stretched so that a whole number fits "
+            "each side of the wall (the period along a periodic axis) [-]."
+        ),
+    )
+
+
+class _WallFace(Strict):
     face: Literal["x-", "x+", "y-", "y+", "z-", "z+"] = Field(
         description='Face of the box the wall lies on: "x-", "x+", "y-", "y+", "z-" or "z+".'
     )
-    mode: Literal["fixed"] = Field("fixed", description="Wall motion: fixed in place.")
+
+
+class Wall(WallMotion, _WallFace):
+    """A plane wall on one face of the box, its normal pointing into the box. Its mode applies
+    before the first stage (and throughout if there are no stages)."""
+
     friction: Real | None = Field(
         None, ge=0, description="Coulomb friction coefficient against particles (default: the contact's) [-]."
     )
@@ -100,6 +192,96 @@ class Wall(Strict):
             "rolling friction (and, for the linear law, its stiffness)."
         ),
     )
+    rough: RoughLayer | None = Field(
+        None,
+        description=(
+            "Make the wall rough: a layer of spheres of the first particle material glued to it. "
+            "They are particles that move with the wall; the forces on them count as wall force."
+        ),
+    )
+
+
+class _StageWallFace(Strict):
+    face: Literal["x-", "x+", "y-", "y+", "z-", "z+"] = Field(
+        description="Face of the wall (one of `walls`) whose mode this table sets."
+    )
+
+
+class StageWall(WallMotion, _StageWallFace):
+    """The mode a wall takes from the start of a stage."""
+
+    approach: Flag = Field(
+        False,
+        description=(
+            "At the start of the stage, move the wall (with its rough layer) along its normal until it "
+            "just touches the outermost free particle; then its mode applies."
+        ),
+    )
+
+
+class StopWhen(Strict):
+    """A stage ends as soon as any of these is met (checked every check_every steps)."""
+
+    kinetic_energy_below: Real | None = Field(
+        None, gt=0, description="Total kinetic energy of the particles below this [J]."
+    )
+    min_time: Real = Field(
+        0.0,
+        ge=0,
+        description=(
+            "Time into the stage before kinetic_energy_below is tested (a bed at rest at the start) [s]."
+        ),
+    )
+    wall: Literal["x-", "x+", "y-", "y+", "z-", "z+"] | None = Field(
+        None, description="Wall whose displacement the displacement criteria measure."
+    )
+    displacement: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Normal displacement of `wall` since the start of the stage, either way, reaching this [m]."
+        ),
+    )
+    shear_displacement: Real | None = Field(
+        None,
+        gt=0,
+        description="Tangential displacement of `wall` since the start of the stage reaching this [m].",
+    )
+
+
+class Stage(Strict):
+    """One stage of a chained experiment (deposit, consolidate, shear, ...)."""
+
+    name: str = Field("", description="Label used in the log and in the output.")
+    duration: Real | None = Field(None, gt=0, description="Longest simulated time the stage runs [s].")
+    stop_when: StopWhen | None = Field(None, description="Conditions that end the stage early.")
+    check_every: Count = Field(100, ge=1, description="Steps between tests of the stop_when conditions [-].")
+    friction: Real | None = Field(
+        None,
+        ge=0,
+        description=(
+            "Coulomb friction of every contact (particle pairs and walls) during this stage, e.g. 0 to "
+            "prepare a dense packing (default: the contact tables) [-]."
+        ),
+    )
+    walls: list[StageWall] = Field(
+        default_factory=list,
+        description="Wall modes from the start of this stage; walls not listed keep their mode.",
+    )
+
+
+class ParticleGroup(Strict):
+    """Particles whose centre starts inside a box-shaped region, given a prescribed motion."""
+
+    region_lower: Vec3 = Field(description="Lower corner of the region [m].")
+    region_upper: Vec3 = Field(description="Upper corner of the region [m].")
+    motion: Literal["fixed", "velocity"] = Field(
+        description=(
+            '"fixed": never moves; "velocity": moves at `velocity` without rotating. Such particles '
+            "push others but nothing pushes them (walls neither touch nor feel them)."
+        )
+    )
+    velocity: Vec3 | None = Field(None, description='Velocity of a "velocity" group [m/s].')
 
 
 # --- particle radii -------------------------------------------------------------------------
@@ -248,6 +430,11 @@ class Particles(Strict):
         ge=0,
         le=0.5,
         description="Largest initial overlap accepted, as a fraction of the smaller radius [-].",
+    )
+
+    groups: list[ParticleGroup] = Field(
+        default_factory=list,
+        description="Groups of particles with a prescribed motion (the others are free); a later group wins.",
     )
 
     @model_validator(mode="before")
@@ -429,6 +616,13 @@ class Case(Strict):
     fluid: Fluid | None = Field(
         None,
         description="The fluid saturating the particles, if any (a dry scene has no [fluid] section).",
+    )
+    stages: list[Stage] = Field(
+        default_factory=list,
+        description=(
+            "Stages run one after another in the same run (each ends on its duration or stop_when); "
+            "the run ends with the last stage or at simulation.duration, whichever comes first."
+        ),
     )
     output: Output = Field(default_factory=Output)
 

@@ -63,7 +63,7 @@ def _trajectory(path: Path) -> dict:
             for name, group in f["observables"].items():
                 values = group["value"][...]
                 if values.size:
-                    obs[name] = values[-1].item()
+                    obs[name] = values[-1].tolist()  # a number, or one row per wall
             return {
                 "kind": "trajectory",
                 "path": str(path),

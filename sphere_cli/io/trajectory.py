@@ -5,7 +5,9 @@
 /particles/trajectory/radius   time-independent (N,) [m]
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
-/observables/<name>            {step, time, value}: energies, contact counts (and the fluid's)
+/observables/<name>            {step, time, value}: energies, contact counts (and the fluid's);
+                               wall series (walls, stages) one row per wall, @wall_faces names
+                               them, created by the first frame
 /fluid/<name>                  {step, time, value}: fluid fields (only when the case has a fluid);
                                @model; on a 3D grid also @origin, @spacing, @shape = (nx, ny, nz),
                                cell-centred values stored as value[frame, k, j, i(, component)]
@@ -26,6 +28,7 @@ import numpy as np
 
 from ..errors import OutputError
 from ..physics.energy import UNITS
+from ..physics.walls import WALL_UNITS
 
 FIELD_UNITS = {
     "position": "m",
@@ -101,6 +104,8 @@ class Trajectory:
                     _time_series(obs, name, (), np.float64, unit)
                 if scene.fluid is not None:
                     _create_fluid(f, scene)
+                if state.walls is not None:
+                    obs.attrs["wall_faces"] = np.array([face.encode() for face in state.walls.faces])
                 params = f.create_group("parameters")
                 params.attrs["case_toml"] = case_text
                 params.attrs["resolved_case"] = json.dumps(resolved)
@@ -123,8 +128,11 @@ class Trajectory:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
                 for field in self.fields:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
+                obs = f["observables"]
                 for name, value in observables.items():
-                    _append(f["observables"][name], step, time, value)
+                    if name not in obs:  # wall and stage series: shaped like their first value
+                        _time_series(obs, name, np.shape(value), np.float64, WALL_UNITS.get(name, ""))
+                    _append(obs[name], step, time, value)
                 if scene.fluid is not None:
                     grid = scene.fluid.grid()
                     for name, (value, _unit) in scene.fluid.output_fields(state).items():

@@ -71,13 +71,16 @@ def pair_elastic_energy(pos, radius, material, nbr, nbr_count, hist, table, hert
 
 @njit(cache=True)
 def wall_elastic_energy(
-    pos, radius, material, wall_axis, wall_sign, wall_coord, wall_table, wall_hist, hertz
+    pos, radius, inv_mass, material, wall_axis, wall_sign, wall_coord, wall_table, wall_hist, hertz
 ):
-    """Returns (elastic energy [J], number of particle-wall contacts)."""
+    """Returns (elastic energy [J], number of particle-wall contacts). Particles with inv_mass = 0
+    (fixed, prescribed, glued to a wall) do not touch walls (kernels/walls.py)."""
     total = 0.0
     touching = 0
     single = wall_table.shape[1] == 1
     for i in range(pos.shape[0]):
+        if inv_mass[i] == 0.0:
+            continue
         for w in range(wall_axis.shape[0]):
             gap = wall_sign[w] * (pos[i, wall_axis[w]] - wall_coord[w])
             if gap < radius[i]:

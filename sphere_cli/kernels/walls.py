@@ -1,12 +1,29 @@
-"""Plane walls on the faces of the box: the contact law of `contact.py` (linear or Hertz-Mindlin,
-tangential spring with Coulomb cap, optional rolling resistance) against a fixed body of
-infinite mass and radius: m* = m_i, R* = r_i, I* = I_i, relative spin w_i.
+"""Plane walls on the faces of the box: their contact with particles and their motion.
 
-Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3); radius, mass, inertia (N,); material
-(N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.0 on a lower face (normal
-along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_table (W,M,6) parameters of wall w
-against material m, columns as in contact.py (the wall's own elasticity, if any, is in E* and
-G*; a rigid wall has none); wall_hist (N,W,3) [m]; force, torque (N,3) accumulated in place.
+Contact: the law of `contact.py` (linear or Hertz-Mindlin, tangential spring with Coulomb cap,
+optional rolling resistance) against a body of infinite mass and radius moving at the wall's
+velocity: m* = m_i, R* = r_i, I* = I_i, relative spin w_i, relative velocity v_i - V_w.
+Particles that do not move by forces (inv_mass = 0: fixed, prescribed or glued to a wall)
+neither touch walls nor push them.
+
+Motion (velocity Verlet like the particles, kernels/motion.py), per wall w and direction:
+fixed, prescribed velocity, or driven by a force balance. With inward normal n, area A, contact
+force F of the particles on the wall, mass M and damping C:
+    M dV_n/dt = A sigma(t) + F.n - C V_n,    sigma(t) = sigma_0 + sigma_a sin(omega t + phi),
+so the wall rests only where the contact stress -F.n/A equals the target. Tangentially, along
+the shear axis t: M dV_t/dt = A tau + F.t - C V_t (tau: the traction on the particles). The
+damping is implicit in the second half kick, so only the undamped wall-contact frequency
+limits the step.
+
+Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3); radius, mass, inertia, inv_mass (N,);
+material (N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.0 on a lower face
+(normal along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_vel, wall_vel_pred (W,3)
+[m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in contact.py (the
+wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m];
+force, torque (N,3) accumulated in place; record: also store each particle's wall forces in
+pforce (N,W,3) [N] (the walls' reaction, summed by wall_kick); mode (W,2) int64 normal mode
+(FIXED, VELOCITY, STRESS) and shear mode (FIXED = none, VELOCITY, STRESS); control (W,NC)
+columns C_*; attached (K,) int64 particles glued to wall attached_wall (K,) int64.
 """
 
 import math
@@ -14,6 +31,22 @@ import math
 from numba import njit, prange
 
 from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
+
+FIXED = 0
+VELOCITY = 1
+STRESS = 2
+# columns of the control table
+C_VELOCITY = 0  # normal velocity into the box [m/s]
+C_STRESS = 1  # mean target normal stress [Pa]
+C_AMPLITUDE = 2  # amplitude of its sine [Pa]
+C_OMEGA = 3  # angular frequency [rad/s]
+C_PHASE = 4  # phase at the start of the stage [rad]
+C_MASS = 5  # [kg]
+C_DAMPING = 6  # damping coefficient C [kg/s]
+C_SHEAR_AXIS = 7  # axis index of the tangential drive
+C_SHEAR = 8  # tangential velocity [m/s] or target shear traction [Pa]
+C_START = 9  # time the stage started [s]
+NC = 10
 
 
 @njit(cache=True, parallel=True)
@@ -26,10 +59,13 @@ def wall_forces(
     radius,
     mass,
     inertia,
+    inv_mass,
     material,
     wall_axis,
     wall_sign,
     wall_coord,
+    wall_vel,
+    wall_vel_pred,
     wall_table,
     wall_hist,
     hertz,
@@ -38,12 +74,22 @@ def wall_forces(
     step_dt,
     force,
     torque,
+    record,
+    pforce,
 ):
-    """Add the forces and torques of W plane walls to force/torque."""
+    """Add the forces and torques of W plane walls to force/torque (and store them in pforce
+    if record)."""
     n = pos.shape[0]
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
     for i in prange(n):
+        if record:
+            for w in range(nw):
+                pforce[i, w, 0] = 0.0
+                pforce[i, w, 1] = 0.0
+                pforce[i, w, 2] = 0.0
+        if inv_mass[i] == 0.0:
+            continue
         ri = radius[i]
         root_m = math.sqrt(mass[i])
         ci = 0 if single else material[i]
@@ -75,16 +121,16 @@ def wall_forces(
             s0 = ri * angvel[i, 0]
             s1 = ri * angvel[i, 1]
             s2 = ri * angvel[i, 2]
-            v0 = vel[i, 0] - (s1 * n2 - s2 * n1)
-            v1 = vel[i, 1] - (s2 * n0 - s0 * n2)
-            v2 = vel[i, 2] - (s0 * n1 - s1 * n0)
+            v0 = (vel[i, 0] - wall_vel[w, 0]) - (s1 * n2 - s2 * n1)
+            v1 = (vel[i, 1] - wall_vel[w, 1]) - (s2 * n0 - s0 * n2)
+            v2 = (vel[i, 2] - wall_vel[w, 2]) - (s0 * n1 - s1 * n0)
             vn = v0 * n0 + v1 * n1 + v2 * n2
             q0 = ri * angvel_pred[i, 0]
             q1 = ri * angvel_pred[i, 1]
             q2 = ri * angvel_pred[i, 2]
-            u0 = vel_pred[i, 0] - (q1 * n2 - q2 * n1)
-            u1 = vel_pred[i, 1] - (q2 * n0 - q0 * n2)
-            u2 = vel_pred[i, 2] - (q0 * n1 - q1 * n0)
+            u0 = (vel_pred[i, 0] - wall_vel_pred[w, 0]) - (q1 * n2 - q2 * n1)
+            u1 = (vel_pred[i, 1] - wall_vel_pred[w, 1]) - (q2 * n0 - q0 * n2)
+            u2 = (vel_pred[i, 2] - wall_vel_pred[w, 2]) - (q0 * n1 - q1 * n0)
             un = u0 * n0 + u1 * n1 + u2 * n2
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, un)
             vt0 = v0 - vn * n0
@@ -112,6 +158,10 @@ def wall_forces(
             f0 += fn * n0 + g0
             f1 += fn * n1 + g1
             f2 += fn * n2 + g2
+            if record:
+                pforce[i, w, 0] = fn * n0 + g0
+                pforce[i, w, 1] = fn * n1 + g1
+                pforce[i, w, 2] = fn * n2 + g2
             t0 -= ri * (n1 * g2 - n2 * g1)
             t1 -= ri * (n2 * g0 - n0 * g2)
             t2 -= ri * (n0 * g1 - n1 * g0)
@@ -138,3 +188,112 @@ def wall_forces(
         torque[i, 0] += t0
         torque[i, 1] += t1
         torque[i, 2] += t2
+
+
+@njit(cache=True)
+def wall_kick_drift(
+    wall_axis, wall_sign, mode, control, coord, vel, acc, vel_pred, shift, dt, attached, attached_wall, pvel
+):
+    """First half kick and drift of every wall (fixed and prescribed directions are set, driven
+    ones kicked with the last acceleration); the glued particles take their wall's velocity."""
+    half = 0.5 * dt
+    for w in range(wall_axis.shape[0]):
+        a = wall_axis[w]
+        t = int(control[w, C_SHEAR_AXIS])
+        for b in range(3):
+            m = mode[w, 0] if b == a else (mode[w, 1] if b == t else FIXED)
+            if m == FIXED:
+                vel[w, b] = 0.0
+                acc[w, b] = 0.0
+            elif m == VELOCITY:
+                vel[w, b] = wall_sign[w] * control[w, C_VELOCITY] if b == a else control[w, C_SHEAR]
+                acc[w, b] = 0.0
+            else:
+                vel[w, b] += half * acc[w, b]
+            vel_pred[w, b] = vel[w, b] + half * acc[w, b]
+            shift[w, b] += dt * vel[w, b]
+        coord[w] += dt * vel[w, a]
+    for k in range(attached.shape[0]):
+        w = attached_wall[k]
+        for b in range(3):
+            pvel[attached[k], b] = vel[w, b]
+
+
+@njit(cache=True)
+def wall_areas(wall_axis, wall_sign, coord, lower, upper, area):
+    """Area [m^2] of each wall: the product of the box's extents along the other two axes, each
+    bounded by the walls on that axis where there are walls (they may move)."""
+    lo0 = lower[0]
+    lo1 = lower[1]
+    lo2 = lower[2]
+    hi0 = upper[0]
+    hi1 = upper[1]
+    hi2 = upper[2]
+    for w in range(wall_axis.shape[0]):
+        a = wall_axis[w]
+        if wall_sign[w] > 0.0:
+            if a == 0:
+                lo0 = coord[w]
+            elif a == 1:
+                lo1 = coord[w]
+            else:
+                lo2 = coord[w]
+        elif a == 0:
+            hi0 = coord[w]
+        elif a == 1:
+            hi1 = coord[w]
+        else:
+            hi2 = coord[w]
+    for w in range(wall_axis.shape[0]):
+        a = wall_axis[w]
+        if a == 0:
+            area[w] = (hi1 - lo1) * (hi2 - lo2)
+        elif a == 1:
+            area[w] = (hi0 - lo0) * (hi2 - lo2)
+        else:
+            area[w] = (hi0 - lo0) * (hi1 - lo1)
+
+
+@njit(cache=True)
+def wall_totals(pforce, attached, attached_wall, pforce_total, mass, body_acc, wall_force):
+    """Force of the particles on each wall [N]: minus the wall forces on free particles (pforce,
+    summed in particle order) plus the contact forces on the particles glued to it (their total
+    force pforce_total less their weight)."""
+    nw = wall_force.shape[0]
+    for w in range(nw):
+        for b in range(3):
+            wall_force[w, b] = 0.0
+    for i in range(pforce.shape[0]):
+        for w in range(nw):
+            for b in range(3):
+                wall_force[w, b] -= pforce[i, w, b]
+    for k in range(attached.shape[0]):
+        i = attached[k]
+        w = attached_wall[k]
+        for b in range(3):
+            wall_force[w, b] += pforce_total[i, b] - mass[i] * body_acc[b]
+
+
+@njit(cache=True)
+def wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, time, dt):
+    """Second half kick of the driven directions from the force balance (module docstring) at
+    `time` [s], with the damping implicit: V_{n+1} = (V_{n+1/2} + dt/2 (A target + F)/M) /
+    (1 + dt/2 C/M); then a_{n+1} = (A target + F - C V_{n+1})/M for the next first half kick."""
+    half = 0.5 * dt
+    for w in range(wall_axis.shape[0]):
+        a = wall_axis[w]
+        s = wall_sign[w]
+        mass = control[w, C_MASS]
+        relax = 1.0 + half * control[w, C_DAMPING] / mass
+        if mode[w, 0] == STRESS:
+            phase = control[w, C_OMEGA] * (time - control[w, C_START]) + control[w, C_PHASE]
+            target = control[w, C_STRESS] + control[w, C_AMPLITUDE] * math.sin(phase)
+            drive = area[w] * target + s * wall_force[w, a]  # along the inward normal
+            inward = (s * vel[w, a] + half * drive / mass) / relax
+            vel[w, a] = s * inward
+            acc[w, a] = s * (drive - control[w, C_DAMPING] * inward) / mass
+        if mode[w, 1] == STRESS:
+            t = int(control[w, C_SHEAR_AXIS])
+            drive = area[w] * control[w, C_SHEAR] + wall_force[w, t]
+            vel[w, t] = (vel[w, t] + half * drive / mass) / relax
+            acc[w, t] = (drive - control[w, C_DAMPING] * vel[w, t]) / mass

@@ -1,30 +1,232 @@
-"""Plane walls on the box faces (forces phase): kernels/walls.py with the contact's law and the
-wall rows of the parameter tables (physics/materials.py)."""
+"""Plane walls on the box faces: their contact with particles (forces phase) and their motion
+(integrate phase), with kernels/walls.py and the wall rows of the parameter tables
+(physics/materials.py).
+
+Modes, per wall and per stage (physics/stages.py): fixed; prescribed normal velocity; normal
+stress control, optionally modulated by a sine; and, on any of these, a tangential drive at a
+prescribed shear velocity or shear stress. A driven direction obeys (kernels/walls.py)
+    M dV/dt = A target + F - C V
+(F: the particles' force on the wall along that direction, A: the wall's current area), so it
+comes to rest where the contact stress equals the target. Defaults that scale with the scene:
+    M = m_mean A / d_mean^2            one layer of mean particles covering the wall,
+    K_1 = k A / d_mean^2               one layer of contacts of stiffness k in parallel,
+    K_bed = K_1 / L                    L = H/d_mean such layers in series, H the distance to
+                                       the opposite wall (or face) when the mode is set,
+    C = damping 2 sqrt(K_bed M)        critical (damping = 1) against that bed,
+with m_mean, d_mean over the free particles and k the wall contact's normal stiffness (for the
+Hertz law its tangent stiffness 2 E* sqrt(r delta) at delta = max(overlap_tolerance, 1 %) of
+the mean radius). The wall then settles on the bed in about 2 sqrt(M/K_bed) =
+2 sqrt(L m_mean/k) without ringing (a softer bed overdamps it, a stiffer one rings a little).
+Where nothing resists it moves at A sigma/C. The stiffest load it can meet is K_1, undamped
+frequency sqrt(K_1/M) = sqrt(k/m_mean), that of one contact; the damping is implicit, so a
+driven wall does not tighten the time step (its limit 2/omega against K_1 is checked anyway).
+
+A rough wall carries a square lattice of spheres glued to it, centres on its plane: particles
+with inv_mass = 0 whose velocity is set to the wall's every step; the contact forces on them
+count as force on the wall. Each wall has its own mode: no wall's force enters another's
+motion (their areas follow each other's positions).
+"""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..kernels.contact import K_N
 from ..kernels.energy import wall_elastic_energy
-from ..kernels.walls import wall_forces
+from ..kernels.walls import (
+    C_AMPLITUDE,
+    C_DAMPING,
+    C_MASS,
+    C_OMEGA,
+    C_PHASE,
+    C_SHEAR,
+    C_SHEAR_AXIS,
+    C_START,
+    C_STRESS,
+    C_VELOCITY,
+    FIXED,
+    NC,
+    STRESS,
+    VELOCITY,
+    wall_areas,
+    wall_forces,
+    wall_kick,
+    wall_kick_drift,
+    wall_totals,
+)
 from ..state import State, Walls
+from .contact import verlet_limit
 
 AXES = {"x": 0, "y": 1, "z": 2}
+MODES = {"fixed": FIXED, "velocity": VELOCITY, "stress": STRESS}
+
+WALL_UNITS = {
+    "wall_position": "m",
+    "wall_velocity": "m s-1",
+    "wall_force": "N",
+    "wall_normal_stress": "Pa",
+    "wall_shear_stress": "Pa",
+    "stage": "",  # index of the current stage (physics/stages.py)
+}
 
 
-def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray) -> Walls:
+def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray, moving: bool) -> Walls:
+    """Walls at the box faces, every one fixed (modes are set by `apply_modes`). `moving`: some
+    wall moves in some stage, so each step records the particles' wall forces."""
     faces = [w.face for w in wall_specs]
+    nw = len(faces)
     axis = np.array([AXES[f[0]] for f in faces], dtype=np.int64)
     sign = np.array([1.0 if f[1] == "-" else -1.0 for f in faces])
     coord = np.array([lower[a] if s > 0 else upper[a] for a, s in zip(axis, sign, strict=True)])
+    control = np.zeros((nw, NC))
+    control[:, C_SHEAR_AXIS] = (axis + 1) % 3
+    control[:, C_MASS] = 1.0
     return Walls(
         faces=faces,
         axis=axis,
         sign=sign,
         coord=coord,
         table=np.ascontiguousarray(wall_table),
-        hist=np.zeros((n_particles, len(faces), 3)),
+        hist=np.zeros((n_particles, nw, 3)),
+        vel=np.zeros((nw, 3)),
+        acc=np.zeros((nw, 3)),
+        shift=np.zeros((nw, 3)),
+        force=np.zeros((nw, 3)),
+        area=np.zeros(nw),
+        mode=np.zeros((nw, 2), dtype=np.int64),
+        control=control,
+        attached=np.zeros(0, dtype=np.int64),
+        attached_wall=np.zeros(0, dtype=np.int64),
+        vel_pred=np.zeros((nw, 3)),
+        pforce=np.zeros((n_particles if moving else 0, nw, 3)),
+        record=moving,
     )
+
+
+def rough_layers(case, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (K,3), radii (K,) and wall index (K,) of the spheres glued to the rough walls:
+    a square lattice on each wall's plane, spacing stretched so a whole number fits each side
+    (the period on a periodic axis, else the face less a radius at each end)."""
+    largest = case.particles.radius.largest
+    pos, radius, wall = [], [], []
+    for w, spec in enumerate(case.walls):
+        if spec.rough is None:
+            continue
+        a = AXES[spec.face[0]]
+        r = spec.rough.radius or largest
+        pitch = spec.rough.spacing * 2.0 * r
+        lines = []
+        for b in range(3):
+            if b == a:
+                lines.append(np.array([lower[a] if spec.face[1] == "-" else upper[a]]))
+                continue
+            length = upper[b] - lower[b]
+            if case.domain.periodic[b]:
+                n = max(1, math.floor(length / pitch + 1e-9))
+                lines.append(lower[b] + (np.arange(n) + 0.5) * (length / n))
+            else:
+                n = max(1, math.floor((length - 2.0 * r) / pitch + 1e-9) + 1)
+                lines.append(
+                    np.linspace(lower[b] + r, upper[b] - r, n)
+                    if n > 1
+                    else np.array([0.5 * (lower[b] + upper[b])])
+                )
+        grid = np.stack(np.meshgrid(*lines, indexing="ij"), axis=-1).reshape(-1, 3)
+        pos.append(grid)
+        radius.append(np.full(grid.shape[0], r))
+        wall.append(np.full(grid.shape[0], w, dtype=np.int64))
+    if not pos:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int64)
+    return np.concatenate(pos), np.concatenate(radius), np.concatenate(wall)
+
+
+def apply_groups(
+    case, pos: np.ndarray, vel: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray
+) -> None:
+    """Give the particles of each [[particles.groups]] region their prescribed motion: no
+    response to forces (inv_mass = inv_inertia = 0), no spin, a fixed velocity (zero if fixed)."""
+    for group in case.particles.groups:
+        inside = np.all((pos >= np.array(group.region_lower)) & (pos <= np.array(group.region_upper)), axis=1)
+        inv_mass[inside] = 0.0
+        inv_inertia[inside] = 0.0
+        vel[inside] = 0.0 if group.motion == "fixed" else np.array(group.velocity)
+
+
+class WallScales:
+    """Mass, stiffness and damping of driven walls per unit area, from the free particles."""
+
+    def __init__(self, case, tables, radius, mass, inv_mass):
+        free = inv_mass > 0.0
+        if not np.any(free):
+            free = np.ones_like(inv_mass, dtype=bool)
+        self.diameter = float((2.0 * radius[free]).mean())
+        self.mass_per_area = float(mass[free].mean()) / self.diameter**2
+        d2 = self.diameter**2
+        stiffness = []
+        r_mean = float(radius[free].mean())
+        delta = max(case.particles.overlap_tolerance, 0.01) * r_mean
+        for w in range(tables.wall_table.shape[0]):
+            row = tables.wall_table[w, 0]
+            k = 1.5 * row[K_N] * math.sqrt(r_mean * delta) if tables.hertz else row[K_N]
+            stiffness.append(k / d2)
+        self.stiffness_per_area = np.array(stiffness)
+
+    def mass(self, spec, area: float) -> float:
+        return spec.mass if spec.mass is not None else self.mass_per_area * area
+
+    def damping(self, spec, w: int, area: float, height: float) -> float:
+        """C [kg/s]: `damping` times critical against a bed of `height` [m] between the wall and
+        the opposite one, taken as height/d_mean layers of one-layer stiffness in series."""
+        ratio = 1.0 if spec.damping is None else spec.damping
+        layers = max(1.0, height / self.diameter)
+        return ratio * 2.0 * math.sqrt(self.stiffness_per_area[w] * area / layers * self.mass(spec, area))
+
+    def dt_limit(self, spec, w: int, area: float) -> float:
+        """Stability limit [s] of a driven wall against one layer of contacts: 2/omega (its
+        damping is implicit, kernels/walls.py)."""
+        return verlet_limit(self.stiffness_per_area[w] * area, 0.0, 0.0, self.mass(spec, area))
+
+
+def bed_height(walls: Walls, w: int, coord, box) -> float:
+    """Distance [m] from wall w to the opposite wall (or the opposite face of the box)."""
+    a = walls.axis[w]
+    opposite = [k for k in range(len(walls.faces)) if walls.axis[k] == a and k != w]
+    if opposite:
+        return abs(float(coord[w] - coord[opposite[0]]))
+    far = box.upper[a] if walls.sign[w] > 0 else box.lower[a]
+    return abs(float(coord[w] - far))
+
+
+def apply_modes(walls: Walls, specs: dict, scales: WallScales, box, start_time: float, coord) -> None:
+    """Set the mode of the walls in `specs` (wall index -> WallMotion) from `start_time` [s];
+    default masses and damping follow the wall areas at the wall positions `coord` (W,) [m] of
+    that time."""
+    coord = np.asarray(coord, dtype=np.float64)
+    area = np.zeros(len(walls.faces))
+    wall_areas(walls.axis, walls.sign, coord, box.lower, box.upper, area)
+    for w, spec in specs.items():
+        c = walls.control[w]
+        c[:] = 0.0
+        walls.mode[w, 0] = MODES[spec.mode]
+        c[C_VELOCITY] = spec.velocity or 0.0
+        c[C_STRESS] = spec.stress or 0.0
+        if spec.stress_amplitude is not None:
+            c[C_AMPLITUDE] = spec.stress_amplitude
+            c[C_OMEGA] = 2.0 * math.pi * spec.frequency
+            c[C_PHASE] = spec.phase or 0.0
+        walls.mode[w, 1] = FIXED
+        c[C_SHEAR_AXIS] = (walls.axis[w] + 1) % 3
+        if spec.shear_axis is not None:
+            c[C_SHEAR_AXIS] = AXES[spec.shear_axis]
+            walls.mode[w, 1] = VELOCITY if spec.shear_velocity is not None else STRESS
+            c[C_SHEAR] = spec.shear_velocity if spec.shear_velocity is not None else spec.shear_stress
+        c[C_MASS] = scales.mass(spec, area[w])
+        c[C_DAMPING] = (
+            scales.damping(spec, w, area[w], bed_height(walls, w, coord, box)) if spec.driven else 0.0
+        )
+        c[C_START] = start_time
 
 
 class PlaneWallForces:
@@ -34,6 +236,9 @@ class PlaneWallForces:
         self.contact = contact  # shares the law (linear or Hertz) and the rolling switch
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
+        self._forces(state, spring_dt, state.walls.hist, state.particles.force, state.particles.torque)
+
+    def _forces(self, state: State, spring_dt, hist, force, torque, record=None, pforce=None) -> None:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
         wall_forces(
@@ -45,24 +250,61 @@ class PlaneWallForces:
             p.radius,
             p.mass,
             p.inertia,
+            p.inv_mass,
             p.material,
             w.axis,
             w.sign,
             w.coord,
+            w.vel,
+            w.vel_pred,
             w.table,
-            w.hist,
+            hist,
             c.hertz,
             c.rolling,
             dt if spring_dt is None else spring_dt,
             dt,
-            p.force,
-            p.torque,
+            force,
+            torque,
+            w.record if record is None else record,
+            w.pforce if pforce is None else pforce,
         )
+
+    def measure(self, state: State) -> None:
+        """Refresh walls.force and walls.area at the current state. With every wall fixed the
+        step does not record the particles' wall forces: they are recomputed (same positions,
+        velocities and springs, the springs not grown: spring_dt = 0) without touching the state."""
+        p, w = state.particles, state.walls
+        wall_areas(w.axis, w.sign, w.coord, state.box.lower, state.box.upper, w.area)
+        if w.record:
+            pforce = w.pforce
+        else:
+            pforce = np.zeros((p.count, len(w.faces), 3))
+            scratch = np.zeros_like(p.force)
+            self._forces(state, 0.0, w.hist.copy(), scratch, scratch.copy(), True, pforce)
+        wall_totals(pforce, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
+
+    def observables(self, state: State) -> dict:
+        """Wall positions, velocities, forces and stresses (compressive normal stress; shear
+        traction of the wall on the particles), per wall in the order of [[walls]]."""
+        self.measure(state)
+        w = state.walls
+        normal = np.zeros((len(w.faces), 3))
+        normal[np.arange(len(w.faces)), w.axis] = w.sign
+        inward = np.einsum("wb,wb->w", w.force, normal)
+        traction = -w.force / w.area[:, None]
+        shear = traction + (inward / w.area)[:, None] * normal
+        return {
+            "wall_position": w.coord.copy(),
+            "wall_velocity": w.vel.copy(),
+            "wall_force": w.force.copy(),
+            "wall_normal_stress": -inward / w.area,
+            "wall_shear_stress": shear,
+        }
 
     def elastic_energy(self, state: State) -> tuple[float, int]:
         p, w, c = state.particles, state.walls, self.contact
         energy, touching = wall_elastic_energy(
-            p.pos, p.radius, p.material, w.axis, w.sign, w.coord, w.table, w.hist, c.hertz
+            p.pos, p.radius, p.inv_mass, p.material, w.axis, w.sign, w.coord, w.table, w.hist, c.hertz
         )
         return float(energy), int(touching)
 
@@ -73,4 +315,47 @@ class PlaneWallForces:
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Walls.PROGNOSTIC:
-            getattr(state.walls, name)[...] = arrays[name]
+            if name in arrays:  # a checkpoint from before moving walls holds coord and hist only
+                setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
+
+
+class WallMotion:
+    """Moves the walls (integrate phase): in the scene only if some wall moves in some stage."""
+
+    phase = "integrate"
+
+    def kick_drift(self, state: State) -> None:
+        w = state.walls
+        wall_kick_drift(
+            w.axis,
+            w.sign,
+            w.mode,
+            w.control,
+            w.coord,
+            w.vel,
+            w.acc,
+            w.vel_pred,
+            w.shift,
+            state.clock.dt,
+            w.attached,
+            w.attached_wall,
+            state.particles.vel,
+        )
+
+    def kick(self, state: State) -> None:
+        w, p, box = state.walls, state.particles, state.box
+        wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
+        wall_totals(w.pforce, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.force)
+        dt = state.clock.dt
+        wall_kick(
+            w.axis,
+            w.sign,
+            w.mode,
+            w.control,
+            w.force,
+            w.area,
+            w.vel,
+            w.acc,
+            (state.clock.step + 1) * dt,
+            dt,
+        )

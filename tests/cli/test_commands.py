@@ -52,7 +52,9 @@ def test_validate_json_fills_in_defaults(tmp_path):
         "region_upper": None,
     }
     assert resolved["contact"]["tangential_stiffness"] is None
-    assert resolved["walls"] == [{"face": "z-", "mode": "fixed", "friction": None, "material": None}]
+    unset = ("velocity", "stress", "stress_amplitude", "frequency", "phase", "shear_axis", "shear_velocity")
+    unset += ("shear_stress", "mass", "damping", "friction", "material", "rough")
+    assert resolved["walls"] == [{"face": "z-", "mode": "fixed", **dict.fromkeys(unset)}]
     assert resolved["output"]["checkpoints"]["keep"] == 3
     assert resolved["domain"]["periodic"] == [False, False, False]
 

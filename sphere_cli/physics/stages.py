@@ -1,0 +1,156 @@
+"""Chained stages of an experiment (deposit -> consolidate -> shear) in one run.
+
+Stage k starts at the step stage k-1 ended on. On entry the walls it lists take their new mode
+(the others keep theirs; before the first stage they have the modes of [[walls]]), the contact
+friction becomes the stage's (or the tables' own), and the wall positions are noted for its
+displacement criteria. A stage ends when its duration has passed or, tested every check_every
+steps, a stop_when condition holds; after the last one the run is finished.
+
+Everything a resume needs is the stage index, its first step and the wall positions then
+(prognostic_state); the modes and the friction follow from the case.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.contact import MU
+from ..kernels.energy import kinetic_energy
+from ..state import State
+from .walls import apply_modes
+
+
+def approach(state: State, w: int) -> None:
+    """Move wall w (and the particles glued to it) along its normal until its plane, or its
+    rough layer, just touches the outermost free particle."""
+    p, walls = state.particles, state.walls
+    a, sign = walls.axis[w], walls.sign[w]
+    free = p.inv_mass > 0.0
+    if not np.any(free):
+        return
+    glued = walls.attached[walls.attached_wall == w]
+    reach = float(p.radius[glued].max()) if glued.size else 0.0
+    # sign * (x - coord) is the distance into the box; the outermost particle has the smallest
+    surface = p.pos[free, a] - sign * p.radius[free]
+    target = (surface.min() if sign > 0 else surface.max()) - sign * reach
+    step = target - walls.coord[w]
+    walls.coord[w] = target
+    walls.shift[w, a] += step
+    p.pos[glued, a] += step
+
+
+def _steps(duration: float, dt: float) -> int:
+    return max(1, int(np.ceil(duration / dt - 1e-9)))
+
+
+class Stages:
+    def __init__(self, case, walls_state, scales, contact):
+        self.stages = case.stages
+        self.names = [s.name or f"stage {k}" for k, s in enumerate(self.stages)]
+        self.face_index = {spec.face: w for w, spec in enumerate(case.walls)}
+        self.base = dict(enumerate(case.walls))
+        self.scales = scales
+        self.contact = contact
+        self.pair_mu = contact.table[..., MU].copy()
+        self.wall_mu = None if walls_state is None else walls_state.table[..., MU].copy()
+        nw = 0 if walls_state is None else len(walls_state.faces)
+        self.index = 0
+        self.start_step = 0
+        self.start_coord = np.zeros(nw)
+        self.start_shift = np.zeros((nw, 3))
+
+    @property
+    def finished(self) -> bool:
+        return self.index >= len(self.stages)
+
+    @property
+    def name(self) -> str:
+        return "finished" if self.finished else self.names[self.index]
+
+    def modes(self, k: int) -> dict:
+        """Wall index -> mode in force during stage k."""
+        modes = dict(self.base)
+        for stage in self.stages[: k + 1]:
+            for spec in stage.walls:
+                modes[self.face_index[spec.face]] = spec
+        return modes
+
+    def begin(self, state: State, k: int) -> None:
+        """Enter stage k at the current step."""
+        self.index = k
+        self.start_step = state.clock.step
+        if state.walls is not None and not self.finished:
+            for spec in self.stages[k].walls:
+                if spec.approach:
+                    approach(state, self.face_index[spec.face])
+        if state.walls is not None:
+            self.start_coord[:] = state.walls.coord
+            self.start_shift[:] = state.walls.shift
+        self._apply(state)
+
+    def _apply(self, state: State) -> None:
+        if self.finished:
+            return
+        stage = self.stages[self.index]
+        friction = stage.friction
+        self.contact.table[..., MU] = self.pair_mu if friction is None else friction
+        walls = state.walls
+        if walls is not None:
+            walls.table[..., MU] = self.wall_mu if friction is None else friction
+            apply_modes(
+                walls,
+                self.modes(self.index),
+                self.scales,
+                state.box,
+                self.start_step * state.clock.dt,
+                self.start_coord,
+            )
+
+    def after_step(self, state: State) -> bool:
+        """Test the current stage's end; returns True if a stage ended at this step."""
+        if self.finished:
+            return False
+        stage = self.stages[self.index]
+        elapsed = state.clock.step - self.start_step
+        done = stage.duration is not None and elapsed >= _steps(stage.duration, state.clock.dt)
+        if not done and stage.stop_when is not None and elapsed % stage.check_every == 0:
+            done = self._condition_met(state, stage.stop_when, elapsed)
+        if done:
+            self.begin(state, self.index + 1)
+        return done
+
+    def _condition_met(self, state: State, stop, elapsed: int) -> bool:
+        if stop.kinetic_energy_below is not None and elapsed * state.clock.dt >= stop.min_time:
+            p = state.particles
+            if kinetic_energy(p.vel, p.angvel, p.mass, p.inertia) < stop.kinetic_energy_below:
+                return True
+        if stop.wall is not None:
+            w = self.face_index[stop.wall]
+            walls = state.walls
+            moved = walls.shift[w] - self.start_shift[w]
+            a = walls.axis[w]
+            normal = abs(walls.coord[w] - self.start_coord[w])
+            tangential = float(np.sqrt(np.sum(moved**2) - moved[a] ** 2))
+            if stop.displacement is not None and normal >= stop.displacement:
+                return True
+            if stop.shear_displacement is not None and tangential >= stop.shear_displacement:
+                return True
+        return False
+
+    def observables(self) -> dict:
+        return {"stage": float(self.index)}
+
+    def prognostic_state(self, state: State) -> dict:
+        return {
+            "index": np.int64(self.index),
+            "start_step": np.int64(self.start_step),
+            "start_coord": self.start_coord,
+            "start_shift": self.start_shift,
+        }
+
+    def restore(self, state: State, arrays: dict) -> None:
+        self.index = int(arrays["index"])
+        self.start_step = int(arrays["start_step"])
+        self.start_coord[:] = arrays["start_coord"]
+        self.start_shift[:] = arrays["start_shift"]
+        self._apply(state)
