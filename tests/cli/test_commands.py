@@ -111,6 +111,7 @@ def test_schema_is_json_schema_naming_the_sections():
         "contact",
         "materials",
         "walls",
+        "stages",
         "fluid",
         "output",
     }
