@@ -140,6 +140,9 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         periodic=np.array(dom.periodic, dtype=np.uint8),
         body_acc=np.array(dom.gravity, dtype=np.float64),
     )
+    if restart is not None:
+        # which particles are free decides the walls' default masses (and so dt): take it now
+        particles.inv_mass[:] = restart.arrays["particles"]["inv_mass"]
     if restart is None:
         _check_inside(loaded, box, pos[:n_placed], radius[:n_placed])
         placed = slice(0, n_placed)
