@@ -29,29 +29,47 @@ from numba import njit, prange
 
 
 @njit(cache=True, inline="always")
-def _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k):
-    """sum over the interior/periodic faces of cell (i,j,k) of a_f x_neighbour / h^2."""
-    nx, ny, nz = x.shape
-    s = 0.0
+def _column(nx, ny, i, j, periodic_x, periodic_y):
+    """The x and y neighbours of column (i, j): for each side the neighbour's index, the index of
+    the face between, and 1.0, or (own index, face, 0.0) on a no-flux boundary, so that the
+    stencil loop over k has no branch on x or y."""
     if i > 0:
-        s += ax[i, j, k] * ih2[0] * x[i - 1, j, k]
+        im, fim, wim = i - 1, i, 1.0
     elif periodic_x:
-        s += ax[0, j, k] * ih2[0] * x[nx - 1, j, k]
+        im, fim, wim = nx - 1, 0, 1.0
+    else:
+        im, fim, wim = i, i, 0.0
     if i < nx - 1:
-        s += ax[i + 1, j, k] * ih2[0] * x[i + 1, j, k]
+        ip, fip, wip = i + 1, i + 1, 1.0
     elif periodic_x:
-        s += ax[0, j, k] * ih2[0] * x[0, j, k]
+        ip, fip, wip = 0, 0, 1.0
+    else:
+        ip, fip, wip = i, i + 1, 0.0
     if j > 0:
-        s += ay[i, j, k] * ih2[1] * x[i, j - 1, k]
+        jm, fjm, wjm = j - 1, j, 1.0
     elif periodic_y:
-        s += ay[i, 0, k] * ih2[1] * x[i, ny - 1, k]
+        jm, fjm, wjm = ny - 1, 0, 1.0
+    else:
+        jm, fjm, wjm = j, j, 0.0
     if j < ny - 1:
-        s += ay[i, j + 1, k] * ih2[1] * x[i, j + 1, k]
+        jp, fjp, wjp = j + 1, j + 1, 1.0
     elif periodic_y:
-        s += ay[i, 0, k] * ih2[1] * x[i, 0, k]
+        jp, fjp, wjp = 0, 0, 1.0
+    else:
+        jp, fjp, wjp = j, j + 1, 0.0
+    return im, fim, wim, ip, fip, wip, jm, fjm, wjm, jp, fjp, wjp
+
+
+@njit(cache=True, inline="always")
+def _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k):
+    """sum over the interior/periodic faces of cell (i,j,k) of a_f x_neighbour / h^2 (nb: the
+    column's neighbours from _column)."""
+    im, fim, wim, ip, fip, wip, jm, fjm, wjm, jp, fjp, wjp = nb
+    s = (wim * ax[fim, j, k] * x[im, j, k] + wip * ax[fip, j, k] * x[ip, j, k]) * ih2[0]
+    s += (wjm * ay[i, fjm, k] * x[i, jm, k] + wjp * ay[i, fjp, k] * x[i, jp, k]) * ih2[1]
     if k > 0:
         s += az[i, j, k] * ih2[2] * x[i, j, k - 1]
-    if k < nz - 1:
+    if k < x.shape[2] - 1:
         s += az[i, j, k + 1] * ih2[2] * x[i, j, k + 1]
     return s
 
@@ -119,11 +137,10 @@ def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partia
     for col in prange(nx * ny):
         i = col // ny
         j = col % ny
+        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
         acc = 0.0
         for k in range(nz):
-            v = diag[i, j, k] * x[i, j, k] - _neighbour_sum(
-                x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k
-            )
+            v = diag[i, j, k] * x[i, j, k] - _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
             out[i, j, k] = v
             acc += x[i, j, k] * v
         partial[col] = acc
@@ -136,10 +153,11 @@ def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial):
     for col in prange(nx * ny):
         i = col // ny
         j = col % ny
+        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
         acc = 0.0
         for k in range(nz):
             v = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
-            v += _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k)
+            v += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
             r[i, j, k] = v
             acc += v * v
         partial[col] = acc
@@ -252,9 +270,10 @@ def jacobi_sweep(rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2
     for col in prange(nx * ny):
         i = col // ny
         j = col % ny
+        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
         acc = 0.0
         for k in range(nz):
-            s = rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, periodic_x, periodic_y, ih2, i, j, k)
+            s = rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
             rv = s - diag[i, j, k] * x[i, j, k]
             acc += rv * rv
             x_new[i, j, k] = inv_diag[i, j, k] * s
@@ -297,3 +316,116 @@ def _mean(a, b, harmonic):
         s = a + b
         return 2.0 * a * b / s if s > 0.0 else 0.0
     return 0.5 * (a + b)
+
+
+# -- geometric multigrid (the V-cycle preconditioner of "pcg") ------------------------------------
+# Level l+1 has cells f_a times larger than level l along each axis a (f_a = 1 or 2). Restriction
+# averages the f_x f_y f_z children, prolongation copies a coarse value to its children (so the
+# restriction is a multiple of the transposed prolongation, and the V-cycle is symmetric).
+
+
+@njit(cache=True, parallel=True)
+def coarsen_coefficients(c, ax, ay, az, fx, fy, fz, cc, axc, ayc, azc):
+    """Coefficients of the coarse operator, re-discretised: c and each coarse face's a are the
+    means of the fine values they cover (a coarse face covers fy*fz fine x faces, and so on)."""
+    mx, my, mz = cc.shape
+    for col in prange(mx * my):
+        ci = col // my
+        cj = col % my
+        for ck in range(mz):
+            s = 0.0
+            for i in range(ci * fx, ci * fx + fx):
+                for j in range(cj * fy, cj * fy + fy):
+                    for k in range(ck * fz, ck * fz + fz):
+                        s += c[i, j, k]
+            cc[ci, cj, ck] = s / (fx * fy * fz)
+            s = 0.0
+            for j in range(cj * fy, cj * fy + fy):
+                for k in range(ck * fz, ck * fz + fz):
+                    s += ax[ci * fx, j, k]
+            axc[ci, cj, ck] = s / (fy * fz)
+            s = 0.0
+            for i in range(ci * fx, ci * fx + fx):
+                for k in range(ck * fz, ck * fz + fz):
+                    s += ay[i, cj * fy, k]
+            ayc[ci, cj, ck] = s / (fx * fz)
+            s = 0.0
+            for i in range(ci * fx, ci * fx + fx):
+                for j in range(cj * fy, cj * fy + fy):
+                    s += az[i, j, ck * fz]
+            azc[ci, cj, ck] = s / (fx * fy)
+            if ci == mx - 1:
+                s = 0.0
+                for j in range(cj * fy, cj * fy + fy):
+                    for k in range(ck * fz, ck * fz + fz):
+                        s += ax[mx * fx, j, k]
+                axc[mx, cj, ck] = s / (fy * fz)
+            if cj == my - 1:
+                s = 0.0
+                for i in range(ci * fx, ci * fx + fx):
+                    for k in range(ck * fz, ck * fz + fz):
+                        s += ay[i, my * fy, k]
+                ayc[ci, my, ck] = s / (fx * fz)
+            if ck == mz - 1:
+                s = 0.0
+                for i in range(ci * fx, ci * fx + fx):
+                    for j in range(cj * fy, cj * fy + fy):
+                        s += az[i, j, mz * fz]
+                azc[ci, cj, mz] = s / (fx * fy)
+
+
+@njit(cache=True, parallel=True)
+def restrict(fine, fx, fy, fz, coarse):
+    """coarse = mean of the children in fine."""
+    mx, my, mz = coarse.shape
+    for col in prange(mx * my):
+        ci = col // my
+        cj = col % my
+        for ck in range(mz):
+            s = 0.0
+            for i in range(ci * fx, ci * fx + fx):
+                for j in range(cj * fy, cj * fy + fy):
+                    for k in range(ck * fz, ck * fz + fz):
+                        s += fine[i, j, k]
+            coarse[ci, cj, ck] = s / (fx * fy * fz)
+
+
+@njit(cache=True, parallel=True)
+def prolong_add(coarse, fx, fy, fz, fine):
+    """fine += the coarse value of each cell's parent."""
+    nx, ny, nz = fine.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        for k in range(nz):
+            fine[i, j, k] += coarse[i // fx, j // fy, k // fz]
+
+
+@njit(cache=True, parallel=True)
+def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out):
+    """One damped Jacobi sweep out = x + omega D^-1 (rhs - A x) (symmetric smoother)."""
+    nx, ny, nz = x.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+        for k in range(nz):
+            s = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
+            s += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
+            out[i, j, k] = x[i, j, k] + omega * inv_diag[i, j, k] * s
+
+
+@njit(cache=True, parallel=True)
+def column_dots(r, z, partial_rz, partial_z):
+    """partial_rz = column sums of r z, partial_z of z."""
+    nx, ny, nz = r.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        rz = 0.0
+        zs = 0.0
+        for k in range(nz):
+            rz += r[i, j, k] * z[i, j, k]
+            zs += z[i, j, k]
+        partial_rz[col] = rz
+        partial_z[col] = zs
