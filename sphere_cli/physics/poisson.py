@@ -251,7 +251,6 @@ class PoissonSolver:
             b, c, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
             float(bottom_value), float(top_value), self.ih2, self.rhs, self.diag, self.inv_diag, self.part_a,
         )  # fmt: skip
-        self.c_field = c
         singular = not (self.dirichlet_bottom or self.dirichlet_top) and not c.any()
         mean_removed = 0.0
         if singular:
@@ -264,7 +263,7 @@ class PoissonSolver:
             return PoissonResult(0, 0.0, True, mean_removed)
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
-            iterations, res = self._pcg(x, ax, ay, az, singular, scale)
+            iterations, res = self._pcg(x, c, ax, ay, az, singular, scale)
         else:
             iterations, res = self._jacobi(x, ax, ay, az, scale)
         if singular:
@@ -293,13 +292,13 @@ class PoissonSolver:
         )
         return math.sqrt(ordered_sum(self.part_a))
 
-    def _pcg(self, x, ax, ay, az, singular, scale):
+    def _pcg(self, x, c, ax, ay, az, singular, scale):
         n = x.size
         iterations = 0
         res = self._true_residual(x, ax, ay, az) * scale
         fine = (self.diag, self.inv_diag, ax, ay, az, self.ih2)
         if self.multigrid is not None:
-            self.multigrid.setup(self.c_field, ax, ay, az)
+            self.multigrid.setup(c, ax, ay, az)
         # restarted from the true residual if the recursively updated one drifted from it
         while res > self.tolerance and iterations < self.max_iterations:
             precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c)
