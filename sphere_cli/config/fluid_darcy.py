@@ -1,17 +1,177 @@
-"""Case-file section `[fluid]` with `model = "darcy"`:
-Pore-pressure diffusion (Darcy flow) coupled to the particles.
+"""`[fluid] model = "darcy"`: pore-pressure diffusion in a compressible pore fluid without inertia
+(slow seepage, consolidation, pressure forcing), coupled to the particles (physics/darcy.py).
+
+The unknown is the excess pore pressure p: the pressure above the hydrostatic one of a fluid of
+`density` under `domain.gravity`. Every pressure of this table (boundaries, fixed cells,
+initial value) is such an excess pressure.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from .base import Strict
+from .base import Count, Real, Strict, Vec3, _default_tag
+from .fluid_grid import FluidGridConfig
+
+
+class PressureBoundary(Strict):
+    """Prescribed excess pressure on the face: pressure + amplitude sin(2 pi t / period + phase)."""
+
+    condition: Literal["pressure"] = "pressure"
+    pressure: Real = Field(0.0, description="Mean excess pore pressure on the face [Pa].")
+    amplitude: Real = Field(0.0, ge=0, description="Amplitude of the sinusoidal modulation (0 = none) [Pa].")
+    period: Real | None = Field(
+        None, gt=0, description="Period of the modulation; required when amplitude > 0 [s]."
+    )
+    phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
+
+    @model_validator(mode="after")
+    def _period_given(self):
+        if self.amplitude > 0 and self.period is None:
+            raise ValueError("a modulation (amplitude > 0) needs its period [s]")
+        return self
+
+
+class NoFlowBoundary(Strict):
+    """Impermeable face: no fluid crosses it (zero normal gradient of the excess pressure)."""
+
+    condition: Literal["no-flow"]
+
+
+DarcyBoundary = Annotated[PressureBoundary | NoFlowBoundary, Field(discriminator="condition")]
+
+
+class KozenyCarmanPermeability(Strict):
+    """k = k_c phi^3 / (1 - phi)^2 per cell (Kozeny-Carman), phi clamped to
+    [porosity_min, porosity_max]."""
+
+    model: Literal["kozeny-carman"] = "kozeny-carman"
+    coefficient: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Kozeny-Carman coefficient k_c. Default: d^2/180 with d the mean particle diameter of "
+            "the scene [m^2]."
+        ),
+    )
+
+
+class ConstantPermeability(Strict):
+    """The same permeability in every cell, whatever the porosity."""
+
+    model: Literal["constant"]
+    value: Real = Field(gt=0, description="Permeability k [m^2].")
+
+
+Permeability = Annotated[KozenyCarmanPermeability | ConstantPermeability, Field(discriminator="model")]
+
+
+class FixedPressureRegion(Strict):
+    """Cells whose centre lies inside an axis-aligned box keep a prescribed excess pressure."""
+
+    lower: Vec3 = Field(description="Lower corner of the region [m].")
+    upper: Vec3 = Field(description="Upper corner of the region [m].")
+    pressure: Real = Field(description="Excess pore pressure held in these cells [Pa].")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for ax, lo, hi in zip("xyz", self.lower, self.upper, strict=True):
+            if not hi > lo:
+                raise ValueError(f"upper {ax} ({hi}) must exceed lower {ax} ({lo})")
+        return self
+
+
+class DarcySolver(Strict):
+    """The implicit solve of each fluid step (the shared symmetric solver, physics/poisson.py)."""
+
+    method: Literal["pcg", "jacobi"] = Field(
+        "pcg",
+        description=(
+            'Iterative method: "pcg" (conjugate gradients with a diagonal preconditioner) or '
+            '"jacobi" (the original sphere\'s iteration, much slower; for comparison).'
+        ),
+    )
+    tolerance: Real = Field(
+        1e-10, gt=0, lt=1, description="Stop when ||b - A p|| / ||b|| falls below this [-]."
+    )
+    max_iterations: Count = Field(
+        10000, ge=1, description="Iterations after which a solve that has not converged is an error [-]."
+    )
 
 
 class DarcyFluid(Strict):
-    """Pore-pressure diffusion (Darcy flow) coupled to the particles."""
+    """Darcy pore-pressure flow: dp/dt = div(k grad p)/(beta_f phi mu)
+    - (dphi/dt + v_p . grad phi)/(beta_f phi (1 - phi)), solved implicitly (backward Euler)."""
 
     model: Literal["darcy"] = Field(description="Selects this fluid model.")
+    grid: FluidGridConfig = Field(default_factory=FluidGridConfig, description="The fluid grid.")
+    density: Real = Field(
+        1000.0, gt=0, description="Fluid density rho_f (buoyancy and the hydrostatic reference) [kg/m^3]."
+    )
+    viscosity: Real = Field(1.0e-3, gt=0, description="Dynamic viscosity mu of the fluid [Pa s].")
+    compressibility: Real = Field(
+        4.5e-10, gt=0, description="Fluid compressibility beta_f (water: 4.5e-10) [1/Pa]."
+    )
+    permeability: Permeability = Field(
+        default_factory=KozenyCarmanPermeability,
+        description='Permeability law: model = "kozeny-carman" (default) or "constant".',
+    )
+    porosity_min: Real = Field(
+        0.1,
+        gt=0,
+        lt=1,
+        description=(
+            "Cell porosities below this are raised to it in the fluid equations (Kozeny-Carman "
+            "vanishes and the storage term degenerates as phi -> 0); clamped cells are counted "
+            "in the observable darcy_clamped_cells [-]."
+        ),
+    )
+    porosity_max: Real = Field(
+        0.9,
+        gt=0,
+        lt=1,
+        description=(
+            "Cell porosities above this are lowered to it (Kozeny-Carman diverges and the source "
+            "term 1/(1 - phi) is singular as phi -> 1; the permeability of open fluid is then "
+            "k_c porosity_max^3 / (1 - porosity_max)^2) [-]."
+        ),
+    )
+    initial_pressure: Real = Field(0.0, description="Excess pore pressure in every cell at t = 0 [Pa].")
+    top: DarcyBoundary = Field(
+        default_factory=PressureBoundary,
+        description='Top face (z+): condition = "pressure" (default, 0 Pa) or "no-flow".',
+    )
+    bottom: DarcyBoundary = Field(
+        default_factory=lambda: NoFlowBoundary(condition="no-flow"),
+        description='Bottom face (z-): condition = "no-flow" (default) or "pressure".',
+    )
+    fixed_pressure: list[FixedPressureRegion] = Field(
+        default_factory=list,
+        description="Regions whose cells hold a prescribed excess pressure, one table per region.",
+    )
+    update_every: Count = Field(
+        1,
+        ge=1,
+        description=(
+            "DEM steps per fluid step; the pressure is solved for every update_every-th step with "
+            "the time step update_every dt [-]."
+        ),
+    )
+    solver: DarcySolver = Field(default_factory=DarcySolver, description="The implicit pressure solve.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_tags(cls, data):
+        data = _default_tag(data, "top", "condition", "pressure")
+        data = _default_tag(data, "bottom", "condition", "pressure")
+        return _default_tag(data, "permeability", "model", "kozeny-carman")
+
+    @model_validator(mode="after")
+    def _clamps_ordered(self):
+        if not self.porosity_min < self.porosity_max:
+            raise ValueError(
+                f"porosity_min ({self.porosity_min}) must be below porosity_max ({self.porosity_max})"
+            )
+        return self

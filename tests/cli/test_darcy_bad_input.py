@@ -1,0 +1,110 @@
+"""Bad `[fluid] model = "darcy"` input: a short message naming the key and its line, exit 65,
+no traceback (the checks of config/fluid_darcy.py and physics/darcy.py)."""
+
+from __future__ import annotations
+
+import pytest
+from cli_test_support import TINY, assert_clean_error, edit, line_of, sphere_inproc
+
+DARCY = TINY.replace("[output.frames]", '[fluid]\nmodel = "darcy"\n\n[output.frames]')
+
+CASE_ERRORS = [
+    # (id, text to replace, replacement, key named, text on the line named, other fragments)
+    (
+        "typo",
+        'model = "darcy"',
+        'model = "darcy"\nviscosty = 1e-3',
+        "fluid.viscosty",
+        "viscosty",
+        ["unknown key"],
+    ),
+    (
+        "negative-viscosity",
+        'model = "darcy"',
+        'model = "darcy"\nviscosity = -1e-3',
+        "fluid.viscosity",
+        "viscosity",
+        ["greater than 0"],
+    ),
+    (
+        "modulation-without-period",
+        'model = "darcy"',
+        'model = "darcy"\ntop = { amplitude = 50.0 }',
+        "fluid.top",
+        "top =",
+        ["needs its period"],
+    ),
+    (
+        "unknown-boundary-condition",
+        'model = "darcy"',
+        'model = "darcy"\nbottom = { condition = "open" }',
+        "fluid.bottom.condition",
+        "bottom =",
+        ["unknown choice", '"no-flow"'],
+    ),
+    (
+        "no-flow-with-a-pressure",
+        'model = "darcy"',
+        'model = "darcy"\nbottom = { condition = "no-flow", pressure = 3.0 }',
+        "fluid.bottom.pressure",
+        "bottom =",
+        ["unknown key"],
+    ),
+    (
+        "clamps-reversed",
+        'model = "darcy"',
+        'model = "darcy"\nporosity_min = 0.6\nporosity_max = 0.5',
+        "fluid",
+        "[fluid]",
+        ["porosity_min (0.6) must be below porosity_max (0.5)"],
+    ),
+    (
+        "unknown-permeability-law",
+        'model = "darcy"',
+        'model = "darcy"\npermeability = { model = "ergun" }',
+        "fluid.permeability.model",
+        "permeability =",
+        ["unknown choice", '"kozeny-carman"'],
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "marker", "fragments"),
+    [c[1:] for c in CASE_ERRORS],
+    ids=[c[0] for c in CASE_ERRORS],
+)
+def test_darcy_case_error_names_key_and_line(tmp_path, old, new, key, marker, fragments):
+    text = edit(DARCY, old, new)
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    result = sphere_inproc("validate", case)
+    assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
+
+
+def test_fixed_pressure_region_without_a_cell(tmp_path):
+    region = (
+        "[[fluid.fixed_pressure]]\nlower = [0.0, 0.0, 0.0]\nupper = [0.001, 0.001, 0.001]\npressure = 1.0\n"
+    )
+    text = edit(DARCY, "[output.frames]", region + "\n[output.frames]")
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(
+        result,
+        65,
+        "fluid.fixed_pressure[0]",
+        f"case.toml:{line_of(text, '[[fluid.fixed_pressure]]')}:",
+        "no cell",
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_periodic_z_is_refused(tmp_path):
+    text = edit(
+        edit(DARCY, '[[walls]]\nface = "z-"\n', ""),
+        "[particles]",
+        "periodic = [false, false, true]\n\n[particles]",
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "domain.periodic", "bounded z axis")

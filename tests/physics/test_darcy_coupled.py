@@ -1,0 +1,152 @@
+"""The Darcy fluid coupled to particles (physics/darcy.py): a bed under an upward seepage
+gradient, bitwise resume, and scenes without it left alone.
+
+Critical gradient of this model: the fluid force on a particle of volume V is -V grad p plus
+the buoyancy -rho_f V g (the original sphere's Darcy coupling, kernels/darcy.py), so a bed
+whose particles see on average an upward excess-pressure gradient -dp/dz = (rho_s - rho_f)|g|
+carries its whole buoyant weight: i_c = (rho_s - rho_f)|g|. The bed here is a simple cubic stack
+of 200 touching spheres (d = 1 mm) on a floor, at rest; the gradient the particles see is the
+volume-weighted mean of grad p interpolated at their centres, after one fluid step (the
+diffusion time H^2/D ~ 1e-9 s is far below the step, so that is the steady state).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sphere_cli import api
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import parse_case
+from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.kernels.darcy import add_pressure_forces
+from sphere_cli.simulation import advance
+
+RHO_S, RHO_F, G = 2650.0, 1000.0, 9.81
+CRITICAL = (RHO_S - RHO_F) * G  # [Pa/m]
+D = 1.0e-3
+
+BED = """
+[simulation]
+duration = {duration}
+dt = 4.0e-6
+[domain]
+upper = [0.005, 0.005, 0.025]
+periodic = [true, true, false]
+[particles]
+count = 200
+density = 2650.0
+radius = {{ distribution = "fixed", value = 0.0005 }}
+placement = {{ method = "lattice", spacing = 1.0, region_upper = [0.005, 0.005, 0.0085] }}
+[contact]
+model = "linear"
+normal_stiffness = 1.0e3
+restitution = 0.2
+friction = 0.5
+[[walls]]
+face = "z-"
+[fluid]
+model = "darcy"
+density = 1000.0
+grid = {{ cells = [2, 2, 10] }}
+bottom = {{ pressure = {pressure} }}
+top = {{ pressure = 0.0 }}
+update_every = {update_every}
+[output]
+frames = {{ every_steps = 100 }}
+checkpoints = {{ every_steps = {checkpoint_every} }}
+"""
+
+
+def bed_case(
+    pressure: float, duration: float = 0.01, update_every: int = 1, checkpoint_every: int = 1000
+) -> str:
+    return BED.format(
+        pressure=pressure, duration=duration, update_every=update_every, checkpoint_every=checkpoint_every
+    )
+
+
+def mean_upward_gradient(scene) -> float:
+    """Volume-weighted mean over the particles of -dp/dz at their centres [Pa/m]."""
+    p, fluid = scene.state.particles, scene.fluid
+    grid = fluid.grid()
+    force = np.zeros_like(p.force)
+    add_pressure_forces(
+        p.pos, p.radius, fluid.pore.state.gradient, grid.origin, grid.spacing,
+        fluid.pore.periodic, 0.0, np.zeros(3), force,
+    )  # fmt: skip
+    return float(force[:, 2].sum() / (4.0 / 3.0 * np.pi * (p.radius**3).sum()))
+
+
+@pytest.fixture(scope="module")
+def pressure_per_gradient() -> float:
+    """Bottom pressure that gives the particles a mean upward gradient of 1 Pa/m (the steady
+    problem is linear in the boundary pressure)."""
+    reference = 100.0
+    scene = build_scene(parse_case(bed_case(reference)))
+    advance(scene, 1)
+    return reference / mean_upward_gradient(scene)
+
+
+@pytest.mark.parametrize("ratio", [0.8, 2.2])
+def test_bed_under_upward_gradient(ratio, pressure_per_gradient):
+    """0.8 i_c: no particle moves by 1 % of a diameter in 0.012 s (3000 steps). 2.2 i_c: the
+    bed lifts; the net upward acceleration is 1.2 (rho_s - rho_f)/rho_s |g| = 7.3 m/s^2, a rise
+    of 0.53 mm in 0.012 s if nothing held it back; the mean rise must pass half of that."""
+    scene = build_scene(parse_case(bed_case(ratio * CRITICAL * pressure_per_gradient)))
+    start = scene.state.particles.pos.copy()
+    advance(scene, 1)
+    assert mean_upward_gradient(scene) == pytest.approx(ratio * CRITICAL, rel=1e-3)
+    advance(scene, 2999)
+    shift = scene.state.particles.pos - start
+    rise = 0.5 * 1.2 * (RHO_S - RHO_F) / RHO_S * G * 0.012**2
+    if ratio < 1:
+        assert np.max(np.abs(shift)) < 0.01 * D
+    else:
+        assert shift[:, 2].mean() > 0.5 * rise
+        assert shift[:, 2].min() > 0.0
+
+
+def test_resume_is_bitwise_identical(tmp_path: Path):
+    """A run stopped at a step between two fluid steps (update_every = 3) and resumed ends in
+    exactly the state of an uninterrupted one: particles, pressure, porosities and gradient."""
+    case = tmp_path / "bed.toml"
+    case.write_text(bed_case(3.0 * CRITICAL * 0.01, duration=200 * 4e-6, update_every=3, checkpoint_every=50))
+    api.run(case, tmp_path / "whole")
+    api.run(case, tmp_path / "split", until=100 * 4e-6)
+    api.resume(tmp_path / "split")
+    a = read_checkpoint(list_checkpoints(tmp_path / "whole" / "checkpoints")[-1])
+    b = read_checkpoint(list_checkpoints(tmp_path / "split" / "checkpoints")[-1])
+    assert a.step == b.step == 200
+    assert set(a.arrays) == set(b.arrays) and "fluid" in a.arrays
+    for group in a.arrays:
+        for name, value in a.arrays[group].items():
+            assert np.array_equal(value, b.arrays[group][name]), f"{group}/{name} differs"
+    assert np.any(a.arrays["fluid"]["pressure"] != 0.0)
+
+
+def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
+    """A dry scene builds and steps without importing the Darcy physics or kernels (the case
+    schema, config/fluid_darcy.py, is part of every case's validation)."""
+    dry = bed_case(0.0).split("[fluid]")[0] + "[output]\nframes = { every_steps = 100 }\n"
+    path = tmp_path / "dry.toml"
+    path.write_text(dry)
+    script = textwrap.dedent(
+        f"""
+        import sys
+        from sphere_cli.build.scene import build_scene
+        from sphere_cli.config.load import load_case
+        from sphere_cli.simulation import advance
+        scene = build_scene(load_case({str(path)!r}))
+        advance(scene, 3)
+        assert scene.fluid is None
+        print(sorted(m for m in sys.modules if m.endswith("darcy") and ".config." not in m))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
