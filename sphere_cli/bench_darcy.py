@@ -1,0 +1,138 @@
+"""Benchmark of the Darcy model coupled to the DEM (never part of the tests): the time of one
+coupled step on a 64^3 fluid grid with 20 000 particles, and of its parts, with the implicit
+solve's iterations.
+
+    python -m sphere_cli.bench_darcy [--cells 64] [--particles 20000] [--threads 1,2] [--steps 20]
+
+The scene: a box of 64 x 64 x 64 cells of 1 mm (periodic in x and y), 20 000 spheres of 1 mm
+diameter stacked simple-cubic on a floor (a bed at rest, five layers), water, Kozeny-Carman
+permeability, an upward seepage of half the critical gradient (bottom face held at an excess
+pressure, top drained), linear contacts, dt = 4e-6 s, the fluid advanced every step. The first
+coupled steps (compilation or cache loading, and the cold solve from p = 0) are timed apart;
+the rows are medians over `steps` steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+
+import numba
+
+from .build.scene import build_scene
+from .config.load import parse_case
+from .simulation import advance
+
+
+def case_text(cells: int, particles: int, tolerance: float, update_every: int = 1) -> str:
+    width = cells * 1e-3
+    layers = math.ceil(particles / cells**2)
+    critical = (2650.0 - 1000.0) * 9.81
+    pressure = 0.5 * critical * layers * 1e-3  # half the critical gradient across the bed
+    bed_top = (layers + 0.5) * 1e-3
+    return f"""
+[simulation]
+duration = 1.0
+dt = 4.0e-6
+[domain]
+upper = [{width!r}, {width!r}, {width!r}]
+periodic = [true, true, false]
+[particles]
+count = {particles}
+density = 2650.0
+radius = {{ distribution = "fixed", value = 0.0005 }}
+placement = {{ method = "lattice", spacing = 1.0, region_upper = [{width!r}, {width!r}, {bed_top!r}] }}
+[contact]
+model = "linear"
+normal_stiffness = 1.0e3
+[[walls]]
+face = "z-"
+[fluid]
+model = "darcy"
+grid = {{ cells = [{cells}, {cells}, {cells}] }}
+bottom = {{ pressure = {pressure!r} }}
+update_every = {update_every}
+solver = {{ tolerance = {tolerance!r} }}
+"""
+
+
+class Stopwatch:
+    """Wraps a bound method of the fluid so each call inside the coupled step is timed."""
+
+    def __init__(self, owner, name: str):
+        self.owner, self.name = owner, name
+        self.method = getattr(owner, name)
+        self.seconds: list[float] = []
+        setattr(owner, name, self)
+
+    def __call__(self, *args, **kwargs):
+        start = time.perf_counter()
+        result = self.method(*args, **kwargs)
+        self.seconds.append(time.perf_counter() - start)
+        return result
+
+    def restore(self) -> None:
+        setattr(self.owner, self.name, self.method)
+
+
+def timed_steps(scene, steps: int) -> list[float]:
+    times = []
+    for _ in range(steps):
+        start = time.perf_counter()
+        advance(scene, 1)
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cells", type=int, default=64)
+    parser.add_argument("--particles", type=int, default=20000)
+    parser.add_argument("--threads", default="1,2")
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--tolerance", type=float, default=1e-8, help="fluid.solver.tolerance")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    scene = build_scene(parse_case(case_text(args.cells, args.particles, args.tolerance)))
+    build = time.perf_counter() - start
+    fluid, state = scene.fluid, scene.state
+    first = timed_steps(scene, 1)[0]
+    cold = fluid.pore.state.iterations
+    print(f"numba {numba.__version__} ({numba.threading_layer()} threading layer)")
+    print(
+        f"{args.cells}^3 cells, {state.particles.count} particles; build {build:.2f} s; first coupled step "
+        f"{first:.2f} s (compile or cache load, and the cold solve from p = 0: {cold} iterations)"
+    )
+    print(
+        "threads | coupled step [ms] | porosity [ms] | pressure step [ms] | solve iterations | "
+        "forces [ms] | DEM alone [ms] | M cell-updates/s (solve)"
+    )
+    med = statistics.median
+    for threads in (int(t) for t in args.threads.split(",")):
+        numba.set_num_threads(threads)
+        timed_steps(scene, 2)
+        watches = [Stopwatch(fluid, "_measure"), Stopwatch(fluid.pore, "advance"), Stopwatch(fluid, "forces")]
+        iterations = []
+        steps = []
+        for _ in range(args.steps):
+            steps += timed_steps(scene, 1)
+            iterations.append(fluid.pore.state.iterations)
+        for watch in watches:
+            watch.restore()
+        scene.fluid = None  # the same steps without the fluid: contacts, walls, integration
+        dem = timed_steps(scene, args.steps)
+        scene.fluid = fluid
+        porosity, solve, forces = (med(w.seconds) for w in watches)
+        its = med(iterations)
+        updates = args.cells**3 * max(its, 1) / solve / 1e6
+        print(
+            f"{threads} | {1e3 * med(steps):.1f} | {1e3 * porosity:.1f} | {1e3 * solve:.1f} | {its:.0f} | "
+            f"{1e3 * forces:.2f} | {1e3 * med(dem):.1f} | {updates:.1f}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
