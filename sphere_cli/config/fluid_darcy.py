@@ -94,7 +94,7 @@ class DarcySolver(Strict):
         ),
     )
     tolerance: Real = Field(
-        1e-10, gt=0, lt=1, description="Stop when ||b - A p|| / ||b|| falls below this [-]."
+        1e-8, gt=0, lt=1, description="Stop when ||b - A p|| / ||b|| falls below this [-]."
     )
     max_iterations: Count = Field(
         10000, ge=1, description="Iterations after which a solve that has not converged is an error [-]."

@@ -22,6 +22,7 @@ from ..kernels.pore_pressure import darcy_velocity
 from .fluid import FluidModule
 from .fluid_grid import FluidGrid, fluid_grid
 from .pore_pressure import PorePressure, fixed_pressure_cells
+from .porosity import Porosity
 
 # porosity of the densest packing of equal spheres, 1 - pi / (3 sqrt 2) (FCC): the lowest a bed
 # of spheres reaches, where the permeability and so the coupling's time limit are smallest
@@ -53,8 +54,6 @@ class Darcy(FluidModule):
         volume = 4.0 / 3.0 * np.pi * particles.radius**3
         self.lightest_density = float(np.min(particles.mass / volume))
         self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0)
-        from .porosity import Porosity  # noqa: PLC0415 (until the shared module lands)
-
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
@@ -123,7 +122,7 @@ class Darcy(FluidModule):
 
     def _measure(self, state) -> None:
         s = self.pore.state
-        self.porosity.measure(state.particles, s.porosity, s.particle_velocity)
+        self.porosity.measure(state.particles, s.porosity, mean_velocity=s.particle_velocity)
 
     # -- particles -------------------------------------------------------------------------------
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from sphere_cli.config.fluid_darcy import DarcyFluid
-from sphere_cli.physics.pore_pressure import PorePressure
 from sphere_cli.physics.fluid_grid import FluidGrid
+from sphere_cli.physics.pore_pressure import PorePressure
 
 # shared: water, a fine sand [SI]
 VISCOSITY = 1.0e-3
@@ -55,7 +55,13 @@ def column(nz: int, height: float, fluid: dict, cells_xy=(1, 1), periodic_xy=(Fa
     bounded), with the porosity POROSITY everywhere; `fluid` holds the [fluid] keys."""
     h = height / nz
     config = DarcyFluid.model_validate(
-        {"model": "darcy", "viscosity": VISCOSITY, "compressibility": COMPRESSIBILITY, **fluid}
+        {
+            "model": "darcy",
+            "viscosity": VISCOSITY,
+            "compressibility": COMPRESSIBILITY,
+            "solver": {"tolerance": 1e-12},  # solve far below the discretisation errors measured
+            **fluid,
+        }
     )
     grid = FluidGrid(
         origin=np.zeros(3),
