@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from .fluid_grid import grid_cells
 from .schema import LAW_KEYS, Case, FilePlacement
 
 AXIS = {"x": 0, "y": 1, "z": 2}
@@ -87,11 +88,22 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
             )
 
     problems += _material_problems(case)
+    problems += _fluid_grid_problems(case, extent, diameter)
 
     frames = case.output.frames
     if frames.every_time is None and frames.every_steps is None and frames.every_wall_minutes is None:
         problems.append((("output", "frames"), "set every_time, every_steps or every_wall_minutes"))
     return problems
+
+
+def _fluid_grid_problems(case: Case, extent: list[float], diameter: float) -> list[tuple[tuple, str]]:
+    """The fluid grid against the largest particle the radius distribution can make (radii
+    read from a placement file are checked when the scene is built)."""
+    grid = getattr(case.fluid, "grid", None)
+    if grid is None or isinstance(case.particles.placement, FilePlacement):
+        return []
+    _, key, problem = grid_cells(grid, extent, diameter)
+    return [] if problem is None else [(("fluid", "grid", key), problem)]
 
 
 def particle_materials(case: Case) -> dict[str, float]:

@@ -10,6 +10,8 @@ smallest cell edge) is never smaller than a particle.
 
 from __future__ import annotations
 
+import math
+
 from pydantic import Field, model_validator
 
 from .base import Count, Real, Strict
@@ -46,3 +48,29 @@ class FluidGridConfig(Strict):
         if self.cells is not None and min(self.cells) < 1:
             raise ValueError(f"cells must be at least 1 along every axis, got {list(self.cells)}")
         return self
+
+
+def grid_cells(
+    config: FluidGridConfig, length, diameter: float
+) -> tuple[tuple[int, int, int], str, str | None]:
+    """Cells per axis for a box of edge lengths `length` (3,) [m] and particles of largest
+    diameter `diameter` [m]; the key that set them ("cells" or "cell_size"); and what is wrong
+    with them for the porosity estimate (None when nothing is)."""
+    if config.cells is not None:
+        key = "cells"
+        shape = tuple(int(n) for n in config.cells)
+    else:
+        key = "cell_size"
+        size = config.cell_size if config.cell_size is not None else AUTO_CELL_DIAMETERS * diameter
+        # a length that is a whole number of cells up to round-off gets that number
+        shape = tuple(max(1, math.floor(float(L) / size * (1.0 + 1e-12))) for L in length)
+    edges = [float(L) / n for L, n in zip(length, shape, strict=True)]
+    ax = min(range(3), key=lambda a: edges[a])
+    problem = None
+    if edges[ax] < diameter:
+        problem = (
+            f"cells of {edges[ax]:g} m along {'xyz'[ax]} are smaller than the largest particle "
+            f"diameter {diameter:g} m; the porosity estimate needs every cell edge at least that "
+            f"long (at most {math.floor(float(length[ax]) / diameter)} cells along {'xyz'[ax]})"
+        )
+    return shape, key, problem

@@ -8,12 +8,11 @@ shape (nx, ny, nz) (scalars) or (nx, ny, nz, 3) (vectors), C order.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..config.fluid_grid import AUTO_CELL_DIAMETERS, FluidGridConfig
+from ..config.fluid_grid import FluidGridConfig, grid_cells
 
 
 @dataclass(frozen=True)
@@ -55,31 +54,15 @@ def fluid_grid(config: FluidGridConfig, box, radius: np.ndarray, loaded=None) ->
     the largest particle diameter) is refused: with `loaded` (the LoadedCase) as its error naming
     the key under [fluid.grid] (exit 65), without it as a ValueError."""
 
-    def refuse(key: str, message: str):
-        if loaded is not None:
-            raise loaded.error(("fluid", "grid", key), message)
-        raise ValueError(f"fluid.grid.{key}: {message}")
-
     lower = np.asarray(box.lower, dtype=np.float64)
     length = np.asarray(box.upper, dtype=np.float64) - lower
     diameter = 2.0 * float(np.max(radius)) if len(radius) else 0.0
-    if config.cells is not None:
-        key = "cells"
-        shape = tuple(int(n) for n in config.cells)
-    else:
-        key = "cell_size"
-        size = config.cell_size if config.cell_size is not None else AUTO_CELL_DIAMETERS * diameter
-        # a length that is a whole number of cells up to round-off gets that number
-        shape = tuple(max(1, math.floor(float(L) / size * (1.0 + 1e-12))) for L in length)
+    shape, key, problem = grid_cells(config, length, diameter)
+    if problem is not None:
+        if loaded is not None:
+            raise loaded.error(("fluid", "grid", key), problem)
+        raise ValueError(f"fluid.grid.{key}: {problem}")
     spacing = length / np.array(shape, dtype=np.float64)
-    if spacing.min() < diameter:
-        ax = int(np.argmin(spacing))
-        refuse(
-            key,
-            f"cells of {spacing[ax]:g} m along {'xyz'[ax]} are smaller than the largest particle "
-            f"diameter {diameter:g} m; the porosity estimate needs every cell edge at least that "
-            f"long (at most {math.floor(length[ax] / diameter)} cells along {'xyz'[ax]})",
-        )
     return FluidGrid(
         origin=lower.copy(),
         spacing=spacing,

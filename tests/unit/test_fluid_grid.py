@@ -69,3 +69,22 @@ def test_cells_smaller_than_a_particle_are_refused_naming_the_key():
     assert message.startswith("<case>:4: fluid.grid.cell_size = 0.001: cells of 0.001 m along x")
     assert "largest particle diameter 0.003 m" in message and "at most 13 cells along x" in message
     assert info.value.exit_code == 65
+
+
+def test_case_check_applies_the_same_rule_before_anything_is_built():
+    """config/consistency.py refuses the grid from the radius distribution's largest radius
+    (what `sphere validate` reports); radii from a placement file wait for the builder."""
+    from sphere_cli.config.consistency import _fluid_grid_problems
+    from sphere_cli.config.schema import FilePlacement, LatticePlacement
+
+    extent = [0.04, 0.02, 0.06]
+    case = SimpleNamespace(
+        fluid=SimpleNamespace(grid=FluidGridConfig(cells=(8, 10, 12))),
+        particles=SimpleNamespace(placement=LatticePlacement()),
+    )
+    [(key, message)] = _fluid_grid_problems(case, extent, 0.003)
+    assert key == ("fluid", "grid", "cells") and "smaller than the largest particle diameter" in message
+    assert _fluid_grid_problems(case, extent, 0.002) == []
+    case.particles.placement = FilePlacement(method="file", path="beads.csv")
+    assert _fluid_grid_problems(case, extent, 0.003) == []
+    assert _fluid_grid_problems(SimpleNamespace(fluid=None, particles=case.particles), extent, 0.003) == []
