@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.consistency import particle_materials
 from ..config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
 from ..kernels.profile_forces import drag_coefficients, profile_forces
 from ..kernels.vans1d import MIXING_KINDS, advance_fluid, damp_mixing_length, mixing_length, shear_stress
@@ -103,11 +104,10 @@ class Vans1d(FluidModule):
         box = state.box
         self._check(loaded, box)
         p = state.particles
-        names = [m.name for m in loaded.case.materials]
         selected = np.ones(p.count, dtype=np.uint8)
         if cfg.materials:
-            ids = [names.index(name) for name in cfg.materials]
-            selected[:] = np.isin(p.material, ids)
+            names = list(particle_materials(loaded.case))  # material id k is the k-th name
+            selected[:] = np.isin(p.material, [names.index(name) for name in cfg.materials])
         selected &= (p.inv_mass > 0).astype(np.uint8)
         flow = cfg.flow
         solved = isinstance(flow, SolvedFlow)
@@ -168,11 +168,12 @@ class Vans1d(FluidModule):
                 f"the fluid surface must lie inside the box, above its bottom z = {bottom:g} m and at "
                 f"most at its top z = {top:g} m",
             )
-        names = [m.name for m in loaded.case.materials]
+        names = list(particle_materials(loaded.case))
         unknown = [name for name in cfg.materials if name not in names]
         if unknown:
             raise loaded.error(
-                ("fluid", "materials"), f"{unknown} not among the materials defined ({names or 'none'})"
+                ("fluid", "materials"),
+                f"{unknown}: no particle is made of it (particles.material names {names or 'none'})",
             )
 
     def dt_limit(self) -> tuple[float, str]:
