@@ -19,6 +19,7 @@ from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 CASE = """
 [simulation]
 duration = 0.01
+threads = 1
 [domain]
 upper = [0.008, 0.008, 0.012]
 periodic = [true, false, false]
