@@ -130,12 +130,19 @@ def test_resume_is_bitwise_identical(tmp_path: Path):
     assert np.any(a.arrays["fluid"]["pressure"] != 0.0)
 
 
-def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
-    """A dry scene builds and steps without importing the Darcy physics or kernels (the case
-    schema, config/fluid_darcy.py, is part of every case's validation)."""
-    dry = bed_case(0.0).split("[fluid]")[0] + "[output]\nframes = { every_steps = 100 }\n"
-    path = tmp_path / "dry.toml"
-    path.write_text(dry)
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+@pytest.mark.parametrize("kind", ["dry", "vans1d"])
+def test_scenes_without_darcy_do_not_load_it(kind, tmp_path: Path):
+    """A dry scene, and a scene of another fluid model (configs/bedload.toml, vans1d), build
+    and step without importing the Darcy physics or kernels (the case schema,
+    config/fluid_darcy.py, is part of every case's validation)."""
+    if kind == "dry":
+        path = tmp_path / "dry.toml"
+        path.write_text(bed_case(0.0).split("[fluid]")[0] + "[output]\nframes = { every_steps = 100 }\n")
+    else:
+        path = CONFIGS / "bedload.toml"
     script = textwrap.dedent(
         f"""
         import sys
@@ -144,8 +151,8 @@ def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
         from sphere_cli.simulation import advance
         scene = build_scene(load_case({str(path)!r}))
         advance(scene, 3)
-        assert scene.fluid is None
-        print(sorted(m for m in sys.modules if m.endswith("darcy") and ".config." not in m))
+        assert (scene.fluid is None) == ({kind!r} == "dry")
+        print(sorted(m for m in sys.modules if m.split(".")[-1] in ("darcy", "pore_pressure")))
         """
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
