@@ -68,25 +68,29 @@ class Stopwatch:
         self.owner, self.name = owner, name
         self.method = getattr(owner, name)
         self.seconds: list[float] = []
+        self.cpu: list[float] = []
         setattr(owner, name, self)
 
     def __call__(self, *args, **kwargs):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         result = self.method(*args, **kwargs)
         self.seconds.append(time.perf_counter() - start)
+        self.cpu.append(time.process_time() - cpu)
         return result
 
     def restore(self) -> None:
         setattr(self.owner, self.name, self.method)
 
 
-def timed_steps(scene, steps: int) -> list[float]:
-    times = []
+def timed_steps(scene, steps: int) -> tuple[list[float], list[float]]:
+    """Wall and process CPU time of each of `steps` steps [s]."""
+    wall, cpu = [], []
     for _ in range(steps):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         advance(scene, 1)
-        times.append(time.perf_counter() - start)
-    return times
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return wall, cpu
 
 
 def main(argv=None) -> None:
@@ -101,7 +105,7 @@ def main(argv=None) -> None:
     scene = build_scene(parse_case(case_text(args.cells, args.particles, args.tolerance)))
     build = time.perf_counter() - start
     fluid, state = scene.fluid, scene.state
-    first = timed_steps(scene, 1)[0]
+    first = timed_steps(scene, 1)[0][0]
     cold = fluid.pore.state.iterations
     print(f"numba {numba.__version__} ({numba.threading_layer()} threading layer)")
     print(
@@ -109,30 +113,33 @@ def main(argv=None) -> None:
         f"{first:.2f} s (compile or cache load, and the cold solve from p = 0: {cold} iterations)"
     )
     print(
-        "threads | coupled step [ms] | porosity [ms] | pressure step [ms] | solve iterations | "
-        "forces [ms] | DEM alone [ms] | M cell-updates/s (solve)"
+        "threads | coupled step [ms] wall (CPU) | porosity [ms] | pressure step [ms] wall (CPU) | "
+        "solve iterations | forces [ms] | DEM alone [ms] | M cell-updates/CPU-s (pressure step)"
     )
     med = statistics.median
     for threads in (int(t) for t in args.threads.split(",")):
         numba.set_num_threads(threads)
         timed_steps(scene, 2)
         watches = [Stopwatch(fluid, "_measure"), Stopwatch(fluid.pore, "advance"), Stopwatch(fluid, "forces")]
-        iterations = []
-        steps = []
+        iterations, steps, steps_cpu = [], [], []
         for _ in range(args.steps):
-            steps += timed_steps(scene, 1)
+            wall, cpu = timed_steps(scene, 1)
+            steps += wall
+            steps_cpu += cpu
             iterations.append(fluid.pore.state.iterations)
         for watch in watches:
             watch.restore()
         scene.fluid = None  # the same steps without the fluid: contacts, walls, integration
-        dem = timed_steps(scene, args.steps)
+        dem = timed_steps(scene, args.steps)[0]
         scene.fluid = fluid
         porosity, solve, forces = (med(w.seconds) for w in watches)
+        solve_cpu = med(watches[1].cpu)
         its = med(iterations)
-        updates = args.cells**3 * max(its, 1) / solve / 1e6
+        updates = args.cells**3 * max(its, 1) / solve_cpu / 1e6
         print(
-            f"{threads} | {1e3 * med(steps):.1f} | {1e3 * porosity:.1f} | {1e3 * solve:.1f} | {its:.0f} | "
-            f"{1e3 * forces:.2f} | {1e3 * med(dem):.1f} | {updates:.1f}",
+            f"{threads} | {1e3 * med(steps):.1f} ({1e3 * med(steps_cpu):.1f}) | {1e3 * porosity:.1f} | "
+            f"{1e3 * solve:.1f} ({1e3 * solve_cpu:.1f}) | {its:.0f} | {1e3 * forces:.2f} | "
+            f"{1e3 * med(dem):.1f} | {updates:.1f}",
             flush=True,
         )
 
