@@ -111,15 +111,10 @@ def test_periodic_z_is_refused(tmp_path):
 
 
 def test_dt_above_the_coupling_limit_names_it(tmp_path):
-    """k = 1e-14 m^2: the coupling's relaxation time rho_s k / mu = 2500 x 1e-14 / 1e-3 =
-    2.5e-8 s is below the contact limit; a dt of 1e-6 s is refused naming it."""
-    text = edit(
-        edit(
-            DARCY, 'model = "darcy"', 'model = "darcy"\npermeability = { model = "constant", value = 1e-14 }'
-        ),
-        'dt = "auto"',
-        "dt = 1e-6",
-    )
+    """k = 1e-14 m^2: the coupling's limit 0.2 rho_s k / mu = 0.2 x 2500 x 1e-14 / 1e-3 = 5e-9 s
+    is below the contact limit; a dt of 1e-6 s is refused naming it."""
+    law = 'permeability = { model = "constant", value = 1e-14 }'
+    text = edit(edit(DARCY, 'model = "darcy"', f'model = "darcy"\n{law}'), 'dt = "auto"', "dt = 1e-6")
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "2.5e-08 s")
+    assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "limit 5e-09 s")
