@@ -15,7 +15,6 @@ import pytest
 
 from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
-from sphere_cli.kernels.walls import wall_forces
 from sphere_cli.simulation import advance
 
 STILL_BED = """
@@ -47,15 +46,10 @@ flow = { kind = "solved", initial = "rest" }
 
 
 def floor_force(scene) -> np.ndarray:
-    """Total force of the floor on the particles [N], evaluated apart (springs not advanced)."""
-    p, w, c = scene.state.particles, scene.state.walls, scene.contact
-    force, torque = np.zeros_like(p.force), np.zeros_like(p.torque)
-    wall_forces(
-        p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.mass, p.inertia, p.material,
-        w.axis, w.sign, w.coord, w.table, w.hist.copy(), c.hertz, c.rolling, 0.0, scene.state.clock.dt,
-        force, torque,
-    )  # fmt: skip
-    return force.sum(axis=0)
+    """Total force of the floor on the particles [N] (the walls' own measurement: minus the
+    force the particles put on the wall)."""
+    scene.walls.measure(scene.state)
+    return -scene.state.walls.force[0]
 
 
 def test_static_immersed_bed_floor_carries_the_buoyant_weight():
