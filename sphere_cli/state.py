@@ -7,7 +7,7 @@ them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -74,16 +74,19 @@ class Particles:
 
 @dataclass
 class NeighborList:
-    """Verlet list with skin and the tangential spring of every listed pair (see kernels)."""
+    """Half Verlet list with skin and the tangential spring of every listed pair (see
+    kernels/neighbors.py): row i lists the j > i near i, so each pair appears once."""
 
     skin: float  # [m]
-    nbr: np.ndarray  # (N,C) int32
+    nbr: np.ndarray  # (N,C) int32, row i: the j > i within reach, ascending
     nbr_count: np.ndarray  # (N,) int32
-    hist: np.ndarray  # (N,C,3) [m]
+    hist: np.ndarray  # (N,C,3) [m] spring of pair (i, nbr[i, k]) seen from i
     ref_pos: np.ndarray  # (N,3) positions at the last build [m]
+    # reverse list, derived from the above at every build and restore (not state): rev[i] holds
+    # the flat slots j*C + k of the pairs (j, i) with j < i, ascending in j
+    rev: np.ndarray | None = None  # (N,R) int32
+    rev_count: np.ndarray | None = None  # (N,) int32
     builds: int = 0
-    # double buffers and cell-list scratch (not state: rebuilt from the above)
-    spare: dict = field(default_factory=dict)
 
     PROGNOSTIC = ("nbr", "nbr_count", "hist", "ref_pos")
 

@@ -44,6 +44,7 @@ limit); out force, torque (N,3) [N, N m].
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from .neighbors import minimum_image
@@ -156,17 +157,19 @@ def pair_forces(
     table,
     hertz,
     rolling,
-    body_acc,
     length,
     periodic,
     spring_dt,
     step_dt,
-    force,
-    torque,
+    slots,
 ):
-    """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle."""
+    """Force of every listed pair (i, j = nbr[i, k]) into its slot s = i*C + k: slots[s, 0:3] the
+    force on i (fn n + F_t), slots[s, 3:6] the cross product n x F_t (the torque of F_t on i is
+    -r_i n x F_t, on j -r_j n x F_t), and with rolling slots[s, 6:9] the rolling torque on i
+    (on j: its negative). Zero for a pair that does not touch."""
     n = pos.shape[0]
     cap = nbr.shape[1]
+    width = slots.shape[1]
     # one material: the parameters are loop constants
     single = table.shape[0] == 1
     kn = table[0, 0, K_N]
@@ -179,18 +182,28 @@ def pair_forces(
         ri = radius[i]
         mi = mass[i]
         ci = 0 if single else material[i]
-        f0 = mi * body_acc[0]
-        f1 = mi * body_acc[1]
-        f2 = mi * body_acc[2]
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
+        x0 = pos[i, 0]
+        x1 = pos[i, 1]
+        x2 = pos[i, 2]
+        vi0 = vel[i, 0]
+        vi1 = vel[i, 1]
+        vi2 = vel[i, 2]
+        wi0 = ri * angvel[i, 0]
+        wi1 = ri * angvel[i, 1]
+        wi2 = ri * angvel[i, 2]
+        pi0 = vel_pred[i, 0]
+        pi1 = vel_pred[i, 1]
+        pi2 = vel_pred[i, 2]
+        qi0 = ri * angvel_pred[i, 0]
+        qi1 = ri * angvel_pred[i, 1]
+        qi2 = ri * angvel_pred[i, 2]
         count = min(nbr_count[i], cap)
         for k in range(count):
-            j = nbr[i, k]
-            d0 = minimum_image(pos[i, 0] - pos[j, 0], length[0], periodic[0])
-            d1 = minimum_image(pos[i, 1] - pos[j, 1], length[1], periodic[1])
-            d2 = minimum_image(pos[i, 2] - pos[j, 2], length[2], periodic[2])
+            s = np.uint64(i * cap + k)
+            j = np.uint64(nbr[i, k])  # unsigned: no negative-index wraparound code
+            d0 = minimum_image(x0 - pos[j, 0], length[0], periodic[0])
+            d1 = minimum_image(x1 - pos[j, 1], length[1], periodic[1])
+            d2 = minimum_image(x2 - pos[j, 2], length[2], periodic[2])
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             rj = radius[j]
             reach = ri + rj
@@ -199,6 +212,8 @@ def pair_forces(
                     hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
                     hist[i, k, 1] = 0.0
                     hist[i, k, 2] = 0.0
+                for c in range(width):
+                    slots[s, c] = 0.0
                 continue
             if not single:
                 cj = material[j]
@@ -215,20 +230,20 @@ def pair_forces(
             n2 = d2 * inv
             delta = reach - dist
             # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
-            s0 = ri * angvel[i, 0] + rj * angvel[j, 0]
-            s1 = ri * angvel[i, 1] + rj * angvel[j, 1]
-            s2 = ri * angvel[i, 2] + rj * angvel[j, 2]
-            v0 = (vel[i, 0] - vel[j, 0]) - (s1 * n2 - s2 * n1)
-            v1 = (vel[i, 1] - vel[j, 1]) - (s2 * n0 - s0 * n2)
-            v2 = (vel[i, 2] - vel[j, 2]) - (s0 * n1 - s1 * n0)
+            s0 = wi0 + rj * angvel[j, 0]
+            s1 = wi1 + rj * angvel[j, 1]
+            s2 = wi2 + rj * angvel[j, 2]
+            v0 = (vi0 - vel[j, 0]) - (s1 * n2 - s2 * n1)
+            v1 = (vi1 - vel[j, 1]) - (s2 * n0 - s0 * n2)
+            v2 = (vi2 - vel[j, 2]) - (s0 * n1 - s1 * n0)
             vn = v0 * n0 + v1 * n1 + v2 * n2
             # the same at the predicted full step, for the dashpots
-            q0 = ri * angvel_pred[i, 0] + rj * angvel_pred[j, 0]
-            q1 = ri * angvel_pred[i, 1] + rj * angvel_pred[j, 1]
-            q2 = ri * angvel_pred[i, 2] + rj * angvel_pred[j, 2]
-            u0 = (vel_pred[i, 0] - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
-            u1 = (vel_pred[i, 1] - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
-            u2 = (vel_pred[i, 2] - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
+            q0 = qi0 + rj * angvel_pred[j, 0]
+            q1 = qi1 + rj * angvel_pred[j, 1]
+            q2 = qi2 + rj * angvel_pred[j, 2]
+            u0 = (pi0 - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
+            u1 = (pi1 - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
+            u2 = (pi2 - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
             un = u0 * n0 + u1 * n1 + u2 * n2
             mj = mass[j]
             root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
@@ -258,32 +273,79 @@ def pair_forces(
                 u1 - un * n1,
                 u2 - un * n2,
             )
-            f0 += fn * n0 + g0
-            f1 += fn * n1 + g1
-            f2 += fn * n2 + g2
-            # torque of F_t applied at the contact point x_i - r_i n
-            t0 -= ri * (n1 * g2 - n2 * g1)
-            t1 -= ri * (n2 * g0 - n0 * g2)
-            t2 -= ri * (n0 * g1 - n1 * g0)
-            if rolling and mu_r > 0.0:
-                ii = inertia[i]
-                ij = inertia[j]
-                m0, m1, m2 = rolling_torque(
-                    angvel[i, 0] - angvel[j, 0],
-                    angvel[i, 1] - angvel[j, 1],
-                    angvel[i, 2] - angvel[j, 2],
-                    n0,
-                    n1,
-                    n2,
-                    mu_r,
-                    r_eff,
-                    fn,
-                    ii * ij / (ii + ij),
-                    step_dt,
-                )
-                t0 += m0
-                t1 += m1
-                t2 += m2
+            slots[s, 0] = fn * n0 + g0
+            slots[s, 1] = fn * n1 + g1
+            slots[s, 2] = fn * n2 + g2
+            # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
+            slots[s, 3] = n1 * g2 - n2 * g1
+            slots[s, 4] = n2 * g0 - n0 * g2
+            slots[s, 5] = n0 * g1 - n1 * g0
+            if rolling:
+                m0 = 0.0
+                m1 = 0.0
+                m2 = 0.0
+                if mu_r > 0.0:
+                    ii = inertia[i]
+                    ij = inertia[j]
+                    m0, m1, m2 = rolling_torque(
+                        angvel[i, 0] - angvel[j, 0],
+                        angvel[i, 1] - angvel[j, 1],
+                        angvel[i, 2] - angvel[j, 2],
+                        n0,
+                        n1,
+                        n2,
+                        mu_r,
+                        r_eff,
+                        fn,
+                        ii * ij / (ii + ij),
+                        step_dt,
+                    )
+                slots[s, 6] = m0
+                slots[s, 7] = m1
+                slots[s, 8] = m2
+
+
+@njit(cache=True, parallel=True)
+def gather_pair_forces(slots, nbr, nbr_count, rev, rev_count, radius, mass, body_acc, rolling, force, torque):
+    """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle,
+    summed in ascending partner index: first the pairs (j, i), j < i, from the reverse list
+    (their slots hold the force on j: subtract), then the own row (add)."""
+    n = force.shape[0]
+    cap = nbr.shape[1]
+    rcap = rev.shape[1]
+    for i in prange(n):
+        ri = radius[i]
+        mi = mass[i]
+        f0 = mi * body_acc[0]
+        f1 = mi * body_acc[1]
+        f2 = mi * body_acc[2]
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        for m in range(min(rev_count[i], rcap)):
+            s = np.uint64(rev[i, m])
+            f0 -= slots[s, 0]
+            f1 -= slots[s, 1]
+            f2 -= slots[s, 2]
+            t0 -= ri * slots[s, 3]
+            t1 -= ri * slots[s, 4]
+            t2 -= ri * slots[s, 5]
+            if rolling:
+                t0 -= slots[s, 6]
+                t1 -= slots[s, 7]
+                t2 -= slots[s, 8]
+        for k in range(min(nbr_count[i], cap)):
+            s = np.uint64(i * cap + k)
+            f0 += slots[s, 0]
+            f1 += slots[s, 1]
+            f2 += slots[s, 2]
+            t0 -= ri * slots[s, 3]
+            t1 -= ri * slots[s, 4]
+            t2 -= ri * slots[s, 5]
+            if rolling:
+                t0 += slots[s, 6]
+                t1 += slots[s, 7]
+                t2 += slots[s, 8]
         force[i, 0] = f0
         force[i, 1] = f1
         force[i, 2] = f2

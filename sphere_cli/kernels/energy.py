@@ -2,7 +2,7 @@
 
 kinetic: sum m v^2/2 + I w^2/2; potential: -sum m g.x; elastic: normal k_n delta^2/2 (linear) or
 (2/5) k_h delta^{5/2} (Hertz, the work of (4/3) E* sqrt(R*) delta^{3/2}) plus tangential
-k_t |xi|^2/2 per contact, each pair seen from both sides and so halved; walls count once.
+k_t |xi|^2/2 per contact; the half neighbour list holds each pair once.
 Arguments as in contact.py / walls.py (table (M,M,6), wall_table (W,M,6)). Sums are serial, in
 particle order, so results do not depend on the thread count.
 """
@@ -63,9 +63,8 @@ def pair_elastic_energy(pos, radius, material, nbr, nbr_count, hist, table, hert
                 xi2 = hist[i, k, 0] ** 2 + hist[i, k, 1] ** 2 + hist[i, k, 2] ** 2
                 row = table[0, 0] if single else table[material[i], material[j]]
                 r_eff = radius[i] * radius[j] / reach
-                total += 0.5 * _elastic(row, hertz, delta, r_eff, xi2)
-                if j > i:
-                    touching += 1
+                total += _elastic(row, hertz, delta, r_eff, xi2)
+                touching += 1
     return total, touching
 
 

@@ -1,14 +1,19 @@
 """Verlet neighbour lists built from a cell list, with the contact history carried across rebuilds.
 
-A full list: row i holds every j (sorted ascending) with |x_i - x_j| < r_i + r_j + skin, so a
-force kernel can gather each particle's contacts and write only its own force (no races).
+A half list: row i holds every j > i (sorted ascending) with |x_i - x_j| < r_i + r_j + skin, so
+each pair is listed, and its force computed, once. The reverse list gives each particle the
+pairs in which it is the second member: rev[i] holds the flat slot j*C + k of every pair (j, i),
+j < i, with nbr[j, k] = i, sorted by j. A force kernel writes each pair's force into the pair's
+own slot, and each particle then gathers its reverse slots and its own row in that fixed order
+(ascending partner index), so the sums do not depend on the thread count (design guide 3).
 The list stays valid until some particle has moved skin/2 since the build.
 
-Arguments (N particles, C neighbour slots per particle):
+Arguments (N particles, C neighbour slots per particle, R reverse slots per particle):
   pos (N,3) [m], radius (N,) [m], lower/length (3,) box corner and edge [m],
-  periodic (3,) uint8, nbr (N,C) int32, nbr_count (N,) int32, hist (N,C,3) [m] tangential springs.
-Capacity: a row that would exceed C stores C entries and records its true count; the caller
-sees count > C, grows C and rebuilds (no contact is ever dropped silently).
+  periodic (3,) uint8, nbr (N,C) int32, nbr_count (N,) int32, hist (N,C,3) [m] tangential springs
+  (pair (i, nbr[i, k]) seen from i), rev (N,R) int32, rev_count (N,) int32.
+Capacity: a row that would exceed C (or R) stores what fits and records its true count; the
+caller sees count > C, grows the list and rebuilds (no contact is ever dropped silently).
 """
 
 import numpy as np
@@ -85,7 +90,7 @@ def build_lists(
     nbr_count,
     hist,
 ):
-    """Fill nbr/nbr_count/hist for every particle, copying each surviving pair's history."""
+    """Fill the half rows nbr/nbr_count/hist, copying each surviving pair's history."""
     n = pos.shape[0]
     cap = nbr.shape[1]
     offx = _axis_offsets(ncell[0], periodic[0])
@@ -118,7 +123,7 @@ def build_lists(
                     g = (gx * ncell[1] + gy) * ncell[2] + gz
                     for s in range(cell_start[g], cell_start[g + 1]):
                         j = order[s]
-                        if j == i:
+                        if j <= i:
                             continue
                         d2 = 0.0
                         for a in range(3):
@@ -159,6 +164,27 @@ def build_lists(
                 hist[i, k, a] = 0.0
 
 
+@njit(cache=True)
+def build_reverse(nbr, nbr_count, rev, rev_count):
+    """Fill rev/rev_count from the half rows: the slots j*C + k of the pairs (j, i), j < i,
+    in ascending j (a serial pass over j keeps that order). Returns the longest reverse row
+    (more than R: the caller grows rev and calls again)."""
+    cap = nbr.shape[1]
+    rcap = rev.shape[1]
+    rev_count[:] = 0
+    longest = 0
+    for j in range(nbr.shape[0]):
+        for k in range(min(nbr_count[j], cap)):
+            i = nbr[j, k]
+            m = rev_count[i]
+            if m < rcap:
+                rev[i, m] = j * cap + k
+            rev_count[i] = m + 1
+            if m + 1 > longest:
+                longest = m + 1
+    return longest
+
+
 @njit(cache=True, parallel=True)
 def max_displacement_sq(pos, ref_pos, length, periodic):
     """Largest squared displacement since the list was built (minimum image) [m^2].
@@ -182,8 +208,6 @@ def worst_overlap(pos, radius, nbr, nbr_count, length, periodic):
     for i in range(pos.shape[0]):
         for k in range(min(nbr_count[i], nbr.shape[1])):
             j = nbr[i, k]
-            if j < i:
-                continue
             d2 = 0.0
             for a in range(3):
                 d = minimum_image(pos[i, a] - pos[j, a], length[a], periodic[a])

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from ..kernels.contact import D_N, K_N, K_T
+from ..kernels.contact import D_N, K_N, K_T, gather_pair_forces
 from ..kernels.contact import pair_forces as pair_forces_kernel
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
@@ -50,12 +50,18 @@ class PairContactForces:
         self.table = np.ascontiguousarray(tables.table)
         self.hertz = tables.hertz
         self.rolling = tables.rolling
+        # per-pair slots (scratch, sized with the neighbour list): force on the first member,
+        # n x F_t, and the rolling torque when rolling resistance is on (kernels/contact.py)
+        self.width = 9 if self.rolling else 6
+        self.slots = np.zeros((0, self.width))
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
         `spring_dt` (default: one step; 0 for the forces of the initial state)."""
         p, box, nl = state.particles, state.box, state.neighbors
         dt = state.clock.dt
+        if self.slots.shape[0] != nl.nbr.size:
+            self.slots = np.zeros((nl.nbr.size, self.width))
         pair_forces_kernel(
             p.pos,
             p.vel,
@@ -72,11 +78,22 @@ class PairContactForces:
             self.table,
             self.hertz,
             self.rolling,
-            box.body_acc,
             box.length,
             box.periodic,
             dt if spring_dt is None else spring_dt,
             dt,
+            self.slots,
+        )
+        gather_pair_forces(
+            self.slots,
+            nl.nbr,
+            nl.nbr_count,
+            nl.rev,
+            nl.rev_count,
+            p.radius,
+            p.mass,
+            box.body_acc,
+            self.rolling,
             p.force,
             p.torque,
         )

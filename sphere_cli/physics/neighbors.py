@@ -1,11 +1,13 @@
-"""Neighbour search (prepare phase): keep the Verlet list valid, rebuilding it when some
-particle has moved half the skin, and growing its capacity when a row overflows."""
+"""Neighbour search (prepare phase): keep the half Verlet list and its reverse list valid,
+rebuilding them when some particle has moved half the skin, and growing their capacity when a
+row overflows."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.neighbors import build_lists, cell_index, counting_sort, max_displacement_sq
+from ..errors import NumericalError
+from ..kernels.neighbors import build_lists, build_reverse, cell_index, counting_sort, max_displacement_sq
 from ..state import NeighborList, State
 
 INITIAL_CAPACITY = 16
@@ -18,6 +20,8 @@ def allocate_neighbor_list(n: int, skin: float, capacity: int = INITIAL_CAPACITY
         nbr_count=np.zeros(n, dtype=np.int32),
         hist=np.zeros((n, capacity, 3)),
         ref_pos=np.zeros((n, 3)),
+        rev=np.zeros((n, capacity), dtype=np.int32),
+        rev_count=np.zeros(n, dtype=np.int32),
     )
 
 
@@ -78,6 +82,21 @@ class NeighborSearch:
         nl.hist, self.spare_hist = self.spare_hist, nl.hist
         nl.ref_pos[:] = p.pos
         nl.builds += 1
+        self._reverse(nl)
+
+    @staticmethod
+    def _reverse(nl: NeighborList) -> None:
+        """Rebuild the reverse list from the half rows, widening it if a row overflows."""
+        if nl.nbr.size >= 2**31:
+            raise NumericalError(
+                f"the neighbour list needs {nl.nbr.shape[0]} x {nl.nbr.shape[1]} pair slots, more than the "
+                "2^31 its int32 slot indices address; use fewer particles per run or a smaller neighbor_skin"
+            )
+        while True:
+            longest = build_reverse(nl.nbr, nl.nbr_count, nl.rev, nl.rev_count)
+            if longest <= nl.rev.shape[1]:
+                return
+            nl.rev = np.zeros((nl.nbr.shape[0], max(longest + 4, int(1.5 * nl.rev.shape[1]))), dtype=np.int32)
 
     def _grow(self, nl: NeighborList, needed: int) -> None:
         """Widen every row to hold `needed` (plus headroom), keeping the current list intact."""
@@ -104,6 +123,26 @@ class NeighborSearch:
         nl = state.neighbors
         for name in NeighborList.PROGNOSTIC:
             setattr(nl, name, np.array(arrays[name]))
+        _keep_upper_half(nl)
         self._spare_like(nl)
+        self._reverse(nl)
         if float(arrays["skin"]) != nl.skin:
             self.rebuild(state)
+
+
+def _keep_upper_half(nl: NeighborList) -> None:
+    """A checkpoint written before the half list holds full rows (each pair twice, its two
+    springs exact negatives): keep each row's j > i, which is the half list of the same build."""
+    n, cap = nl.nbr.shape
+    listed = np.arange(cap)[None, :] < np.minimum(nl.nbr_count, cap)[:, None]
+    keep = listed & (nl.nbr > np.arange(n)[:, None])
+    if np.array_equal(keep, listed):
+        return
+    slot = np.cumsum(keep, axis=1) - 1
+    rows, cols = np.nonzero(keep)
+    nbr = np.zeros_like(nl.nbr)
+    hist = np.zeros_like(nl.hist)
+    nbr[rows, slot[rows, cols]] = nl.nbr[rows, cols]
+    hist[rows, slot[rows, cols]] = nl.hist[rows, cols]
+    nl.nbr, nl.hist = nbr, hist
+    nl.nbr_count = keep.sum(axis=1).astype(np.int32)
