@@ -157,7 +157,10 @@ def bench(
     repeats: int = typer.Option(3, "--repeats", help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
     output: Path = typer.Option(
-        Path("bench-results"), "-o", "--output", help="Folder for results and the settled beds."
+        Path("bench-results"),
+        "-o",
+        "--output",
+        help="Folder for the results (the settled beds are cached in the user cache directory).",
     ),
 ) -> None:
     """Benchmark the canonical scene: particle-steps per second for each size, state and thread count."""

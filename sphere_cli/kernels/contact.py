@@ -169,7 +169,6 @@ def pair_forces(
     (on j: its negative). Zero for a pair that does not touch."""
     n = pos.shape[0]
     cap = nbr.shape[1]
-    width = slots.shape[1]
     # one material: the parameters are loop constants
     single = table.shape[0] == 1
     kn = table[0, 0, K_N]
@@ -212,8 +211,16 @@ def pair_forces(
                     hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
                     hist[i, k, 1] = 0.0
                     hist[i, k, 2] = 0.0
-                for c in range(width):
-                    slots[s, c] = 0.0
+                slots[s, 0] = 0.0
+                slots[s, 1] = 0.0
+                slots[s, 2] = 0.0
+                slots[s, 3] = 0.0
+                slots[s, 4] = 0.0
+                slots[s, 5] = 0.0
+                if rolling:
+                    slots[s, 6] = 0.0
+                    slots[s, 7] = 0.0
+                    slots[s, 8] = 0.0
                 continue
             if not single:
                 cj = material[j]
