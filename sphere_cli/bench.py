@@ -104,20 +104,17 @@ def _time_steps(scene, steps: int, repeats: int) -> list[float]:
 
 
 def bytes_per_particle(scene) -> float:
+    """Every array the time loop keeps per particle, scratch included, divided by N."""
     state = scene.state
-    arrays = [getattr(state.particles, name) for name in state.particles.PROGNOSTIC]
+    p = state.particles
+    arrays = [getattr(p, name) for name in p.PROGNOSTIC] + [p.vel_pred, p.angvel_pred]
     nl = state.neighbors
-    arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos]
-    arrays += [
-        scene.neighbors.spare_nbr,
-        scene.neighbors.spare_count,
-        scene.neighbors.spare_hist,
-        scene.neighbors.cell_of,
-        scene.neighbors.order,
-    ]
+    arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos, nl.rev, nl.rev_count, scene.contact.slots]
+    search = scene.neighbors
+    arrays += [search.spare_nbr, search.spare_count, search.spare_hist, search.cell_of, search.order]
     if state.walls is not None:
         arrays.append(state.walls.hist)
-    return sum(a.nbytes for a in arrays) / state.particles.count
+    return sum(a.nbytes for a in arrays) / p.count
 
 
 def run_benchmark(

@@ -28,18 +28,21 @@ so that it stops, and never reverses, the relative rolling within one step. The 
 contact: a sphere braked by several contacts at once can overshoot, leaving a jitter of its spin
 at rest bounded by one step's rolling impulse (sum of mu_r R* F_n) dt/I.
 
-Gather form: a prange over particles, each summing over its own neighbour row and writing only
-its own force, torque and history row. Every operation is antisymmetric in (i, j), so the
-two copies of a pair's history stay exact negatives and the forces are equal and opposite to
-the last bit.
+Half list with per-pair slots (design guide 3): pair_forces computes each listed pair (i, j > i)
+once, in a prange over i, and writes the force on i and the torque terms into the pair's own slot;
+gather_pair_forces then sums, for each particle, its pairs in ascending partner index (the
+reverse list for j < i, its own row for j > i). Every operation is antisymmetric in (i, j), so
+the force on j is exactly the negative of the force on i, and the sums are bitwise those a full
+list computing each pair from both sides would give; neither depends on the thread count.
 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
-(N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32, nbr_count (N,);
+(N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32 half rows,
+nbr_count (N,); rev (N,R) int32 reverse slots, rev_count (N,) (kernels/neighbors.py);
 hist (N,C,3) [m]; table (M,M,6) per pair of materials, columns K_N, K_T, D_N, D_T, MU, MU_R as
 above [N/m or Pa, N/m or Pa, kg^1/2/s or (Pa kg)^1/2 m^-1/2, same, -, -]; hertz, rolling flags;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
-limit); out force, torque (N,3) [N, N m].
+limit); slots (N*C, 6 or 9 with rolling) [N, N, N m]; out force, torque (N,3) [N, N m].
 """
 
 import math

@@ -1,7 +1,7 @@
 """Periodic boundaries and momentum conservation of the DEM contact forces.
 
-Sources: Newton's third law for pair forces (the contact kernel computes each pair from both
-sides with operations antisymmetric in (i, j), kernels/contact.py), and the translation
+Sources: Newton's third law for pair forces (the contact kernel computes each pair once, with
+operations antisymmetric in (i, j), and applies it to both, kernels/contact.py), and the translation
 invariance of a periodic box (Allen & Tildesley, Computer Simulation of Liquids, 2nd ed.,
 section 1.5.2: minimum-image convention): a collision straddling a periodic face must be the
 same collision as one in the middle of the box.
