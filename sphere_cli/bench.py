@@ -12,6 +12,7 @@ Compile (or cache-load) time is measured apart from run time; each timing is the
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -23,7 +24,7 @@ import numba
 import numpy as np
 
 from .build.scene import build_scene
-from .config.load import parse_case, physics_hash, resolved_dict
+from .config.load import parse_case
 from .io.checkpoint import newest_valid_checkpoint
 from .simulation import advance
 
@@ -70,8 +71,10 @@ keep = 1
 
 
 def settled_cache_dir(n: int) -> Path:
-    """Where the settled bed of N spheres is kept: the user cache, keyed by N and the physics."""
-    digest = physics_hash(resolved_dict(parse_case(canonical_case(n, SETTLE_TIME)).case))
+    """Where the settled bed of N spheres is kept: the user cache, keyed by the text of the
+    settling case (N and every parameter). A change of the code's defaults is not seen: delete
+    the folder to settle again."""
+    digest = hashlib.sha256(canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS).encode()).hexdigest()
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return base / "sphere" / "bench" / f"settled-{n}-{digest[:12]}"
 
