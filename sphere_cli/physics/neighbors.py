@@ -10,10 +10,12 @@ from ..errors import NumericalError
 from ..kernels.neighbors import build_lists, build_reverse, cell_index, counting_sort, max_displacement_sq
 from ..state import NeighborList, State
 
-INITIAL_CAPACITY = 16
+INITIAL_CAPACITY = 8  # half rows: a settled monodisperse bed lists at most ~10 (the list grows on overflow)
 
 
-def allocate_neighbor_list(n: int, skin: float, capacity: int = INITIAL_CAPACITY) -> NeighborList:
+def allocate_neighbor_list(n: int, skin: float, capacity: int | None = None) -> NeighborList:
+    if capacity is None:
+        capacity = INITIAL_CAPACITY  # read at call time (tests change it)
     return NeighborList(
         skin=skin,
         nbr=np.zeros((n, capacity), dtype=np.int32),

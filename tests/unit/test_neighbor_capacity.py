@@ -43,6 +43,7 @@ def test_overflowing_rows_grow_and_match_a_roomy_list(monkeypatch):
     tight = _scene(2, monkeypatch)
     roomy = _scene(64, monkeypatch)
     nl_t, nl_r = tight.state.neighbors, roomy.state.neighbors
+    assert nl_r.nbr.shape[1] == 64 and nl_t.nbr.shape[1] < 64  # each list got its own capacity
     assert nl_r.nbr_count.max() > 2, "the scene must overflow a capacity of 2"
     assert nl_t.nbr.shape[1] >= nl_t.nbr_count.max()  # grew to hold every row
     for i in range(nl_t.nbr_count.size):
