@@ -1,18 +1,162 @@
-"""Case-file section `[fluid]` with `model = "navier-stokes"`:
-Porous (volume-averaged) Navier-Stokes flow on a regular grid coupled to the particles by drag.
+"""`[fluid] model = "navier-stokes"`: the porous (volume-averaged) Navier-Stokes equations on the
+regular fluid grid, coupled to the particles (sphere-fluid-particle-interaction.md).
+
+The equations, the discretisation and the choices behind the defaults are in
+sphere_cli/kernels/navier_stokes.py and docs/user-guide.md ("Fluid flow (porous Navier-Stokes)").
 """
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from .base import Strict
+from .base import Count, Flag, Real, Strict, _default_tag
+from .drag import DragConfig
+from .fluid_grid import FluidGridConfig
+
+
+class NoFlowBoundary(Strict):
+    """A closed boundary: no flow through it (Neumann for the pressure correction)."""
+
+    type: Literal["no-flow"] = "no-flow"
+    no_slip: Flag = Field(
+        False,
+        description="The velocity along the boundary vanishes there too (otherwise free slip) [-].",
+    )
+
+
+class PressureBoundary(Strict):
+    """An open boundary at a prescribed pressure (Dirichlet), optionally modulated in time:
+    p_b(t) = pressure + amplitude sin(2 pi frequency t + phase). Fluid may flow through it."""
+
+    type: Literal["pressure"]
+    pressure: Real = Field(0.0, description="Mean pressure at the boundary face [Pa].")
+    amplitude: Real = Field(0.0, ge=0, description="Amplitude of the sinusoidal modulation [Pa].")
+    frequency: Real = Field(0.0, ge=0, description="Frequency of the modulation [Hz].")
+    phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
+    no_slip: Flag = Field(
+        False,
+        description="The velocity along the boundary vanishes there (otherwise free slip) [-].",
+    )
+
+    def value(self, time: float) -> float:
+        """Boundary pressure at `time` [s] -> [Pa]."""
+        return self.pressure + self.amplitude * math.sin(2.0 * math.pi * self.frequency * time + self.phase)
+
+
+Boundary = Annotated[NoFlowBoundary | PressureBoundary, Field(discriminator="type")]
+
+
+class PressureSolverConfig(Strict):
+    """Solver of the pressure equation of every fluid step."""
+
+    method: Literal["pcg", "jacobi"] = Field(
+        "pcg",
+        description=(
+            '"pcg": conjugate gradient preconditioned with the diagonal (fast); "jacobi": the '
+            "reference's Jacobi iteration, kept to compare (needs far more iterations) [-]."
+        ),
+    )
+    tolerance: Real = Field(
+        1e-10,
+        gt=0,
+        lt=1,
+        description="Stop when ||b - A x|| / ||b|| of the pressure equation is at most this [-].",
+    )
+    max_iterations: Count = Field(
+        100_000,
+        ge=1,
+        description="A solve that has not converged after this many iterations stops the run (exit 70) [-].",
+    )
+
+
+class CouplingConfig(Strict):
+    """How the fluid steps interleave with the DEM steps: the DEM takes ndem steps in the fluid
+    field of the last fluid step, then the fluid takes one step over the same time with the
+    particles where they are now. Give ndem, or fluid_dt, not both."""
+
+    ndem: Count | None = Field(
+        None,
+        ge=1,
+        description=(
+            'DEM steps per fluid step (default 1): the fluid step is ndem dt, and dt ("auto" or '
+            "given) must satisfy the fluid's limits divided by ndem [-]."
+        ),
+    )
+    fluid_dt: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "The fluid step instead, sub-stepped by the DEM: ndem = floor(fluid_dt / dt) DEM steps "
+            "(at least one) per fluid step of ndem dt. fluid_dt itself must satisfy the fluid's "
+            "limits, and dt may not exceed it [s]."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if self.ndem is not None and self.fluid_dt is not None:
+            raise ValueError("give either ndem or fluid_dt, not both")
+        return self
 
 
 class NavierStokesFluid(Strict):
-    """Porous (volume-averaged) Navier-Stokes flow on a regular
-    grid coupled to the particles by drag."""
+    """A Newtonian fluid filling the pores: porous Navier-Stokes on the fluid grid, x and y
+    periodic, z bounded by the bottom and top boundaries."""
 
     model: Literal["navier-stokes"] = Field(description="Selects this fluid model.")
+    grid: FluidGridConfig = Field(default_factory=FluidGridConfig, description="The fluid grid.")
+    density: Real = Field(1000.0, gt=0, description="Fluid density rho [kg/m^3].")
+    viscosity: Real = Field(1e-3, gt=0, description="Dynamic viscosity mu [Pa s].")
+    formulation: Literal["A", "B"] = Field(
+        "A",
+        description=(
+            '"A": the pressure acts in both phases (momentum -phi grad p; Zhu et al. 2007 model A, '
+            'the older sphere page); "B": in the fluid only (momentum -grad p; model B, the newer '
+            "page). Default A: it holds for unsteady and non-uniform flow, while B is only "
+            "conditionally valid (Zhou et al. 2010, J. Fluid Mech. 661) [-]."
+        ),
+    )
+    beta: Real = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description=(
+            "Weight of the old pressure in the predictor (Langtangen et al. 2002): 0 is Chorin's "
+            "projection, where every step solves for the whole pressure, so solver tolerances "
+            "never accumulate in it (default); 1 is the incremental form [-]."
+        ),
+    )
+    bottom: Boundary = Field(
+        default_factory=NoFlowBoundary, description="Boundary at the lower z face of the box."
+    )
+    top: Boundary = Field(
+        default_factory=lambda: PressureBoundary(type="pressure"),
+        description="Boundary at the upper z face of the box (default: open at 0 Pa).",
+    )
+    solver: PressureSolverConfig = Field(
+        default_factory=PressureSolverConfig, description="Solver of the pressure equation."
+    )
+    coupling: CouplingConfig = Field(
+        default_factory=CouplingConfig, description="Fluid steps against DEM steps."
+    )
+    drag: DragConfig = Field(
+        default_factory=DragConfig, description="Momentum exchange between particles and fluid."
+    )
+    max_speed: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "Largest fluid speed expected [m/s]: the advective limit sum |u_i| dt_f/dx_i <= 1 is "
+            'then checked before the run (and honoured by dt = "auto"). Whether given or not, '
+            "the run stops (exit 70) naming the cell if the fluid ever exceeds that limit."
+        ),
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_tags(cls, data):
+        data = _default_tag(data, "bottom", "type", "no-flow")
+        return _default_tag(data, "top", "type", "pressure")

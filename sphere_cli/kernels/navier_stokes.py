@@ -1,0 +1,286 @@
+"""Porous (volume-averaged) Navier-Stokes on a regular cell-centred grid, by operator splitting
+(Langtangen et al. 2002, as in sphere's documentation: shared/reference/sphere-fluid-*.{md,rst}).
+
+Momentum, with porosity phi, fluid density rho, viscosity mu and the interaction force f_i the
+fluid exerts on the particles per unit volume (the fluid receives -f_i):
+  d(phi v)/dt + div(phi v v) = -(phi or 1)/rho grad p + div(phi tau)/rho - f_i/rho + phi g,
+  tau = mu (grad v + grad v^T);  pressure factor phi in formulation A (pressure in both phases,
+  Zhu et al. 2007 model A), 1 in formulation B (pressure in the fluid only).
+Continuity: d phi/dt + div(phi v) = 0.
+
+One fluid step of length dt:
+1. predictor  v* = v + dt [-beta (1 or 1/phi)/rho grad p + div(phi tau)/(rho phi)
+                            - div(phi v v)/phi + g - f_i/(rho phi)] - v dphi dt/phi,
+   with the drag's change over the step, k_drag (v* - v), implicit (see `predict`);
+2. pressure equation for eps = p_new - beta p from continuity with face fluxes phi_f v_f:
+     A:  v = v* - dt/rho grad eps          ->  div(phi_f grad eps) = rho/dt (div(phi_f v*_f) + dphi)
+     B:  v = v* - dt/(rho phi) grad eps    ->  div(grad eps)       = rho/dt (div(phi_f v*_f) + dphi)
+   (the reference's B derivation drops a derivative of 1/phi and gains a spurious grad(phi).grad(eps)
+   term; done exactly, B's operator has constant coefficients);
+3. correction v = v* - dt/rho (1 or 1/phi) grad eps, p = beta p + eps.
+
+Space: second-order central differences; viscous stress compact (3-point) in each direction;
+the cross terms of grad v^T with the 4-point mixed stencil; advective fluxes phi_f u_f upwinded
+(first order, stable for sum |u_i| dt/dx_i <= 1). x and y are periodic. In z the cells k = -1 and
+k = nz are ghosts: velocity ghost = sign * v of the boundary cell (bc_sign (2,3): row 0 bottom,
+row 1 top; -1 for the normal component at a no-flow wall and the tangential ones at a no-slip
+wall, +1 otherwise); porosity ghost = boundary cell; pressure ghost 2 p_b - p_0 at a prescribed-
+pressure face, linear extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrostatic pressure has
+its exact gradient in every cell).
+
+Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
+dphi, k_drag, rhs (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2]; spacing (3,) [m]; gravity (3,)
+[m/s^2]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure, 0 = no flow;
+p_bound (2,) [Pa] boundary pressure (bottom, top); rho [kg/m^3]; mu [Pa s]; beta [-];
+pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def _wrap(i, n):
+    if i < 0:
+        return i + n
+    if i >= n:
+        return i - n
+    return i
+
+
+@njit(cache=True, inline="always")
+def _shift(i, j, k, a, s):
+    """The cell s (= +1 or -1) steps from (i,j,k) along axis a (not wrapped)."""
+    if a == 0:
+        return i + s, j, k
+    if a == 1:
+        return i, j + s, k
+    return i, j, k + s
+
+
+@njit(cache=True, inline="always")
+def _vel(v, i, j, k, c, bc_sign):
+    """v[i,j,k,c], periodic in x and y, z ghost cells k = -1 and k = nz."""
+    nz = v.shape[2]
+    i = _wrap(i, v.shape[0])
+    j = _wrap(j, v.shape[1])
+    if k < 0:
+        return bc_sign[0, c] * v[i, j, 0, c]
+    if k >= nz:
+        return bc_sign[1, c] * v[i, j, nz - 1, c]
+    return v[i, j, k, c]
+
+
+@njit(cache=True, inline="always")
+def _cell(f, i, j, k):
+    """f[i,j,k], periodic in x and y, the boundary cell's value in the z ghost cells."""
+    nz = f.shape[2]
+    k = 0 if k < 0 else (nz - 1 if k >= nz else k)
+    return f[_wrap(i, f.shape[0]), _wrap(j, f.shape[1]), k]
+
+
+@njit(cache=True, inline="always")
+def _pres(p, i, j, k, p_kind, p_bound):
+    """p[i,j,k] with the z ghost cells of a pressure (see the module docstring)."""
+    nz = p.shape[2]
+    i = _wrap(i, p.shape[0])
+    j = _wrap(j, p.shape[1])
+    if k < 0:
+        if p_kind[0] == 1:
+            return 2.0 * p_bound[0] - p[i, j, 0]
+        return 2.0 * p[i, j, 0] - p[i, j, 1]
+    if k >= nz:
+        if p_kind[1] == 1:
+            return 2.0 * p_bound[1] - p[i, j, nz - 1]
+        return 2.0 * p[i, j, nz - 1] - p[i, j, nz - 2]
+    return p[i, j, k]
+
+
+@njit(cache=True, inline="always")
+def _grad(p, i, j, k, a, spacing, p_kind, p_bound):
+    """Central difference of p along axis a at cell (i,j,k)."""
+    i1, j1, k1 = _shift(i, j, k, a, 1)
+    i0, j0, k0 = _shift(i, j, k, a, -1)
+    return (_pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)) / (
+        2.0 * spacing[a]
+    )
+
+
+@njit(cache=True, parallel=True)
+def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
+    """grad_p = central-difference gradient of p in every cell [Pa/m]."""
+    nx, ny, nz = p.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz):
+                for a in range(3):
+                    grad_p[i, j, k, a] = _grad(p, i, j, k, a, spacing, p_kind, p_bound)
+
+
+@njit(cache=True, inline="always")
+def _viscous(v, phi, i, j, k, c, spacing, bc_sign):
+    """div(phi (grad v + grad v^T))_c / viscosity: compact 3-point second differences for
+    d_a(phi d_a v_c) and d_c(phi d_c v_c), the 4-point mixed stencil for d_a(phi d_c v_a), a != c."""
+    ph = phi[i, j, k]
+    vc = v[i, j, k, c]
+    total = 0.0
+    for a in range(3):
+        i1, j1, k1 = _shift(i, j, k, a, 1)
+        i0, j0, k0 = _shift(i, j, k, a, -1)
+        phi_up = 0.5 * (ph + _cell(phi, i1, j1, k1))
+        phi_dn = 0.5 * (ph + _cell(phi, i0, j0, k0))
+        second = (
+            phi_up * (_vel(v, i1, j1, k1, c, bc_sign) - vc) - phi_dn * (vc - _vel(v, i0, j0, k0, c, bc_sign))
+        ) / (spacing[a] * spacing[a])
+        if a == c:
+            total += 2.0 * second
+        else:
+            # d_a(phi d_c v_a), d_c v_a centred at the two neighbours along a
+            ia, ja, ka = _shift(i1, j1, k1, c, 1)
+            ib, jb, kb = _shift(i1, j1, k1, c, -1)
+            up = _cell(phi, i1, j1, k1) * (_vel(v, ia, ja, ka, a, bc_sign) - _vel(v, ib, jb, kb, a, bc_sign))
+            ia, ja, ka = _shift(i0, j0, k0, c, 1)
+            ib, jb, kb = _shift(i0, j0, k0, c, -1)
+            dn = _cell(phi, i0, j0, k0) * (_vel(v, ia, ja, ka, a, bc_sign) - _vel(v, ib, jb, kb, a, bc_sign))
+            total += second + (up - dn) / (4.0 * spacing[a] * spacing[c])
+    return total
+
+
+@njit(cache=True, inline="always")
+def _advection(v, phi, i, j, k, c, spacing, bc_sign):
+    """div(phi v v_c) with face fluxes phi_f u_f and the upwind value of v_c."""
+    ph = phi[i, j, k]
+    vc = v[i, j, k, c]
+    total = 0.0
+    for a in range(3):
+        i1, j1, k1 = _shift(i, j, k, a, 1)
+        i0, j0, k0 = _shift(i, j, k, a, -1)
+        va = v[i, j, k, a]
+        flux_up = 0.25 * (ph + _cell(phi, i1, j1, k1)) * (va + _vel(v, i1, j1, k1, a, bc_sign))
+        flux_dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v, i0, j0, k0, a, bc_sign) + va)
+        up = vc if flux_up > 0.0 else _vel(v, i1, j1, k1, c, bc_sign)
+        dn = _vel(v, i0, j0, k0, c, bc_sign) if flux_dn > 0.0 else vc
+        total += (flux_up * up - flux_dn * dn) / spacing[a]
+    return total
+
+
+@njit(cache=True, parallel=True)
+def predict(
+    v,
+    grad_p,
+    phi,
+    dphi,
+    f_i,
+    k_drag,
+    spacing,
+    gravity,
+    bc_sign,
+    rho,
+    mu,
+    beta,
+    pressure_in_solid,
+    dt,
+    v_star,
+    f_exchange,
+):
+    """Predicted velocity v* (step 1 of the module docstring) with the interaction force
+    f_exchange = f_i + k_drag (v* - v) [N/m^3] on the particles, which the fluid receives with the
+    opposite sign: f_i is the force at the old fluid velocity v, k_drag its derivative with
+    respect to v (kernels/drag.py), so the drag is implicit in the fluid's own velocity."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz):
+                ph = phi[i, j, k]
+                inv = 1.0 / (rho * ph)
+                p_factor = 1.0 / rho if pressure_in_solid else inv
+                implicit = dt * k_drag[i, j, k] * inv
+                for c in range(3):
+                    vc = v[i, j, k, c]
+                    rate = (
+                        mu * inv * _viscous(v, phi, i, j, k, c, spacing, bc_sign)
+                        - _advection(v, phi, i, j, k, c, spacing, bc_sign) / ph
+                        - beta * p_factor * grad_p[i, j, k, c]
+                        + gravity[c]
+                        - inv * f_i[i, j, k, c]
+                    )
+                    explicit = vc + dt * rate - vc * dphi[i, j, k] * dt / ph
+                    new = (explicit + implicit * vc) / (1.0 + implicit)
+                    v_star[i, j, k, c] = new
+                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + k_drag[i, j, k] * (new - vc)
+
+
+@njit(cache=True, parallel=True)
+def pressure_rhs(v_star, phi, dphi, spacing, bc_sign, rho, dt, rhs):
+    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b.
+    Face velocities are the means of the two cells (ghosts at z faces: zero at a no-flow wall)."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz):
+                ph = phi[i, j, k]
+                div = 0.0
+                for a in range(3):
+                    i1, j1, k1 = _shift(i, j, k, a, 1)
+                    i0, j0, k0 = _shift(i, j, k, a, -1)
+                    va = v_star[i, j, k, a]
+                    up = 0.25 * (ph + _cell(phi, i1, j1, k1)) * (va + _vel(v_star, i1, j1, k1, a, bc_sign))
+                    dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v_star, i0, j0, k0, a, bc_sign) + va)
+                    div += (up - dn) / spacing[a]
+                rhs[i, j, k] = -rho / dt * (div + dphi[i, j, k])
+
+
+@njit(cache=True, parallel=True)
+def correct(v_star, eps, phi, spacing, eps_kind, eps_bound, rho, beta, pressure_in_solid, dt, v, p):
+    """v = v* - dt/rho (1 or 1/phi) grad eps;  p = beta p + eps (step 3)."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz):
+                factor = dt / rho if pressure_in_solid else dt / (rho * phi[i, j, k])
+                for c in range(3):
+                    v[i, j, k, c] = v_star[i, j, k, c] - factor * _grad(
+                        eps, i, j, k, c, spacing, eps_kind, eps_bound
+                    )
+                p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
+
+
+@njit(cache=True)
+def first_unstable(v, p, spacing, dt):
+    """First cell (flat C index) with a non-finite velocity or pressure (reason 1) or an advective
+    Courant number sum |v_a| dt/dx_a above 1 (reason 2); -1 if none. Returns (cell, reason, value)."""
+    nx, ny, nz = p.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                courant = 0.0
+                finite = math.isfinite(p[i, j, k])
+                for a in range(3):
+                    finite = finite and math.isfinite(v[i, j, k, a])
+                    courant += abs(v[i, j, k, a]) * dt / spacing[a]
+                if not finite:
+                    return (i * ny + j) * nz + k, 1, courant
+                if courant > 1.0:
+                    return (i * ny + j) * nz + k, 2, courant
+    return -1, 0, 0.0
+
+
+@njit(cache=True)
+def max_courant(v, spacing, dt):
+    """Largest advective Courant number sum |v_a| dt/dx_a over the cells [-]."""
+    nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
+    worst = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                courant = 0.0
+                for a in range(3):
+                    courant += abs(v[i, j, k, a]) * dt / spacing[a]
+                worst = max(worst, courant)
+    return worst

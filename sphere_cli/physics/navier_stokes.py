@@ -1,0 +1,415 @@
+"""Porous Navier-Stokes fluid (`[fluid] model = "navier-stokes"`): the fluid state, one fluid
+step (predictor, pressure equation through the shared Poisson solver, correction; equations in
+kernels/navier_stokes.py), its stability limits, and the plug-in that couples it to the DEM loop.
+
+NavierStokesSolver advances a NavierStokesState and knows nothing of particles, so the fluid-alone
+checks (tests/physics/test_fluid_navier_stokes.py) drive it directly. NavierStokes (FluidModule)
+adds the particles: porosity from the grid engineer's physics/porosity.py, the interaction force
+from physics/drag.py (the contract: /work/wt/NS-CONTRACT.md), and the coupling schedule.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config.fluid_navier_stokes import NavierStokesFluid, NoFlowBoundary, PressureBoundary
+from ..errors import NumericalError
+from ..kernels.navier_stokes import (
+    correct,
+    first_unstable,
+    max_courant,
+    predict,
+    pressure_gradient,
+    pressure_rhs,
+)
+from ..kernels.poisson import face_means
+from .drag import FluidParticleDrag
+from .fluid import FluidModule
+from .fluid_grid import FluidGrid, fluid_grid
+from .poisson import PoissonResult, PoissonSolver
+from .porosity import Porosity
+
+
+@dataclass
+class NavierStokesState:
+    """Fluid fields on the grid (cell-centred, C order); see NS-CONTRACT.md for who writes what."""
+
+    v: np.ndarray  # (nx,ny,nz,3) [m/s] interstitial fluid velocity
+    p: np.ndarray  # (nx,ny,nz) [Pa] pressure
+    grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p (central differences)
+    phi: np.ndarray  # (nx,ny,nz) [-] porosity
+    dphi: np.ndarray  # (nx,ny,nz) [1/s] d phi/dt
+    f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles at the old fluid v
+    k_drag: np.ndarray  # (nx,ny,nz) [kg/(m^3 s)] its derivative with respect to the fluid v
+    f_exchange: np.ndarray  # (nx,ny,nz,3) [N/m^3] f_i + k_drag (v_new - v_old) of the last step
+    # scratch of the fluid step (not state)
+    v_star: np.ndarray
+    rhs: np.ndarray
+    eps: np.ndarray
+    zero: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    az: np.ndarray
+    steps: int = 0  # fluid steps taken
+    iterations: int = 0  # of the last pressure solve
+    residual: float = 0.0  # relative residual of the last pressure solve
+
+    PROGNOSTIC = ("v", "p", "grad_p", "phi", "dphi", "f_i", "k_drag", "f_exchange")
+    SCALARS = ("steps", "iterations", "residual")
+
+
+class NavierStokesSolver:
+    """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
+    under the body acceleration `gravity` (3,) [m/s^2]."""
+
+    def __init__(self, config: NavierStokesFluid, grid: FluidGrid, gravity):
+        self.config = config
+        self.grid = grid
+        self.spacing = np.ascontiguousarray(grid.spacing, dtype=np.float64)
+        self.gravity = np.asarray(gravity, dtype=np.float64).copy()
+        self.rho = float(config.density)
+        self.mu = float(config.viscosity)
+        self.beta = float(config.beta)
+        self.pressure_in_solid = config.formulation == "A"
+        self.boundaries = (config.bottom, config.top)
+        self.bc_sign = np.ones((2, 3))
+        for row, b in enumerate(self.boundaries):
+            if isinstance(b, NoFlowBoundary):
+                self.bc_sign[row, 2] = -1.0
+            if b.no_slip:
+                self.bc_sign[row, :2] = -1.0
+        self.p_kind = np.array([isinstance(b, PressureBoundary) for b in self.boundaries], dtype=np.int64)
+        kinds = ["dirichlet" if k else "no-flux" for k in self.p_kind]
+        solver = config.solver
+        self.poisson = PoissonSolver(
+            grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations
+        )
+        self.p_bound = np.zeros(2)  # boundary pressures at the new time [Pa]
+        self.eps_bound = np.zeros(2)  # and of eps = p_new - beta p_old [Pa]
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def allocate(self) -> NavierStokesState:
+        """Fluid at rest, porosity 1, no particles, pressure 0 (initial_pressure() sets it)."""
+        shape = tuple(self.grid.shape)
+        vec = (*shape, 3)
+        ax, ay, az = self.poisson.face_arrays()
+        if not self.pressure_in_solid:
+            for a in (ax, ay, az):
+                a[...] = 1.0  # formulation B: constant coefficients
+        return NavierStokesState(
+            v=np.zeros(vec),
+            p=np.zeros(shape),
+            grad_p=np.zeros(vec),
+            phi=np.ones(shape),
+            dphi=np.zeros(shape),
+            f_i=np.zeros(vec),
+            k_drag=np.zeros(shape),
+            f_exchange=np.zeros(vec),
+            v_star=np.zeros(vec),
+            rhs=np.zeros(shape),
+            eps=np.zeros(shape),
+            zero=np.zeros(shape),
+            ax=ax,
+            ay=ay,
+            az=az,
+        )
+
+    def boundary_pressure(self, time: float, out: np.ndarray) -> np.ndarray:
+        """Pressures of the bottom and top boundaries at `time` (0 where no-flow) [Pa]."""
+        for row, b in enumerate(self.boundaries):
+            out[row] = b.value(time) if isinstance(b, PressureBoundary) else 0.0
+        return out
+
+    def initial_pressure(self, fs: NavierStokesState, time: float) -> None:
+        """Hydrostatic pressure p = p_ref + rho g_z (z - z_ref), referred to the top boundary if it
+        has a prescribed pressure, else the bottom one, else zero at mid-height; its gradient."""
+        g = self.grid
+        z = g.centres(2)
+        bottom_z, top_z = g.origin[2], g.origin[2] + g.shape[2] * g.spacing[2]
+        self.boundary_pressure(time, self.p_bound)
+        if self.p_kind[1]:
+            z_ref, p_ref = top_z, self.p_bound[1]
+        elif self.p_kind[0]:
+            z_ref, p_ref = bottom_z, self.p_bound[0]
+        else:
+            z_ref, p_ref = 0.5 * (bottom_z + top_z), 0.0
+        fs.p[...] = (p_ref + self.rho * self.gravity[2] * (z - z_ref))[None, None, :]
+        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
+
+    # -- the fluid step ------------------------------------------------------------------------
+
+    def step(self, fs: NavierStokesState, time: float, dt: float) -> PoissonResult:
+        """Advance the fluid from `time` to `time + dt` [s] with the porosity, its rate and the
+        interaction force already in fs."""
+        rho, beta, solid = self.rho, self.beta, self.pressure_in_solid
+        predict(
+            fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
+            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.f_exchange,
+        )  # fmt: skip
+        pressure_rhs(fs.v_star, fs.phi, fs.dphi, self.spacing, self.bc_sign, rho, dt, fs.rhs)
+        if solid:
+            face_means(fs.phi, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
+        old = self.boundary_pressure(time, self.eps_bound)
+        old *= beta
+        self.boundary_pressure(time + dt, self.p_bound)
+        np.subtract(self.p_bound, old, out=self.eps_bound)
+        # first guess: eps = p_new - beta p_old with p_new ~ p_old
+        np.multiply(fs.p, 1.0 - beta, out=fs.eps)
+        result = self.poisson.solve(
+            fs.eps, fs.rhs, fs.zero, fs.ax, fs.ay, fs.az, self.eps_bound[0], self.eps_bound[1]
+        )
+        fs.iterations, fs.residual = result.iterations, result.residual
+        if not result.converged:
+            raise NumericalError(
+                f"the fluid pressure solve ({self.poisson.describe()}) did not converge in "
+                f"{result.iterations} iterations (relative residual {result.residual:.3g}) at "
+                f"t = {time + dt:.6g} s; raise fluid.solver.max_iterations or the tolerance, or "
+                'use method = "pcg"'
+            )
+        correct(
+            fs.v_star,
+            fs.eps,
+            fs.phi,
+            self.spacing,
+            self.p_kind,
+            self.eps_bound,
+            rho,
+            beta,
+            solid,
+            dt,
+            fs.v,
+            fs.p,
+        )
+        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
+        fs.steps += 1
+        return result
+
+    # -- limits and checks ---------------------------------------------------------------------
+
+    def viscous_limit(self) -> float:
+        """Largest stable explicit fluid step for the viscous stress [s]: 1/(2 nu (sum 1/dx_a^2 +
+        max 1/dx_a^2)), dx^2/(8 nu) on cubic cells (the normal stress d_c(2 mu d_c v_c) doubles
+        one direction's share of dx^2/(6 nu))."""
+        inv2 = 1.0 / self.spacing**2
+        nu = self.mu / self.rho
+        return 1.0 / (2.0 * nu * (inv2.sum() + inv2.max()))
+
+    def advective_limit(self, speed: float) -> float:
+        """Largest fluid step with sum |u_a| dt/dx_a <= 1 at the speed `speed` in the worst
+        direction [m/s] -> [s]."""
+        return 1.0 / (speed * float(np.sum(1.0 / self.spacing))) if speed > 0 else math.inf
+
+    def courant(self, fs: NavierStokesState, dt: float) -> float:
+        return float(max_courant(fs.v, self.spacing, dt))
+
+    def first_unstable(self, fs: NavierStokesState, dt: float) -> str | None:
+        """A message naming the first bad cell (non-finite, or Courant number above 1), or None."""
+        cell, reason, courant = first_unstable(fs.v, fs.p, self.spacing, dt)
+        if cell < 0:
+            return None
+        i, j, k = np.unravel_index(int(cell), self.grid.shape)
+        centre = self.grid.origin + (np.array([i, j, k]) + 0.5) * self.spacing
+        where = f"fluid cell ({i}, {j}, {k}) at {tuple(round(float(c), 9) for c in centre)} m"
+        values = f"v = {tuple(float(c) for c in fs.v[i, j, k])} m/s, p = {float(fs.p[i, j, k]):.6g} Pa"
+        if reason == 1:
+            return f"{where} has a non-finite fluid state ({values})"
+        return (
+            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > 1 "
+            f"({values}); use a smaller dt or fluid.coupling.ndem, or set fluid.max_speed"
+        )
+
+    def describe(self) -> dict[str, str]:
+        c = self.config
+        bounds = []
+        for name, b in zip(("bottom", "top"), self.boundaries, strict=True):
+            text = "no flow" if isinstance(b, NoFlowBoundary) else f"pressure {b.pressure:g} Pa"
+            if isinstance(b, PressureBoundary) and b.amplitude > 0:
+                text += f" + {b.amplitude:g} Pa sin(2 pi {b.frequency:g} Hz t + {b.phase:g})"
+            if b.no_slip:
+                text += ", no slip"
+            bounds.append(f"{name}: {text}")
+        return {
+            "fluid": (
+                f"porous Navier-Stokes, formulation {c.formulation}, rho = {c.density:g} kg/m^3, "
+                f"mu = {c.viscosity:g} Pa s, beta = {c.beta:g}"
+            ),
+            "fluid grid": self.grid.describe() + ", periodic in x and y",
+            "fluid boundaries": "; ".join(bounds),
+            "pressure solver": self.poisson.describe(),
+        }
+
+
+class NavierStokes(FluidModule):
+    """The porous Navier-Stokes fluid in the DEM loop: x/y periodic box, the grid of
+    [fluid.grid], porosity from the particles, drag both ways (physics/drag.py).
+
+    Schedule: the DEM takes ndem steps in the fluid field of the last fluid step (forces() and
+    kick() hand the drag to physics/drag.py), then after_step() measures the porosity where the
+    particles are now, has the drag module gather the force density the fluid receives, and
+    advances the fluid by ndem dt."""
+
+    model = "navier-stokes"
+    name = "fluid"
+    replaces_kick = True
+
+    def __init__(self, loaded, state):
+        super().__init__(loaded, state)
+        cfg = loaded.case.fluid
+        box = state.box
+        if not (box.periodic[0] and box.periodic[1]) or box.periodic[2]:
+            raise loaded.error(
+                ("domain", "periodic"),
+                "the Navier-Stokes fluid needs x and y periodic and z not periodic (its bottom and "
+                "top boundaries are the box's z faces): periodic = [true, true, false]",
+            )
+        self.config = cfg
+        self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
+        if self._grid.shape[2] < 2:
+            raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
+        self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
+        self.porosity = Porosity(self._grid, state.particles.count)
+        self.drag = FluidParticleDrag(
+            cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
+        )
+        self.fs = self.solver.allocate()
+        state.fluid = self.fs
+        self.floor = float(cfg.drag.porosity_floor)
+        self.warned = False
+        self.ndem = cfg.coupling.ndem or 1
+        self.fluid_dt = math.nan  # ndem dt, set by start()
+        limit, reason = self._fluid_limit()
+        fixed = cfg.coupling.fluid_dt
+        if fixed is not None and fixed > limit:
+            raise loaded.error(
+                ("fluid", "coupling", "fluid_dt"),
+                f"above the fluid's stability limit {limit:.4g} s ({reason}); use fluid_dt <= {limit:.4g} s",
+            )
+
+    def _fluid_limit(self) -> tuple[float, str]:
+        """The fluid step's own limit [s] and what sets it."""
+        nu = self.config.viscosity / self.config.density
+        limit = self.solver.viscous_limit()
+        reason = f"viscous diffusion dx^2/(8 nu) of the fluid step, nu = {nu:.4g} m^2/s"
+        if self.config.max_speed is not None:
+            advective = self.solver.advective_limit(self.config.max_speed)
+            if advective < limit:
+                limit = advective
+                reason = (
+                    "advective limit sum |u| dt/dx <= 1 of the fluid step at fluid.max_speed = "
+                    f"{self.config.max_speed:g} m/s"
+                )
+        return limit, reason
+
+    def dt_limit(self) -> tuple[float, str]:
+        fixed = self.config.coupling.fluid_dt
+        if fixed is not None:
+            limit, reason = fixed, "the DEM sub-steps the fluid step fluid.coupling.fluid_dt"
+        else:
+            limit, reason = self._fluid_limit()
+            if self.ndem > 1:
+                limit /= self.ndem
+                reason += f", divided by fluid.coupling.ndem = {self.ndem}"
+        drag_limit, drag_reason = self.drag.dt_limit()
+        if drag_limit < limit:
+            return drag_limit, drag_reason
+        return limit, reason
+
+    def start(self, state) -> None:
+        dt = state.clock.dt
+        fixed = self.config.coupling.fluid_dt
+        if fixed is not None:
+            self.ndem = max(1, math.floor(fixed / dt * (1.0 + 1e-12)))
+        self.fluid_dt = self.ndem * dt
+
+    def initialize(self, state) -> None:
+        """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
+        fs = self.fs
+        self._measure_porosity(state)
+        fs.dphi[...] = 0.0
+        self.solver.initial_pressure(fs, state.clock.time)
+
+    def forces(self, state, spring_dt: float | None = None) -> None:
+        self.drag.forces(state, self.fs, spring_dt)
+
+    def kick(self, state) -> None:
+        self.drag.kick(state, self.fs)
+
+    def after_step(self, state) -> None:
+        clock = state.clock
+        if clock.step % self.ndem:
+            return
+        fs = self.fs
+        # d phi/dt by backward difference over the fluid step
+        np.copyto(fs.dphi, fs.phi)
+        self._measure_porosity(state)
+        np.subtract(fs.phi, fs.dphi, out=fs.dphi)
+        fs.dphi *= 1.0 / self.fluid_dt
+        self.drag.fluid_forcing(state, fs, self.fluid_dt)
+        self.solver.step(fs, (clock.step - self.ndem) * clock.dt, self.fluid_dt)
+
+    def _measure_porosity(self, state) -> None:
+        """fs.phi from the particles where they are now, floored at fluid.drag.porosity_floor:
+        the fluid divides by phi, and the drag correlations take the same floor."""
+        fs = self.fs
+        self.porosity.measure(state.particles, fs.phi)
+        if fs.phi.min() >= self.floor:
+            return
+        if not self.warned:
+            self.warned = True
+            i, j, k = np.unravel_index(int(np.argmin(fs.phi)), fs.phi.shape)
+            warnings.warn(
+                f"step {state.clock.step}: porosity {fs.phi[i, j, k]:.3g} in fluid cell ({i}, {j}, {k}) "
+                f"is below fluid.drag.porosity_floor = {self.floor}; the fluid and the drag use the floor "
+                f"there ({int(np.count_nonzero(fs.phi < self.floor))} cell(s) now, not repeated)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        np.maximum(fs.phi, self.floor, out=fs.phi)
+
+    def prognostic_state(self, state) -> dict[str, np.ndarray]:
+        fs = self.fs
+        arrays = {name: getattr(fs, name) for name in NavierStokesState.PROGNOSTIC}
+        for name in NavierStokesState.SCALARS:
+            arrays[name] = np.array(getattr(fs, name))
+        return arrays
+
+    def restore(self, state, arrays: dict) -> None:
+        fs = self.fs
+        for name in NavierStokesState.PROGNOSTIC:
+            getattr(fs, name)[...] = arrays[name]
+        fs.steps = int(arrays["steps"])
+        fs.iterations = int(arrays["iterations"])
+        fs.residual = float(arrays["residual"])
+
+    def first_unstable(self, state) -> str | None:
+        return self.solver.first_unstable(self.fs, self.fluid_dt)
+
+    def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
+        fs = self.fs
+        return {
+            "pressure": (fs.p, "Pa"),
+            "velocity": (fs.v, "m/s"),
+            "porosity": (fs.phi, "1"),
+            "interaction_force": (fs.f_exchange, "N/m^3"),
+        }
+
+    def grid(self) -> FluidGrid:
+        return self._grid
+
+    def observables(self, state) -> dict[str, tuple[float, str]]:
+        fs = self.fs
+        return {
+            "fluid_max_courant": (self.solver.courant(fs, self.fluid_dt), "1"),
+            "pressure_iterations": (float(fs.iterations), "1"),
+            "pressure_residual": (float(fs.residual), "1"),
+        }
+
+    def summary(self) -> dict[str, str]:
+        facts = self.solver.describe()
+        facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {self.ndem} DEM step(s)"
+        return facts
