@@ -1,0 +1,135 @@
+"""Bad input to the Navier-Stokes fluid (`[fluid] model = "navier-stokes"`): a short message naming
+the TOML key and line, exit 65 before anything runs (70 for a fluid that outruns its limit during
+the run, naming the cell), no traceback."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+
+FLUID = """\
+title = "fluid"
+
+[simulation]
+duration = 0.0005
+dt = "auto"
+
+[domain]
+upper = [0.01, 0.01, 0.02]
+periodic = [true, true, false]
+
+[particles]
+count = 16
+density = 2500.0
+radius = { distribution = "fixed", value = 0.0005 }
+placement = { method = "lattice", region_upper = [0.01, 0.01, 0.008] }
+
+[contact]
+normal_stiffness = 1.0e4
+
+[[walls]]
+face = "z-"
+
+[fluid]
+model = "navier-stokes"
+grid = { cells = [4, 4, 8] }
+viscosity = 0.001
+beta = 0.0
+formulation = "A"
+top = { type = "pressure", pressure = 0.0 }
+
+[fluid.solver]
+method = "pcg"
+
+[fluid.coupling]
+ndem = 5
+"""
+
+# (id, text to replace, replacement, key named, text on the line named, other fragments)
+SCHEMA_ERRORS = [
+    ("beta-above-1", "beta = 0.0", "beta = 1.5", "fluid.beta", "beta =", []),
+    ("formulation", 'formulation = "A"', 'formulation = "C"', "fluid.formulation", "formulation =", []),
+    ("solver-method", 'method = "pcg"', 'method = "sor"', "fluid.solver.method", 'method = "sor"', []),
+    ("ndem-zero", "ndem = 5", "ndem = 0", "fluid.coupling.ndem", "ndem =", []),
+    (
+        "ndem-and-fluid-dt",
+        "ndem = 5",
+        "ndem = 5\nfluid_dt = 1e-4",
+        "fluid.coupling",
+        "[fluid.coupling]",
+        ["not both"],
+    ),
+    ("boundary-type", 'type = "pressure"', 'type = "open"', "fluid.top", "top =", []),
+    ("negative-viscosity", "viscosity = 0.001", "viscosity = -1.0", "fluid.viscosity", "viscosity =", []),
+    ("typo", "beta = 0.0", "betta = 0.0", "fluid.betta", "betta", ["unknown key"]),
+]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "marker", "fragments"),
+    [e[1:] for e in SCHEMA_ERRORS],
+    ids=[e[0] for e in SCHEMA_ERRORS],
+)
+def test_fluid_schema_error_names_key_and_line(tmp_path, old, new, key, marker, fragments):
+    text = edit(FLUID, old, new)
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", tmp_path / "case.toml")
+    assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
+
+
+def _run(tmp_path, text):
+    (tmp_path / "case.toml").write_text(text)
+    return sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+
+
+def test_fluid_needs_periodic_x_and_y(tmp_path):
+    text = edit(FLUID, "periodic = [true, true, false]", "periodic = [true, false, false]")
+    result = _run(tmp_path, text)
+    assert_clean_error(
+        result, 65, "domain.periodic", f"case.toml:{line_of(text, 'periodic =')}:", "x and y periodic"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_dt_above_the_viscous_limit_names_it(tmp_path):
+    """A viscous fluid (nu = 0.1 m^2/s on 2.5 mm cells: dx^2/(8 nu) = 7.8 us, 1.6 us per DEM step
+    with ndem = 5) limits dt below the contact limit (~23 us): a given dt above it is refused."""
+    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), 'dt = "auto"', "dt = 1e-5")
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 65, "simulation.dt", "viscous diffusion", "ndem = 5")
+    limit = float(re.search(r"stability limit ([0-9.eE+-]+) s", result.stderr).group(1))
+    assert limit == pytest.approx(0.25**2 * 1e-4 / (8 * 0.1) / 5, rel=1e-3)  # printed to 4 digits
+
+
+def test_fluid_dt_above_the_viscous_limit_is_refused(tmp_path):
+    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), "ndem = 5", "fluid_dt = 1e-4")
+    result = _run(tmp_path, text)
+    assert_clean_error(
+        result,
+        65,
+        "fluid.coupling.fluid_dt",
+        f"case.toml:{line_of(text, 'fluid_dt =')}:",
+        "viscous diffusion",
+    )
+
+
+def test_grid_finer_than_the_particles_is_refused(tmp_path):
+    text = edit(FLUID, "cells = [4, 4, 8]", "cells = [20, 4, 8]")
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 65, "fluid.grid.cells", "diameter")
+
+
+def test_fluid_outrunning_the_advective_limit_stops_naming_the_cell(tmp_path):
+    """A pressure drop of 1e8 Pa over the 2 cm column accelerates the fluid at ~5e6 m/s^2: with a
+    fluid step of 50 DEM steps the Courant number passes 1 (at ~70 m/s) within a few fluid steps,
+    and the run stops (exit 70) naming the fluid cell, before any NaN and before the particles,
+    which lag the fluid, move half a radius per step."""
+    text = edit(
+        FLUID, 'top = { type = "pressure", pressure = 0.0 }', 'bottom = { type = "pressure", pressure = 1e8 }'
+    )
+    text = edit(text, "ndem = 5", "ndem = 50")
+    text = edit(text, 'dt = "auto"', 'dt = "auto"\nblowup_check_every = 5')
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 70, "fluid cell (", "Courant number")
