@@ -16,8 +16,9 @@ One fluid step of length dt:
      A:  v = v* - dt/rho grad eps          ->  div(phi_f grad eps) = rho/dt (div(phi_f v*_f) + dphi)
      B:  v = v* - dt/(rho phi) grad eps    ->  div(grad eps)       = rho/dt (div(phi_f v*_f) + dphi)
    (the reference's B derivation drops a derivative of 1/phi and gains a spurious grad(phi).grad(eps)
-   term; done exactly, B's operator has constant coefficients);
-3. correction v = v* - dt/rho (1 or 1/phi) grad eps, p = beta p + eps.
+   term; done exactly, B's operator has constant coefficients); with implicit drag both carry the
+   factor D = 1/(1 + dt k_drag/(rho phi)) (see `predict`): faces a_f = mean(phi D) or mean(D);
+3. correction v = v* - dt/rho (1 or 1/phi) D grad eps, p = beta p + eps.
 
 Space: second-order central differences; viscous stress compact (3-point) in each direction;
 the cross terms of grad v^T with the 4-point mixed stencil; advective fluxes phi_f u_f upwinded
@@ -29,7 +30,7 @@ pressure face, linear extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrosta
 its exact gradient in every cell).
 
 Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
-dphi, k_drag, rhs (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2]; spacing (3,) [m]; gravity (3,)
+dphi, k_drag, rhs, mobility (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2, -]; spacing (3,) [m]; gravity (3,)
 [m/s^2]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure, 0 = no flow;
 p_bound (2,) [Pa] boundary pressure (bottom, top); rho [kg/m^3]; mu [Pa s]; beta [-];
 pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step.
@@ -184,12 +185,16 @@ def predict(
     pressure_in_solid,
     dt,
     v_star,
-    f_exchange,
+    mobility,
 ):
-    """Predicted velocity v* (step 1 of the module docstring) with the interaction force
-    f_exchange = f_i + k_drag (v* - v) [N/m^3] on the particles, which the fluid receives with the
-    opposite sign: f_i is the force at the old fluid velocity v, k_drag its derivative with
-    respect to v (kernels/drag.py), so the drag is implicit in the fluid's own velocity."""
+    """Predicted velocity v* (step 1 of the module docstring) and the pressure mobility of each
+    cell, mobility = phi D (A) or D (B) with D = 1/(1 + dt k_drag/(rho phi)).
+
+    The drag on the fluid is f_i + k_drag (v_new - v): f_i at the old fluid velocity v, k_drag its
+    derivative (kernels/drag.py), so it is implicit in the fluid's own velocity. Solving the
+    momentum balance for v_new divides every explicit increment, the pressure's included, by
+    1 + dt k_drag/(rho phi): v* = v + D dt [...], and v_new = v* - D dt/rho (1 or 1/phi) grad eps =
+    v* - dt/rho (mobility/phi) grad eps, with the same D in the pressure equation's faces."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
@@ -209,45 +214,115 @@ def predict(
                         - inv * f_i[i, j, k, c]
                     )
                     explicit = vc + dt * rate - vc * dphi[i, j, k] * dt / ph
-                    new = (explicit + implicit * vc) / (1.0 + implicit)
-                    v_star[i, j, k, c] = new
-                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + k_drag[i, j, k] * (new - vc)
+                    v_star[i, j, k, c] = (explicit + implicit * vc) / (1.0 + implicit)
+                mobility[i, j, k] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
+
+
+@njit(cache=True, inline="always")
+def _face_flux(
+    v_star, phi, mobility, grad_p, p, i, j, k, a, spacing, bc_sign, p_kind, p_bound, beta, rho, dt
+):
+    """phi_f v_f through the face between cell (i,j,k) and its +a neighbour (either may be a z
+    ghost): the mean of the two predicted velocities, in which the old pressure's share (beta > 0)
+    is taken with the compact face gradient instead of the mean of the two central ones (Rhie &
+    Chow 1983), so an odd-even pressure mode is seen and removed."""
+    nz = phi.shape[2]
+    i1, j1, k1 = _shift(i, j, k, a, 1)
+    phi_f = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i1, j1, k1))
+    flux = 0.5 * phi_f * (_vel(v_star, i, j, k, a, bc_sign) + _vel(v_star, i1, j1, k1, a, bc_sign))
+    if beta == 0.0:
+        return flux
+    if a == 2 and ((k < 0 and p_kind[0] == 0) or (k1 >= nz and p_kind[1] == 0)):
+        return flux  # a no-flow wall: zero
+    m0 = _cell(mobility, i, j, k)
+    m1 = _cell(mobility, i1, j1, k1)
+    central = 0.5 * (
+        m0 / _cell(phi, i, j, k) * _cell_vec(grad_p, i, j, k, a)
+        + m1 / _cell(phi, i1, j1, k1) * _cell_vec(grad_p, i1, j1, k1, a)
+    )
+    compact = (_pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i, j, k, p_kind, p_bound)) / spacing[a]
+    return flux + beta * dt / rho * (phi_f * central - 0.5 * (m0 + m1) * compact)
+
+
+@njit(cache=True, inline="always")
+def _cell_vec(f, i, j, k, a):
+    """f[i,j,k,a] of a cell vector field, periodic in x and y, the boundary cell's in z ghosts."""
+    nz = f.shape[2]
+    k = 0 if k < 0 else (nz - 1 if k >= nz else k)
+    return f[_wrap(i, f.shape[0]), _wrap(j, f.shape[1]), k, a]
 
 
 @njit(cache=True, parallel=True)
-def pressure_rhs(v_star, phi, dphi, spacing, bc_sign, rho, dt, rhs):
-    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b.
-    Face velocities are the means of the two cells (ghosts at z faces: zero at a no-flow wall)."""
+def pressure_rhs(
+    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, rhs
+):
+    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b, with
+    the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p and p_bound of the old
+    pressure."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(nz):
-                ph = phi[i, j, k]
                 div = 0.0
                 for a in range(3):
-                    i1, j1, k1 = _shift(i, j, k, a, 1)
                     i0, j0, k0 = _shift(i, j, k, a, -1)
-                    va = v_star[i, j, k, a]
-                    up = 0.25 * (ph + _cell(phi, i1, j1, k1)) * (va + _vel(v_star, i1, j1, k1, a, bc_sign))
-                    dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v_star, i0, j0, k0, a, bc_sign) + va)
+                    up = _face_flux(
+                        v_star,
+                        phi,
+                        mobility,
+                        grad_p,
+                        p,
+                        i,
+                        j,
+                        k,
+                        a,
+                        spacing,
+                        bc_sign,
+                        p_kind,
+                        p_bound,
+                        beta,
+                        rho,
+                        dt,
+                    )
+                    dn = _face_flux(
+                        v_star,
+                        phi,
+                        mobility,
+                        grad_p,
+                        p,
+                        i0,
+                        j0,
+                        k0,
+                        a,
+                        spacing,
+                        bc_sign,
+                        p_kind,
+                        p_bound,
+                        beta,
+                        rho,
+                        dt,
+                    )
                     div += (up - dn) / spacing[a]
                 rhs[i, j, k] = -rho / dt * (div + dphi[i, j, k])
 
 
 @njit(cache=True, parallel=True)
-def correct(v_star, eps, phi, spacing, eps_kind, eps_bound, rho, beta, pressure_in_solid, dt, v, p):
-    """v = v* - dt/rho (1 or 1/phi) grad eps;  p = beta p + eps (step 3)."""
+def correct(
+    v_star, eps, phi, mobility, f_i, k_drag, spacing, eps_kind, eps_bound, rho, beta, dt, v, p, f_exchange
+):
+    """v_new = v* - dt/rho (mobility/phi) grad eps;  p = beta p + eps (step 3); the drag the fluid
+    took, f_exchange = f_i + k_drag (v_new - v) [N/m^3], which it receives with the opposite sign."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(nz):
-                factor = dt / rho if pressure_in_solid else dt / (rho * phi[i, j, k])
+                factor = dt / rho * mobility[i, j, k] / phi[i, j, k]
                 for c in range(3):
-                    v[i, j, k, c] = v_star[i, j, k, c] - factor * _grad(
-                        eps, i, j, k, c, spacing, eps_kind, eps_bound
-                    )
+                    new = v_star[i, j, k, c] - factor * _grad(eps, i, j, k, c, spacing, eps_kind, eps_bound)
+                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + k_drag[i, j, k] * (new - v[i, j, k, c])
+                    v[i, j, k, c] = new
                 p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
 
 

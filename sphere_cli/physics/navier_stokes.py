@@ -50,6 +50,7 @@ class NavierStokesState:
     v_star: np.ndarray
     rhs: np.ndarray
     eps: np.ndarray
+    mobility: np.ndarray
     zero: np.ndarray
     ax: np.ndarray
     ay: np.ndarray
@@ -89,6 +90,7 @@ class NavierStokesSolver:
             grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations
         )
         self.p_bound = np.zeros(2)  # boundary pressures at the new time [Pa]
+        self.p_old = np.zeros(2)  # and at the old time [Pa]
         self.eps_bound = np.zeros(2)  # and of eps = p_new - beta p_old [Pa]
 
     # -- state ---------------------------------------------------------------------------------
@@ -98,9 +100,6 @@ class NavierStokesSolver:
         shape = tuple(self.grid.shape)
         vec = (*shape, 3)
         ax, ay, az = self.poisson.face_arrays()
-        if not self.pressure_in_solid:
-            for a in (ax, ay, az):
-                a[...] = 1.0  # formulation B: constant coefficients
         return NavierStokesState(
             v=np.zeros(vec),
             p=np.zeros(shape),
@@ -113,6 +112,7 @@ class NavierStokesSolver:
             v_star=np.zeros(vec),
             rhs=np.zeros(shape),
             eps=np.zeros(shape),
+            mobility=np.zeros(shape),
             zero=np.zeros(shape),
             ax=ax,
             ay=ay,
@@ -149,15 +149,17 @@ class NavierStokesSolver:
         rho, beta, solid = self.rho, self.beta, self.pressure_in_solid
         predict(
             fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
-            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.f_exchange,
+            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
         )  # fmt: skip
-        pressure_rhs(fs.v_star, fs.phi, fs.dphi, self.spacing, self.bc_sign, rho, dt, fs.rhs)
-        if solid:
-            face_means(fs.phi, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
-        old = self.boundary_pressure(time, self.eps_bound)
-        old *= beta
+        old = self.boundary_pressure(time, self.p_old)
+        pressure_rhs(
+            fs.v_star, fs.phi, fs.dphi, fs.mobility, fs.grad_p, fs.p, self.spacing, self.bc_sign, self.p_kind,
+            old, beta, rho, dt, fs.rhs,
+        )  # fmt: skip
+        face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
         self.boundary_pressure(time + dt, self.p_bound)
-        np.subtract(self.p_bound, old, out=self.eps_bound)
+        np.multiply(old, -beta, out=self.eps_bound)
+        self.eps_bound += self.p_bound
         # first guess: eps = p_new - beta p_old with p_new ~ p_old
         np.multiply(fs.p, 1.0 - beta, out=fs.eps)
         result = self.poisson.solve(
@@ -172,19 +174,9 @@ class NavierStokesSolver:
                 'use method = "pcg"'
             )
         correct(
-            fs.v_star,
-            fs.eps,
-            fs.phi,
-            self.spacing,
-            self.p_kind,
-            self.eps_bound,
-            rho,
-            beta,
-            solid,
-            dt,
-            fs.v,
-            fs.p,
-        )
+            fs.v_star, fs.eps, fs.phi, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
+            self.eps_bound, rho, beta, dt, fs.v, fs.p, fs.f_exchange,
+        )  # fmt: skip
         pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
         fs.steps += 1
         return result
@@ -376,6 +368,8 @@ class NavierStokes(FluidModule):
         arrays = {name: getattr(fs, name) for name in NavierStokesState.PROGNOSTIC}
         for name in NavierStokesState.SCALARS:
             arrays[name] = np.array(getattr(fs, name))
+        for name, value in self.drag.prognostic_state().items():
+            arrays["drag_" + name] = value
         return arrays
 
     def restore(self, state, arrays: dict) -> None:
@@ -385,6 +379,7 @@ class NavierStokes(FluidModule):
         fs.steps = int(arrays["steps"])
         fs.iterations = int(arrays["iterations"])
         fs.residual = float(arrays["residual"])
+        self.drag.restore({name[5:]: value for name, value in arrays.items() if name.startswith("drag_")})
 
     def first_unstable(self, state) -> str | None:
         return self.solver.first_unstable(self.fs, self.fluid_dt)
