@@ -155,30 +155,29 @@ def test_resume_is_bitwise_identical(tmp_path: Path):
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
-@pytest.mark.parametrize("kind", ["dry", "vans1d"])
-def test_scenes_without_darcy_do_not_load_it(kind, tmp_path: Path):
-    """A dry scene, and a scene of another fluid model (configs/bedload.toml, vans1d), build
-    and step without importing the Darcy physics or kernels (the case schema,
-    config/fluid_darcy.py, is part of every case's validation)."""
-    if kind == "dry":
-        path = tmp_path / "dry.toml"
-        path.write_text(bed_case(0.0).split("[fluid]")[0] + "[output]\nframes = { every_steps = 100 }\n")
-    else:
-        path = CONFIGS / "bedload.toml"
+def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
+    """A dry scene, and scenes of the other fluid models (configs/bedload.toml, vans1d;
+    configs/fluid-settling.toml, navier-stokes), build and step without importing the Darcy
+    physics or kernels (the case schema, config/fluid_darcy.py, is part of every case's
+    validation). One fresh interpreter builds the three in turn."""
+    dry = tmp_path / "dry.toml"
+    dry.write_text(bed_case(0.0).split("[fluid]")[0] + "[output]\nframes = { every_steps = 100 }\n")
+    cases = [str(dry), str(CONFIGS / "bedload.toml"), str(CONFIGS / "fluid-settling.toml")]
     script = textwrap.dedent(
         f"""
         import sys
         from sphere_cli.build.scene import build_scene
         from sphere_cli.config.load import load_case
         from sphere_cli.simulation import advance
-        scene = build_scene(load_case({str(path)!r}))
-        advance(scene, 3)
-        assert (scene.fluid is None) == ({kind!r} == "dry")
-        print(sorted(m for m in sys.modules if m.split(".")[-1] in ("darcy", "pore_pressure")))
+        for path, model in zip({cases!r}, (None, "vans1d", "navier-stokes")):
+            scene = build_scene(load_case(path))
+            advance(scene, 3)
+            assert (scene.fluid.model if scene.fluid is not None else None) == model, path
+            print(sorted(m for m in sys.modules if m.split(".")[-1] in ("darcy", "pore_pressure")))
         """
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    assert out.stdout.split() == ["[]"] * 3
 
 
 OEDOMETER = """
