@@ -55,8 +55,9 @@ class PressureSolverConfig(Strict):
     method: Literal["pcg", "jacobi"] = Field(
         "pcg",
         description=(
-            '"pcg": conjugate gradient preconditioned with the diagonal (fast); "jacobi": the '
-            "reference's Jacobi iteration, kept to compare (needs far more iterations) [-]."
+            '"pcg": conjugate gradient preconditioned with a multigrid V-cycle (the diagonal on a '
+            'grid that does not halve; physics/poisson.py), fast; "jacobi": the reference\'s '
+            "Jacobi iteration, kept to compare (needs far more iterations) [-]."
         ),
     )
     tolerance: Real = Field(
