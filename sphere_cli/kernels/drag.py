@@ -215,27 +215,35 @@ def exchange(
 
 
 @njit(cache=True, parallel=True)
-def cell_drag(law, rho, mu, floor, u, phi, diameter, vp, grad_p, pressure_exchanged, f_i, f_i_coef):
-    """The cell-averaged form of the sphere documentation, for a bed given by its porosity,
-    mean diameter diameter (C,) [m] and mean particle velocity vp (C,3) [m/s] alone:
-    f_i = (1 - phi) k (u - vp) (minus (1 - phi) grad(p) if pressure_exchanged),
-    f_i_coef = (1 - phi) k. Cells with phi >= 1 hold no solid and get zero."""
+def cell_drag(
+    law, rho, mu, floor, u, phi, diameter, vp, grad_p, pressure_exchanged, f_i, f_i_coef, f_exchange
+):
+    """The cell-averaged form of the sphere documentation, for a bed given by its porosity, mean
+    diameter diameter (C,) [m] and mean particle velocity vp (C,3) [m/s] alone:
+    f_i = (1 - phi) k (u - vp) (minus (1 - phi) grad(p) if pressure_exchanged), less what the
+    last fluid step took ahead (f_exchange - f_i, as in `exchange`); f_i_coef = (1 - phi) k.
+    Cells with phi >= 1 hold no solid and get zero."""
     for c in prange(f_i_coef.shape[0]):
         solid = 1.0 - phi[c]
+        ahead0 = f_exchange[c, 0] - f_i[c, 0]
+        ahead1 = f_exchange[c, 1] - f_i[c, 1]
+        ahead2 = f_exchange[c, 2] - f_i[c, 2]
         if solid <= 0.0:
             f_i_coef[c] = 0.0
-            for a in range(3):
-                f_i[c, a] = 0.0
+            f_i[c, 0] = -ahead0
+            f_i[c, 1] = -ahead1
+            f_i[c, 2] = -ahead2
             continue
         w0 = u[c, 0] - vp[c, 0]
         w1 = u[c, 1] - vp[c, 1]
         w2 = u[c, 2] - vp[c, 2]
-        beta = solid * drag_rate(
-            law, phi[c], diameter[c], math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor
-        )
+        w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        beta = solid * drag_rate(law, phi[c], diameter[c], w, rho, mu, floor)
         f_i_coef[c] = beta
-        for a in range(3):
-            f = beta * (u[c, a] - vp[c, a])
-            if pressure_exchanged:
-                f -= solid * grad_p[c, a]
-            f_i[c, a] = f
+        f_i[c, 0] = beta * w0 - ahead0
+        f_i[c, 1] = beta * w1 - ahead1
+        f_i[c, 2] = beta * w2 - ahead2
+        if pressure_exchanged:
+            f_i[c, 0] -= solid * grad_p[c, 0]
+            f_i[c, 1] -= solid * grad_p[c, 1]
+            f_i[c, 2] -= solid * grad_p[c, 2]
