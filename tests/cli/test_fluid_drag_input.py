@@ -1,0 +1,104 @@
+"""Bad input to the drag of the Navier-Stokes fluid (`[fluid.drag]`): a short message naming the
+TOML key and line, exit 65, no traceback; and the porosity floor warning names the cell."""
+
+from __future__ import annotations
+
+import pytest
+from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+
+CASE = """\
+title = "drag"
+
+[simulation]
+duration = 0.0005
+dt = "auto"
+
+[domain]
+upper = [0.01, 0.01, 0.02]
+periodic = [true, true, false]
+
+[particles]
+count = 16
+density = 2500.0
+radius = { distribution = "fixed", value = 0.0005 }
+placement = { method = "lattice", region_upper = [0.01, 0.01, 0.008] }
+
+[contact]
+normal_stiffness = 1.0e4
+
+[[walls]]
+face = "z-"
+
+[fluid]
+model = "navier-stokes"
+grid = { cells = [4, 4, 8] }
+
+[fluid.drag]
+law = "gidaspow"
+pressure_force = true
+porosity_floor = 0.1
+"""
+
+# (id, text to replace, replacement, key named, text on the line named, other fragments)
+ERRORS = [
+    (
+        "law",
+        'law = "gidaspow"',
+        'law = "stokes"',
+        "fluid.drag.law",
+        'law = "stokes"',
+        ["gidaspow", "di-felice"],
+    ),
+    (
+        "floor-at-1",
+        "porosity_floor = 0.1",
+        "porosity_floor = 1.0",
+        "fluid.drag.porosity_floor",
+        "porosity_floor",
+        [],
+    ),
+    (
+        "floor-zero",
+        "porosity_floor = 0.1",
+        "porosity_floor = 0",
+        "fluid.drag.porosity_floor",
+        "porosity_floor",
+        [],
+    ),
+    (
+        "flag-as-number",
+        "pressure_force = true",
+        "pressure_force = 1",
+        "fluid.drag.pressure_force",
+        "pressure_",
+        [],
+    ),
+    (
+        "typo",
+        "pressure_force = true",
+        "pressure_forces = true",
+        "fluid.drag.pressure_forces",
+        "pressure_",
+        ["unknown key"],
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "marker", "fragments"), [e[1:] for e in ERRORS], ids=[e[0] for e in ERRORS]
+)
+def test_drag_error_names_key_and_line(tmp_path, old, new, key, marker, fragments):
+    text = edit(CASE, old, new)
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", tmp_path / "case.toml")
+    assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
+
+
+def test_drag_defaults_in_the_resolved_case(tmp_path):
+    """Without a [fluid.drag] table the resolved case shows the defaults."""
+    text = CASE[: CASE.index("[fluid.drag]")]
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", tmp_path / "case.toml")
+    assert result.code == 0, result.stderr
+    for fragment in ("gidaspow", "pressure_force", "porosity_floor"):
+        assert fragment in result.stdout
