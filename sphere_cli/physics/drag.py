@@ -158,13 +158,6 @@ class FluidParticleDrag:
             total = total - volume @ fs.grad_p.reshape(-1, 3)[self.cell_of]
         return total
 
-    def shortest_relaxation_time(self, state: State) -> float:
-        """Smallest particle relaxation time m/K of the last forces() call [s] (inf if none)."""
-        p = state.particles
-        rate = self.coef * p.inv_mass
-        top = float(rate.max()) if rate.size else 0.0
-        return 1.0 / top if top > 0.0 else math.inf
-
     def prognostic_state(self) -> dict[str, np.ndarray]:
         """What a bitwise restart needs: the drag of the next first half kick and the impulses
         not yet handed to the fluid."""
