@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sphere_cli.physics.navier_stokes import NavierStokesSolver
 
 from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
 from sphere_cli.kernels.drag import GIDASPOW, cell_drag
 from sphere_cli.physics.fluid_grid import FluidGrid
+from sphere_cli.physics.navier_stokes import NavierStokesSolver
 
 RHO, MU, D = 1000.0, 1e-3, 1e-3  # water, 1 mm spheres
 
