@@ -93,9 +93,9 @@ class NeighborList:
 
 @dataclass
 class Walls:
-    """Plane walls and their motion (physics/walls.py). `force` and `vel` are those of the
-    current step whenever a wall moves (energy budgets integrate force . velocity from them);
-    with every wall fixed, `force` is refreshed only when observed."""
+    """Plane walls and their motion (physics/walls.py). `vel` is that of the current step;
+    `force` too for every wall that moves (energy budgets integrate force . velocity from them);
+    a fixed wall's force (zero work) is refreshed only when observed."""
 
     faces: list[str]
     axis: np.ndarray  # (W,) int64
@@ -112,10 +112,11 @@ class Walls:
     control: np.ndarray  # (W,NC) parameters of the modes (kernels/walls.py)
     attached: np.ndarray  # (K,) int64 particles glued to a wall (rough walls)
     attached_wall: np.ndarray  # (K,) int64 their wall
-    # scratch: predicted velocity (W,3); each particle's wall forces (N,W,3) while `record`
+    # scratch: predicted velocity (W,3); each particle's force from the walls marked in
+    # `record` (W,) uint8 (the moving ones), (N,W,3) if some wall ever moves, else (0,W,3)
     vel_pred: np.ndarray = None
     pforce: np.ndarray = None
-    record: bool = False
+    record: np.ndarray = None
 
     PROGNOSTIC = ("coord", "hist", "vel", "acc", "shift", "force", "attached", "attached_wall")
 

@@ -20,10 +20,11 @@ material (N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.
 (normal along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_vel, wall_vel_pred (W,3)
 [m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in contact.py (the
 wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m];
-force, torque (N,3) accumulated in place; record: also store each particle's wall forces in
-pforce (N,W,3) [N] (the walls' reaction, summed by wall_kick); mode (W,2) int64 normal mode
-(FIXED, VELOCITY, STRESS) and shear mode (FIXED = none, VELOCITY, STRESS); control (W,NC)
-columns C_*; attached (K,) int64 particles glued to wall attached_wall (K,) int64.
+force, torque (N,3) accumulated in place; record (W,) uint8: for the walls marked, also store
+each particle's wall force in pforce (N,W,3) [N] (their reaction, summed by wall_totals);
+mode (W,2) int64 normal mode (FIXED, VELOCITY, STRESS) and shear mode (FIXED = none, VELOCITY,
+STRESS); control (W,NC) columns C_*; attached (K,) int64 particles glued to wall attached_wall
+(K,) int64.
 """
 
 import math
@@ -77,14 +78,14 @@ def wall_forces(
     record,
     pforce,
 ):
-    """Add the forces and torques of W plane walls to force/torque (and store them in pforce
-    if record)."""
+    """Add the forces and torques of W plane walls to force/torque (and store those of the
+    walls marked in record in pforce)."""
     n = pos.shape[0]
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
     for i in prange(n):
-        if record:
-            for w in range(nw):
+        for w in range(nw):
+            if record[w]:
                 pforce[i, w, 0] = 0.0
                 pforce[i, w, 1] = 0.0
                 pforce[i, w, 2] = 0.0
@@ -158,7 +159,7 @@ def wall_forces(
             f0 += fn * n0 + g0
             f1 += fn * n1 + g1
             f2 += fn * n2 + g2
-            if record:
+            if record[w]:
                 pforce[i, w, 0] = fn * n0 + g0
                 pforce[i, w, 1] = fn * n1 + g1
                 pforce[i, w, 2] = fn * n2 + g2
@@ -255,23 +256,25 @@ def wall_areas(wall_axis, wall_sign, coord, lower, upper, area):
 
 
 @njit(cache=True)
-def wall_totals(pforce, attached, attached_wall, pforce_total, mass, body_acc, wall_force):
-    """Force of the particles on each wall [N]: minus the wall forces on free particles (pforce,
-    summed in particle order) plus the contact forces on the particles glued to it (their total
-    force pforce_total less their weight)."""
+def wall_totals(pforce, record, attached, attached_wall, pforce_total, mass, body_acc, wall_force):
+    """Force of the particles on each wall marked in record [N]: minus the wall forces on free
+    particles (pforce, summed in particle order) plus the contact forces on the particles glued
+    to it (their total force pforce_total less their weight). Other walls: zero."""
     nw = wall_force.shape[0]
     for w in range(nw):
         for b in range(3):
             wall_force[w, b] = 0.0
     for i in range(pforce.shape[0]):
         for w in range(nw):
-            for b in range(3):
-                wall_force[w, b] -= pforce[i, w, b]
+            if record[w]:
+                for b in range(3):
+                    wall_force[w, b] -= pforce[i, w, b]
     for k in range(attached.shape[0]):
         i = attached[k]
         w = attached_wall[k]
-        for b in range(3):
-            wall_force[w, b] += pforce_total[i, b] - mass[i] * body_acc[b]
+        if record[w]:
+            for b in range(3):
+                wall_force[w, b] += pforce_total[i, b] - mass[i] * body_acc[b]
 
 
 @njit(cache=True)

@@ -74,7 +74,7 @@ WALL_UNITS = {
 
 def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray, moving: bool) -> Walls:
     """Walls at the box faces, every one fixed (modes are set by `apply_modes`). `moving`: some
-    wall moves in some stage, so each step records the particles' wall forces."""
+    wall moves in some stage, so steps record the particles' forces on the moving walls."""
     faces = [w.face for w in wall_specs]
     nw = len(faces)
     axis = np.array([AXES[f[0]] for f in faces], dtype=np.int64)
@@ -101,7 +101,7 @@ def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.nd
         attached_wall=np.zeros(0, dtype=np.int64),
         vel_pred=np.zeros((nw, 3)),
         pforce=np.zeros((n_particles if moving else 0, nw, 3)),
-        record=moving,
+        record=np.zeros(nw, dtype=np.uint8),
     )
 
 
@@ -227,6 +227,7 @@ def apply_modes(walls: Walls, specs: dict, scales: WallScales, box, start_time: 
             scales.damping(spec, w, area[w], bed_height(walls, w, coord, box)) if spec.driven else 0.0
         )
         c[C_START] = start_time
+        walls.record[w] = walls.mode[w, 0] != FIXED or walls.mode[w, 1] != FIXED
 
 
 class PlaneWallForces:
@@ -270,18 +271,17 @@ class PlaneWallForces:
         )
 
     def measure(self, state: State) -> None:
-        """Refresh walls.force and walls.area at the current state. With every wall fixed the
-        step does not record the particles' wall forces: they are recomputed (same positions,
-        velocities and springs, the springs not grown: spring_dt = 0) without touching the state."""
+        """Refresh walls.force (every wall) and walls.area at the current state. A step records
+        the particles' forces on moving walls only, so they are recomputed here (same positions,
+        velocities and springs, the springs not grown: spring_dt = 0, the force the step had)
+        without touching the state."""
         p, w = state.particles, state.walls
         wall_areas(w.axis, w.sign, w.coord, state.box.lower, state.box.upper, w.area)
-        if w.record:
-            pforce = w.pforce
-        else:
-            pforce = np.zeros((p.count, len(w.faces), 3))
-            scratch = np.zeros_like(p.force)
-            self._forces(state, 0.0, w.hist.copy(), scratch, scratch.copy(), True, pforce)
-        wall_totals(pforce, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
+        every = np.ones(len(w.faces), dtype=np.uint8)
+        pforce = np.zeros((p.count, len(w.faces), 3))
+        scratch = np.zeros_like(p.force)
+        self._forces(state, 0.0, w.hist.copy(), scratch, scratch.copy(), every, pforce)
+        wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
 
     def observables(self, state: State) -> dict:
         """Wall positions, velocities, forces and stresses (compressive normal stress; shear
@@ -345,7 +345,7 @@ class WallMotion:
     def kick(self, state: State) -> None:
         w, p, box = state.walls, state.particles, state.box
         wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
-        wall_totals(w.pforce, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.force)
+        wall_totals(w.pforce, w.record, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.force)
         dt = state.clock.dt
         wall_kick(
             w.axis,
