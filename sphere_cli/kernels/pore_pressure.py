@@ -241,17 +241,55 @@ def pressure_gradient(p, ih, periodic, bottom_dirichlet, top_dirichlet, bottom_v
 
 
 @njit(cache=True, parallel=True)
-def darcy_velocity(grad, k, phi_used, mu, v):
-    """v = -k grad p / (mu phi): the mean velocity of the pore fluid relative to the grains
-    (the Darcy flux q = -k grad p / mu divided by the porosity)."""
-    nx, ny, nz = k.shape
+def darcy_velocity(
+    p, ax, ay, az, ih, periodic, bottom_dirichlet, top_dirichlet, bottom_value, top_value, phi_used, mu, v
+):
+    """v = q / phi, the mean velocity of the pore fluid relative to the grains, with the Darcy
+    flux q of a cell the mean of the fluxes -a_f (dp/dn)_f / mu through its two faces along
+    each axis: the fluxes the solve balances (harmonic face permeabilities), so q is
+    continuous across a jump of permeability where -k grad p of the cell would not be. A
+    no-flow face carries 0, a face held at g the flux to g half a cell away."""
+    nx, ny, nz = p.shape
     for col in prange(nx * ny):
         i = col // ny
         j = col % ny
-        for m in range(nz):
-            s = -k[i, j, m] / (mu * phi_used[i, j, m])
-            for a in range(3):
-                v[i, j, m, a] = s * grad[i, j, m, a]
+        for k in range(nz):
+            here = p[i, j, k]
+            s = 0.5 / (mu * phi_used[i, j, k])
+            # x faces i (low) and i + 1 (high)
+            lo = 0.0
+            if i > 0:
+                lo = -ax[i, j, k] * (here - p[i - 1, j, k]) * ih[0]
+            elif periodic[0]:
+                lo = -ax[0, j, k] * (here - p[nx - 1, j, k]) * ih[0]
+            hi = 0.0
+            if i < nx - 1:
+                hi = -ax[i + 1, j, k] * (p[i + 1, j, k] - here) * ih[0]
+            elif periodic[0]:
+                hi = -ax[0, j, k] * (p[0, j, k] - here) * ih[0]
+            v[i, j, k, 0] = s * (lo + hi)
+            lo = 0.0
+            if j > 0:
+                lo = -ay[i, j, k] * (here - p[i, j - 1, k]) * ih[1]
+            elif periodic[1]:
+                lo = -ay[i, 0, k] * (here - p[i, ny - 1, k]) * ih[1]
+            hi = 0.0
+            if j < ny - 1:
+                hi = -ay[i, j + 1, k] * (p[i, j + 1, k] - here) * ih[1]
+            elif periodic[1]:
+                hi = -ay[i, 0, k] * (p[i, 0, k] - here) * ih[1]
+            v[i, j, k, 1] = s * (lo + hi)
+            lo = 0.0
+            if k > 0:
+                lo = -az[i, j, k] * (here - p[i, j, k - 1]) * ih[2]
+            elif bottom_dirichlet:
+                lo = -az[i, j, 0] * (here - bottom_value) * 2.0 * ih[2]
+            hi = 0.0
+            if k < nz - 1:
+                hi = -az[i, j, k + 1] * (p[i, j, k + 1] - here) * ih[2]
+            elif top_dirichlet:
+                hi = -az[i, j, nz] * (top_value - here) * 2.0 * ih[2]
+            v[i, j, k, 2] = s * (lo + hi)
 
 
 @njit(cache=True)

@@ -18,7 +18,6 @@ import numpy as np
 from ..config.fluid_darcy import DarcyFluid
 from ..errors import NumericalError
 from ..kernels.darcy import add_pressure_forces
-from ..kernels.pore_pressure import darcy_velocity
 from .fluid import FluidModule
 from .fluid_grid import FluidGrid, fluid_grid
 from .pore_pressure import PorePressure, fixed_pressure_cells
@@ -148,6 +147,7 @@ class Darcy(FluidModule):
             "porosity": s.porosity,
             "porosity_previous": self.porosity_previous,
             "gradient": s.gradient,
+            "darcy_velocity": s.velocity,  # output only, but made with the last step's faces
         }
 
     def restore(self, state, arrays: dict) -> None:
@@ -157,7 +157,7 @@ class Darcy(FluidModule):
         self.porosity_previous[...] = arrays["porosity_previous"]
         s.gradient[...] = arrays["gradient"]
         self.pore.update_permeability()
-        darcy_velocity(s.gradient, s.permeability, s.porosity_used, self.pore.config.viscosity, s.velocity)
+        s.velocity[...] = arrays["darcy_velocity"]
 
     # -- diagnostics and output ------------------------------------------------------------------
 

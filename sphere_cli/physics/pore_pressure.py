@@ -78,7 +78,7 @@ class DarcyState:
     porosity_used: np.ndarray  # phi clamped to [porosity_min, porosity_max] [-]
     permeability: np.ndarray  # k [m^2]
     gradient: np.ndarray  # grad p [Pa/m]
-    velocity: np.ndarray  # Darcy velocity -k grad p / (mu phi) [m/s]
+    velocity: np.ndarray  # Darcy velocity q / phi, q from the face fluxes [m/s]
     fixed: np.ndarray  # uint8, 1 = cell held at fixed_value
     fixed_value: np.ndarray  # [Pa]
     # scratch of the implicit step
@@ -185,14 +185,21 @@ class PorePressure:
         return boundary_pressure(self.config.bottom, time), boundary_pressure(self.config.top, time)
 
     def update_gradient(self, time: float) -> None:
-        """grad p and the Darcy velocity from the current pressure (boundary values at `time`)."""
+        """grad p and the Darcy velocity from the current pressure and permeability (boundary
+        values at `time`)."""
         s = self.state
         bottom, top = self.boundary_values(time)
         pressure_gradient(
             s.pressure, self.ih, self.periodic, np.uint8(self.bottom_dirichlet), np.uint8(self.top_dirichlet),
             bottom, top, s.gradient,
         )  # fmt: skip
-        darcy_velocity(s.gradient, s.permeability, s.porosity_used, self.config.viscosity, s.velocity)
+        ax, ay, az = s.faces
+        # the faces again, uncut: a fixed cell exchanges fluid with its neighbours
+        face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        darcy_velocity(
+            s.pressure, ax, ay, az, self.ih, self.periodic, np.uint8(self.bottom_dirichlet),
+            np.uint8(self.top_dirichlet), bottom, top, s.porosity_used, self.config.viscosity, s.velocity,
+        )  # fmt: skip
 
     # -- facts -----------------------------------------------------------------------------------
 
