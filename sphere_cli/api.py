@@ -160,7 +160,7 @@ def run(
     log.info("case %s -> %s", case_path, rundir.path)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
-    output.frame(scene)
+    output.first(scene)
     output.checkpoint(scene)
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
 
@@ -212,7 +212,7 @@ def resume(
         rundir.trajectory_path.rename(aside)
         log.warning("%s; moved it to %s and started a new trajectory file", exc, aside.name)
         output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
-        output.frame(scene)
+        output.first(scene)
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
 
 
@@ -241,6 +241,13 @@ def inspect(path: str | Path) -> dict:
     from .io.inspect import summarize
 
     return summarize(Path(path))
+
+
+def plot(run_dir: str | Path, out_dir: str | Path | None = None) -> list[Path]:
+    """PNG figures of a run's observables (sphere_cli/plot.py); returns the files written."""
+    from .plot import plot_run
+
+    return plot_run(run_dir, out_dir)
 
 
 def to_json(data) -> str:

@@ -1,7 +1,8 @@
 """`sphere`: the command line. Parses arguments, calls `api`, maps errors to exit codes.
 
 Exit codes (design guide §6): 0 done; 2 usage; 65 bad case file; 66 missing input;
-70 numerical failure; 74 I/O failure; 75 stopped early on request; 78 resume refused.
+69 optional package missing (plot without matplotlib); 70 numerical failure; 74 I/O failure;
+75 stopped early on request; 78 resume refused.
 """
 
 from __future__ import annotations
@@ -147,6 +148,23 @@ def inspect(
     except SphereError as exc:
         _fail(exc)
     typer.echo(api.to_json(summary) if as_json else render(summary))
+
+
+@app.command()
+def plot(
+    run_dir: Path = typer.Argument(..., help="Run directory (or its trajectory.h5)."),
+    output: Path | None = typer.Option(
+        None, "-o", "--output", help="Folder for the PNG files (default RUN_DIR/plots)."
+    ),
+) -> None:
+    """Draw the observables as PNG files: time series of stress, friction, dilation, energy and
+    structure, and the layer profiles (needs matplotlib: pip install 'sphere-cli[plot]')."""
+    try:
+        written = api.plot(run_dir, output)
+    except SphereError as exc:
+        _fail(exc)
+    for path in written:
+        typer.echo(str(path))
 
 
 @app.command()

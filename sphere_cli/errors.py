@@ -48,3 +48,9 @@ class ResumeRefused(SphereError):
     """The case no longer matches the checkpoint it would resume from (EX_CONFIG)."""
 
     exit_code = 78
+
+
+class MissingDependency(SphereError):
+    """An optional package a command needs is not installed (EX_UNAVAILABLE)."""
+
+    exit_code = 69

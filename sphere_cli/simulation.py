@@ -1,13 +1,14 @@
 """The time loop: one step composes only the modules the scene holds, then the schedules run.
 
-Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick,
-then, with a fluid, the fluid's own step when it is due (physics/fluid.py). Moving walls are
-kicked and drifted just before the particles (their glued particles take the wall's velocity)
-and kicked after the forces. After the clock advances the stages test their end
-(physics/stages.py); the run is done when the last stage ends. Then: stability guard (every
-`blowup_check_every` steps and before every checkpoint), trajectory frames, checkpoints and
-status, each on its own schedule. A stop request (signal, wall-time budget) writes a checkpoint
-at the next step boundary.
+Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick
+->  finish (modules that need the full-step velocities: the energy budget), then, with a fluid,
+the fluid's own step when it is due (physics/fluid.py). Moving walls are kicked and drifted
+just before the particles (their glued particles take the wall's velocity) and kicked after the
+forces. After the clock advances the stages test their end (physics/stages.py); the run is done
+when the last stage ends. Then: stability guard (every `blowup_check_every` steps and before
+every checkpoint), trajectory frames, observables, checkpoints and status, each on its own
+schedule (observables follow the frames unless output.observables sets a schedule of its own).
+A stop request (signal, wall-time budget) writes a checkpoint at the next step boundary.
 """
 
 from __future__ import annotations
@@ -81,6 +82,7 @@ def advance(scene, steps: int) -> bool:
     forces, after_step = scene.force_modules, scene.after_step_modules
     walls = [] if scene.wall_motion is None else [scene.wall_motion]
     stages = scene.stages
+    finishers = scene.finish_modules
     clock = state.clock
     ended = False
     for _ in range(steps):
@@ -95,6 +97,8 @@ def advance(scene, steps: int) -> bool:
         for module in walls:
             module.kick(state)
         kicker.kick(state)
+        for module in finishers:
+            module.finish_step(state)
         clock.step += 1
         for module in after_step:
             module.after_step(state)
@@ -140,6 +144,8 @@ class Loop:
         out_cfg = scene.case.output
         self.frames = StepSchedule.from_config(out_cfg.frames, dt)
         self.checkpoints = StepSchedule.from_config(out_cfg.checkpoints, dt)
+        observed = out_cfg.observables
+        self.observations = None if observed.follows_frames else StepSchedule.from_config(observed, dt)
         self.status = StepSchedule(wall_seconds=progress.interval)
         self.check_every = scene.case.simulation.blowup_check_every
 
@@ -167,6 +173,9 @@ class Loop:
                 check_stable(scene)  # no frame with NaNs reaches the trajectory
                 self.output.frame(scene)
                 self.frames.done(now)
+            if self.observations is not None and self.observations.due(step, now):
+                self.output.observe(scene)
+                self.observations.done(now)
             if self.checkpoints.due(step, now) and step < self.end_step:
                 check_stable(scene)
                 self.output.checkpoint(scene)
@@ -176,6 +185,8 @@ class Loop:
                 self.status.done(now)
         check_stable(scene)
         self.output.frame(scene)
+        if self.observations is not None:
+            self.output.observe(scene)
         self.output.checkpoint(scene)
         finished = clock.step >= self.end_step or scene.finished
         self.progress.update(

@@ -16,10 +16,12 @@ from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlaceme
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
 from ..physics.contact import PairContactForces, stability_limit
+from ..physics.energy_budget import EnergyBudget
 from ..physics.fluid import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.motion import Motion
 from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
+from ..physics.observables import Observer
 from ..physics.stages import Stages
 from ..physics.walls import (
     PlaneWallForces,
@@ -48,6 +50,11 @@ class Scene:
     fluid: FluidModule | None = None
     wall_motion: WallMotion | None = None  # only if some wall moves in some stage
     stages: Stages | None = None  # only if the case has [[stages]]
+    budget: EnergyBudget | None = None  # only when the energy budget is observed
+    observer: Observer | None = None
+
+    # optional modules whose state a checkpoint may lack (resume starts them afresh)
+    OPTIONAL_STATE = ("energy_budget", "observables")
 
     @property
     def tables(self) -> ContactTables:
@@ -55,7 +62,13 @@ class Scene:
 
     @property
     def force_modules(self) -> list:
-        return [m for m in (self.contact, self.walls, self.fluid) if m is not None]
+        # the budget reads the springs of the step before the contacts update them
+        return [m for m in (self.budget, self.contact, self.walls, self.fluid) if m is not None]
+
+    @property
+    def finish_modules(self) -> list:
+        """Modules run after the second half kick of each step."""
+        return [] if self.budget is None else [self.budget]
 
     @property
     def after_step_modules(self) -> list:
@@ -77,6 +90,10 @@ class Scene:
             modules[self.fluid.name] = self.fluid
         if self.stages is not None:
             modules["stages"] = self.stages
+        if self.budget is not None:
+            modules["energy_budget"] = self.budget
+        if self.observer is not None and self.observer.stateful:
+            modules["observables"] = self.observer
         return modules
 
     @property
@@ -207,6 +224,10 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     )
     if fluid is not None:
         fluid.start(state)
+    observed = case.output.observables
+    scene.observer = Observer(scene, observed)
+    if "energy_budget" in observed.quantities:
+        scene.budget = EnergyBudget(scene)
     if restart is None:
         if stages is not None:
             stages.begin(state, 0)
@@ -215,6 +236,8 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         if fluid is not None:
             fluid.initialize(state)
         scene.compute_initial_forces()
+        if scene.budget is not None:
+            scene.budget.start()
     else:
         _restore(loaded, scene, restart)
     return scene
@@ -250,13 +273,20 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
             f"{scene.state.clock.dt!r} s"
         )
     modules = scene.stateful_modules
-    if set(modules) != set(restart.arrays):
+    optional = set(Scene.OPTIONAL_STATE)
+    if set(modules) - optional != set(restart.arrays) - optional:
         raise ResumeRefused(
             f"{restart.path}: holds state for {sorted(restart.arrays)} but the case needs {sorted(modules)}"
         )
+    fresh = []
     for name, module in modules.items():
-        module.restore(scene.state, restart.arrays[name])
+        if name in restart.arrays:
+            module.restore(scene.state, restart.arrays[name])
+        else:
+            fresh.append(module)
     scene.state.clock.step = restart.step
+    for module in fresh:  # observed from the resume step on
+        module.start()
 
 
 def _initial_particles(loaded: LoadedCase, rng):

@@ -579,6 +579,71 @@ class CheckpointSchedule(Schedule):
     keep: Count = Field(3, ge=1, description="Number of newest checkpoints kept [-].")
 
 
+class Observables(Schedule):
+    """Measurements written to /observables of trajectory.h5, computed only when due (the time
+    loop does no measuring work between samples; the energy budget alone accumulates every step,
+    and only when listed). Schedule keys left unset: a sample with every frame."""
+
+    quantities: list[
+        Literal[
+            "energy",
+            "contacts",
+            "packing_fraction",
+            "coordination",
+            "stress",
+            "profiles",
+            "deformation",
+            "energy_budget",
+        ]
+    ] = Field(
+        default_factory=lambda: ["energy", "contacts"],
+        description=(
+            "Groups of observables to record: energy (kinetic, potential, elastic, total [J]); "
+            "contacts (pair and wall contact counts); packing_fraction (solid fraction of the sample "
+            "and of its interior [-]); coordination (mean contacts per particle in the interior, with "
+            "and without rattlers [-]); stress (granular stress tensor of the sample, contact virial "
+            "+ kinetic part, compression positive [Pa], pressure [Pa], effective friction "
+            "tau/sigma_n [-]); profiles (solid fraction, stress tensor and mean velocity per horizontal "
+            "layer); deformation (sample height [m], dilation [-]); energy_budget (work of gravity and "
+            "walls, energy dissipated by damping, friction and rolling resistance, accumulated every "
+            "step, and the balance residual [J])."
+        ),
+    )
+    layers: Count = Field(
+        10,
+        ge=1,
+        le=10000,
+        description="Number of horizontal layers of the profiles over the sample height [-].",
+    )
+    interior_margin: Real = Field(
+        2.0,
+        ge=0,
+        description=(
+            "Thickness of the layer next to each wall and free surface left out of the interior "
+            "region (interior packing fraction and coordination), in largest particle diameters [-]."
+        ),
+    )
+    shear_direction: Literal["x", "y"] = Field(
+        "x",
+        description=(
+            'Horizontal direction of shear for the effective friction tau/sigma_n = sigma_zs/sigma_zz, '
+            "s = this axis (z is the normal direction)."
+        ),
+    )
+
+    @field_validator("quantities")
+    @classmethod
+    def _unique(cls, value):
+        repeated = sorted({q for q in value if value.count(q) > 1})
+        if repeated:
+            raise ValueError(f"listed more than once: {', '.join(repeated)}")
+        return value
+
+    @property
+    def follows_frames(self) -> bool:
+        return self.every_time is None and self.every_steps is None and self.every_wall_minutes is None
+
+
 class Output(Strict):
     frames: Schedule = Field(
         default_factory=lambda: Schedule(every_steps=1000),
@@ -594,6 +659,13 @@ class Output(Strict):
     fields: list[Literal["velocity", "angular_velocity", "force", "torque"]] = Field(
         default_factory=lambda: ["velocity", "angular_velocity", "force"],
         description="Per-particle fields written in each frame besides position (radius is written once).",
+    )
+    observables: Observables = Field(
+        default_factory=Observables,
+        description=(
+            "Which observables are recorded in trajectory.h5 and how often (default: energies "
+            "and contact counts with every frame)."
+        ),
     )
 
 

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import h5py
+import numpy as np
 
 from ..errors import MissingInputError, OutputError
 from .checkpoint import list_checkpoints, read_checkpoint
@@ -59,11 +60,11 @@ def _trajectory(path: Path) -> dict:
             part = f["particles/trajectory"]
             steps = part["position/step"][...]
             times = part["position/time"][...]
-            obs = {}
-            for name, group in f["observables"].items():
-                values = group["value"][...]
-                if values.size:
-                    obs[name] = values[-1].tolist()  # a number, or one row per wall
+            obs = {
+                name: _last_sample(group)
+                for name, group in f["observables"].items()
+                if group["step"].shape[0]
+            }
             return {
                 "kind": "trajectory",
                 "path": str(path),
@@ -102,6 +103,21 @@ def _fluid(f: h5py.File) -> dict | None:
             last = values[-1]
             out[name] = f"min {last.min():.6g}, max {last.max():.6g} {unit}".rstrip()
     return out
+
+
+def _last_sample(group: h5py.Group):
+    """The last sample of an observable: a number, a small tensor as nested lists, or for a
+    profile its shape, unit and range (the whole series: `sphere plot`, or the file itself)."""
+    value = group["value"][-1]
+    unit = group["value"].attrs.get("unit", "")
+    if value.ndim == 0:
+        return value.item()
+    if value.size <= 24:  # a tensor, or one row per wall
+        return np.vectorize(lambda x: float(f"{x:.6g}"), otypes=[float])(value).tolist()
+    return (
+        f"{value.shape[0]} layers x {value.shape[1:] or 'scalar'}, {group['step'].shape[0]} samples, "
+        f"last from {value.min():.4g} to {value.max():.4g}" + (f" {unit}" if unit else "")
+    )
 
 
 def _checkpoint(path: Path) -> dict:

@@ -17,7 +17,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import OutputError, UsageError
-from ..physics.energy import observables
 from .atomic import write_text_atomic
 from .checkpoint import remove_stale_temporaries, write_checkpoint
 from .trajectory import Trajectory, is_grid_field
@@ -109,14 +108,23 @@ class RunOutput:
         self.keep = scene.case.output.checkpoints.keep
         self.last_checkpoint: Path | None = None
         self.frame_times: list[float] = []
+        self.observables_follow_frames = scene.case.output.observables.follows_frames
 
     def frame(self, scene) -> None:
-        values = observables(scene)
-        if scene.fluid is not None:
-            fluid_values = scene.fluid.observables(scene.state)
-            values.update({name: value for name, (value, _unit) in fluid_values.items()})
-        self.trajectory.append(scene, values)
+        self.trajectory.append(scene)
         self._refresh_xdmf(scene)
+        if self.observables_follow_frames:
+            self.observe(scene)
+
+    def first(self, scene) -> None:
+        """The frame and observables of the starting state."""
+        self.frame(scene)
+        if not self.observables_follow_frames:
+            self.observe(scene)
+
+    def observe(self, scene) -> None:
+        """One sample of the observables (on their schedule: computed only now)."""
+        self.trajectory.append_observables(scene, scene.observer.sample())
 
     def _refresh_xdmf(self, scene) -> None:
         import h5py

@@ -5,9 +5,10 @@
 /particles/trajectory/radius   time-independent (N,) [m]
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
-/observables/<name>            {step, time, value}: energies, contact counts (and the fluid's);
-                               wall series (walls, stages) one row per wall, @wall_faces names
-                               them, created by the first frame
+/observables/<name>            {step, time, value}: the observables on their own schedule
+                               (physics/observables.py); value (samples, ...) holds a scalar,
+                               a tensor (3,3) or a profile (layers, ...) per sample
+                               (wall series one row per wall, @wall_faces names them)
 /fluid/<name>                  {step, time, value}: fluid fields (only when the case has a fluid);
                                @model; on a 3D grid also @origin, @spacing, @shape = (nx, ny, nz),
                                cell-centred values stored as value[frame, k, j, i(, component)]
@@ -27,8 +28,6 @@ import h5py
 import numpy as np
 
 from ..errors import OutputError
-from ..physics.energy import UNITS
-from ..physics.walls import WALL_UNITS
 
 FIELD_UNITS = {
     "position": "m",
@@ -52,7 +51,7 @@ def _time_series(parent: h5py.Group, name: str, shape: tuple, dtype, unit: str) 
     g.create_dataset("step", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(256,))
     t = g.create_dataset("time", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(256,))
     t.attrs["unit"] = "s"
-    chunk = (1, *shape) if shape else (256,)
+    chunk = (max(1, 256 // int(np.prod(shape))), *shape) if shape else (256,)
     v = g.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=chunk)
     if unit:
         v.attrs["unit"] = unit
@@ -99,9 +98,7 @@ class Trajectory:
                 species.attrs["materials"] = np.array([name.encode() for name in scene.tables.names])
                 for field in self.fields:
                     _time_series(part, field, (n, 3), np.float64, FIELD_UNITS[field])
-                obs = f.create_group("observables")
-                for name, unit in UNITS.items():
-                    _time_series(obs, name, (), np.float64, unit)
+                obs = f.create_group("observables")  # series are created by their first sample
                 if scene.fluid is not None:
                     _create_fluid(f, scene)
                 if state.walls is not None:
@@ -118,7 +115,7 @@ class Trajectory:
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
 
-    def append(self, scene, observables: dict) -> None:
+    def append(self, scene) -> None:
         state = scene.state
         step, time = state.clock.step, state.clock.time
         try:
@@ -128,17 +125,29 @@ class Trajectory:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
                 for field in self.fields:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
-                obs = f["observables"]
-                for name, value in observables.items():
-                    if name not in obs:  # wall and stage series: shaped like their first value
-                        _time_series(obs, name, np.shape(value), np.float64, WALL_UNITS.get(name, ""))
-                    _append(obs[name], step, time, value)
                 if scene.fluid is not None:
                     grid = scene.fluid.grid()
                     for name, (value, _unit) in scene.fluid.output_fields(state).items():
                         _append(f["fluid"][name], step, time, _file_order(value, grid))
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot append a frame ({exc})") from None
+
+    def append_observables(self, scene, observables: dict[str, tuple]) -> None:
+        """One sample: name -> (value, unit), value a number or an array of fixed shape."""
+        clock = scene.state.clock
+        try:
+            with h5py.File(self.path, "a") as f:
+                obs = f["observables"]
+                for name, (value, unit) in observables.items():
+                    value = np.asarray(value, dtype=np.float64)
+                    if name not in obs:
+                        _time_series(obs, name, value.shape, np.float64, unit)
+                    group = obs[name]
+                    if group["step"].shape[0] and group["step"][-1] >= clock.step:
+                        continue  # already recorded (the end sample of a resumed run)
+                    _append(group, clock.step, clock.time, value)
+        except OSError as exc:
+            raise OutputError(f"{self.path}: cannot append observables ({exc})") from None
 
     def truncate_after(self, step: int) -> None:
         """Drop frames later than `step` (they are recomputed by a resumed run)."""
@@ -178,8 +187,6 @@ def _create_fluid(f: h5py.File, scene) -> None:
     for name, (value, unit) in fluid.output_fields(state).items():
         value = _file_order(value, grid)
         _time_series(group, name, value.shape, value.dtype, unit)
-    for name, (_value, unit) in fluid.observables(state).items():
-        _time_series(f["observables"], name, (), np.float64, unit)
 
 
 def is_grid_field(value: np.ndarray, grid) -> bool:

@@ -1,0 +1,211 @@
+"""Energy budget, accumulated every step while the budget is requested: work of gravity and of
+moving walls, energy dissipated by the dashpots, by Coulomb sliding and by rolling resistance.
+
+Velocity Verlet changes the kinetic energy (translation and rotation) by exactly
+    sum over steps k of F_k . v_k dt,
+F_k the force of step k and v_k = v_{k-1/2} + dt/2 a_k the full-step velocity (the two half
+kicks of F_k act over (v_{k-1/2} + v_k)/2 and (v_k + v_{k+1/2})/2, whose mean is v_k), up to
+half a step at each end. So each contact's work is booked at the full-step relative velocity
+w_k of its contact point: this kernel runs after the second half kick (vel = v_k), on copies of
+the springs of step k-1 and of the half-step velocities taken before the contact forces, and it
+evaluates each contact with the law's own functions (normal_law, tangential_force,
+rolling_torque of kernels/contact.py) on a scratch copy of its spring, reproducing the force
+F_k the contact kernel applied. Per step:
+  gravity   m g . v_{k-1/2} dt, exactly the work over the drift x_k - x_{k-1};
+  walls     (F_n n + F_t) . v_wall dt, the force of the wall on the particle times the wall's
+            displacement (0 for a fixed wall);
+  damping   -(F_n - F_e) w_n dt, F_e the elastic normal force (the law at zero velocity), so it
+            also books the elastic force the clamp F_n >= 0 cancels; and c_t u_t . w_t dt, the
+            tangential dashpot of a sticking contact (u the predicted velocity it acts on);
+  friction  k_t (xi_k + xi_{k-1}) . (xi* - xi_k)/2 for a sliding contact: xi* the spring grown
+            by the step without the cap, xi_k the capped one, xi_{k-1} the previous one rotated
+            into the contact plane (the spring's work k_t xi_k . w_k dt summed by parts is
+            Delta(k_t |xi|^2/2) plus this slip term); plus k_t |xi|^2/2 of a spring dropped when
+            its pair parts;
+  rolling   -M . (w_i - w_j) dt at the full-step spins.
+The elastic energies are state functions (kernels/energy.py), so
+W_gravity + W_walls = Delta(kinetic + elastic) + damping + friction + rolling holds to the
+quadrature of the elastic work (second order, not accumulating) and the overlap's curvature.
+For Hertz-Mindlin the tangential energy k_t |xi|^2/2 is not a potential (k_t grows with the
+overlap), so the budget closes exactly only for the linear law.
+
+Arguments as in contact.py, walls.py and contact_probe.py; vel_half, angvel_half (N,3) the
+half-step velocities; vel, angvel (N,3) the full-step ones [m/s, rad/s]; hist, wall_hist the
+springs of the previous step [m]; wall_vel (W,3) [m/s]; scratch (N,2,3) [m]; parts (N,5) [J]
+per-particle contributions (gravity, walls, damping, friction, rolling); totals (5,) [J],
+accumulated in place by a serial sum in particle order (thread-count independent).
+"""
+
+import math
+
+from numba import njit, prange
+
+from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
+from .contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
+
+GRAVITY = 0
+WALLS = 1
+DAMPING = 2
+FRICTION = 3
+ROLLING = 4
+TERMS = 5
+
+
+@njit(cache=True, inline="always")
+def _tangential(scratch, i, spring, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2, w0, w1, w2):
+    """(F_t (3 values) [N], damping [J], friction [J]) of one contact over the step; the spring
+    (3,) is copied into scratch[i] and the law applied there twice: uncapped, then capped.
+    w: the full-step relative velocity of the contact point [m/s]."""
+    for a in range(3):
+        scratch[i, 0, a] = spring[a]
+        scratch[i, 1, a] = spring[a]
+    # mu = inf never caps (inf * F_n is inf, or nan for F_n = 0, and no |F_t|^2 exceeds either)
+    tangential_force(scratch, i, 0, vt0, vt1, vt2, n0, n1, n2, kt, ct, math.inf, fn, dt, ut0, ut1, ut2)
+    g0, g1, g2 = tangential_force(scratch, i, 1, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2)
+    x0 = scratch[i, 1, 0]
+    x1 = scratch[i, 1, 1]
+    x2 = scratch[i, 1, 2]
+    s0 = scratch[i, 0, 0] - x0
+    s1 = scratch[i, 0, 1] - x1
+    s2 = scratch[i, 0, 2] - x2
+    if s0 != 0.0 or s1 != 0.0 or s2 != 0.0:
+        # previous spring, rotated: the uncapped spring less the step's growth
+        p0 = scratch[i, 0, 0] - vt0 * dt
+        p1 = scratch[i, 0, 1] - vt1 * dt
+        p2 = scratch[i, 0, 2] - vt2 * dt
+        return g0, g1, g2, 0.0, 0.5 * kt * ((x0 + p0) * s0 + (x1 + p1) * s1 + (x2 + p2) * s2)
+    # dashpot force F_t + k_t xi against the full-step slip
+    damping = -((g0 + kt * x0) * w0 + (g1 + kt * x1) * w1 + (g2 + kt * x2) * w2) * dt
+    return g0, g1, g2, damping, 0.0
+
+
+@njit(cache=True, parallel=True)
+def accumulate_budget(
+    pos,
+    vel_half,
+    angvel_half,
+    vel_pred,
+    angvel_pred,
+    vel,
+    angvel,
+    radius,
+    mass,
+    inertia,
+    material,
+    nbr,
+    nbr_count,
+    hist,
+    table,
+    hertz,
+    rolling,
+    body_acc,
+    length,
+    periodic,
+    wall_axis,
+    wall_sign,
+    wall_coord,
+    wall_vel,
+    wall_table,
+    wall_hist,
+    dt,
+    scratch,
+    parts,
+    totals,
+):
+    """Add one step's work and dissipation to totals (see the module docstring)."""
+    n = pos.shape[0]
+    cap = nbr.shape[1]
+    single = table.shape[0] == 1
+    wall_single = wall_table.shape[1] == 1
+    for i in prange(n):
+        ri = radius[i]
+        mi = mass[i]
+        ci = 0 if single else material[i]
+        gravity = mi * (
+            body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2]
+        )
+        gravity *= dt
+        walls = 0.0
+        damping = 0.0
+        friction = 0.0
+        roll = 0.0
+        for k in range(min(nbr_count[i], cap)):
+            j = nbr[i, k]
+            row = table[0, 0] if single else table[ci, material[j]]
+            touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
+            if not touching:
+                if not hertz:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
+                    xi2 = hist[i, k, 0] ** 2 + hist[i, k, 1] ** 2 + hist[i, k, 2] ** 2
+                    friction += 0.25 * row[K_T] * xi2
+                continue
+            rj = radius[j]
+            v0, v1, v2 = pair_slip(vel_half, angvel_half, i, j, ri, rj, n0, n1, n2)
+            vn = v0 * n0 + v1 * n1 + v2 * n2
+            u0, u1, u2 = pair_slip(vel_pred, angvel_pred, i, j, ri, rj, n0, n1, n2)
+            un = u0 * n0 + u1 * n1 + u2 * n2
+            w0, w1, w2 = pair_slip(vel, angvel, i, j, ri, rj, n0, n1, n2)
+            wn = w0 * n0 + w1 * n1 + w2 * n2
+            root_m = math.sqrt(mi * mass[j] / (mi + mass[j]))
+            r_eff = ri * rj / (ri + rj)
+            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
+            fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, 0.0)[0]
+            _, _, _, d_t, f_t = _tangential(
+                scratch, i, hist[i, k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
+                row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+            )  # fmt: skip
+            damping += 0.5 * (-(fn - fe) * wn * dt + d_t)
+            friction += 0.5 * f_t
+            if rolling and row[MU_R] > 0.0:
+                ii = inertia[i]
+                ij = inertia[j]
+                m0, m1, m2 = rolling_torque(
+                    angvel_half[i, 0] - angvel_half[j, 0],
+                    angvel_half[i, 1] - angvel_half[j, 1],
+                    angvel_half[i, 2] - angvel_half[j, 2],
+                    n0, n1, n2, row[MU_R], r_eff, fn, ii * ij / (ii + ij), dt,
+                )  # fmt: skip
+                r0 = angvel[i, 0] - angvel[j, 0]
+                r1 = angvel[i, 1] - angvel[j, 1]
+                r2 = angvel[i, 2] - angvel[j, 2]
+                roll -= 0.5 * (m0 * r0 + m1 * r1 + m2 * r2) * dt
+        for w in range(wall_axis.shape[0]):
+            row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
+            touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
+            if not touching:
+                if not hertz:
+                    xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
+                    friction += 0.5 * row[K_T] * xi2
+                continue
+            wv0 = wall_vel[w, 0]
+            wv1 = wall_vel[w, 1]
+            wv2 = wall_vel[w, 2]
+            v0, v1, v2 = wall_slip(vel_half, angvel_half, i, ri, n0, n1, n2, wv0, wv1, wv2)
+            vn = v0 * n0 + v1 * n1 + v2 * n2
+            u0, u1, u2 = wall_slip(vel_pred, angvel_pred, i, ri, n0, n1, n2, wv0, wv1, wv2)
+            un = u0 * n0 + u1 * n1 + u2 * n2
+            w0, w1, w2 = wall_slip(vel, angvel, i, ri, n0, n1, n2, wv0, wv1, wv2)
+            wn = w0 * n0 + w1 * n1 + w2 * n2
+            root_m = math.sqrt(mi)
+            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, un)
+            fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, 0.0)[0]
+            g0, g1, g2, d_t, f_t = _tangential(
+                scratch, i, wall_hist[i, w], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
+                ct, row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+            )  # fmt: skip
+            walls += ((fn * n0 + g0) * wv0 + (fn * n1 + g1) * wv1 + (fn * n2 + g2) * wv2) * dt
+            damping += -(fn - fe) * wn * dt + d_t
+            friction += f_t
+            if rolling and row[MU_R] > 0.0:
+                m0, m1, m2 = rolling_torque(
+                    angvel_half[i, 0], angvel_half[i, 1], angvel_half[i, 2],
+                    n0, n1, n2, row[MU_R], ri, fn, inertia[i], dt,
+                )  # fmt: skip
+                roll -= (m0 * angvel[i, 0] + m1 * angvel[i, 1] + m2 * angvel[i, 2]) * dt
+        parts[i, GRAVITY] = gravity
+        parts[i, WALLS] = walls
+        parts[i, DAMPING] = damping
+        parts[i, FRICTION] = friction
+        parts[i, ROLLING] = roll
+    for i in range(n):
+        for t in range(TERMS):
+            totals[t] += parts[i, t]

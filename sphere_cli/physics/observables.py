@@ -1,0 +1,114 @@
+"""The observables of a run (diagnose phase): the groups the case lists in
+`output.observables.quantities`, computed only when the observables schedule is due.
+
+Each sample is a dict name -> (value, unit); a value is a float or an array (the stress tensor
+(3,3), the profiles (layers,), (layers,3) or (layers,3,3)). Groups:
+  energy, contacts         physics/energy.py
+  (always, with walls)     wall positions, velocities, forces and stresses, one row per wall
+                           (physics/walls.py), and the index of the current stage
+  packing_fraction,
+  coordination             physics/structure.py (interior region: see there)
+  stress, profiles         physics/stress.py
+  deformation              sample height H (z extent of the sample region) [m] and the dilation
+                           (H - H_0)/H_0 against the height at the first sample of the run [-];
+                           with walls, the shear strain: the upper z wall's displacement along
+                           the shear direction relative to the lower wall's, over H_0 [-]
+  energy_budget            physics/energy_budget.py (a forces-phase module, every step)
+and, with a fluid, the fluid model's own observables (physics/fluid.py), always.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..state import State
+from . import energy, structure
+from .stress import PROFILE_UNITS, StressProbe
+from .stress import UNITS as STRESS_UNITS
+from .walls import WALL_UNITS
+
+AXES = {"x": 0, "y": 1}
+
+
+class Observer:
+    def __init__(self, scene, config):
+        self.scene = scene
+        self.config = config
+        self.groups = set(config.quantities)
+        self.shear_axis = AXES[config.shear_direction]
+        self.margin = config.interior_margin * 2.0 * float(scene.state.particles.radius.max())
+        self.stress = None
+        if self.groups & {"stress", "profiles"}:
+            self.stress = StressProbe(scene.state, scene.tables, scene.tables.hertz)
+        # sample height at the first sample of the run [m] (nan: not measured yet)
+        self.reference_height = np.full(1, np.nan)
+
+    @property
+    def stateful(self) -> bool:
+        return "deformation" in self.groups
+
+    def sample(self) -> dict[str, tuple]:
+        scene, state, groups = self.scene, self.scene.state, self.groups
+        out: dict[str, tuple] = {}
+        for name, value in energy.observables(scene).items():
+            if name not in energy.UNITS:  # walls and stages: always
+                out[name] = (value, WALL_UNITS.get(name, ""))
+            elif ("energy" if energy.UNITS[name] == "J" else "contacts") in groups:
+                out[name] = (value, energy.UNITS[name])
+        sample = structure.sample_region(state)
+        interior = sample.shrunk(self.margin)
+        if "packing_fraction" in groups:
+            for name, value in structure.packing_fractions(state, sample, interior).items():
+                out[name] = (value, structure.UNITS[name])
+        if "coordination" in groups:
+            for name, value in structure.coordination(state, scene.tables, interior).items():
+                out[name] = (value, structure.UNITS[name])
+        if self.stress is not None:
+            layers = self.config.layers
+            values, profiles = self.stress.measure(state, sample, layers, AXES[self.config.shear_direction])
+            if "stress" in groups:
+                for name, value in values.items():
+                    out[name] = (value, STRESS_UNITS[name])
+            if "profiles" in groups:
+                profiles["packing_fraction_profile"] = structure.layer_fractions(state, sample, layers)
+                for name, value in profiles.items():
+                    out[name] = (value, PROFILE_UNITS[name])
+        if "deformation" in groups:
+            height = float(sample.upper[2] - sample.lower[2])
+            if np.isnan(self.reference_height[0]):
+                self.reference_height[0] = height
+            ref = float(self.reference_height[0])
+            out["sample_height"] = (height, "m")
+            out["dilation"] = ((height - ref) / ref, "")
+            if state.walls is not None:
+                out["shear_strain"] = (shear_strain(state.walls, self.shear_axis, ref), "")
+        if scene.budget is not None:
+            out.update(scene.budget.observables())
+        if scene.fluid is not None:
+            out.update(scene.fluid.observables(state))
+        return out
+
+    def prognostic_state(self, state: State) -> dict:
+        return {"reference_height": self.reference_height}
+
+    def restore(self, state: State, arrays: dict) -> None:
+        self.reference_height[:] = arrays["reference_height"]
+
+    def start(self) -> None:
+        """Nothing measured yet (a resume from a checkpoint that did not record deformation)."""
+        self.reference_height[:] = np.nan
+
+
+def shear_strain(walls, axis: int, height: float) -> float:
+    """Displacement of the upper z wall relative to the lower one along the shear axis since
+    the start of the run, over the sample height at the first sample [-] (0 without them)."""
+    shift = getattr(walls, "shift", None)
+    if shift is None:
+        return 0.0
+    top = bottom = 0.0
+    for w, face in enumerate(walls.faces):
+        if face == "z+":
+            top = float(shift[w, axis])
+        elif face == "z-":
+            bottom = float(shift[w, axis])
+    return (top - bottom) / height

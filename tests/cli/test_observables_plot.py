@@ -1,0 +1,111 @@
+"""Observables on their own schedule in trajectory.h5, shown by `sphere inspect`, drawn by
+`sphere plot` (and its message when matplotlib is missing), and bad observables keys."""
+
+from __future__ import annotations
+
+import sys
+
+import h5py
+import numpy as np
+import pytest
+from cli_test_support import TINY, assert_clean_error, edit, line_of, sphere_inproc
+
+from sphere_cli import api
+
+GROUPS = ("energy", "contacts", "packing_fraction", "coordination", "stress", "profiles", "deformation")
+ALL = "[" + ", ".join(f'"{g}"' for g in (*GROUPS, "energy_budget")) + "]"
+OBSERVED = (
+    TINY
+    + f"""
+[output.observables]
+every_steps = 200
+quantities = {ALL}
+layers = 4
+"""
+)
+
+
+@pytest.fixture(scope="module")
+def observed_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("observed")
+    (root / "case.toml").write_text(OBSERVED)
+    api.run(root / "case.toml", root / "run")
+    return root / "run"
+
+
+def test_observables_on_their_own_schedule(observed_run):
+    with h5py.File(observed_run / "trajectory.h5", "r") as f:
+        frames = f["particles/trajectory/position/step"][...]
+        obs = f["observables"]
+        steps = obs["pressure/step"][...]
+        # every 200 steps from 0, plus the end (1423); frames every 50
+        assert steps.tolist() == [*range(0, 1423, 200), 1423]
+        assert frames.size == 1423 // 50 + 2
+        assert obs["stress/value"].shape == (steps.size, 3, 3)
+        assert obs["stress/value"].attrs["unit"] == "Pa"
+        assert obs["stress_profile/value"].shape == (steps.size, 4, 3, 3)
+        assert obs["packing_fraction_profile/value"].shape == (steps.size, 4)
+        assert obs["velocity_profile/value"].shape == (steps.size, 4, 3)
+        assert obs["layer_center/value"].attrs["unit"] == "m"
+        for name in ("work_gravity", "dissipated_damping", "dilation", "coordination", "packing_fraction"):
+            assert obs[f"{name}/value"].shape == (steps.size,)
+        assert obs["dilation/value"][0] == 0.0
+        phi = obs["packing_fraction/value"][...]
+        assert np.all((phi > 0.0) & (phi < 0.75))
+
+
+def test_inspect_shows_observables(observed_run):
+    result = sphere_inproc("inspect", observed_run)
+    assert result.code == 0, result.stderr
+    for name in ("effective_friction:", "stress:", "packing_fraction_profile:", "energy_balance_residual:"):
+        assert name in result.stdout
+    assert "4 layers" in result.stdout
+
+
+def test_plot_writes_pngs(observed_run, tmp_path):
+    pytest.importorskip("matplotlib")
+    result = sphere_inproc("plot", observed_run, "-o", tmp_path / "plots")
+    assert result.code == 0, result.stderr
+    names = sorted(p.name for p in (tmp_path / "plots").iterdir())
+    assert names == sorted(
+        ["stress.png", "friction.png", "deformation.png", "energy.png", "structure.png", "profiles.png"]
+    )
+    for name in names:
+        assert (tmp_path / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_without_matplotlib_says_how_to_install(observed_run, tmp_path, monkeypatch):
+    # a None entry in sys.modules makes `import matplotlib` raise ImportError
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    result = sphere_inproc("plot", observed_run, "-o", tmp_path / "plots")
+    assert_clean_error(result, 69, "matplotlib", "pip install 'sphere-cli[plot]'")
+    assert not (tmp_path / "plots").exists()
+
+
+def test_plot_of_a_missing_run(tmp_path):
+    assert_clean_error(sphere_inproc("plot", tmp_path / "nothing"), 66, "no trajectory")
+
+
+@pytest.mark.parametrize(
+    ("new", "key", "fragment"),
+    [
+        ('quantities = ["energy", "stres"]', "output.observables.quantities", "stres"),
+        (
+            'quantities = ["energy", "energy"]',
+            "output.observables.quantities",
+            "listed more than once: energy",
+        ),
+        ("layers = 0", "output.observables.layers", "greater than or equal to 1"),
+        ("interior_margin = -1.0", "output.observables.interior_margin", "greater than or equal to 0"),
+        ('shear_direction = "z"', "output.observables.shear_direction", "z"),
+    ],
+    ids=["unknown-quantity", "repeated-quantity", "no-layers", "negative-margin", "vertical-shear"],
+)
+def test_bad_observables_keys(tmp_path, new, key, fragment):
+    old = f"quantities = {ALL}" if new.startswith("quantities") else "layers = 4"
+    text = edit(OBSERVED, old, new)
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    marker = new.split(" =")[0]
+    result = sphere_inproc("validate", case)
+    assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker + ' =')}:", fragment)
