@@ -12,8 +12,11 @@ evaluates each contact with the law's own functions (normal_law, tangential_forc
 rolling_torque of kernels/contact.py) on a scratch copy of its spring, reproducing the force
 F_k the contact kernel applied. Per step:
   gravity   m g . v_{k-1/2} dt, exactly the work over the drift x_k - x_{k-1};
-  walls     (F_n n + F_t) . v_wall dt, the force of the wall on the particle times the wall's
-            displacement (0 for a fixed wall);
+  walls     (F_n n + F_t) . V_k dt, the force of the wall on the particle times the wall's
+            full-step velocity (0 for a fixed wall); and for a particle moved by prescription
+            (inv_mass = 0: fixed, prescribed, glued to a wall), minus the power of the contact
+            forces and torques on it at its velocity (gravity does no work on it, and walls do
+            not touch it);
   damping   -(F_n - F_e) w_n dt, F_e the elastic normal force (the law at zero velocity), so it
             also books the elastic force the clamp F_n >= 0 cancels; and c_t u_t . w_t dt, the
             tangential dashpot of a sticking contact (u the predicted velocity it acts on);
@@ -31,7 +34,9 @@ overlap), so the budget closes exactly only for the linear law.
 
 Arguments as in contact.py, walls.py and contact_probe.py; vel_half, angvel_half (N,3) the
 half-step velocities; vel, angvel (N,3) the full-step ones [m/s, rad/s]; hist, wall_hist the
-springs of the previous step [m]; wall_vel (W,3) [m/s]; scratch (N,2,3) [m]; parts (N,5) [J]
+springs of the previous step [m]; inv_mass (N,) [1/kg]; wall_vel_half, wall_vel_pred, wall_vel
+(W,3) the walls' half-step, predicted and full-step velocities (as the particles') [m/s];
+scratch (N,2,3) [m]; parts (N,5) [J]
 per-particle contributions (gravity, walls, damping, friction, rolling); totals (5,) [J],
 accumulated in place by a serial sum in particle order (thread-count independent).
 """
@@ -91,6 +96,7 @@ def accumulate_budget(
     radius,
     mass,
     inertia,
+    inv_mass,
     material,
     nbr,
     nbr_count,
@@ -104,6 +110,8 @@ def accumulate_budget(
     wall_axis,
     wall_sign,
     wall_coord,
+    wall_vel_half,
+    wall_vel_pred,
     wall_vel,
     wall_table,
     wall_hist,
@@ -121,11 +129,22 @@ def accumulate_budget(
         ri = radius[i]
         mi = mass[i]
         ci = 0 if single else material[i]
-        gravity = mi * (
-            body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2]
-        )
-        gravity *= dt
+        driven = inv_mass[i] == 0.0  # moved by prescription, not by forces
+        gravity = 0.0
+        if not driven:
+            gravity = (
+                dt
+                * mi
+                * (body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2])
+            )
         walls = 0.0
+        # force and torque of the contacts on a driven particle (its work is the boundary's)
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
         damping = 0.0
         friction = 0.0
         roll = 0.0
@@ -149,12 +168,18 @@ def accumulate_budget(
             r_eff = ri * rj / (ri + rj)
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
             fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, 0.0)[0]
-            _, _, _, d_t, f_t = _tangential(
+            g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, hist[i, k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             damping += 0.5 * (-(fn - fe) * wn * dt + d_t)
             friction += 0.5 * f_t
+            f0 += fn * n0 + g0
+            f1 += fn * n1 + g1
+            f2 += fn * n2 + g2
+            t0 -= ri * (n1 * g2 - n2 * g1)
+            t1 -= ri * (n2 * g0 - n0 * g2)
+            t2 -= ri * (n0 * g1 - n1 * g0)
             if rolling and row[MU_R] > 0.0:
                 ii = inertia[i]
                 ij = inertia[j]
@@ -168,7 +193,16 @@ def accumulate_budget(
                 r1 = angvel[i, 1] - angvel[j, 1]
                 r2 = angvel[i, 2] - angvel[j, 2]
                 roll -= 0.5 * (m0 * r0 + m1 * r1 + m2 * r2) * dt
+                t0 += m0
+                t1 += m1
+                t2 += m2
+        if driven:
+            # the work the driven particle does on the rest: minus that of the forces on it
+            walls -= (f0 * vel[i, 0] + f1 * vel[i, 1] + f2 * vel[i, 2]) * dt
+            walls -= (t0 * angvel[i, 0] + t1 * angvel[i, 1] + t2 * angvel[i, 2]) * dt
         for w in range(wall_axis.shape[0]):
+            if driven:
+                break  # walls neither touch nor push driven particles
             row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
             touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
             if not touching:
@@ -179,9 +213,15 @@ def accumulate_budget(
             wv0 = wall_vel[w, 0]
             wv1 = wall_vel[w, 1]
             wv2 = wall_vel[w, 2]
-            v0, v1, v2 = wall_slip(vel_half, angvel_half, i, ri, n0, n1, n2, wv0, wv1, wv2)
+            h0 = wall_vel_half[w, 0]
+            h1 = wall_vel_half[w, 1]
+            h2 = wall_vel_half[w, 2]
+            v0, v1, v2 = wall_slip(vel_half, angvel_half, i, ri, n0, n1, n2, h0, h1, h2)
             vn = v0 * n0 + v1 * n1 + v2 * n2
-            u0, u1, u2 = wall_slip(vel_pred, angvel_pred, i, ri, n0, n1, n2, wv0, wv1, wv2)
+            p0 = wall_vel_pred[w, 0]
+            p1 = wall_vel_pred[w, 1]
+            p2 = wall_vel_pred[w, 2]
+            u0, u1, u2 = wall_slip(vel_pred, angvel_pred, i, ri, n0, n1, n2, p0, p1, p2)
             un = u0 * n0 + u1 * n1 + u2 * n2
             w0, w1, w2 = wall_slip(vel, angvel, i, ri, n0, n1, n2, wv0, wv1, wv2)
             wn = w0 * n0 + w1 * n1 + w2 * n2

@@ -48,22 +48,31 @@ class EnergyBudget:
         walls = state.walls
         self.still = np.zeros((0 if walls is None else walls.axis.shape[0], 3))
         self.wall_hist = np.zeros((n, 0, 3)) if walls is None else np.zeros_like(walls.hist)
+        self.wall_vel_half = np.zeros_like(self.still)
         self.no_walls = (
             np.zeros(0, dtype=np.int64),
             np.zeros(0),
             np.zeros(0),
+            self.still,
+            self.still,
             self.still,
             np.zeros((0, 1, 6)),
         )
         self.pending = False
 
     def _stored_energy(self) -> float:
+        """Kinetic energy of the particles moved by forces plus the elastic energy [J]."""
         state = self.scene.state
         p = state.particles
         elastic, _ = self.scene.contact.elastic_energy(state)
         if self.scene.walls is not None:
             elastic += self.scene.walls.elastic_energy(state)[0]
-        return float(kinetic_energy(p.vel, p.angvel, p.mass, p.inertia)) + elastic
+        free = p.inv_mass > 0.0
+        if free.all():
+            kinetic = kinetic_energy(p.vel, p.angvel, p.mass, p.inertia)
+        else:
+            kinetic = kinetic_energy(p.vel[free], p.angvel[free], p.mass[free], p.inertia[free])
+        return float(kinetic) + elastic
 
     def start(self) -> None:
         """Begin accounting at the current state."""
@@ -79,6 +88,7 @@ class EnergyBudget:
         self.hist[...] = nl.hist
         if state.walls is not None:
             self.wall_hist[...] = state.walls.hist
+            self.wall_vel_half[...] = wall_velocity(state.walls, self.still)
         self.vel_half[...] = p.vel
         self.angvel_half[...] = p.angvel
         self.pending = True
@@ -92,7 +102,17 @@ class EnergyBudget:
         if w is None:
             walls = self.no_walls
         else:
-            walls = (w.axis, w.sign, w.coord, wall_velocity(w, self.still), w.table)
+            predicted = getattr(w, "vel_pred", None)
+            full = wall_velocity(w, self.still)
+            walls = (
+                w.axis,
+                w.sign,
+                w.coord,
+                self.wall_vel_half,
+                full if predicted is None else predicted,
+                full,
+                w.table,
+            )
         accumulate_budget(
             p.pos,
             self.vel_half,
@@ -104,6 +124,7 @@ class EnergyBudget:
             p.radius,
             p.mass,
             p.inertia,
+            p.inv_mass,
             p.material,
             nl.nbr,
             nl.nbr_count,
