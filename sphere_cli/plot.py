@@ -1,7 +1,7 @@
 """`sphere plot RUN_DIR`: PNG figures of a run's observables (matplotlib, the `plot` extra).
 
 Time series, one figure per family, of whatever the run recorded:
-  stress.png       pressure and the stress components sigma_zz, sigma_xz (or sigma_yz) [Pa]
+  stress.png       pressure, sigma_zz and the shear traction tau = -sigma_zx (or -sigma_zy) [Pa]
   friction.png     effective friction tau/sigma_n [-]
   deformation.png  dilation [-] and sample height [m]
   energy.png       kinetic, elastic, potential energy; with the budget, the work of gravity and
@@ -79,7 +79,7 @@ def _read(trajectory: Path) -> tuple[dict, str]:
         t, sigma, unit = series["stress"]
         a = "xyz".index(shear)
         series["stress_zz"] = (t, sigma[:, 2, 2], unit)
-        series["stress_shear"] = (t, 0.5 * (sigma[:, 2, a] + sigma[:, a, 2]), unit)
+        series["stress_shear"] = (t, -0.5 * (sigma[:, 2, a] + sigma[:, a, 2]), unit)
     return series, shear
 
 
@@ -97,7 +97,7 @@ def plot_run(run_dir: str | Path, out_dir: str | Path | None = None) -> list[Pat
     except OSError as exc:
         raise OutputError(f"{out}: cannot create the plot folder ({exc})") from None
     written = []
-    labels = {"stress_zz": "sigma_zz", "stress_shear": f"sigma_z{shear}"}
+    labels = {"stress_zz": "sigma_zz", "stress_shear": f"tau = -sigma_z{shear}"}
     for figure, (ylabel, names) in SERIES.items():
         present = [n for n in names if n in series and series[n][1].ndim == 1 and series[n][1].size]
         if not present:
@@ -138,8 +138,8 @@ def _profiles(series: dict, shear: str, title: str, out: Path, plt) -> Path:
         ("stress_profile", "sigma_zz [Pa]", lambda v: v[:, 2, 2]),
         (
             "stress_profile",
-            f"sigma_z{shear} [Pa]",
-            lambda v: 0.5 * (v[:, 2, "xyz".index(shear)] + v[:, "xyz".index(shear), 2]),
+            f"tau = -sigma_z{shear} [Pa]",
+            lambda v: -0.5 * (v[:, 2, "xyz".index(shear)] + v[:, "xyz".index(shear), 2]),
         ),
         ("velocity_profile", f"mean v_{shear} [m/s]", lambda v: v[:, "xyz".index(shear)]),
     ]

@@ -10,7 +10,8 @@ Each sample is a dict name -> (value, unit); a value is a float or an array (the
   coordination             physics/structure.py (interior region: see there)
   stress, profiles         physics/stress.py
   deformation              sample height H (z extent of the sample region) [m] and the dilation
-                           (H - H_0)/H_0 against the height at the first sample of the run [-];
+                           (H - H_0)/H_0 against the height at the first sample of the run, or
+                           of the current stage with [[stages]] [-];
                            with walls, the shear strain: the upper z wall's displacement along
                            the shear direction relative to the lower wall's, over H_0 [-]
   energy_budget            physics/energy_budget.py (a forces-phase module, every step)
@@ -39,9 +40,10 @@ class Observer:
         self.margin = config.interior_margin * 2.0 * float(scene.state.particles.radius.max())
         self.stress = None
         if self.groups & {"stress", "profiles"}:
-            self.stress = StressProbe(scene.state, scene.tables, scene.tables.hertz)
-        # sample height at the first sample of the run [m] (nan: not measured yet)
-        self.reference_height = np.full(1, np.nan)
+            self.stress = StressProbe(scene.state, scene.contact)
+        # sample height at the first sample of the run or of the current stage [m] (nan: not
+        # measured yet), and that stage's index
+        self.reference_height = np.array([np.nan, -1.0])
 
     @property
     def stateful(self) -> bool:
@@ -61,7 +63,7 @@ class Observer:
             for name, value in structure.packing_fractions(state, sample, interior).items():
                 out[name] = (value, structure.UNITS[name])
         if "coordination" in groups:
-            for name, value in structure.coordination(state, scene.tables, interior).items():
+            for name, value in structure.coordination(state, scene.contact.table, interior).items():
                 out[name] = (value, structure.UNITS[name])
         if self.stress is not None:
             layers = self.config.layers
@@ -75,8 +77,9 @@ class Observer:
                     out[name] = (value, PROFILE_UNITS[name])
         if "deformation" in groups:
             height = float(sample.upper[2] - sample.lower[2])
-            if np.isnan(self.reference_height[0]):
-                self.reference_height[0] = height
+            stage = -1.0 if scene.stages is None else float(scene.stages.index)
+            if np.isnan(self.reference_height[0]) or stage != self.reference_height[1]:
+                self.reference_height[:] = (height, stage)
             ref = float(self.reference_height[0])
             out["sample_height"] = (height, "m")
             out["dilation"] = ((height - ref) / ref, "")

@@ -3,8 +3,9 @@ kinetic part, for the whole sample and per horizontal layer; pressure and the ef
 See kernels/stress.py for the formula. Compression is positive (soil-mechanics convention):
 a sample squeezed along z has sigma_zz > 0.
 
-Effective friction: tau/sigma_n with sigma_n = sigma_zz and tau = (sigma_zs + sigma_sz)/2, s the
-shear direction (x or y): the shear stress on horizontal planes, signed.
+Effective friction: tau/sigma_n with sigma_n = sigma_zz and tau = -(sigma_zs + sigma_sz)/2, s the
+shear direction (x or y): the shear traction the material above a horizontal plane exerts on the
+material below, along +s (positive when a top wall drags the sample along +s).
 """
 
 from __future__ import annotations
@@ -32,10 +33,9 @@ PROFILE_UNITS = {
 class StressProbe:
     """Scratch arrays of the stress measurement, allocated once."""
 
-    def __init__(self, state: State, tables, hertz: bool):
+    def __init__(self, state: State, contact):
         n = state.particles.count
-        self.table = np.ascontiguousarray(tables.table)
-        self.hertz = hertz
+        self.contact = contact  # its table may change between stages
         self.scratch = np.zeros((n, 1, 3))
         self.moment = np.zeros((n, 3, 3))
         w = state.walls
@@ -68,8 +68,8 @@ class StressProbe:
             nl.nbr,
             nl.nbr_count,
             nl.hist,
-            self.table,
-            self.hertz,
+            self.contact.table,
+            self.contact.hertz,
             box.length,
             box.periodic,
             *walls,
@@ -96,7 +96,7 @@ class StressProbe:
         sigma = (kinetic.sum(axis=0) - virial.sum(axis=0)) / sample.volume
         profile = (kinetic - virial) / (area * dz)
         velocity = np.divide(momentum, mass[:, None], out=np.zeros_like(momentum), where=mass[:, None] > 0)
-        tau = 0.5 * (sigma[2, shear_axis] + sigma[shear_axis, 2])
+        tau = -0.5 * (sigma[2, shear_axis] + sigma[shear_axis, 2])
         values = {
             "stress": sigma,
             "pressure": float(np.trace(sigma) / 3.0),

@@ -94,7 +94,7 @@ def layer_fractions(state: State, sample: Region, layers: int) -> np.ndarray:
     return solid / (area * dz)
 
 
-def coordination(state: State, tables, interior: Region) -> dict[str, float]:
+def coordination(state: State, table: np.ndarray, interior: Region) -> dict[str, float]:
     """Mean number of contacts (particles and walls) of the particles whose centre lies in the
     interior: of all of them, and of those left after removing rattlers (fewer than 4 contacts
     when every friction coefficient is 0, fewer than 2 otherwise), and the rattlers' share."""
@@ -107,7 +107,7 @@ def coordination(state: State, tables, interior: Region) -> dict[str, float]:
         nan = float("nan")
         return {"coordination": nan, "coordination_no_rattlers": nan, "rattler_fraction": nan}
     all_mean = float(count[inside].mean())
-    frictionless = not np.any(tables.table[..., MU] > 0.0) and not np.any(tables.wall_table[..., MU] > 0.0)
+    frictionless = not np.any(table[..., MU] > 0.0)  # the pair table in force now
     alive = np.ones(p.count, dtype=np.bool_)
     remove_rattlers(
         p.pos,
