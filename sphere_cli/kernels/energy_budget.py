@@ -8,7 +8,8 @@ kicks of F_k act over (v_{k-1/2} + v_k)/2 and (v_k + v_{k+1/2})/2, whose mean is
 half a step at each end. So each contact's work is booked at the full-step relative velocity
 w_k of its contact point: this kernel runs after the second half kick (vel = v_k), on copies of
 the springs of step k-1 and of the half-step velocities taken before the contact forces, and it
-evaluates each contact with the law's own functions (normal_law, tangential_force,
+evaluates each contact (the half list: each pair once, in the row of its lower index) with
+the law's own functions (normal_law, tangential_force,
 rolling_torque of kernels/contact.py) on a scratch copy of its spring, reproducing the force
 F_k the contact kernel applied. Per step:
   gravity   m g . v_{k-1/2} dt, exactly the work over the drift x_k - x_{k-1};
@@ -138,7 +139,7 @@ def accumulate_budget(
                 * (body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2])
             )
         walls = 0.0
-        # force and torque of the contacts on a driven particle (its work is the boundary's)
+        # force and torque of its contacts on a driven particle i (its work is the boundary's)
         f0 = 0.0
         f1 = 0.0
         f2 = 0.0
@@ -155,7 +156,7 @@ def accumulate_budget(
             if not touching:
                 if not hertz:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
                     xi2 = hist[i, k, 0] ** 2 + hist[i, k, 1] ** 2 + hist[i, k, 2] ** 2
-                    friction += 0.25 * row[K_T] * xi2
+                    friction += 0.5 * row[K_T] * xi2
                 continue
             rj = radius[j]
             v0, v1, v2 = pair_slip(vel_half, angvel_half, i, j, ri, rj, n0, n1, n2)
@@ -172,14 +173,18 @@ def accumulate_budget(
                 scratch, i, hist[i, k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
-            damping += 0.5 * (-(fn - fe) * wn * dt + d_t)
-            friction += 0.5 * f_t
-            f0 += fn * n0 + g0
-            f1 += fn * n1 + g1
-            f2 += fn * n2 + g2
-            t0 -= ri * (n1 * g2 - n2 * g1)
-            t1 -= ri * (n2 * g0 - n0 * g2)
-            t2 -= ri * (n0 * g1 - n1 * g0)
+            damping += -(fn - fe) * wn * dt + d_t
+            friction += f_t
+            # force on i (on j: its negative); torques r n x F_t of both, and the rolling pair
+            c0 = fn * n0 + g0
+            c1 = fn * n1 + g1
+            c2 = fn * n2 + g2
+            x0 = n1 * g2 - n2 * g1
+            x1 = n2 * g0 - n0 * g2
+            x2 = n0 * g1 - n1 * g0
+            m0 = 0.0
+            m1 = 0.0
+            m2 = 0.0
             if rolling and row[MU_R] > 0.0:
                 ii = inertia[i]
                 ij = inertia[j]
@@ -192,12 +197,20 @@ def accumulate_budget(
                 r0 = angvel[i, 0] - angvel[j, 0]
                 r1 = angvel[i, 1] - angvel[j, 1]
                 r2 = angvel[i, 2] - angvel[j, 2]
-                roll -= 0.5 * (m0 * r0 + m1 * r1 + m2 * r2) * dt
-                t0 += m0
-                t1 += m1
-                t2 += m2
+                roll -= (m0 * r0 + m1 * r1 + m2 * r2) * dt
+            # the work a driven particle does on the other: minus that of the contact on it
+            if driven:
+                f0 += c0
+                f1 += c1
+                f2 += c2
+                t0 += m0 - ri * x0
+                t1 += m1 - ri * x1
+                t2 += m2 - ri * x2
+            if inv_mass[j] == 0.0:
+                walls += (c0 * vel[j, 0] + c1 * vel[j, 1] + c2 * vel[j, 2]) * dt
+                walls -= ((-m0 - rj * x0) * angvel[j, 0] + (-m1 - rj * x1) * angvel[j, 1]) * dt
+                walls -= (-m2 - rj * x2) * angvel[j, 2] * dt
         if driven:
-            # the work the driven particle does on the rest: minus that of the forces on it
             walls -= (f0 * vel[i, 0] + f1 * vel[i, 1] + f2 * vel[i, 2]) * dt
             walls -= (t0 * angvel[i, 0] + t1 * angvel[i, 1] + t2 * angvel[i, 2]) * dt
         for w in range(wall_axis.shape[0]):

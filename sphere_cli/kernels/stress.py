@@ -4,7 +4,8 @@ on each particle, and the sums per horizontal layer.
 Per particle (Love-Weber; Christoffersen, Mehrabadi & Nemat-Nasser 1981, J. Appl. Mech. 48:339):
     M_i = sum over the contacts c of i of (x_c - x_i) (x) f_c        [N m]
 with x_c - x_i = -r_i n (n from the other body to i) and f_c the contact force on i (normal and
-tangential, with the dashpots). The forces are evaluated with the law of kernels/contact.py and
+tangential, with the dashpots); for j, x_c - x_j = r_j n and the force is -f_c, so its moment is
+the same expression with r_j. The forces are evaluated with the law of kernels/contact.py and
 kernels/walls.py on the current state (the springs as stored, no growth), on a scratch copy of
 each spring: they are the forces of the last force evaluation.
 The stress of a region of volume V, compression positive, is
@@ -18,7 +19,7 @@ walls' predicted velocities (their dashpots act on them) [m/s]; scratch (N,1,3) 
 
 import math
 
-from numba import njit, prange
+from numba import njit
 
 from .contact import D_N, D_T, K_N, K_T, MU, normal_law, tangential_force
 from .contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
@@ -40,7 +41,7 @@ def _add_moment(moment, i, ri, n0, n1, n2, f0, f1, f2):
     moment[i, 2, 2] += b2 * f2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def contact_moments(
     pos,
     vel_pred,
@@ -65,15 +66,14 @@ def contact_moments(
     scratch,
     moment,
 ):
-    """moment[i] = sum over the pair and wall contacts of i of (x_c - x_i) (x) f_c."""
+    """moment[i] = sum over the pair and wall contacts of i of (x_c - x_i) (x) f_c. Serial over
+    the half list (each pair once, added to both its particles), in particle order."""
     n = pos.shape[0]
     cap = nbr.shape[1]
     single = table.shape[0] == 1
     wall_single = wall_table.shape[1] == 1
-    for i in prange(n):
-        for a in range(3):
-            for b in range(3):
-                moment[i, a, b] = 0.0
+    moment[...] = 0.0
+    for i in range(n):
         ri = radius[i]
         mi = mass[i]
         ci = 0 if single else material[i]
@@ -96,6 +96,8 @@ def contact_moments(
                 u0 - un * n0, u1 - un * n1, u2 - un * n2,
             )  # fmt: skip
             _add_moment(moment, i, ri, n0, n1, n2, fn * n0 + g0, fn * n1 + g1, fn * n2 + g2)
+            # on j: the opposite force at x_j + r_j n, i.e. (-r_j)(-n) (x) (-f)
+            _add_moment(moment, j, rj, n0, n1, n2, fn * n0 + g0, fn * n1 + g1, fn * n2 + g2)
         for w in range(wall_axis.shape[0]):
             if inv_mass[i] == 0.0:
                 break  # walls neither touch nor push particles moved by prescription

@@ -16,7 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels.contact import MU
-from ..kernels.structure import contact_counts, layer_solid_volume, region_solid_volume, remove_rattlers
+from ..kernels.structure import (
+    contact_counts,
+    layer_solid_volume,
+    region_solid_volume,
+    remove_rattlers,
+    touching_pairs,
+)
 from ..state import State
 
 UNITS = {
@@ -100,8 +106,11 @@ def coordination(state: State, table: np.ndarray, interior: Region) -> dict[str,
     when every friction coefficient is 0, fewer than 2 otherwise), and the rattlers' share."""
     p, box, nl = state.particles, state.box, state.neighbors
     axis, sign, coord = wall_arrays(state)
+    pairs = np.zeros((int(np.minimum(nl.nbr_count, nl.nbr.shape[1]).sum()), 2), dtype=np.int64)
+    found = touching_pairs(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic, pairs)
+    pairs = pairs[:found]
     count = np.zeros(p.count, dtype=np.int64)
-    contact_counts(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic, axis, sign, coord, count)
+    contact_counts(p.pos, p.radius, p.inv_mass, pairs, axis, sign, coord, count)
     inside = interior.holds(p.pos)
     if not inside.any():
         nan = float("nan")
@@ -109,17 +118,7 @@ def coordination(state: State, table: np.ndarray, interior: Region) -> dict[str,
     all_mean = float(count[inside].mean())
     frictionless = not np.any(table[..., MU] > 0.0)  # the pair table in force now
     alive = np.ones(p.count, dtype=np.bool_)
-    remove_rattlers(
-        p.pos,
-        p.radius,
-        nl.nbr,
-        nl.nbr_count,
-        box.length,
-        box.periodic,
-        4 if frictionless else 2,
-        count,
-        alive,
-    )
+    remove_rattlers(pairs, 4 if frictionless else 2, count, alive)
     kept = inside & alive
     return {
         "coordination": all_mean,
