@@ -7,10 +7,10 @@ DEMO_DIR ?= runs/demo
 
 .PHONY: install demo test bench docs lint clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot]"
 	touch $(STAMP)
 
 install: $(STAMP)
