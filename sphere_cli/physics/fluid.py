@@ -29,7 +29,9 @@ class FluidModule:
 
     model = ""  # the [fluid] model tag, written to the trajectory
     name = "fluid"  # the checkpoint group of its prognostic state
-    replaces_kick = False  # True when the model defines kick() (semi-implicit drag)
+    # True when the model defines kick(state): the second half kick of velocity Verlet with its
+    # implicit drag, called instead of Motion.kick
+    replaces_kick = False
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate
@@ -49,10 +51,6 @@ class FluidModule:
 
     def forces(self, state, spring_dt: float | None = None) -> None:
         """Add the fluid's forces and torques on the particles (spring_dt = 0: initial forces)."""
-
-    def kick(self, state) -> None:
-        """Second half kick of velocity Verlet with the model's implicit drag (replaces_kick)."""
-        raise NotImplementedError
 
     def after_step(self, state) -> None:
         """After the clock advances: advance the fluid when it is due."""
