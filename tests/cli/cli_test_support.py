@@ -128,3 +128,32 @@ def assert_clean_error(result: Result, code: int, *fragments: str) -> None:
         assert "sphere: error: " in result.stderr, shown
         message = result.stderr[result.stderr.index("sphere: error: ") :]
         assert len(message.splitlines()) <= 5, f"error message too long\n{shown}"
+
+
+# A small laterally periodic scene with a Navier-Stokes fluid (its [fluid] table left open for
+# more keys), shared by the fluid and drag bad-input tests.
+NAVIER_STOKES_SCENE = """\
+[simulation]
+duration = 0.0005
+dt = "auto"
+
+[domain]
+upper = [0.01, 0.01, 0.02]
+periodic = [true, true, false]
+
+[particles]
+count = 16
+density = 2500.0
+radius = { distribution = "fixed", value = 0.0005 }
+placement = { method = "lattice", region_upper = [0.01, 0.01, 0.008] }
+
+[contact]
+normal_stiffness = 1.0e4
+
+[[walls]]
+face = "z-"
+
+[fluid]
+model = "navier-stokes"
+grid = { cells = [4, 4, 8] }
+"""

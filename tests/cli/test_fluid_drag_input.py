@@ -4,40 +4,18 @@ TOML key and line, exit 65, no traceback; and the porosity floor warning names t
 from __future__ import annotations
 
 import pytest
-from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+from cli_test_support import NAVIER_STOKES_SCENE, assert_clean_error, edit, line_of, sphere_inproc
 
-CASE = """\
-title = "drag"
-
-[simulation]
-duration = 0.0005
-dt = "auto"
-
-[domain]
-upper = [0.01, 0.01, 0.02]
-periodic = [true, true, false]
-
-[particles]
-count = 16
-density = 2500.0
-radius = { distribution = "fixed", value = 0.0005 }
-placement = { method = "lattice", region_upper = [0.01, 0.01, 0.008] }
-
-[contact]
-normal_stiffness = 1.0e4
-
-[[walls]]
-face = "z-"
-
-[fluid]
-model = "navier-stokes"
-grid = { cells = [4, 4, 8] }
-
+CASE = (
+    'title = "drag"\n\n'
+    + NAVIER_STOKES_SCENE
+    + """
 [fluid.drag]
 law = "gidaspow"
 pressure_force = true
 porosity_floor = 0.1
 """
+)
 
 # (id, text to replace, replacement, key named, text on the line named, other fragments)
 ERRORS = [

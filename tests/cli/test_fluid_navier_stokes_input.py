@@ -7,35 +7,12 @@ from __future__ import annotations
 import re
 
 import pytest
-from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+from cli_test_support import NAVIER_STOKES_SCENE, assert_clean_error, edit, line_of, sphere_inproc
 
-FLUID = """\
-title = "fluid"
-
-[simulation]
-duration = 0.0005
-dt = "auto"
-
-[domain]
-upper = [0.01, 0.01, 0.02]
-periodic = [true, true, false]
-
-[particles]
-count = 16
-density = 2500.0
-radius = { distribution = "fixed", value = 0.0005 }
-placement = { method = "lattice", region_upper = [0.01, 0.01, 0.008] }
-
-[contact]
-normal_stiffness = 1.0e4
-
-[[walls]]
-face = "z-"
-
-[fluid]
-model = "navier-stokes"
-grid = { cells = [4, 4, 8] }
-viscosity = 0.001
+FLUID = (
+    'title = "fluid"\n\n'
+    + NAVIER_STOKES_SCENE
+    + """viscosity = 0.001
 beta = 0.0
 formulation = "A"
 top = { type = "pressure", pressure = 0.0 }
@@ -46,6 +23,7 @@ method = "pcg"
 [fluid.coupling]
 ndem = 5
 """
+)
 
 # (id, text to replace, replacement, key named, text on the line named, other fragments)
 SCHEMA_ERRORS = [
