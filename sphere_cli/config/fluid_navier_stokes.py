@@ -150,7 +150,7 @@ class NavierStokesFluid(Strict):
         None,
         gt=0,
         description=(
-            "Largest fluid speed expected [m/s]: the advective limit sum |u_i| dt_f/dx_i <= 1 is "
+            "Largest fluid speed expected [m/s]: the advective limit sum |u_i| dt_f/dx_i <= 1/2 is "
             'then checked before the run (and honoured by dt = "auto"). Whether given or not, '
             "the run stops (exit 70) naming the cell if the fluid ever exceeds that limit."
         ),

@@ -21,13 +21,24 @@ One fluid step of length dt:
 3. correction v = v* - dt/rho (1 or 1/phi) D grad eps, p = beta p + eps.
 
 Space: second-order central differences; viscous stress compact (3-point) in each direction;
-the cross terms of grad v^T with the 4-point mixed stencil; advective fluxes phi_f u_f upwinded
-(first order, stable for sum |u_i| dt/dx_i <= 1). x and y are periodic. In z the cells k = -1 and
-k = nz are ghosts: velocity ghost = sign * v of the boundary cell (bc_sign (2,3): row 0 bottom,
-row 1 top; -1 for the normal component at a no-flow wall and the tangential ones at a no-slip
-wall, +1 otherwise); porosity ghost = boundary cell; pressure ghost 2 p_b - p_0 at a prescribed-
-pressure face, linear extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrostatic pressure has
-its exact gradient in every cell).
+the cross terms of grad v^T with the 4-point mixed stencil. Advection div(phi v v_c) in flux form,
+second order and bounded: through each face the flux phi_f u_f (means of the two cells) carries
+the value of v_c reconstructed from the upwind cell U with a limited slope (MUSCL, van Leer 1979,
+J. Comput. Phys. 32, 101; van Leer's limiter psi(r) = (r + |r|)/(1 + r), Sweby 1984, SIAM J.
+Numer. Anal. 21, 995; Versteeg & Malalasekera 2007, sec. 5.10):
+  v_f = v_U + 0.5 L(v_U - v_UU, v_D - v_U),  L(a, b) = 2ab/(a + b) if ab > 0, else 0,
+UU the cell upwind of U, D the cell across the face; at an extremum L = 0 (first-order upwind).
+With forward Euler this is TVD (no new extrema) for sum |u_i| dt/dx_i <= 1/2: the update of a
+cell is a convex combination of it and its upwind neighbours when the coefficient of each
+difference, C_i (1 + psi/2 - psi/(2r)) <= 2 C_i (psi <= 2 and psi/r >= 0), sums to at most 1
+(Harten 1983, J. Comput. Phys. 49, 357); first-order upwind allowed 1.
+x and y are periodic. In z the cells k < 0 and k >= nz are ghosts, mirrors of the cells inside:
+velocity ghost k = -1 - m (bottom) or nz + m (top) = sign * v of cell m from that boundary (bc_sign
+(2,3): row 0 bottom, row 1 top; -1 for the normal component at a no-flow wall and the tangential
+ones at a no-slip wall, +1 otherwise; the advection reads two ghost layers, the other terms one);
+porosity ghost = boundary cell; pressure ghost 2 p_b - p_0 at a prescribed-pressure face, linear
+extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrostatic pressure has its exact gradient in
+every cell).
 
 Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
 dphi, k_drag, rhs, mobility (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2, -]; spacing (3,) [m]; gravity (3,)
@@ -63,14 +74,15 @@ def _shift(i, j, k, a, s):
 
 @njit(cache=True, inline="always")
 def _vel(v, i, j, k, c, bc_sign):
-    """v[i,j,k,c], periodic in x and y, z ghost cells k = -1 and k = nz."""
+    """v[i,j,k,c], periodic in x and y (i, j at most one period outside), z ghost cells mirrored:
+    k = -1 - m and nz + m are sign * v of cell m from the boundary (clamped to the column)."""
     nz = v.shape[2]
     i = _wrap(i, v.shape[0])
     j = _wrap(j, v.shape[1])
     if k < 0:
-        return bc_sign[0, c] * v[i, j, 0, c]
+        return bc_sign[0, c] * v[i, j, min(-1 - k, nz - 1), c]
     if k >= nz:
-        return bc_sign[1, c] * v[i, j, nz - 1, c]
+        return bc_sign[1, c] * v[i, j, max(2 * nz - 1 - k, 0), c]
     return v[i, j, k, c]
 
 
@@ -151,19 +163,53 @@ def _viscous(v, phi, i, j, k, c, spacing, bc_sign):
 
 
 @njit(cache=True, inline="always")
+def _limited_face_value(upwind_upwind, upwind, downwind):
+    """v_U + 0.5 L(v_U - v_UU, v_D - v_U): the face value reconstructed from the upwind cell with
+    van Leer's limited slope L(a, b) = 2ab/(a + b), 0 unless a and b have the same sign."""
+    back = upwind - upwind_upwind
+    ahead = downwind - upwind
+    product = back * ahead
+    if product > 0.0:
+        return upwind + product / (back + ahead)
+    return upwind
+
+
+@njit(cache=True, inline="always")
+def _far(i, j, k, a, s, shape):
+    """The cell two steps s (= +1 or -1) from (i,j,k) along axis a, wrapped in x and y so that
+    _vel's single wrap suffices even on a grid one cell wide (z is left to _vel's mirror)."""
+    if a == 0:
+        return _wrap(_wrap(i + 2 * s, shape[0]), shape[0]), j, k
+    if a == 1:
+        return i, _wrap(_wrap(j + 2 * s, shape[1]), shape[1]), k
+    return i, j, k + 2 * s
+
+
+@njit(cache=True, inline="always")
 def _advection(v, phi, i, j, k, c, spacing, bc_sign):
-    """div(phi v v_c) with face fluxes phi_f u_f and the upwind value of v_c."""
+    """div(phi v v_c): face fluxes phi_f u_f carrying the limited upwind-biased value of v_c (see
+    the module docstring); the five cells W2, W, P, E, E2 along each axis."""
     ph = phi[i, j, k]
     vc = v[i, j, k, c]
     total = 0.0
     for a in range(3):
         i1, j1, k1 = _shift(i, j, k, a, 1)
         i0, j0, k0 = _shift(i, j, k, a, -1)
+        i2, j2, k2 = _far(i, j, k, a, 1, v.shape)
+        im, jm, km = _far(i, j, k, a, -1, v.shape)
         va = v[i, j, k, a]
         flux_up = 0.25 * (ph + _cell(phi, i1, j1, k1)) * (va + _vel(v, i1, j1, k1, a, bc_sign))
         flux_dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v, i0, j0, k0, a, bc_sign) + va)
-        up = vc if flux_up > 0.0 else _vel(v, i1, j1, k1, c, bc_sign)
-        dn = _vel(v, i0, j0, k0, c, bc_sign) if flux_dn > 0.0 else vc
+        east = _vel(v, i1, j1, k1, c, bc_sign)
+        west = _vel(v, i0, j0, k0, c, bc_sign)
+        if flux_up > 0.0:
+            up = _limited_face_value(west, vc, east)
+        else:
+            up = _limited_face_value(_vel(v, i2, j2, k2, c, bc_sign), east, vc)
+        if flux_dn > 0.0:
+            dn = _limited_face_value(_vel(v, im, jm, km, c, bc_sign), west, vc)
+        else:
+            dn = _limited_face_value(east, vc, west)
         total += (flux_up * up - flux_dn * dn) / spacing[a]
     return total
 
@@ -327,9 +373,10 @@ def correct(
 
 
 @njit(cache=True)
-def first_unstable(v, p, spacing, dt):
+def first_unstable(v, p, spacing, dt, courant_limit):
     """First cell (flat C index) with a non-finite velocity or pressure (reason 1) or an advective
-    Courant number sum |v_a| dt/dx_a above 1 (reason 2); -1 if none. Returns (cell, reason, value)."""
+    Courant number sum |v_a| dt/dx_a above courant_limit (reason 2); -1 if none. Returns (cell,
+    reason, value)."""
     nx, ny, nz = p.shape
     for i in range(nx):
         for j in range(ny):
@@ -341,7 +388,7 @@ def first_unstable(v, p, spacing, dt):
                     courant += abs(v[i, j, k, a]) * dt / spacing[a]
                 if not finite:
                     return (i * ny + j) * nz + k, 1, courant
-                if courant > 1.0:
+                if courant > courant_limit:
                     return (i * ny + j) * nz + k, 2, courant
     return -1, 0, 0.0
 

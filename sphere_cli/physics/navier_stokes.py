@@ -63,6 +63,11 @@ class NavierStokesState:
     SCALARS = ("steps", "iterations", "residual")
 
 
+# Largest advective Courant number sum |u_a| dt/dx_a of a fluid step: the limited (TVD) advection
+# with forward Euler stays bounded up to 1/2 (kernels/navier_stokes.py, module docstring).
+COURANT_LIMIT = 0.5
+
+
 class NavierStokesSolver:
     """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
     under the body acceleration `gravity` (3,) [m/s^2]."""
@@ -192,16 +197,17 @@ class NavierStokesSolver:
         return 1.0 / (2.0 * nu * (inv2.sum() + inv2.max()))
 
     def advective_limit(self, speed: float) -> float:
-        """Largest fluid step with sum |u_a| dt/dx_a <= 1 at the speed `speed` in the worst
-        direction [m/s] -> [s]."""
-        return 1.0 / (speed * float(np.sum(1.0 / self.spacing))) if speed > 0 else math.inf
+        """Largest fluid step with sum |u_a| dt/dx_a <= COURANT_LIMIT at the speed `speed` in the
+        worst direction [m/s] -> [s]."""
+        return COURANT_LIMIT / (speed * float(np.sum(1.0 / self.spacing))) if speed > 0 else math.inf
 
     def courant(self, fs: NavierStokesState, dt: float) -> float:
         return float(max_courant(fs.v, self.spacing, dt))
 
     def first_unstable(self, fs: NavierStokesState, dt: float) -> str | None:
-        """A message naming the first bad cell (non-finite, or Courant number above 1), or None."""
-        cell, reason, courant = first_unstable(fs.v, fs.p, self.spacing, dt)
+        """A message naming the first bad cell (non-finite, or Courant number above COURANT_LIMIT),
+        or None."""
+        cell, reason, courant = first_unstable(fs.v, fs.p, self.spacing, dt, COURANT_LIMIT)
         if cell < 0:
             return None
         i, j, k = np.unravel_index(int(cell), self.grid.shape)
@@ -211,8 +217,8 @@ class NavierStokesSolver:
         if reason == 1:
             return f"{where} has a non-finite fluid state ({values})"
         return (
-            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > 1 "
-            f"({values}); use a smaller dt or fluid.coupling.ndem, or set fluid.max_speed"
+            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > "
+            f"{COURANT_LIMIT:g} ({values}); use a smaller dt or fluid.coupling.ndem, or set fluid.max_speed"
         )
 
     def describe(self) -> dict[str, str]:
@@ -292,8 +298,8 @@ class NavierStokes(FluidModule):
             if advective < limit:
                 limit = advective
                 reason = (
-                    "advective limit sum |u| dt/dx <= 1 of the fluid step at fluid.max_speed = "
-                    f"{self.config.max_speed:g} m/s"
+                    f"advective limit sum |u| dt/dx <= {COURANT_LIMIT:g} of the fluid step at "
+                    f"fluid.max_speed = {self.config.max_speed:g} m/s"
                 )
         return limit, reason
 

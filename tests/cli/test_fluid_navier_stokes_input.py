@@ -101,7 +101,7 @@ def test_grid_finer_than_the_particles_is_refused(tmp_path):
 
 def test_fluid_outrunning_the_advective_limit_stops_naming_the_cell(tmp_path):
     """A pressure drop of 1e8 Pa over the 2 cm column accelerates the fluid at ~5e6 m/s^2: with a
-    fluid step of 50 DEM steps the Courant number passes 1 (at ~70 m/s) within a few fluid steps,
+    fluid step of 50 DEM steps the Courant number passes 1/2 (at ~35 m/s) within a few fluid steps,
     and the run stops (exit 70) naming the fluid cell, before any NaN and before the particles,
     which lag the fluid, move half a radius per step."""
     text = edit(
