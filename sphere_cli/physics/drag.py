@@ -60,7 +60,6 @@ class FluidParticleDrag:
         self.cells = np.asarray(self.shape, dtype=np.int64)
         self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
         cells = self.shape[0] * self.shape[1] * self.shape[2]
-        self.inv_cell_volume = 1.0 / float(np.prod(self.spacing))
         n = n_particles
         self.cell_of = np.zeros(n, dtype=np.int64)  # cell of each particle centre (flat index)
         self.wrapped = np.zeros((n, 3))  # centres wrapped into the periodic box (scratch) [m]
@@ -71,6 +70,12 @@ class FluidParticleDrag:
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
+
+    @property
+    def inv_cell_volume(self) -> float:
+        """1 / the volume of the grid's current cells [1/m^3] (they change when the grid follows
+        the top wall: self.spacing is the grid's own array)."""
+        return 1.0 / float(np.prod(self.spacing))
 
     def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
         """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""

@@ -4,6 +4,11 @@
 Cell (i, j, k) spans origin + (i, j, k) * spacing to origin + (i+1, j+1, k+1) * spacing; its
 centre is at origin + (i + 1/2, j + 1/2, k + 1/2) * spacing. Fields on the grid are arrays of
 shape (nx, ny, nz) (scalars) or (nx, ny, nz, 3) (vectors), C order.
+
+A grid that follows the top wall (`[fluid.grid] follow_top_wall`) keeps its cells along z and
+changes its height: `set_height` rewrites spacing[2] in place, so every holder of the spacing
+array sees the new cells; what a holder derives from it (the pressure solver's 1/h^2, the drag's
+cell volume) it refreshes when told (physics/navier_stokes.py).
 """
 
 from __future__ import annotations
@@ -21,6 +26,19 @@ class FluidGrid:
     spacing: np.ndarray  # (3,) [m] cell edges dx, dy, dz
     shape: tuple[int, int, int]  # (nx, ny, nz)
     periodic: np.ndarray  # (3,) bool, as the domain box
+
+    def __post_init__(self):
+        # one float64 array per grid, shared (not copied) by whoever takes np.asarray of it
+        object.__setattr__(self, "spacing", np.asarray(self.spacing, dtype=np.float64))
+
+    @property
+    def height(self) -> float:
+        """Extent along z, nz dz [m]."""
+        return float(self.shape[2] * self.spacing[2])
+
+    def set_height(self, height: float) -> None:
+        """Stretch the cells along z so that the grid spans `height` [m] from its origin."""
+        self.spacing[2] = height / self.shape[2]
 
     @property
     def cell_volume(self) -> float:

@@ -112,9 +112,17 @@ class Multigrid:
             ih2 = ih2 / np.asarray(factors, dtype=np.float64) ** 2
             self.levels.append(_Level(shape, factors, ih2))
         self.usable = int(np.prod(shape)) <= COARSEST_LIMIT and bool(self.levels)
+        self.grid = grid
         fine = grid.shape
         self.fine_x, self.fine_tmp, self.fine_r = (np.zeros(fine) for _ in range(3))
         self.fine_partial = np.zeros(fine[0] * fine[1])
+
+    def update_spacing(self) -> None:
+        """Take the grid's current spacing (a grid following the top wall changes it)."""
+        ih2 = 1.0 / self.grid.spacing**2
+        for level in self.levels:
+            ih2 = ih2 / np.asarray(level.factors, dtype=np.float64) ** 2
+            level.ih2[:] = ih2
 
     def describe(self) -> str:
         shapes = " -> ".join("x".join(str(n) for n in level.shape) for level in self.levels)
@@ -217,6 +225,13 @@ class PoissonSolver:
             flags = (self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top)
             multigrid = Multigrid(grid, flags)
             self.multigrid = multigrid if multigrid.usable else None
+
+    def update_spacing(self) -> None:
+        """Take the grid's current spacing: call after grid.set_height (a grid that follows the
+        top wall); the coefficients are rebuilt by every solve."""
+        self.ih2[:] = 1.0 / self.grid.spacing**2
+        if self.multigrid is not None:
+            self.multigrid.update_spacing()
 
     def describe(self) -> str:
         if self.method == "jacobi":

@@ -35,7 +35,6 @@ class Porosity:
         self.spacing = np.asarray(grid.spacing, dtype=np.float64)
         self.shape = np.asarray(grid.shape, dtype=np.int64)
         self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
-        self.sampling_radius = grid.sampling_radius
         self.cell_of = np.zeros(count, dtype=np.int64)
         self.wrapped = np.zeros((count, 3))
         self.cell_start = np.zeros(grid.cell_count + 1, dtype=np.int64)
@@ -47,6 +46,11 @@ class Porosity:
         self._spare: dict[str, np.ndarray] = {}
         self.clamped_cells = 0
         self._warned = False
+
+    @property
+    def sampling_radius(self) -> float:
+        """[m], of the grid's current cells (a grid following the top wall changes them)."""
+        return self.grid.sampling_radius
 
     def measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> int:
         """Fill porosity (nx, ny, nz) [-] from particles.pos/.radius; with mean_velocity
