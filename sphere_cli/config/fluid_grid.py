@@ -1,7 +1,9 @@
 """The regular fluid grid shared by the 3D fluid models (`[fluid.grid]` of "navier-stokes" and
 "darcy"): how many cells the domain box is cut into.
 
-The grid spans the whole box: cell edge along an axis = box length / cells along it. What the
+The grid spans the whole box: cell edge along an axis = box length / cells along it; with
+`follow_top_wall` its top is instead the "z+" wall wherever that wall is, and its nz cells
+stretch uniformly between the box bottom and the wall (Navier-Stokes only). What the
 porosity estimate needs (physics/porosity.py) is checked when the scene is built, against the
 particles actually made (physics/fluid_grid.py): the smallest cell edge must be at least the
 largest particle diameter, so that the spherical sampling volume of a cell (diameter = the
@@ -14,7 +16,7 @@ import math
 
 from pydantic import Field, model_validator
 
-from .base import Count, Real, Strict
+from .base import Count, Flag, Real, Strict
 
 # cell edge chosen when neither `cells` nor `cell_size` is given, in largest particle diameters
 AUTO_CELL_DIAMETERS = 3.0
@@ -38,6 +40,17 @@ class FluidGridConfig(Strict):
             "(at least one), so every edge is at least this long. Exclusive with cells. Neither "
             "given: three largest particle diameters. Whichever way, the smallest edge must be "
             "at least the largest particle diameter [m]."
+        ),
+    )
+
+    follow_top_wall: Flag = Field(
+        False,
+        description=(
+            'The grid\'s top is the "z+" wall and moves with it: the cells along z keep their '
+            "number and stretch uniformly, dz = (z_wall - z_bottom) / nz, and the top boundary "
+            '(a prescribed pressure) acts at the wall. Needs a "z+" wall and a pressure top; the '
+            "run stops (exit 70) if dz falls below the largest particle diameter. Navier-Stokes "
+            "only [-]."
         ),
     )
 

@@ -9,6 +9,7 @@ import h5py
 import numpy as np
 
 from ..errors import MissingInputError, OutputError
+from ..physics.fluid import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
 
@@ -96,6 +97,11 @@ def _fluid(f: h5py.File) -> dict | None:
     if "shape" in group.attrs:
         out["grid_cells"] = [int(c) for c in group.attrs["shape"]]
         out["cell_size"] = [float(c) for c in group.attrs["spacing"]]
+        moving = group.get(MOVING_GRID_SPACING)
+        if moving is not None and moving["value"].shape[0]:
+            # a grid following the top wall: its cells and height in the last frame
+            out["cell_size"] = [float(c) for c in moving["value"][-1]]
+            out["grid_height"] = out["grid_cells"][2] * out["cell_size"][2]
     for name, series in group.items():
         values = series["value"]
         unit = values.attrs.get("unit", "")

@@ -17,6 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import OutputError, UsageError
+from ..physics.fluid import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import remove_stale_temporaries, write_checkpoint
 from .trajectory import Trajectory, is_grid_field
@@ -131,13 +132,15 @@ class RunOutput:
 
         with h5py.File(self.rundir.trajectory_path, "r") as f:
             times = f["/particles/trajectory/position/time"][...].tolist()
+            moving = f"/fluid/{MOVING_GRID_SPACING}/value"
+            spacing = f[moving][...] if moving in f else None
         write_xdmf(
             self.rundir.xdmf,
             self.rundir.trajectory_path.name,
             times,
             scene.state.particles.count,
             self.fields,
-            fluid=_xdmf_fluid(scene),
+            fluid=_xdmf_fluid(scene, spacing),
         )
 
     def checkpoint(self, scene) -> None:
@@ -150,8 +153,8 @@ class RunOutput:
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)
 
 
-def _xdmf_fluid(scene):
-    """(grid, {field name: components}) of the fluid's 3D fields, or None."""
+def _xdmf_fluid(scene, spacing):
+    """(grid, {field name: components}, spacing per frame or None) of the fluid's 3D fields, or None."""
     fluid = scene.fluid
     grid = fluid.grid() if fluid is not None else None
     if grid is None:
@@ -160,4 +163,4 @@ def _xdmf_fluid(scene):
     for name, (value, _unit) in fluid.output_fields(scene.state).items():
         if is_grid_field(value, grid):
             fields[name] = 1 if value.ndim == 3 else value.shape[3]
-    return grid, fields
+    return grid, fields, spacing

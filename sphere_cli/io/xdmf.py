@@ -3,7 +3,8 @@
 One grid per frame: a Polyvertex topology over the N particles, the position hyperslab of that
 frame as geometry, radius (cell-independent, written once) and each vector field as node
 attributes. With a fluid on a 3D grid, each frame is a spatial collection of the particles and
-a 3DCoRectMesh whose cell attributes are the fluid fields (stored z-major, see trajectory.py).
+a 3DCoRectMesh whose cell attributes are the fluid fields (stored z-major, see trajectory.py),
+with the grid spacing of that frame when the grid moves (one that follows the top wall).
 Rewritten atomically after each frame.
 """
 
@@ -51,10 +52,11 @@ def _xml_vector(*values: float) -> str:
     return f"{item}{text}</DataItem>"
 
 
-def _fluid_grid(h5name: str, k: int, frames: int, grid, fields: dict) -> str:
+def _fluid_grid(h5name: str, k: int, frames: int, grid, fields: dict, spacing=None) -> str:
+    """`spacing`: None for a fixed grid, else (frames, 3) [m] the spacing of each frame."""
     nx, ny, nz = (int(c) for c in grid.shape)
     ox, oy, oz = (float(c) for c in grid.origin)
-    dx, dy, dz = (float(c) for c in grid.spacing)
+    dx, dy, dz = (float(c) for c in (grid.spacing if spacing is None else spacing[k]))
     attrs = "".join(
         f'<Attribute Name="{name}" AttributeType="{"Vector" if comps == 3 else "Scalar"}" Center="Cell">'
         + _grid_slab(h5name, name, k, frames, (nz, ny, nx), comps)
@@ -71,7 +73,8 @@ def _fluid_grid(h5name: str, k: int, frames: int, grid, fields: dict) -> str:
 
 
 def write_xdmf(path: Path, h5name: str, times, n: int, fields: list[str], fluid=None) -> None:
-    """`fluid`: None, or (FluidGrid, {field name: components}) for the 3D fluid fields."""
+    """`fluid`: None, or (FluidGrid, {field name: components}, spacing) for the 3D fluid fields,
+    spacing None for a fixed grid or (frames, 3) [m] per frame for a moving one."""
     frames = len(times)
     grids = []
     for k, t in enumerate(times):

@@ -40,11 +40,33 @@ porosity ghost = boundary cell; pressure ghost 2 p_b - p_0 at a prescribed-press
 extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrostatic pressure has its exact gradient in
 every cell).
 
+Moving grid (`[fluid.grid] follow_top_wall`): the grid's top is the top wall at height H(t)
+above the bottom, and its nz layers stretch uniformly, so the face k (k = 0 .. nz) moves with
+w_k = k dz H'/H and a cell's volume V = dx dy dz changes at dV/dt = dx dy (w_(k+1) - w_k): the
+geometric conservation law (Thomas & Lombard 1979, AIAA J. 17) holds exactly on every step.
+Fields belong to the moving cells (arbitrary Lagrangian-Eulerian form, Hirt et al. 1974, J.
+Comput. Phys. 14): over a cell moving with the faces, continuity and momentum are
+  (1/V) d(phi V)/dt|_cell + div(phi (v - w)) = 0,
+  (1/V) d(phi V v)/dt|_cell + div(phi v (v - w)) = (forces as above),
+the time derivative being the backward difference of the cell's own values (dphi from the
+porosity measured on the new cells, fs.dphi). With the step's stretch rate s = (H_new - H_old)
+/ (H_new dt) [1/s] (dz is the new height / nz), (V_new - V_old)/(V_new dt) = s and w_k =
+k dz s exactly, so that:
+  pressure source   dphi + phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k),   phi_old = phi - dt dphi
+                    (the last term is the grid's flux div_z(phi_f w_f); `pressure_rhs`);
+  predictor rate    + s (phi_(k+1/2) (k+1) v_(k+1/2) - phi_(k-1/2) k v_(k-1/2)) / phi - s v
+                    (v_f upwind of the flux relative to the faces, -w: first order; `predict`).
+A uniform phi and v at rest stay so (both terms vanish); summed over a column, the pore volume
+sum(phi V) changes by exactly the relative flux phi_f (v_f - H') through the top face, which must
+then be open (prescribed pressure; the bottom face does not move). s = 0: the fixed grid, these
+terms are skipped.
+
 Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
 dphi, k_drag, rhs, mobility (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2, -]; spacing (3,) [m]; gravity (3,)
 [m/s^2]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure, 0 = no flow;
 p_bound (2,) [Pa] boundary pressure (bottom, top); rho [kg/m^3]; mu [Pa s]; beta [-];
-pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step.
+pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step; stretch [1/s] the
+moving grid's s (0 on a fixed grid).
 """
 
 import math
@@ -214,6 +236,24 @@ def _advection(v, phi, i, j, k, c, spacing, bc_sign):
     return total
 
 
+@njit(cache=True, inline="always")
+def _grid_advection(v, phi, i, j, k, c, stretch, bc_sign):
+    """The moving grid's share of the momentum rate of cell (i,j,k), component c (module
+    docstring): s (phi_(k+1/2) (k+1) v_(k+1/2) - phi_(k-1/2) k v_(k-1/2)) / phi - s v, v_f of the
+    cell the relative flux -w_f comes from (above when the grid stretches, s > 0)."""
+    ph = phi[i, j, k]
+    vc = v[i, j, k, c]
+    phi_up = 0.5 * (ph + _cell(phi, i, j, k + 1))
+    phi_dn = 0.5 * (ph + _cell(phi, i, j, k - 1))
+    if stretch > 0.0:
+        v_up = _vel(v, i, j, k + 1, c, bc_sign)
+        v_dn = vc
+    else:
+        v_up = vc
+        v_dn = _vel(v, i, j, k - 1, c, bc_sign)
+    return stretch * ((k + 1) * phi_up * v_up - k * phi_dn * v_dn) / ph - stretch * vc
+
+
 @njit(cache=True, parallel=True)
 def predict(
     v,
@@ -230,11 +270,13 @@ def predict(
     beta,
     pressure_in_solid,
     dt,
+    stretch,
     v_star,
     mobility,
 ):
-    """Predicted velocity v* (step 1 of the module docstring) and the pressure mobility of each
-    cell, mobility = phi D (A) or D (B) with D = 1/(1 + dt k_drag/(rho phi)).
+    """Predicted velocity v* (step 1 of the module docstring, with the moving grid's terms when
+    stretch != 0) and the pressure mobility of each cell, mobility = phi D (A) or D (B) with
+    D = 1/(1 + dt k_drag/(rho phi)).
 
     The drag on the fluid is f_i + k_drag (v_new - v): f_i at the old fluid velocity v, k_drag its
     derivative (kernels/drag.py), so it is implicit in the fluid's own velocity. Solving the
@@ -259,6 +301,8 @@ def predict(
                         + gravity[c]
                         - inv * f_i[i, j, k, c]
                     )
+                    if stretch != 0.0:
+                        rate += _grid_advection(v, phi, i, j, k, c, stretch, bc_sign)
                     explicit = vc + dt * rate - vc * dphi[i, j, k] * dt / ph
                     v_star[i, j, k, c] = (explicit + implicit * vc) / (1.0 + implicit)
                 mobility[i, j, k] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
@@ -300,11 +344,12 @@ def _cell_vec(f, i, j, k, a):
 
 @njit(cache=True, parallel=True)
 def pressure_rhs(
-    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, rhs
+    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, stretch, rhs
 ):
-    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b, with
-    the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p and p_bound of the old
-    pressure."""
+    """rhs = -rho/dt (div(phi_f v*_f) + dphi + moving grid's source): the right-hand side b of
+    -div(a grad eps) = b, with the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p
+    and p_bound of the old pressure; the source of the moving grid (module docstring) when
+    stretch != 0."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
@@ -350,7 +395,58 @@ def pressure_rhs(
                         dt,
                     )
                     div += (up - dn) / spacing[a]
-                rhs[i, j, k] = -rho / dt * (div + dphi[i, j, k])
+                source = dphi[i, j, k]
+                if stretch != 0.0:
+                    source += _grid_source(phi, dphi, i, j, k, stretch, dt)
+                rhs[i, j, k] = -rho / dt * (div + source)
+
+
+@njit(cache=True, inline="always")
+def _grid_source(phi, dphi, i, j, k, stretch, dt):
+    """phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k): the cell's volume change less the
+    grid's flux div_z(phi_f w_f), per unit volume and time (module docstring)."""
+    ph = phi[i, j, k]
+    phi_up = 0.5 * (ph + _cell(phi, i, j, k + 1))
+    phi_dn = 0.5 * (ph + _cell(phi, i, j, k - 1))
+    return (ph - dt * dphi[i, j, k]) * stretch - stretch * ((k + 1) * phi_up - k * phi_dn)
+
+
+@njit(cache=True)
+def top_outflow(
+    v_star,
+    phi,
+    mobility,
+    grad_p,
+    p,
+    eps,
+    az,
+    spacing,
+    bc_sign,
+    p_kind,
+    p_bound,
+    eps_bound,
+    beta,
+    rho,
+    dt,
+    stretch,
+):
+    """Fluid volume leaving through the open top face per unit time, relative to the face moving
+    at w = nz dz s [m^3/s]: the sum over the top faces of dx dy (F - phi_f w), F the corrected
+    face flux the pressure equation balances, F = F* - dt/rho a_f 2 (eps_top - eps)/dz (F* of
+    `_face_flux`, eps_top = eps_bound[1]). Call after the solve and before `correct` (p, grad_p,
+    p_bound still the old pressure's). Serial, in a fixed order."""
+    nx, ny, nz = phi.shape
+    k = nz - 1
+    w = nz * spacing[2] * stretch
+    total = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            flux = _face_flux(
+                v_star, phi, mobility, grad_p, p, i, j, k, 2, spacing, bc_sign, p_kind, p_bound, beta, rho, dt
+            )
+            flux -= dt / rho * az[i, j, nz] * 2.0 * (eps_bound[1] - eps[i, j, k]) / spacing[2]
+            total += flux - phi[i, j, k] * w
+    return total * spacing[0] * spacing[1]
 
 
 @njit(cache=True, parallel=True)

@@ -45,6 +45,11 @@ class Darcy(FluidModule):
                 ("domain", "periodic"),
                 "the Darcy model needs a bounded z axis (its top and bottom boundaries); make z non-periodic",
             )
+        if config.grid.follow_top_wall:
+            raise loaded.error(
+                ("fluid", "grid", "follow_top_wall"),
+                'true is available for model = "navier-stokes" only; the Darcy grid spans the box',
+            )
         grid = fluid_grid(config.grid, box, particles.radius, loaded)
         _, _, empty = fixed_pressure_cells(config, grid)
         if empty:

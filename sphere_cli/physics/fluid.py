@@ -23,6 +23,10 @@ MODELS = {
     "vans1d": "sphere_cli.physics.vans1d:Vans1d",
 }
 
+# output field of a grid whose spacing changes in time (one that follows the top wall): the
+# spacing (3,) [m] of each frame, which the XDMF sidecar and `inspect` read back
+MOVING_GRID_SPACING = "grid_spacing"
+
 
 class FluidModule:
     """Base class of the fluid models; each hook's default does nothing."""
@@ -69,7 +73,8 @@ class FluidModule:
 
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
         """name -> (array, unit) written with every frame under /fluid/<name>. Fields on a 3D
-        grid are cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3)."""
+        grid are cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3). A grid that moves adds
+        its spacing (3,) [m] as MOVING_GRID_SPACING."""
         return {}
 
     def grid(self):

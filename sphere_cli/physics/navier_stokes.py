@@ -25,10 +25,11 @@ from ..kernels.navier_stokes import (
     predict,
     pressure_gradient,
     pressure_rhs,
+    top_outflow,
 )
 from ..kernels.poisson import face_means
 from .drag import FluidParticleDrag
-from .fluid import FluidModule
+from .fluid import MOVING_GRID_SPACING, FluidModule
 from .fluid_grid import FluidGrid, fluid_grid
 from .poisson import PoissonResult, PoissonSolver
 from .porosity import Porosity
@@ -58,9 +59,14 @@ class NavierStokesState:
     steps: int = 0  # fluid steps taken
     iterations: int = 0  # of the last pressure solve
     residual: float = 0.0  # relative residual of the last pressure solve
+    # a grid following the top wall: its height at the last step [m], and the fluid volume that
+    # has left through its top face (relative to the moving face) since the start [m^3]
+    height: float = 0.0
+    outflow: float = 0.0
 
     PROGNOSTIC = ("v", "p", "grad_p", "phi", "dphi", "f_i", "k_drag", "f_exchange")
     SCALARS = ("steps", "iterations", "residual")
+    MOVING_GRID = ("height", "outflow")
 
 
 # Largest advective Courant number sum |u_a| dt/dx_a of a fluid step: the limited (TVD) advection
@@ -70,11 +76,18 @@ COURANT_LIMIT = 0.5
 
 class NavierStokesSolver:
     """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
-    under the body acceleration `gravity` (3,) [m/s^2]."""
+    under the body acceleration `gravity` (3,) [m/s^2].
+
+    With config.grid.follow_top_wall the grid's height may change between steps: resize(H) to
+    the new height first (then measure the porosity on the new cells), and step() takes the
+    moving grid's terms (kernels/navier_stokes.py) from the height of the last step, fs.height,
+    to H."""
 
     def __init__(self, config: NavierStokesFluid, grid: FluidGrid, gravity):
         self.config = config
         self.grid = grid
+        self.follows = bool(config.grid.follow_top_wall)
+        self.height = grid.height  # of the grid now [m]
         self.spacing = np.ascontiguousarray(grid.spacing, dtype=np.float64)
         self.gravity = np.asarray(gravity, dtype=np.float64).copy()
         self.rho = float(config.density)
@@ -89,6 +102,8 @@ class NavierStokesSolver:
             if b.no_slip:
                 self.bc_sign[row, :2] = -1.0
         self.p_kind = np.array([isinstance(b, PressureBoundary) for b in self.boundaries], dtype=np.int64)
+        if self.follows and not self.p_kind[1]:
+            raise ValueError("a grid that follows the top wall needs a prescribed-pressure top boundary")
         kinds = ["dirichlet" if k else "no-flux" for k in self.p_kind]
         solver = config.solver
         self.poisson = PoissonSolver(
@@ -122,7 +137,14 @@ class NavierStokesSolver:
             ax=ax,
             ay=ay,
             az=az,
+            height=self.height,
         )
+
+    def resize(self, height: float) -> None:
+        """Stretch the grid along z to `height` [m] (a grid following the top wall)."""
+        self.height = float(height)
+        self.grid.set_height(self.height)
+        self.poisson.update_spacing()
 
     def boundary_pressure(self, time: float, out: np.ndarray) -> np.ndarray:
         """Pressures of the bottom and top boundaries at `time` (0 where no-flow) [Pa]."""
@@ -152,14 +174,20 @@ class NavierStokesSolver:
         """Advance the fluid from `time` to `time + dt` [s] with the porosity, its rate and the
         interaction force already in fs."""
         rho, beta, solid = self.rho, self.beta, self.pressure_in_solid
+        old = self.boundary_pressure(time, self.p_old)
+        stretch = 0.0
+        if self.follows:
+            # (V_new - V_old) / (V_new dt) of every cell; the old pressure's gradient on the new cells
+            stretch = (self.height - fs.height) / (self.height * dt)
+            if beta != 0.0 and stretch != 0.0:
+                pressure_gradient(fs.p, self.spacing, self.p_kind, old, fs.grad_p)
         predict(
             fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
-            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
+            self.bc_sign, rho, self.mu, beta, solid, dt, stretch, fs.v_star, fs.mobility,
         )  # fmt: skip
-        old = self.boundary_pressure(time, self.p_old)
         pressure_rhs(
             fs.v_star, fs.phi, fs.dphi, fs.mobility, fs.grad_p, fs.p, self.spacing, self.bc_sign, self.p_kind,
-            old, beta, rho, dt, fs.rhs,
+            old, beta, rho, dt, stretch, fs.rhs,
         )  # fmt: skip
         face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
         self.boundary_pressure(time + dt, self.p_bound)
@@ -178,6 +206,12 @@ class NavierStokesSolver:
                 f"t = {time + dt:.6g} s; raise fluid.solver.max_iterations or the tolerance, or "
                 'use method = "pcg"'
             )
+        if self.follows:
+            fs.outflow += dt * top_outflow(
+                fs.v_star, fs.phi, fs.mobility, fs.grad_p, fs.p, fs.eps, fs.az, self.spacing, self.bc_sign,
+                self.p_kind, old, self.eps_bound, beta, rho, dt, stretch,
+            )  # fmt: skip
+            fs.height = self.height
         correct(
             fs.v_star, fs.eps, fs.phi, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
             self.eps_bound, rho, beta, dt, fs.v, fs.p, fs.f_exchange,
@@ -236,7 +270,9 @@ class NavierStokesSolver:
                 f"porous Navier-Stokes, formulation {c.formulation}, rho = {c.density:g} kg/m^3, "
                 f"mu = {c.viscosity:g} Pa s, beta = {c.beta:g}"
             ),
-            "fluid grid": self.grid.describe() + ", periodic in x and y",
+            "fluid grid": self.grid.describe()
+            + ", periodic in x and y"
+            + (", top following the z+ wall" if self.follows else ""),
             "fluid boundaries": "; ".join(bounds),
             "pressure solver": self.poisson.describe(),
         }
@@ -269,7 +305,13 @@ class NavierStokes(FluidModule):
         self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
         if self._grid.shape[2] < 2:
             raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
+        self.top_wall = None  # index of the wall the grid's top follows
+        if cfg.grid.follow_top_wall:
+            self.top_wall = _top_wall(loaded, state)
+        self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
         self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
+        if self.top_wall is not None:
+            self.solver.resize(self._wall_height(state))
         self.porosity = Porosity(self._grid, state.particles.count)
         self.drag = FluidParticleDrag(
             cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
@@ -342,13 +384,51 @@ class NavierStokes(FluidModule):
         if clock.step % self.ndem:
             return
         fs = self.fs
-        # d phi/dt by backward difference over the fluid step
+        if self.top_wall is not None:
+            self._follow_wall(state)
+        # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
         np.copyto(fs.dphi, fs.phi)
         self._measure_porosity(state)
         np.subtract(fs.phi, fs.dphi, out=fs.dphi)
         fs.dphi *= 1.0 / self.fluid_dt
         self.drag.fluid_forcing(state, fs, self.fluid_dt)
         self.solver.step(fs, (clock.step - self.ndem) * clock.dt, self.fluid_dt)
+
+    def _wall_height(self, state) -> float:
+        """Height of the top wall above the grid's bottom [m]."""
+        return float(state.walls.coord[self.top_wall]) - float(self._grid.origin[2])
+
+    def _follow_wall(self, state) -> None:
+        """Stretch the grid to the top wall, or stop (exit 70) where its cells would no longer
+        hold what the porosity estimate (dz at least the largest particle diameter), the moving
+        grid's advection (the top moves at most half a cell per fluid step, the fluid's own
+        advective limit) or the viscous limit need."""
+        clock, nz = state.clock, self._grid.shape[2]
+        height = self._wall_height(state)
+        dz_old, dz = self.fs.height / nz, height / nz
+        where = (
+            f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
+            f"{float(state.walls.coord[self.top_wall]):.7g} m makes the fluid cells (fluid.grid."
+            f"follow_top_wall, {nz} along z) {dz:.6g} m high"
+        )
+        if not dz >= self.diameter:
+            raise NumericalError(
+                f"{where}, less than the largest particle diameter {self.diameter:.4g} m that the porosity "
+                "estimate needs; use fewer cells along z or stop the wall higher"
+            )
+        if not abs(height - self.fs.height) <= 0.5 * dz_old:
+            raise NumericalError(
+                f"{where}; the wall moved {abs(height - self.fs.height):.4g} m in one fluid step of "
+                f"{self.fluid_dt:.4g} s, more than half a cell ({dz_old:.4g} m), the advective limit of "
+                "the moving grid's explicit flux; use a smaller dt or fluid.coupling.ndem"
+            )
+        self.solver.resize(height)
+        limit = self.solver.viscous_limit()
+        if self.fluid_dt > limit:
+            raise NumericalError(
+                f"{where}, where the fluid step {self.fluid_dt:.4g} s exceeds the viscous limit "
+                f"dx^2/(8 nu) {limit:.4g} s; use a smaller dt or fluid.coupling.ndem"
+            )
 
     def _measure_porosity(self, state) -> None:
         """fs.phi from the particles where they are now, floored at fluid.drag.porosity_floor:
@@ -372,7 +452,10 @@ class NavierStokes(FluidModule):
     def prognostic_state(self, state) -> dict[str, np.ndarray]:
         fs = self.fs
         arrays = {name: getattr(fs, name) for name in NavierStokesState.PROGNOSTIC}
-        for name in NavierStokesState.SCALARS:
+        names = NavierStokesState.SCALARS
+        if self.top_wall is not None:
+            names += NavierStokesState.MOVING_GRID
+        for name in names:
             arrays[name] = np.array(getattr(fs, name))
         for name, value in self.drag.prognostic_state().items():
             arrays["drag_" + name] = value
@@ -385,6 +468,10 @@ class NavierStokes(FluidModule):
         fs.steps = int(arrays["steps"])
         fs.iterations = int(arrays["iterations"])
         fs.residual = float(arrays["residual"])
+        if self.top_wall is not None:
+            fs.height = float(arrays["height"])
+            fs.outflow = float(arrays["outflow"])
+            self.solver.resize(fs.height)
         self.drag.restore({name[5:]: value for name, value in arrays.items() if name.startswith("drag_")})
 
     def first_unstable(self, state) -> str | None:
@@ -392,25 +479,52 @@ class NavierStokes(FluidModule):
 
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
         fs = self.fs
-        return {
+        fields = {
             "pressure": (fs.p, "Pa"),
             "velocity": (fs.v, "m/s"),
             "porosity": (fs.phi, "1"),
             "interaction_force": (fs.f_exchange, "N/m^3"),
         }
+        if self.top_wall is not None:
+            fields[MOVING_GRID_SPACING] = (self._grid.spacing, "m")
+        return fields
 
     def grid(self) -> FluidGrid:
         return self._grid
 
     def observables(self, state) -> dict[str, tuple[float, str]]:
         fs = self.fs
-        return {
+        values = {
             "fluid_max_courant": (self.solver.courant(fs, self.fluid_dt), "1"),
             "pressure_iterations": (float(fs.iterations), "1"),
             "pressure_residual": (float(fs.residual), "1"),
         }
+        if self.top_wall is not None:
+            values["fluid_grid_height"] = (fs.height, "m")
+            values["fluid_pore_volume"] = (float(fs.phi.sum()) * self._grid.cell_volume, "m^3")
+            values["fluid_top_outflow_volume"] = (fs.outflow, "m^3")
+        return values
 
     def summary(self) -> dict[str, str]:
         facts = self.solver.describe()
         facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {self.ndem} DEM step(s)"
         return facts
+
+
+def _top_wall(loaded, state) -> int:
+    """Index of the "z+" wall that the grid's top follows; refuses a case where it cannot."""
+    cfg = loaded.case.fluid
+    faces = state.walls.faces if state.walls is not None else []
+    if "z+" not in faces:
+        raise loaded.error(
+            ("fluid", "grid", "follow_top_wall"),
+            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+            f"{', '.join(faces) or 'none'})",
+        )
+    if not isinstance(cfg.top, PressureBoundary):
+        raise loaded.error(
+            ("fluid", "top", "type"),
+            '"no-flow" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be able to '
+            'leave or enter through the moving top; use type = "pressure"',
+        )
+    return faces.index("z+")
