@@ -53,20 +53,21 @@ porosity measured on the new cells, fs.dphi). With the step's stretch rate s = (
 / (H_new dt) [1/s] (dz is the new height / nz), (V_new - V_old)/(V_new dt) = s and w_k =
 k dz s exactly, so that:
   pressure source   dphi + phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k),   phi_old = phi - dt dphi
-                    (the last term is the grid's flux div_z(phi_f w_f); `pressure_rhs`);
+                    (the last term is the grid's flux div_z(phi_f w_f); `add_grid_source`);
   predictor rate    + s (phi_(k+1/2) (k+1) v_(k+1/2) - phi_(k-1/2) k v_(k-1/2)) / phi - s v
-                    (v_f upwind of the flux relative to the faces, -w: first order; `predict`).
-A uniform phi and v at rest stay so (both terms vanish); summed over a column, the pore volume
+                    (v_f upwind of the flux relative to the faces, -w: first order;
+                    `add_grid_motion`, with the implicit drag's factor D).
+A uniform phi and v stay so (both pairs of terms cancel); summed over a column, the pore volume
 sum(phi V) changes by exactly the relative flux phi_f (v_f - H') through the top face, which must
-then be open (prescribed pressure; the bottom face does not move). s = 0: the fixed grid, these
-terms are skipped.
+then be open (prescribed pressure; the bottom face does not move). These kernels run only on a
+moving grid, after `predict` and `pressure_rhs`: a fixed grid runs exactly what it ran before.
 
 Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
 dphi, k_drag, rhs, mobility (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2, -]; spacing (3,) [m]; gravity (3,)
 [m/s^2]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure, 0 = no flow;
 p_bound (2,) [Pa] boundary pressure (bottom, top); rho [kg/m^3]; mu [Pa s]; beta [-];
 pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step; stretch [1/s] the
-moving grid's s (0 on a fixed grid).
+moving grid's s.
 """
 
 import math
@@ -270,13 +271,11 @@ def predict(
     beta,
     pressure_in_solid,
     dt,
-    stretch,
     v_star,
     mobility,
 ):
-    """Predicted velocity v* (step 1 of the module docstring, with the moving grid's terms when
-    stretch != 0) and the pressure mobility of each cell, mobility = phi D (A) or D (B) with
-    D = 1/(1 + dt k_drag/(rho phi)).
+    """Predicted velocity v* (step 1 of the module docstring) and the pressure mobility of each
+    cell, mobility = phi D (A) or D (B) with D = 1/(1 + dt k_drag/(rho phi)).
 
     The drag on the fluid is f_i + k_drag (v_new - v): f_i at the old fluid velocity v, k_drag its
     derivative (kernels/drag.py), so it is implicit in the fluid's own velocity. Solving the
@@ -301,8 +300,6 @@ def predict(
                         + gravity[c]
                         - inv * f_i[i, j, k, c]
                     )
-                    if stretch != 0.0:
-                        rate += _grid_advection(v, phi, i, j, k, c, stretch, bc_sign)
                     explicit = vc + dt * rate - vc * dphi[i, j, k] * dt / ph
                     v_star[i, j, k, c] = (explicit + implicit * vc) / (1.0 + implicit)
                 mobility[i, j, k] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
@@ -344,12 +341,11 @@ def _cell_vec(f, i, j, k, a):
 
 @njit(cache=True, parallel=True)
 def pressure_rhs(
-    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, stretch, rhs
+    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, rhs
 ):
-    """rhs = -rho/dt (div(phi_f v*_f) + dphi + moving grid's source): the right-hand side b of
-    -div(a grad eps) = b, with the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p
-    and p_bound of the old pressure; the source of the moving grid (module docstring) when
-    stretch != 0."""
+    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b, with
+    the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p and p_bound of the old
+    pressure."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
@@ -395,10 +391,32 @@ def pressure_rhs(
                         dt,
                     )
                     div += (up - dn) / spacing[a]
-                source = dphi[i, j, k]
-                if stretch != 0.0:
-                    source += _grid_source(phi, dphi, i, j, k, stretch, dt)
-                rhs[i, j, k] = -rho / dt * (div + source)
+                rhs[i, j, k] = -rho / dt * (div + dphi[i, j, k])
+
+
+@njit(cache=True, parallel=True)
+def add_grid_motion(v, phi, k_drag, bc_sign, rho, dt, stretch, v_star):
+    """v* += dt D (the moving grid's momentum rate) after `predict` (module docstring; D =
+    1/(1 + dt k_drag/(rho phi)) as in `predict`), from the old velocity v."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)
+        for j in range(ny):
+            for k in range(nz):
+                d = 1.0 / (1.0 + dt * k_drag[i, j, k] / (rho * phi[i, j, k]))
+                for c in range(3):
+                    v_star[i, j, k, c] += dt * d * _grid_advection(v, phi, i, j, k, c, stretch, bc_sign)
+
+
+@njit(cache=True, parallel=True)
+def add_grid_source(phi, dphi, rho, dt, stretch, rhs):
+    """rhs -= rho/dt (the moving grid's source) after `pressure_rhs` (module docstring)."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)
+        for j in range(ny):
+            for k in range(nz):
+                rhs[i, j, k] -= rho / dt * _grid_source(phi, dphi, i, j, k, stretch, dt)
 
 
 @njit(cache=True, inline="always")

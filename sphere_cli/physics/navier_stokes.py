@@ -19,6 +19,8 @@ import numpy as np
 from ..config.fluid_navier_stokes import NavierStokesFluid, NoFlowBoundary, PressureBoundary
 from ..errors import NumericalError
 from ..kernels.navier_stokes import (
+    add_grid_motion,
+    add_grid_source,
     correct,
     first_unstable,
     max_courant,
@@ -183,12 +185,16 @@ class NavierStokesSolver:
                 pressure_gradient(fs.p, self.spacing, self.p_kind, old, fs.grad_p)
         predict(
             fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
-            self.bc_sign, rho, self.mu, beta, solid, dt, stretch, fs.v_star, fs.mobility,
+            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
         )  # fmt: skip
+        if stretch != 0.0:
+            add_grid_motion(fs.v, fs.phi, fs.k_drag, self.bc_sign, rho, dt, stretch, fs.v_star)
         pressure_rhs(
             fs.v_star, fs.phi, fs.dphi, fs.mobility, fs.grad_p, fs.p, self.spacing, self.bc_sign, self.p_kind,
-            old, beta, rho, dt, stretch, fs.rhs,
+            old, beta, rho, dt, fs.rhs,
         )  # fmt: skip
+        if stretch != 0.0:
+            add_grid_source(fs.phi, fs.dphi, rho, dt, stretch, fs.rhs)
         face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
         self.boundary_pressure(time + dt, self.p_bound)
         np.multiply(old, -beta, out=self.eps_bound)
