@@ -28,13 +28,14 @@ from .simulation import advance
 
 DIAMETER = 1.0e-3  # [m]
 CELL = 2.0e-3  # [m]: two diameters
+DENSITY = 2650.0  # [kg/m^3] quartz
 
 
-def case_text(cells: int, particles: int, tolerance: float, update_every: int = 1) -> str:
+def scene_text(cells: int, particles: int, spacing: float, jitter: float) -> str:
+    """The particles and box of the coupled benchmarks (no [fluid] table): a cube of `cells`^3
+    cells of CELL, periodic in x and y, DIAMETER spheres of DENSITY on a lattice of `spacing`
+    diameters with `jitter`, linear contacts, a floor, dt = 4e-6 s."""
     width = cells * CELL
-    per_side = math.ceil(particles ** (1.0 / 3.0))
-    spacing = 0.99 * width / per_side / DIAMETER
-    pressure = 0.5 * (2650.0 - 1000.0) * 9.81 * width  # half the critical gradient across the box
     return f"""
 [simulation]
 duration = 1.0
@@ -44,21 +45,32 @@ upper = [{width!r}, {width!r}, {width!r}]
 periodic = [true, true, false]
 [particles]
 count = {particles}
-density = 2650.0
+density = {DENSITY!r}
 radius = {{ distribution = "fixed", value = {DIAMETER / 2!r} }}
-placement = {{ method = "lattice", spacing = {spacing!r}, jitter = 0.5 }}
+placement = {{ method = "lattice", spacing = {spacing!r}, jitter = {jitter!r} }}
 [contact]
 model = "linear"
 normal_stiffness = 1.0e3
 [[walls]]
 face = "z-"
-[fluid]
+"""
+
+
+def case_text(cells: int, particles: int, tolerance: float, update_every: int = 1) -> str:
+    width = cells * CELL
+    per_side = math.ceil(particles ** (1.0 / 3.0))
+    spacing = 0.99 * width / per_side / DIAMETER
+    pressure = 0.5 * (DENSITY - 1000.0) * 9.81 * width  # half the critical gradient across the box
+    return (
+        scene_text(cells, particles, spacing, 0.5)
+        + f"""[fluid]
 model = "darcy"
 grid = {{ cells = [{cells}, {cells}, {cells}] }}
 bottom = {{ pressure = {pressure!r} }}
 update_every = {update_every}
 solver = {{ tolerance = {tolerance!r} }}
 """
+    )
 
 
 class Stopwatch:

@@ -171,7 +171,9 @@ def plot(
 def bench(
     sizes: str = typer.Option("10000,100000", "--sizes", help="Particle counts, comma-separated."),
     threads: str = typer.Option("1,2", "--threads", help="Thread counts, comma-separated."),
-    steps: int = typer.Option(200, "--steps", help="Steps per timing."),
+    steps: int | None = typer.Option(
+        None, "--steps", help="Steps per timing (default 200; 20 coupled steps with --fluid)."
+    ),
     repeats: int = typer.Option(3, "--repeats", help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
     output: Path = typer.Option(
@@ -180,9 +182,24 @@ def bench(
         "--output",
         help="Folder for the results (the settled beds are cached in the user cache directory).",
     ),
+    fluid: bool = typer.Option(
+        False,
+        "--fluid",
+        help="Benchmark the Navier-Stokes fluid coupled to a DEM bed instead (--sizes, --repeats and "
+        "--states do not apply).",
+    ),
+    cells: int = typer.Option(64, "--cells", min=4, help="With --fluid: fluid cells along each axis."),
+    particles: int = typer.Option(20_000, "--particles", min=1, help="With --fluid: particles in the bed."),
+    jacobi_max_iterations: int = typer.Option(
+        100_000, "--jacobi-max-iterations", min=1, help="With --fluid: Jacobi stops after this many."
+    ),
+    jacobi_seconds: float = typer.Option(
+        60.0, "--jacobi-seconds", min=0.0, help="With --fluid: Jacobi stops after this many seconds."
+    ),
 ) -> None:
-    """Benchmark the canonical scene: particle-steps per second for each size, state and thread count."""
-    from .bench import run_benchmark
+    """Benchmark the canonical scene: particle-steps per second for each size, state and thread count;
+    with --fluid, the Navier-Stokes fluid coupled to a DEM bed: cell-updates per second of the fluid
+    step, time per coupled step, pressure-solve time of the fast solver and of Jacobi."""
 
     def numbers(text: str) -> tuple[int, ...]:
         try:
@@ -190,11 +207,23 @@ def bench(
         except ValueError:
             raise typer.BadParameter(f"{text!r}: expected comma-separated integers") from None
 
+    if fluid:
+        from .bench_navier_stokes import run_fluid_benchmark
+
+        try:
+            run_fluid_benchmark(
+                cells, particles, numbers(threads), steps or 20, jacobi_max_iterations, jacobi_seconds, output
+            )
+        except SphereError as exc:
+            _fail(exc)
+        return
+    from .bench import run_benchmark
+
     chosen = tuple(s.strip() for s in states.split(",") if s.strip())
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
     try:
-        run_benchmark(numbers(sizes), numbers(threads), steps, repeats, chosen, output)
+        run_benchmark(numbers(sizes), numbers(threads), steps or 200, repeats, chosen, output)
     except SphereError as exc:
         _fail(exc)
 
