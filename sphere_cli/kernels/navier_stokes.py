@@ -78,7 +78,8 @@ from numba import njit, prange
 
 # Not inline="always": Numba's IR inlining of this index wrap, reached through every other helper
 # at some hundred call sites, was most of the module's compile time (predict and pressure_rhs:
-# 75 s -> 24 s); LLVM still inlines it, the run time is unchanged.
+# 75 s -> 24 s on the loaded 2-core machine); LLVM still inlines it, the run time is unchanged.
+# Each call site of an inlined helper costs compile time: _advection has one per face.
 @njit(cache=True)
 def _wrap(i, n):
     if i < 0:
@@ -228,14 +229,17 @@ def _advection(v, phi, i, j, k, c, spacing, bc_sign):
         flux_dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v, i0, j0, k0, a, bc_sign) + va)
         east = _vel(v, i1, j1, k1, c, bc_sign)
         west = _vel(v, i0, j0, k0, c, bc_sign)
+        # (far upwind, upwind, downwind) of each face; one call site each (compile time)
         if flux_up > 0.0:
-            up = _limited_face_value(west, vc, east)
+            uu, u, d = west, vc, east
         else:
-            up = _limited_face_value(_vel(v, i2, j2, k2, c, bc_sign), east, vc)
+            uu, u, d = _vel(v, i2, j2, k2, c, bc_sign), east, vc
+        up = _limited_face_value(uu, u, d)
         if flux_dn > 0.0:
-            dn = _limited_face_value(_vel(v, im, jm, km, c, bc_sign), west, vc)
+            uu, u, d = _vel(v, im, jm, km, c, bc_sign), west, vc
         else:
-            dn = _limited_face_value(east, vc, west)
+            uu, u, d = east, vc, west
+        dn = _limited_face_value(uu, u, d)
         total += (flux_up * up - flux_dn * dn) / spacing[a]
     return total
 
