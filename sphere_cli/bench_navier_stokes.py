@@ -152,7 +152,11 @@ def run_fluid_benchmark(
     warm = build_scene(parse_case(case_text(4, 16)))
     timed_steps(warm, 2)
     results["compile_seconds"] = time.perf_counter() - start
-    log(f"compile / cache load of the kernels (a 4^3 scene, 2 steps): {results['compile_seconds']:.2f} s")
+    results["threading_layer"] = numba.threading_layer()
+    log(
+        f"compile / cache load of the kernels (a 4^3 scene, 2 steps): {results['compile_seconds']:.2f} s; "
+        f"{results['threading_layer']} threading layer; load average {results['load_average_before'][0]:.2f}"
+    )
 
     start = time.perf_counter()
     scene = build_scene(parse_case(case_text(cells, particles)))
@@ -228,5 +232,8 @@ def run_fluid_benchmark(
     results["jacobi_limits"] = {"max_iterations": jacobi_max_iterations, "seconds": jacobi_seconds}
     results["load_average_after"] = list(os.getloadavg())
     (out_dir / "bench-fluid.json").write_text(json.dumps(results, indent=2))
-    log(f"results written to {out_dir / 'bench-fluid.json'}")
+    log(
+        f"load average {results['load_average_after'][0]:.2f} at the end; "
+        f"results written to {out_dir / 'bench-fluid.json'}"
+    )
     return results
