@@ -28,26 +28,31 @@ so that it stops, and never reverses, the relative rolling within one step. The 
 contact: a sphere braked by several contacts at once can overshoot, leaving a jitter of its spin
 at rest bounded by one step's rolling impulse (sum of mu_r R* F_n) dt/I.
 
-Half list with per-pair slots (design guide 3): pair_forces computes each listed pair (i, j > i)
-once, in a prange over i, and writes the force on i and the torque terms into the pair's own slot;
-gather_pair_forces then sums, for each particle, its pairs in ascending partner index (the
-reverse list for j < i, its own row for j > i). Every operation is antisymmetric in (i, j), so
-the force on j is exactly the negative of the force on i, and the sums are bitwise those a full
-list computing each pair from both sides would give; neither depends on the thread count.
+Half list, particles owned by chunks (design guide 3). Each listed pair (i, j > i) is computed
+once. The particles are cut into contiguous index chunks, one per thread; a chunk owns the
+forces of its particles and sweeps its rows in ascending i. A pair whose partner j lies in the
+same chunk is applied at once to both members (force on j: the negative, torque on j with r_j),
+which no other thread touches; a pair whose j lies in a later chunk is computed beforehand into
+its own slot (cross_chunk_pairs) and read back by both owners. Each particle's sum is then always
+m g, minus its pairs (j, i) with j < i in ascending j, plus its own row in ascending j, whatever
+the number of chunks: the result is bitwise the same for any thread count (one thread: one
+chunk, no slots at all). Every operation is antisymmetric in (i, j), so the force on j is exactly
+the negative of the force on i.
 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
 (N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32 half rows,
 nbr_count (N,); rev (N,R) int32 reverse slots, rev_count (N,) (kernels/neighbors.py);
+bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i < bounds[c+1]);
 hist (N,C,3) [m]; table (M,M,6) per pair of materials, columns K_N, K_T, D_N, D_T, MU, MU_R as
 above [N/m or Pa, N/m or Pa, kg^1/2/s or (Pa kg)^1/2 m^-1/2, same, -, -]; hertz, rolling flags;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
-limit); slots (N*C, 6 or 9 with rolling) [N, N, N m]; out force, torque (N,3) [N, N m].
+limit); slots (N*C, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at i*C + k, used
+for the pairs across chunks only; out force, torque (N,3) [N, N m].
 """
 
 import math
 
-import numpy as np
 from numba import njit, prange
 
 from .neighbors import minimum_image
@@ -143,8 +148,172 @@ def rolling_torque(w0, w1, w2, n0, n1, n2, mu_r, r_eff, fn, i_eff, dt):
     return scale * r0, scale * r1, scale * r2
 
 
+@njit(cache=True, inline="always")
+def pair_force(
+    i,
+    k,
+    j,
+    own,
+    pos,
+    vel,
+    angvel,
+    vel_pred,
+    angvel_pred,
+    radius,
+    mass,
+    inertia,
+    params,
+    hist,
+    hertz,
+    rolling,
+    length,
+    periodic,
+    spring_dt,
+    step_dt,
+):
+    """Contact of pair (i, j = nbr[i, k]); own: i's (x0, x1, x2, v0, v1, v2, r w0, r w1, r w2,
+    vp0, vp1, vp2, r wp0, r wp1, r wp2, r, m) (velocities at the half step and predicted).
+    Updates the spring hist[i, k] (cleared when the pair does not touch) and returns
+    (touching, force on i (3), n x F_t (3), rolling torque on i (3)); the torque of F_t on i is
+    -r_i n x F_t, on j -r_j n x F_t; on j the force and rolling torque are the negatives."""
+    ri = own[15]
+    d0 = minimum_image(own[0] - pos[j, 0], length[0], periodic[0])
+    d1 = minimum_image(own[1] - pos[j, 1], length[1], periodic[1])
+    d2 = minimum_image(own[2] - pos[j, 2], length[2], periodic[2])
+    dist2 = d0 * d0 + d1 * d1 + d2 * d2
+    rj = radius[j]
+    reach = ri + rj
+    if dist2 >= reach * reach:
+        if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
+            hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
+            hist[i, k, 1] = 0.0
+            hist[i, k, 2] = 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    kn, kt, dn, dt, mu, mu_r = params
+    dist = math.sqrt(dist2)
+    inv = 1.0 / dist
+    n0 = d0 * inv
+    n1 = d1 * inv
+    n2 = d2 * inv
+    delta = reach - dist
+    # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
+    s0 = own[6] + rj * angvel[j, 0]
+    s1 = own[7] + rj * angvel[j, 1]
+    s2 = own[8] + rj * angvel[j, 2]
+    v0 = (own[3] - vel[j, 0]) - (s1 * n2 - s2 * n1)
+    v1 = (own[4] - vel[j, 1]) - (s2 * n0 - s0 * n2)
+    v2 = (own[5] - vel[j, 2]) - (s0 * n1 - s1 * n0)
+    vn = v0 * n0 + v1 * n1 + v2 * n2
+    # the same at the predicted full step, for the dashpots
+    q0 = own[12] + rj * angvel_pred[j, 0]
+    q1 = own[13] + rj * angvel_pred[j, 1]
+    q2 = own[14] + rj * angvel_pred[j, 2]
+    u0 = (own[9] - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
+    u1 = (own[10] - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
+    u2 = (own[11] - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
+    un = u0 * n0 + u1 * n1 + u2 * n2
+    mi = own[16]
+    mj = mass[j]
+    root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
+    r_eff = 0.0
+    if hertz or rolling:
+        r_eff = ri * rj / (ri + rj)
+    fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
+    g0, g1, g2 = tangential_force(
+        hist,
+        i,
+        k,
+        v0 - vn * n0,
+        v1 - vn * n1,
+        v2 - vn * n2,
+        n0,
+        n1,
+        n2,
+        kt_now,
+        ct,
+        mu,
+        fn,
+        spring_dt,
+        u0 - un * n0,
+        u1 - un * n1,
+        u2 - un * n2,
+    )
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    if rolling and mu_r > 0.0:
+        ii = inertia[i]
+        ij = inertia[j]
+        m0, m1, m2 = rolling_torque(
+            angvel[i, 0] - angvel[j, 0],
+            angvel[i, 1] - angvel[j, 1],
+            angvel[i, 2] - angvel[j, 2],
+            n0,
+            n1,
+            n2,
+            mu_r,
+            r_eff,
+            fn,
+            ii * ij / (ii + ij),
+            step_dt,
+        )
+    # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
+    return (
+        True,
+        fn * n0 + g0,
+        fn * n1 + g1,
+        fn * n2 + g2,
+        n1 * g2 - n2 * g1,
+        n2 * g0 - n0 * g2,
+        n0 * g1 - n1 * g0,
+        m0,
+        m1,
+        m2,
+    )
+
+
+@njit(cache=True, inline="always")
+def own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass):
+    """The tuple `own` of pair_force for particle i."""
+    ri = radius[i]
+    return (
+        pos[i, 0],
+        pos[i, 1],
+        pos[i, 2],
+        vel[i, 0],
+        vel[i, 1],
+        vel[i, 2],
+        ri * angvel[i, 0],
+        ri * angvel[i, 1],
+        ri * angvel[i, 2],
+        vel_pred[i, 0],
+        vel_pred[i, 1],
+        vel_pred[i, 2],
+        ri * angvel_pred[i, 0],
+        ri * angvel_pred[i, 1],
+        ri * angvel_pred[i, 2],
+        ri,
+        mass[i],
+    )
+
+
+@njit(cache=True, inline="always")
+def pair_params(table, material, single, i, j):
+    """(K_N, K_T, D_N, D_T, MU, MU_R) of the pair's materials."""
+    a = 0 if single else material[i]
+    b = 0 if single else material[j]
+    return (
+        table[a, b, K_N],
+        table[a, b, K_T],
+        table[a, b, D_N],
+        table[a, b, D_T],
+        table[a, b, MU],
+        table[a, b, MU_R],
+    )
+
+
 @njit(cache=True, parallel=True)
-def pair_forces(
+def cross_chunk_pairs(
     pos,
     vel,
     angvel,
@@ -164,201 +333,206 @@ def pair_forces(
     periodic,
     spring_dt,
     step_dt,
+    bounds,
     slots,
 ):
-    """Force of every listed pair (i, j = nbr[i, k]) into its slot s = i*C + k: slots[s, 0:3] the
-    force on i (fn n + F_t), slots[s, 3:6] the cross product n x F_t (the torque of F_t on i is
-    -r_i n x F_t, on j -r_j n x F_t), and with rolling slots[s, 6:9] the rolling torque on i
-    (on j: its negative). Zero for a pair that does not touch."""
-    n = pos.shape[0]
+    """Every listed pair whose partner lies in a later chunk, into its slot s = i*C + k:
+    slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling torque on i (with rolling);
+    zero for a pair that does not touch."""
     cap = nbr.shape[1]
-    # one material: the parameters are loop constants
     single = table.shape[0] == 1
-    kn = table[0, 0, K_N]
-    kt = table[0, 0, K_T]
-    dn = table[0, 0, D_N]
-    dt = table[0, 0, D_T]
-    mu = table[0, 0, MU]
-    mu_r = table[0, 0, MU_R]
-    for i in prange(n):
-        ri = radius[i]
-        mi = mass[i]
-        ci = 0 if single else material[i]
-        x0 = pos[i, 0]
-        x1 = pos[i, 1]
-        x2 = pos[i, 2]
-        vi0 = vel[i, 0]
-        vi1 = vel[i, 1]
-        vi2 = vel[i, 2]
-        wi0 = ri * angvel[i, 0]
-        wi1 = ri * angvel[i, 1]
-        wi2 = ri * angvel[i, 2]
-        pi0 = vel_pred[i, 0]
-        pi1 = vel_pred[i, 1]
-        pi2 = vel_pred[i, 2]
-        qi0 = ri * angvel_pred[i, 0]
-        qi1 = ri * angvel_pred[i, 1]
-        qi2 = ri * angvel_pred[i, 2]
-        count = min(nbr_count[i], cap)
-        for k in range(count):
-            s = np.uint64(i * cap + k)
-            j = np.uint64(nbr[i, k])  # unsigned: no negative-index wraparound code
-            d0 = minimum_image(x0 - pos[j, 0], length[0], periodic[0])
-            d1 = minimum_image(x1 - pos[j, 1], length[1], periodic[1])
-            d2 = minimum_image(x2 - pos[j, 2], length[2], periodic[2])
-            dist2 = d0 * d0 + d1 * d1 + d2 * d2
-            rj = radius[j]
-            reach = ri + rj
-            if dist2 >= reach * reach:
-                if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
-                    hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
-                    hist[i, k, 1] = 0.0
-                    hist[i, k, 2] = 0.0
-                slots[s, 0] = 0.0
-                slots[s, 1] = 0.0
-                slots[s, 2] = 0.0
-                slots[s, 3] = 0.0
-                slots[s, 4] = 0.0
-                slots[s, 5] = 0.0
+    for c in prange(bounds.shape[0] - 1):
+        end = bounds[c + 1]
+        for i in range(bounds[c], end):
+            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
+            count = min(nbr_count[i], cap)
+            first = count  # the row is ascending: its partners beyond the chunk are a suffix
+            while first > 0 and nbr[i, first - 1] >= end:
+                first -= 1
+            for k in range(first, count):
+                j = nbr[i, k]
+                params = pair_params(table, material, single, i, j)
+                touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
+                    i,
+                    k,
+                    j,
+                    own,
+                    pos,
+                    vel,
+                    angvel,
+                    vel_pred,
+                    angvel_pred,
+                    radius,
+                    mass,
+                    inertia,
+                    params,
+                    hist,
+                    hertz,
+                    rolling,
+                    length,
+                    periodic,
+                    spring_dt,
+                    step_dt,
+                )
+                s = i * cap + k
+                slots[s, 0] = e0
+                slots[s, 1] = e1
+                slots[s, 2] = e2
+                slots[s, 3] = c0
+                slots[s, 4] = c1
+                slots[s, 5] = c2
                 if rolling:
-                    slots[s, 6] = 0.0
-                    slots[s, 7] = 0.0
-                    slots[s, 8] = 0.0
-                continue
-            if not single:
-                cj = material[j]
-                kn = table[ci, cj, K_N]
-                kt = table[ci, cj, K_T]
-                dn = table[ci, cj, D_N]
-                dt = table[ci, cj, D_T]
-                mu = table[ci, cj, MU]
-                mu_r = table[ci, cj, MU_R]
-            dist = math.sqrt(dist2)
-            inv = 1.0 / dist
-            n0 = d0 * inv
-            n1 = d1 * inv
-            n2 = d2 * inv
-            delta = reach - dist
-            # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
-            s0 = wi0 + rj * angvel[j, 0]
-            s1 = wi1 + rj * angvel[j, 1]
-            s2 = wi2 + rj * angvel[j, 2]
-            v0 = (vi0 - vel[j, 0]) - (s1 * n2 - s2 * n1)
-            v1 = (vi1 - vel[j, 1]) - (s2 * n0 - s0 * n2)
-            v2 = (vi2 - vel[j, 2]) - (s0 * n1 - s1 * n0)
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            # the same at the predicted full step, for the dashpots
-            q0 = qi0 + rj * angvel_pred[j, 0]
-            q1 = qi1 + rj * angvel_pred[j, 1]
-            q2 = qi2 + rj * angvel_pred[j, 2]
-            u0 = (pi0 - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
-            u1 = (pi1 - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
-            u2 = (pi2 - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
-            un = u0 * n0 + u1 * n1 + u2 * n2
-            mj = mass[j]
-            root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
-            r_eff = 0.0
-            if hertz or rolling:
-                r_eff = ri * rj / (ri + rj)
-            fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
-            vt0 = v0 - vn * n0
-            vt1 = v1 - vn * n1
-            vt2 = v2 - vn * n2
-            g0, g1, g2 = tangential_force(
-                hist,
-                i,
-                k,
-                vt0,
-                vt1,
-                vt2,
-                n0,
-                n1,
-                n2,
-                kt_now,
-                ct,
-                mu,
-                fn,
-                spring_dt,
-                u0 - un * n0,
-                u1 - un * n1,
-                u2 - un * n2,
-            )
-            slots[s, 0] = fn * n0 + g0
-            slots[s, 1] = fn * n1 + g1
-            slots[s, 2] = fn * n2 + g2
-            # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
-            slots[s, 3] = n1 * g2 - n2 * g1
-            slots[s, 4] = n2 * g0 - n0 * g2
-            slots[s, 5] = n0 * g1 - n1 * g0
-            if rolling:
-                m0 = 0.0
-                m1 = 0.0
-                m2 = 0.0
-                if mu_r > 0.0:
-                    ii = inertia[i]
-                    ij = inertia[j]
-                    m0, m1, m2 = rolling_torque(
-                        angvel[i, 0] - angvel[j, 0],
-                        angvel[i, 1] - angvel[j, 1],
-                        angvel[i, 2] - angvel[j, 2],
-                        n0,
-                        n1,
-                        n2,
-                        mu_r,
-                        r_eff,
-                        fn,
-                        ii * ij / (ii + ij),
-                        step_dt,
-                    )
-                slots[s, 6] = m0
-                slots[s, 7] = m1
-                slots[s, 8] = m2
+                    slots[s, 6] = m0
+                    slots[s, 7] = m1
+                    slots[s, 8] = m2
 
 
 @njit(cache=True, parallel=True)
-def gather_pair_forces(slots, nbr, nbr_count, rev, rev_count, radius, mass, body_acc, rolling, force, torque):
-    """Set force = m g + sum of pair forces and torque = sum of pair torques, per particle,
-    summed in ascending partner index: first the pairs (j, i), j < i, from the reverse list
-    (their slots hold the force on j: subtract), then the own row (add)."""
-    n = force.shape[0]
+def chunk_pair_forces(
+    pos,
+    vel,
+    angvel,
+    vel_pred,
+    angvel_pred,
+    radius,
+    mass,
+    inertia,
+    material,
+    nbr,
+    nbr_count,
+    hist,
+    table,
+    hertz,
+    rolling,
+    length,
+    periodic,
+    spring_dt,
+    step_dt,
+    rev,
+    rev_count,
+    body_acc,
+    bounds,
+    slots,
+    force,
+    torque,
+):
+    """Set force = m g + the sum of the pair forces and torque = the sum of the pair torques,
+    chunk by chunk: first m g minus the pairs (j, i) with j in an earlier chunk (their slots,
+    ascending j), then a sweep in ascending i applying the pairs inside the chunk to both
+    members and adding the row's pairs beyond the chunk from their slots (cross_chunk_pairs
+    must have run). Each particle's terms come in ascending partner index (module docstring)."""
     cap = nbr.shape[1]
     rcap = rev.shape[1]
-    for i in prange(n):
-        ri = radius[i]
-        mi = mass[i]
-        f0 = mi * body_acc[0]
-        f1 = mi * body_acc[1]
-        f2 = mi * body_acc[2]
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        for m in range(min(rev_count[i], rcap)):
-            s = np.uint64(rev[i, m])
-            f0 -= slots[s, 0]
-            f1 -= slots[s, 1]
-            f2 -= slots[s, 2]
-            t0 -= ri * slots[s, 3]
-            t1 -= ri * slots[s, 4]
-            t2 -= ri * slots[s, 5]
-            if rolling:
-                t0 -= slots[s, 6]
-                t1 -= slots[s, 7]
-                t2 -= slots[s, 8]
-        for k in range(min(nbr_count[i], cap)):
-            s = np.uint64(i * cap + k)
-            f0 += slots[s, 0]
-            f1 += slots[s, 1]
-            f2 += slots[s, 2]
-            t0 -= ri * slots[s, 3]
-            t1 -= ri * slots[s, 4]
-            t2 -= ri * slots[s, 5]
-            if rolling:
-                t0 += slots[s, 6]
-                t1 += slots[s, 7]
-                t2 += slots[s, 8]
-        force[i, 0] = f0
-        force[i, 1] = f1
-        force[i, 2] = f2
-        torque[i, 0] = t0
-        torque[i, 1] = t1
-        torque[i, 2] = t2
+    single = table.shape[0] == 1
+    for c in prange(bounds.shape[0] - 1):
+        begin = bounds[c]
+        end = bounds[c + 1]
+        for i in range(begin, end):
+            ri = radius[i]
+            mi = mass[i]
+            f0 = mi * body_acc[0]
+            f1 = mi * body_acc[1]
+            f2 = mi * body_acc[2]
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            # the reverse row is ascending in j: pairs from earlier chunks are a prefix
+            for m in range(min(rev_count[i], rcap)):
+                s = rev[i, m]
+                if s >= begin * cap:
+                    break
+                f0 -= slots[s, 0]
+                f1 -= slots[s, 1]
+                f2 -= slots[s, 2]
+                t0 -= ri * slots[s, 3]
+                t1 -= ri * slots[s, 4]
+                t2 -= ri * slots[s, 5]
+                if rolling:
+                    t0 -= slots[s, 6]
+                    t1 -= slots[s, 7]
+                    t2 -= slots[s, 8]
+            force[i, 0] = f0
+            force[i, 1] = f1
+            force[i, 2] = f2
+            torque[i, 0] = t0
+            torque[i, 1] = t1
+            torque[i, 2] = t2
+        for i in range(begin, end):
+            ri = radius[i]
+            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
+            # every pair (j, i), j < i, is in force[i] by now
+            f0 = force[i, 0]
+            f1 = force[i, 1]
+            f2 = force[i, 2]
+            t0 = torque[i, 0]
+            t1 = torque[i, 1]
+            t2 = torque[i, 2]
+            count = min(nbr_count[i], cap)
+            k = 0
+            while k < count and nbr[i, k] < end:
+                j = nbr[i, k]
+                params = pair_params(table, material, single, i, j)
+                touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
+                    i,
+                    k,
+                    j,
+                    own,
+                    pos,
+                    vel,
+                    angvel,
+                    vel_pred,
+                    angvel_pred,
+                    radius,
+                    mass,
+                    inertia,
+                    params,
+                    hist,
+                    hertz,
+                    rolling,
+                    length,
+                    periodic,
+                    spring_dt,
+                    step_dt,
+                )
+                k += 1
+                if not touching:
+                    continue
+                f0 += e0
+                f1 += e1
+                f2 += e2
+                t0 -= ri * c0
+                t1 -= ri * c1
+                t2 -= ri * c2
+                rj = radius[j]
+                force[j, 0] -= e0
+                force[j, 1] -= e1
+                force[j, 2] -= e2
+                torque[j, 0] -= rj * c0
+                torque[j, 1] -= rj * c1
+                torque[j, 2] -= rj * c2
+                if rolling:
+                    t0 += m0
+                    t1 += m1
+                    t2 += m2
+                    torque[j, 0] -= m0
+                    torque[j, 1] -= m1
+                    torque[j, 2] -= m2
+            while k < count:
+                s = i * cap + k
+                f0 += slots[s, 0]
+                f1 += slots[s, 1]
+                f2 += slots[s, 2]
+                t0 -= ri * slots[s, 3]
+                t1 -= ri * slots[s, 4]
+                t2 -= ri * slots[s, 5]
+                if rolling:
+                    t0 += slots[s, 6]
+                    t1 += slots[s, 7]
+                    t2 += slots[s, 8]
+                k += 1
+            force[i, 0] = f0
+            force[i, 1] = f1
+            force[i, 2] = f2
+            torque[i, 0] = t0
+            torque[i, 1] = t1
+            torque[i, 2] = t2

@@ -83,16 +83,19 @@ def wall_forces(
     n = pos.shape[0]
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
+    recording = False
+    for w in range(nw):
+        recording = recording or record[w] != 0
     for i in prange(n):
-        for w in range(nw):
-            if record[w]:
-                pforce[i, w, 0] = 0.0
-                pforce[i, w, 1] = 0.0
-                pforce[i, w, 2] = 0.0
+        if recording:
+            for w in range(nw):
+                if record[w]:
+                    pforce[i, w, 0] = 0.0
+                    pforce[i, w, 1] = 0.0
+                    pforce[i, w, 2] = 0.0
         if inv_mass[i] == 0.0:
             continue
         ri = radius[i]
-        root_m = math.sqrt(mass[i])
         ci = 0 if single else material[i]
         f0 = 0.0
         f1 = 0.0
@@ -104,10 +107,14 @@ def wall_forces(
             a = wall_axis[w]
             gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
             if gap >= ri:
-                wall_hist[i, w, 0] = 0.0
-                wall_hist[i, w, 1] = 0.0
-                wall_hist[i, w, 2] = 0.0
+                # no contact: its spring is gone (written only when there was one, so a
+                # particle away from every wall costs reads only)
+                if wall_hist[i, w, 0] != 0.0 or wall_hist[i, w, 1] != 0.0 or wall_hist[i, w, 2] != 0.0:
+                    wall_hist[i, w, 0] = 0.0
+                    wall_hist[i, w, 1] = 0.0
+                    wall_hist[i, w, 2] = 0.0
                 continue
+            root_m = math.sqrt(mass[i])
             row = wall_table[w, ci]
             n0 = 0.0
             n1 = 0.0

@@ -33,10 +33,10 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from ..kernels.contact import D_N, K_N, K_T, gather_pair_forces
-from ..kernels.contact import pair_forces as pair_forces_kernel
+from ..kernels.contact import D_N, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
@@ -50,19 +50,31 @@ class PairContactForces:
         self.table = np.ascontiguousarray(tables.table)
         self.hertz = tables.hertz
         self.rolling = tables.rolling
-        # per-pair slots (scratch, sized with the neighbour list): force on the first member,
-        # n x F_t, and the rolling torque when rolling resistance is on (kernels/contact.py)
+        # per-pair slots (scratch, sized with the neighbour list, used by the pairs across
+        # chunks only): force on the first member, n x F_t, and the rolling torque when rolling
+        # resistance is on (kernels/contact.py)
         self.width = 9 if self.rolling else 6
         self.slots = np.zeros((0, self.width))
+        self.bounds = np.zeros(2, dtype=np.int64)
+
+    def _chunks(self, n: int, size: int) -> None:
+        """One chunk of particles per thread (the result does not depend on it); slots only
+        when there is more than one chunk."""
+        chunks = max(1, min(numba.get_num_threads(), n))
+        if self.bounds.size != chunks + 1 or self.bounds[-1] != n:
+            self.bounds = (np.arange(chunks + 1, dtype=np.int64) * n) // chunks
+        rows = size if chunks > 1 else 0
+        if self.slots.shape[0] != rows:
+            self.slots = np.zeros((rows, self.width))
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
         `spring_dt` (default: one step; 0 for the forces of the initial state)."""
         p, box, nl = state.particles, state.box, state.neighbors
         dt = state.clock.dt
-        if self.slots.shape[0] != nl.nbr.size:
-            self.slots = np.zeros((nl.nbr.size, self.width))
-        pair_forces_kernel(
+        spring = dt if spring_dt is None else spring_dt
+        self._chunks(p.count, nl.nbr.size)
+        common = (
             p.pos,
             p.vel,
             p.angvel,
@@ -80,22 +92,13 @@ class PairContactForces:
             self.rolling,
             box.length,
             box.periodic,
-            dt if spring_dt is None else spring_dt,
+            spring,
             dt,
-            self.slots,
         )
-        gather_pair_forces(
-            self.slots,
-            nl.nbr,
-            nl.nbr_count,
-            nl.rev,
-            nl.rev_count,
-            p.radius,
-            p.mass,
-            box.body_acc,
-            self.rolling,
-            p.force,
-            p.torque,
+        if self.bounds.size > 2:
+            cross_chunk_pairs(*common, self.bounds, self.slots)
+        chunk_pair_forces(
+            *common, nl.rev, nl.rev_count, box.body_acc, self.bounds, self.slots, p.force, p.torque
         )
 
     def elastic_energy(self, state: State) -> tuple[float, int]:
