@@ -53,6 +53,7 @@ for the pairs across chunks only; out force, torque (N,3) [N, N m].
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from .neighbors import minimum_image
@@ -312,6 +313,21 @@ def pair_params(table, material, single, i, j):
     )
 
 
+@njit(cache=True, inline="always")
+def cross_start(nbr, i, count, end):
+    """First k of row i whose partner lies at or beyond index `end` (the row is ascending, so
+    those partners are a suffix)."""
+    first = count
+    while first > 0 and nbr[i, first - 1] >= end:
+        first -= 1
+    return first
+
+
+# Index arithmetic below is unsigned (np.uint64): a signed index makes Numba emit a
+# negative-index wraparound for every array access, which costs ~10 % in these loops. Never
+# compare or mix an unsigned value with a signed one (Numba would convert both to float).
+
+
 @njit(cache=True, parallel=True)
 def cross_chunk_pairs(
     pos,
@@ -340,17 +356,17 @@ def cross_chunk_pairs(
     slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling torque on i (with rolling);
     zero for a pair that does not touch."""
     cap = nbr.shape[1]
+    ucap = np.uint64(cap)
     single = table.shape[0] == 1
     for c in prange(bounds.shape[0] - 1):
         end = bounds[c + 1]
-        for i in range(bounds[c], end):
+        for row in range(bounds[c], end):
+            i = np.uint64(row)
             own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
             count = min(nbr_count[i], cap)
-            first = count  # the row is ascending: its partners beyond the chunk are a suffix
-            while first > 0 and nbr[i, first - 1] >= end:
-                first -= 1
-            for k in range(first, count):
-                j = nbr[i, k]
+            for slot in range(cross_start(nbr, i, count, end), count):
+                k = np.uint64(slot)
+                j = np.uint64(nbr[i, k])
                 params = pair_params(table, material, single, i, j)
                 touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
                     i,
@@ -374,7 +390,7 @@ def cross_chunk_pairs(
                     spring_dt,
                     step_dt,
                 )
-                s = i * cap + k
+                s = i * ucap + k
                 slots[s, 0] = e0
                 slots[s, 1] = e1
                 slots[s, 2] = e2
@@ -422,12 +438,14 @@ def chunk_pair_forces(
     members and adding the row's pairs beyond the chunk from their slots (cross_chunk_pairs
     must have run). Each particle's terms come in ascending partner index (module docstring)."""
     cap = nbr.shape[1]
+    ucap = np.uint64(cap)
     rcap = rev.shape[1]
     single = table.shape[0] == 1
     for c in prange(bounds.shape[0] - 1):
         begin = bounds[c]
         end = bounds[c + 1]
-        for i in range(begin, end):
+        for row in range(begin, end):
+            i = np.uint64(row)
             ri = radius[i]
             mi = mass[i]
             f0 = mi * body_acc[0]
@@ -438,9 +456,9 @@ def chunk_pair_forces(
             t2 = 0.0
             # the reverse row is ascending in j: pairs from earlier chunks are a prefix
             for m in range(min(rev_count[i], rcap)):
-                s = rev[i, m]
-                if s >= begin * cap:
+                if rev[i, m] >= begin * cap:
                     break
+                s = np.uint64(rev[i, m])
                 f0 -= slots[s, 0]
                 f1 -= slots[s, 1]
                 f2 -= slots[s, 2]
@@ -457,7 +475,8 @@ def chunk_pair_forces(
             torque[i, 0] = t0
             torque[i, 1] = t1
             torque[i, 2] = t2
-        for i in range(begin, end):
+        for row in range(begin, end):
+            i = np.uint64(row)
             ri = radius[i]
             own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
             # every pair (j, i), j < i, is in force[i] by now
@@ -468,9 +487,10 @@ def chunk_pair_forces(
             t1 = torque[i, 1]
             t2 = torque[i, 2]
             count = min(nbr_count[i], cap)
-            k = 0
-            while k < count and nbr[i, k] < end:
-                j = nbr[i, k]
+            inner = cross_start(nbr, i, count, end)
+            for slot in range(inner):
+                k = np.uint64(slot)
+                j = np.uint64(nbr[i, k])
                 params = pair_params(table, material, single, i, j)
                 touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
                     i,
@@ -494,7 +514,6 @@ def chunk_pair_forces(
                     spring_dt,
                     step_dt,
                 )
-                k += 1
                 if not touching:
                     continue
                 f0 += e0
@@ -517,8 +536,8 @@ def chunk_pair_forces(
                     torque[j, 0] -= m0
                     torque[j, 1] -= m1
                     torque[j, 2] -= m2
-            while k < count:
-                s = i * cap + k
+            for slot in range(inner, count):
+                s = i * ucap + np.uint64(slot)
                 f0 += slots[s, 0]
                 f1 += slots[s, 1]
                 f2 += slots[s, 2]
@@ -529,7 +548,6 @@ def chunk_pair_forces(
                     t0 += slots[s, 6]
                     t1 += slots[s, 7]
                     t2 += slots[s, 8]
-                k += 1
             force[i, 0] = f0
             force[i, 1] = f1
             force[i, 2] = f2

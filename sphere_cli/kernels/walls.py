@@ -20,7 +20,8 @@ material (N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.
 (normal along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_vel, wall_vel_pred (W,3)
 [m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in contact.py (the
 wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m];
-force, torque (N,3) accumulated in place; record (W,) uint8: for the walls marked, also store
+force, torque (N,3) accumulated in place; springs (N,) uint64 bit mask of the walls whose spring
+with particle i may be non-zero (W <= 64); record (W,) uint8: for the walls marked, also store
 each particle's wall force in pforce (N,W,3) [N] (their reaction, summed by wall_totals);
 mode (W,2) int64 normal mode (FIXED, VELOCITY, STRESS) and shear mode (FIXED = none, VELOCITY,
 STRESS); control (W,NC) columns C_*; attached (K,) int64 particles glued to wall attached_wall
@@ -29,6 +30,7 @@ STRESS); control (W,NC) columns C_*; attached (K,) int64 particles glued to wall
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
@@ -77,9 +79,12 @@ def wall_forces(
     torque,
     record,
     pforce,
+    springs,
 ):
     """Add the forces and torques of W plane walls to force/torque (and store those of the
-    walls marked in record in pforce)."""
+    walls marked in record in pforce). springs (N,) uint64: bit w set where wall_hist[i, w] may
+    be non-zero (kept up to date here), so a particle away from the walls reads one word
+    instead of its W springs."""
     n = pos.shape[0]
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
@@ -96,24 +101,27 @@ def wall_forces(
         if inv_mass[i] == 0.0:
             continue
         ri = radius[i]
-        ci = 0 if single else material[i]
+        ci = np.uint64(0 if single else material[i])
+        held = springs[i]
         f0 = 0.0
         f1 = 0.0
         f2 = 0.0
         t0 = 0.0
         t1 = 0.0
         t2 = 0.0
-        for w in range(nw):
-            a = wall_axis[w]
+        for wall in range(nw):
+            w = np.uint64(wall)  # unsigned indices: no negative-index wraparound code
+            a = np.uint64(wall_axis[w])
             gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
+            bit = np.uint64(1) << w
             if gap >= ri:
-                # no contact: its spring is gone (written only when there was one, so a
-                # particle away from every wall costs reads only)
-                if wall_hist[i, w, 0] != 0.0 or wall_hist[i, w, 1] != 0.0 or wall_hist[i, w, 2] != 0.0:
+                if held & bit:  # the contact has ended: its spring is gone
                     wall_hist[i, w, 0] = 0.0
                     wall_hist[i, w, 1] = 0.0
                     wall_hist[i, w, 2] = 0.0
+                    held &= ~bit
                 continue
+            held |= bit
             root_m = math.sqrt(mass[i])
             row = wall_table[w, ci]
             n0 = 0.0
@@ -190,6 +198,7 @@ def wall_forces(
                 t0 += m0
                 t1 += m1
                 t2 += m2
+        springs[i] = held
         force[i, 0] += f0
         force[i, 1] += f1
         force[i, 2] += f2

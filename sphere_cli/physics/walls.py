@@ -235,11 +235,27 @@ class PlaneWallForces:
 
     def __init__(self, contact):
         self.contact = contact  # shares the law (linear or Hertz) and the rolling switch
+        self._springs = None  # which wall springs may be set, per particle (kernels/walls.py)
+        self._springs_of = None  # the hist array that mask describes
+
+    def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
+        """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
+        state's hist is a new array (start, restore)."""
+        if self._springs_of is not hist:
+            held = np.any(hist != 0.0, axis=2).astype(np.uint64)
+            self._springs = (held << np.arange(hist.shape[1], dtype=np.uint64)).sum(axis=1, dtype=np.uint64)
+            self._springs_of = hist
+        return self._springs
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
-        self._forces(state, spring_dt, state.walls.hist, state.particles.force, state.particles.torque)
+        hist = state.walls.hist
+        self._forces(
+            state, spring_dt, hist, state.particles.force, state.particles.torque, self._spring_mask(hist)
+        )
 
-    def _forces(self, state: State, spring_dt, hist, force, torque, record=None, pforce=None) -> None:
+    def _forces(
+        self, state: State, spring_dt, hist, force, torque, springs, record=None, pforce=None
+    ) -> None:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
         wall_forces(
@@ -268,6 +284,7 @@ class PlaneWallForces:
             torque,
             w.record if record is None else record,
             w.pforce if pforce is None else pforce,
+            springs,
         )
 
     def measure(self, state: State) -> None:
@@ -280,7 +297,9 @@ class PlaneWallForces:
         every = np.ones(len(w.faces), dtype=np.uint8)
         pforce = np.zeros((p.count, len(w.faces), 3))
         scratch = np.zeros_like(p.force)
-        self._forces(state, 0.0, w.hist.copy(), scratch, scratch.copy(), every, pforce)
+        hist = w.hist.copy()
+        springs = np.full(p.count, ~np.uint64(0), dtype=np.uint64)  # check every spring
+        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, every, pforce)
         wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
 
     def observables(self, state: State) -> dict:
