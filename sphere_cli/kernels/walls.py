@@ -80,18 +80,20 @@ def wall_forces(
     record,
     pforce,
     springs,
+    near,
 ):
-    """Add the forces and torques of W plane walls to force/torque (and store those of the
-    walls marked in record in pforce). springs (N,) uint64: bit w set where wall_hist[i, w] may
-    be non-zero (kept up to date here), so a particle away from the walls reads one word
-    instead of its W springs."""
-    n = pos.shape[0]
+    """Add the forces and torques of W plane walls on the particles listed in `near` (every
+    particle that can touch a wall, see near_walls) to force/torque, and store those of the walls
+    marked in record in pforce. springs (N,) uint64: bit w set where wall_hist[i, w] may be
+    non-zero (kept up to date here), so a particle away from the walls reads one word instead of
+    its W springs."""
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
     recording = False
     for w in range(nw):
         recording = recording or record[w] != 0
-    for i in prange(n):
+    for m in prange(near.shape[0]):
+        i = np.uint64(near[m])
         if recording:
             for w in range(nw):
                 if record[w]:
@@ -205,6 +207,31 @@ def wall_forces(
         torque[i, 0] += t0
         torque[i, 1] += t1
         torque[i, 2] += t2
+
+
+@njit(cache=True)
+def near_walls(pos, radius, inv_mass, wall_axis, wall_sign, wall_coord, margin, springs, wall_hist, near):
+    """List in `near` the particles that move by forces and lie within their radius + margin
+    of some wall; return how many. A particle left out cannot touch a wall until it, or the
+    wall, has moved margin/2 (the caller rebuilds the list before that); its springs are
+    cleared here (a particle that jumped away within one step keeps none)."""
+    count = 0
+    for i in range(pos.shape[0]):
+        close = False
+        if inv_mass[i] != 0.0:
+            for w in range(wall_axis.shape[0]):
+                gap = wall_sign[w] * (pos[i, wall_axis[w]] - wall_coord[w])
+                close = close or gap < radius[i] + margin
+        if close:
+            near[count] = i
+            count += 1
+        elif springs[i] != 0:
+            springs[i] = 0
+            for w in range(wall_axis.shape[0]):
+                wall_hist[i, w, 0] = 0.0
+                wall_hist[i, w, 1] = 0.0
+                wall_hist[i, w, 2] = 0.0
+    return count
 
 
 @njit(cache=True)

@@ -50,6 +50,7 @@ from ..kernels.walls import (
     NC,
     STRESS,
     VELOCITY,
+    near_walls,
     wall_areas,
     wall_forces,
     wall_kick,
@@ -237,6 +238,13 @@ class PlaneWallForces:
         self.contact = contact  # shares the law (linear or Hertz) and the rolling switch
         self._springs = None  # which wall springs may be set, per particle (kernels/walls.py)
         self._springs_of = None  # the hist array that mask describes
+        # the particles that can touch a wall (kernels/walls.py near_walls), valid while no
+        # particle has moved half the neighbour skin since the neighbour list was built (the
+        # list is rebuilt with it) and no wall has moved half the skin since this list was made
+        self._near = np.zeros(0, dtype=np.int64)
+        self._near_count = 0
+        self._near_build = -1
+        self._near_coord = None
 
     def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
         """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
@@ -245,16 +253,35 @@ class PlaneWallForces:
             held = np.any(hist != 0.0, axis=2).astype(np.uint64)
             self._springs = (held << np.arange(hist.shape[1], dtype=np.uint64)).sum(axis=1, dtype=np.uint64)
             self._springs_of = hist
+            self._near_build = -1
         return self._springs
+
+    def _near_walls(self, state: State, springs: np.ndarray) -> np.ndarray:
+        p, w, nl = state.particles, state.walls, state.neighbors
+        if (
+            self._near_build != nl.builds
+            or self._near_coord is None
+            or np.abs(w.coord - self._near_coord).max(initial=0.0) >= 0.5 * nl.skin
+        ):
+            if self._near.shape[0] != p.count:
+                self._near = np.zeros(p.count, dtype=np.int64)
+            self._near_count = near_walls(
+                p.pos, p.radius, p.inv_mass, w.axis, w.sign, w.coord, nl.skin, springs, w.hist, self._near
+            )
+            self._near_build = nl.builds
+            self._near_coord = w.coord.copy()
+            if w.pforce.shape[0]:
+                w.pforce[...] = 0.0  # only listed particles are written from now on
+        return self._near[: self._near_count]
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         hist = state.walls.hist
-        self._forces(
-            state, spring_dt, hist, state.particles.force, state.particles.torque, self._spring_mask(hist)
-        )
+        springs = self._spring_mask(hist)
+        near = self._near_walls(state, springs)
+        self._forces(state, spring_dt, hist, state.particles.force, state.particles.torque, springs, near)
 
     def _forces(
-        self, state: State, spring_dt, hist, force, torque, springs, record=None, pforce=None
+        self, state: State, spring_dt, hist, force, torque, springs, near, record=None, pforce=None
     ) -> None:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
@@ -285,6 +312,7 @@ class PlaneWallForces:
             w.record if record is None else record,
             w.pforce if pforce is None else pforce,
             springs,
+            near,
         )
 
     def measure(self, state: State) -> None:
@@ -299,7 +327,8 @@ class PlaneWallForces:
         scratch = np.zeros_like(p.force)
         hist = w.hist.copy()
         springs = np.full(p.count, ~np.uint64(0), dtype=np.uint64)  # check every spring
-        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, every, pforce)
+        everyone = np.arange(p.count, dtype=np.int64)
+        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, everyone, every, pforce)
         wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
 
     def observables(self, state: State) -> dict:
