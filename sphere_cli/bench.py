@@ -125,6 +125,7 @@ def bytes_per_particle(scene) -> float:
     arrays += [search.spare_nbr, search.spare_count, search.spare_hist, search.cell_of, search.order]
     if state.walls is not None:
         arrays.append(state.walls.hist)
+        arrays += scene.walls.scratch()
     return sum(a.nbytes for a in arrays) / p.count
 
 

@@ -626,7 +626,7 @@ class Observables(Schedule):
     shear_direction: Literal["x", "y"] = Field(
         "x",
         description=(
-            'Horizontal direction of shear for the effective friction tau/sigma_n = -sigma_zs/sigma_zz, '
+            "Horizontal direction of shear for the effective friction tau/sigma_n = -sigma_zs/sigma_zz, "
             "s = this axis (z is the normal direction)."
         ),
     )

@@ -362,9 +362,12 @@ def cross_chunk_pairs(
         end = bounds[c + 1]
         for row in range(bounds[c], end):
             i = np.uint64(row)
-            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
             count = min(nbr_count[i], cap)
-            for slot in range(cross_start(nbr, i, count, end), count):
+            first = cross_start(nbr, i, count, end)
+            if first == count:
+                continue  # most rows: no partner beyond the chunk
+            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
+            for slot in range(first, count):
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
                 params = pair_params(table, material, single, i, j)

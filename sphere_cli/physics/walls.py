@@ -246,6 +246,10 @@ class PlaneWallForces:
         self._near_build = -1
         self._near_coord = None
 
+    def scratch(self) -> list[np.ndarray]:
+        """The per-particle arrays this module keeps besides the state (memory accounting)."""
+        return [a for a in (self._near, self._springs) if a is not None]
+
     def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
         """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
         state's hist is a new array (start, restore)."""

@@ -113,13 +113,13 @@ def test_only_the_selected_materials_feel_the_fluid():
     text = ONE_WAY.replace(
         'flow = { kind = "log-law", friction_velocity = 0.05, bed_level = 0.002, roughness_length = 1.0e-4 }',
         'flow = { kind = "profile", z = [0.0, 0.02], u = [0.5, 0.5] }\nmaterials = ["glass"]',
-    ).replace("count = 2\ndensity = 2500.0", 'count = 8\nmaterial = { glass = 0.5, steel = 0.5 }')
+    ).replace("count = 2\ndensity = 2500.0", "count = 8\nmaterial = { glass = 0.5, steel = 0.5 }")
     text = text.replace(
         "[fluid]",
         '[[materials]]\nname = "steel"\ndensity = 7800.0\n'
         '[[materials]]\nname = "glass"\ndensity = 2500.0\n[fluid]',
     )
-    text = text.replace('region_lower = [0.0, 0.0, 0.008]', "region_lower = [0.0, 0.0, 0.004]")
+    text = text.replace("region_lower = [0.0, 0.0, 0.008]", "region_lower = [0.0, 0.0, 0.004]")
     scene = build_scene(parse_case(text))
     p = scene.state.particles
     steps = 200
