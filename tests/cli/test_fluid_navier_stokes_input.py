@@ -81,6 +81,19 @@ def test_dt_above_the_viscous_limit_names_it(tmp_path):
     assert limit == pytest.approx(0.25**2 * 1e-4 / (8 * 0.1) / 5, rel=1e-3)  # printed to 4 digits
 
 
+def test_dt_above_the_advective_limit_of_max_speed_names_it(tmp_path):
+    """fluid.max_speed = 50 m/s on 2.5 mm cells: the advective limit sum |u| dt_f/dx <= 1/2 (the
+    bound of the limited advection, kernels/navier_stokes.py) gives dt_f <= 0.5/(50 * 3/2.5e-3)
+    = 8.33 us, 1.67 us per DEM step with ndem = 5, below the contact limit (6.9 us): a given
+    dt = 5e-6 s is refused naming it (with the factor 1 of first-order upwind it would be 3.3 us)."""
+    text = edit(FLUID, "viscosity = 0.001", "viscosity = 0.001\nmax_speed = 50.0")
+    text = edit(text, 'dt = "auto"', "dt = 5e-6")
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 65, "simulation.dt", "advective limit", "fluid.max_speed = 50", "ndem = 5")
+    limit = float(re.search(r"stability limit ([0-9.eE+-]+) s", result.stderr).group(1))
+    assert limit == pytest.approx(0.5 / (50.0 * 3 / 2.5e-3) / 5, rel=1e-3)  # printed to 4 digits
+
+
 def test_fluid_dt_above_the_viscous_limit_is_refused(tmp_path):
     text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), "ndem = 5", "fluid_dt = 1e-4")
     result = _run(tmp_path, text)
