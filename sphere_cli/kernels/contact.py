@@ -457,8 +457,9 @@ def chunk_pair_forces(
             t0 = 0.0
             t1 = 0.0
             t2 = 0.0
-            # the reverse row is ascending in j: pairs from earlier chunks are a prefix
-            for m in range(min(rev_count[i], rcap)):
+            # the reverse row is ascending in j: pairs from earlier chunks are a prefix (none
+            # for the first chunk, which then reads no reverse row)
+            for m in range(min(rev_count[i], rcap) if begin > 0 else 0):
                 if rev[i, m] >= begin * cap:
                     break
                 s = np.uint64(rev[i, m])
