@@ -56,14 +56,20 @@ class PairContactForces:
         self.width = 9 if self.rolling else 6
         self.slots = np.zeros((0, self.width))
         self.bounds = np.zeros(2, dtype=np.int64)
+        self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
 
-    def _chunks(self, n: int, size: int) -> None:
-        """One chunk of particles per thread (the result does not depend on it); slots only
-        when there is more than one chunk."""
+    def _chunks(self, nl) -> None:
+        """One chunk of particles per thread, cut where the listed pairs (plus one per
+        particle) are shared evenly, again after each rebuild of the list; the result does not
+        depend on the cuts. Slots only when there is more than one chunk."""
+        n = nl.nbr.shape[0]
         chunks = max(1, min(numba.get_num_threads(), n))
-        if self.bounds.size != chunks + 1 or self.bounds[-1] != n:
-            self.bounds = (np.arange(chunks + 1, dtype=np.int64) * n) // chunks
-        rows = size if chunks > 1 else 0
+        if self.bounds.size != chunks + 1 or self.bounds[-1] != n or self.bounds_build != nl.builds:
+            work = np.cumsum(np.minimum(nl.nbr_count, nl.nbr.shape[1]) + 1)
+            cuts = np.searchsorted(work, np.arange(1, chunks) * (work[-1] / chunks))
+            self.bounds = np.concatenate(([0], cuts, [n])).astype(np.int64)
+            self.bounds_build = nl.builds
+        rows = nl.nbr.size if chunks > 1 else 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
 
@@ -73,7 +79,7 @@ class PairContactForces:
         p, box, nl = state.particles, state.box, state.neighbors
         dt = state.clock.dt
         spring = dt if spring_dt is None else spring_dt
-        self._chunks(p.count, nl.nbr.size)
+        self._chunks(nl)
         common = (
             p.pos,
             p.vel,
