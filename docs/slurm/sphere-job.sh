@@ -43,6 +43,8 @@ fi
 # Exactly the CPUs SLURM gave this task (sphere's results do not depend on the count).
 export NUMBA_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}
 export OMP_NUM_THREADS=$NUMBA_NUM_THREADS
+# OpenMP threads spin while waiting: right on cores of their own, very slow on shared cores
+export OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-ACTIVE}
 
 if [ -f "$RUN_DIR/case.toml" ]; then
     "$SPHERE" resume "$RUN_DIR" &
