@@ -54,3 +54,24 @@ def test_overflowing_rows_grow_and_match_a_roomy_list(monkeypatch):
     advance(roomy, 300)
     assert np.array_equal(tight.state.particles.pos, roomy.state.particles.pos)
     assert np.array_equal(tight.state.particles.angvel, roomy.state.particles.angvel)
+
+
+def test_rows_far_wider_than_needed_narrow_at_the_next_build(monkeypatch):
+    """Rows much wider than the longest (a bed that has settled) are narrowed when the list is
+    rebuilt, to the longest row + HEADROOM; the springs survive and the result is unchanged."""
+    wide = _scene(2, monkeypatch)
+    roomy = _scene(64, monkeypatch)
+    monkeypatch.setattr(neighbors_module, "INITIAL_CAPACITY", 2)
+    nl = wide.state.neighbors
+    advance(wide, 100)
+    advance(roomy, 100)
+    wide.neighbors._resize(nl, 40)  # as if the rows had grown in a denser past
+    wide.neighbors._reverse(nl)
+    wide.neighbors.rebuild(wide.state)
+    longest = int(nl.nbr_count.max())
+    assert nl.nbr.shape[1] == longest + neighbors_module.HEADROOM
+    assert nl.hist.shape[1] == nl.nbr.shape[1]
+    advance(wide, 200)
+    advance(roomy, 200)
+    assert np.array_equal(wide.state.particles.pos, roomy.state.particles.pos)
+    assert np.array_equal(wide.state.particles.angvel, roomy.state.particles.angvel)
