@@ -26,7 +26,7 @@ demo: $(STAMP)
 # Passive OpenMP waiting: on a machine shared with other jobs (CI runners), spinning threads made
 # 2-thread tests up to 15x slower; a benchmark on dedicated cores keeps the default.
 test: $(STAMP)
-	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q
+	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q --durations=10
 
 bench: $(STAMP)
 	$(BIN)/sphere bench
