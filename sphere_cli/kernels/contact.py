@@ -301,8 +301,8 @@ def own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass):
 @njit(cache=True, inline="always")
 def pair_params(table, material, single, i, j):
     """(K_N, K_T, D_N, D_T, MU, MU_R) of the pair's materials."""
-    a = 0 if single else material[i]
-    b = 0 if single else material[j]
+    a = np.uint64(0 if single else material[i])
+    b = np.uint64(0 if single else material[j])
     return (
         table[a, b, K_N],
         table[a, b, K_T],

@@ -1,0 +1,35 @@
+"""`sphere bench` (the DEM canonical scene of issue 8) at a tiny size: every row of the report
+holds the figures docs/performance.md quotes, with consistent values. No timing is asserted
+(a shared machine makes any bound loose or flaky); the settled state is left out (it settles a
+bed for 0.15 s of simulated time)."""
+
+from __future__ import annotations
+
+import json
+
+from cli_test_support import sphere_inproc
+
+
+def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
+    result = sphere_inproc(
+        "bench", "--sizes", "216", "--states", "loose", "--threads", "1,2", "--steps", "3",
+        "--repeats", "2", "-o", tmp_path / "out",
+    )  # fmt: skip
+    assert result.code == 0, result.stdout + result.stderr
+    report = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert report["steps"] == 3 and report["repeats"] == 2
+    assert report["first_call_seconds"] > 0
+    rows = report["rows"]
+    assert [r["threads"] for r in rows] == [1, 2][: len(rows)] and rows
+    for row in rows:
+        assert row["n"] == 216 and row["state"] == "loose" and row["steps"] == 3
+        assert len(row["all_seconds"]) == 2 and min(row["all_seconds"]) > 0
+        assert row["particle_steps_per_second"] == 216 * 3 / row["seconds"]
+        assert row["best_particle_steps_per_second"] >= row["particle_steps_per_second"]
+        # the loose lattice (spacing 1.2 d) has no contacts, and every array costs memory
+        assert row["contacts_per_particle"] == 0.0
+        assert row["bytes_per_particle"] > 200
+    if len(rows) == 2:
+        one, two = rows
+        assert two["speedup"] == two["particle_steps_per_second"] / one["particle_steps_per_second"]
+    assert f"N = {216:>7}" in result.stdout
