@@ -120,7 +120,9 @@ def bytes_per_particle(scene) -> float:
     p = state.particles
     arrays = [getattr(p, name) for name in p.PROGNOSTIC] + [p.vel_pred, p.angvel_pred]
     nl = state.neighbors
-    arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos, nl.rev, nl.rev_count, scene.contact.slots]
+    contact = scene.contact
+    arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos, nl.rev, nl.rev_count, contact.slots]
+    arrays += [contact.blocks, contact.block_ids, contact.block_rows]
     search = scene.neighbors
     arrays += [search.spare_nbr, search.spare_count, search.spare_hist, search.cell_of, search.order]
     if state.walls is not None:

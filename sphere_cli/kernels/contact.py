@@ -39,6 +39,15 @@ the number of chunks: the result is bitwise the same for any thread count (one t
 chunk, no slots at all). Every operation is antisymmetric in (i, j), so the force on j is exactly
 the negative of the force on i.
 
+Blocks: the law is evaluated for BLOCK touching pairs at a time. A scalar sweep finds them and
+copies the law's inputs into a block (one row of BLOCK values per quantity: row f of contact c is
+buf[f * BLOCK + c]); contact_law evaluates the whole block in one loop, which the compiler
+vectorises (4 contacts per instruction with AVX2: the rows are contiguous, a constant BLOCK
+apart, and the law is arithmetic only, its branches become masks); a scalar sweep then applies
+the results in the block's order, which is the sweep's. Each contact gets the same operations
+in the same order as a contact-by-contact evaluation, so the forces are bitwise the same; the
+pairs across chunks go through the same blocks and law.
+
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
 (N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32 half rows,
 nbr_count (N,); rev (N,R) int32 reverse slots, rev_count (N,) (kernels/neighbors.py);
@@ -48,7 +57,9 @@ above [N/m or Pa, N/m or Pa, kg^1/2/s or (Pa kg)^1/2 m^-1/2, same, -, -]; hertz,
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
 limit); slots (N*C, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at i*C + k, used
-for the pairs across chunks only; out force, torque (N,3) [N, N m].
+for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T, 3*BLOCK)
+uint64 (the (i, j, k) of each contact of a block), block_rows (T, 2*BLOCK) int64 (rows waiting
+for their slots): scratch per chunk; out force, torque (N,3) [N, N m].
 """
 
 import math
@@ -87,14 +98,12 @@ def normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un):
 
 
 @njit(cache=True, inline="always")
-def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
-    """Update the spring xi = hist[i, k] (3,) in place and return F_t as a tuple [N].
+def tangential_spring(x0, x1, x2, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
+    """(F_t (3 values) [N], the new spring (3 values) [m]) of a contact whose spring was x.
 
     vt: tangential slip velocity at the half step (grows the spring: exact midpoint rule);
-    ut: the same at the predicted full step (the dashpot acts at the time of the force)."""
-    x0 = hist[i, k, 0]
-    x1 = hist[i, k, 1]
-    x2 = hist[i, k, 2]
+    ut: the same at the predicted full step (the dashpot acts at the time of the force).
+    Arithmetic only (no memory), so that a loop over contacts vectorises."""
     # rotate the spring into the current tangent plane, keeping its length
     old2 = x0 * x0 + x1 * x1 + x2 * x2
     if old2 > 0.0:
@@ -124,6 +133,31 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
         x0 = -f0 / kt
         x1 = -f1 / kt
         x2 = -f2 / kt
+    return f0, f1, f2, x0, x1, x2
+
+
+@njit(cache=True, inline="always")
+def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
+    """tangential_spring on the spring hist[i, k] (3,), updated in place; returns F_t [N]."""
+    f0, f1, f2, x0, x1, x2 = tangential_spring(
+        hist[i, k, 0],
+        hist[i, k, 1],
+        hist[i, k, 2],
+        vt0,
+        vt1,
+        vt2,
+        n0,
+        n1,
+        n2,
+        kt,
+        ct,
+        mu,
+        fn,
+        dt,
+        ut0,
+        ut1,
+        ut2,
+    )
     hist[i, k, 0] = x0
     hist[i, k, 1] = x1
     hist[i, k, 2] = x2
@@ -149,81 +183,90 @@ def rolling_torque(w0, w1, w2, n0, n1, n2, mu_r, r_eff, fn, i_eff, dt):
     return scale * r0, scale * r1, scale * r2
 
 
+# Rows of a block (module docstring). 64 contacts: the block's 43 rows (22 KB) stay in L1.
+BLOCK = 64
+# inputs: separation d = x_i - x_j and |d|^2; v_i - v_j, r_i w_i + r_j w_j at the half step (A, S)
+# and predicted (P, Q); masses, radii; the spring (replaced by the new one)
+B_D0, B_D1, B_D2, B_DIST2 = 0, 1, 2, 3
+B_A0, B_A1, B_A2, B_S0, B_S1, B_S2 = 4, 5, 6, 7, 8, 9
+B_P0, B_P1, B_P2, B_Q0, B_Q1, B_Q2 = 10, 11, 12, 13, 14, 15
+B_MI, B_MJ, B_RI, B_RJ = 16, 17, 18, 19
+B_H0, B_H1, B_H2 = 20, 21, 22
+# with rolling resistance: w_i - w_j at the half step, the two moments of inertia
+B_W0, B_W1, B_W2, B_II, B_IJ = 23, 24, 25, 26, 27
+# with several materials: the pair's table row
+B_ROW = 28  # B_ROW + column (K_N ... MU_R)
+# outputs: force on i, n x F_t, rolling torque on i
+B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
+FIELDS = 43
+# per contact, in a companion uint64 array: the row i, the partner j and the slot k
+ID_I, ID_J, ID_K = 0, 1, 2
+
+
 @njit(cache=True, inline="always")
-def pair_force(
-    i,
-    k,
-    j,
-    own,
-    pos,
-    vel,
-    angvel,
-    vel_pred,
-    angvel_pred,
-    radius,
-    mass,
-    inertia,
-    params,
-    hist,
-    hertz,
-    rolling,
-    length,
-    periodic,
-    spring_dt,
-    step_dt,
-):
-    """Contact of pair (i, j = nbr[i, k]); own: i's (x0, x1, x2, v0, v1, v2, r w0, r w1, r w2,
-    vp0, vp1, vp2, r wp0, r wp1, r wp2, r, m) (velocities at the half step and predicted).
-    Updates the spring hist[i, k] (cleared when the pair does not touch) and returns
-    (touching, force on i (3), n x F_t (3), rolling torque on i (3)); the torque of F_t on i is
-    -r_i n x F_t, on j -r_j n x F_t; on j the force and rolling torque are the negatives."""
-    ri = own[15]
-    d0 = minimum_image(own[0] - pos[j, 0], length[0], periodic[0])
-    d1 = minimum_image(own[1] - pos[j, 1], length[1], periodic[1])
-    d2 = minimum_image(own[2] - pos[j, 2], length[2], periodic[2])
-    dist2 = d0 * d0 + d1 * d1 + d2 * d2
-    rj = radius[j]
-    reach = ri + rj
-    if dist2 >= reach * reach:
-        if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
-            hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
-            hist[i, k, 1] = 0.0
-            hist[i, k, 2] = 0.0
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    kn, kt, dn, dt, mu, mu_r = params
-    dist = math.sqrt(dist2)
+def _put(buf, field, c, value):
+    buf[np.uint64(field * BLOCK) + c] = value
+
+
+@njit(cache=True, inline="always")
+def _get(buf, field, c):
+    return buf[np.uint64(field * BLOCK) + c]
+
+
+@njit(cache=True, inline="always")
+def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt):
+    """The law of contact c of a block; kn1 ... mur1: the table row when there is one material."""
+    d0 = buf[B_D0 * BLOCK + c]
+    d1 = buf[B_D1 * BLOCK + c]
+    d2 = buf[B_D2 * BLOCK + c]
+    ri = buf[B_RI * BLOCK + c]
+    rj = buf[B_RJ * BLOCK + c]
+    dist = math.sqrt(buf[B_DIST2 * BLOCK + c])
     inv = 1.0 / dist
     n0 = d0 * inv
     n1 = d1 * inv
     n2 = d2 * inv
-    delta = reach - dist
+    delta = (ri + rj) - dist
     # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
-    s0 = own[6] + rj * angvel[j, 0]
-    s1 = own[7] + rj * angvel[j, 1]
-    s2 = own[8] + rj * angvel[j, 2]
-    v0 = (own[3] - vel[j, 0]) - (s1 * n2 - s2 * n1)
-    v1 = (own[4] - vel[j, 1]) - (s2 * n0 - s0 * n2)
-    v2 = (own[5] - vel[j, 2]) - (s0 * n1 - s1 * n0)
+    s0 = buf[B_S0 * BLOCK + c]
+    s1 = buf[B_S1 * BLOCK + c]
+    s2 = buf[B_S2 * BLOCK + c]
+    v0 = buf[B_A0 * BLOCK + c] - (s1 * n2 - s2 * n1)
+    v1 = buf[B_A1 * BLOCK + c] - (s2 * n0 - s0 * n2)
+    v2 = buf[B_A2 * BLOCK + c] - (s0 * n1 - s1 * n0)
     vn = v0 * n0 + v1 * n1 + v2 * n2
     # the same at the predicted full step, for the dashpots
-    q0 = own[12] + rj * angvel_pred[j, 0]
-    q1 = own[13] + rj * angvel_pred[j, 1]
-    q2 = own[14] + rj * angvel_pred[j, 2]
-    u0 = (own[9] - vel_pred[j, 0]) - (q1 * n2 - q2 * n1)
-    u1 = (own[10] - vel_pred[j, 1]) - (q2 * n0 - q0 * n2)
-    u2 = (own[11] - vel_pred[j, 2]) - (q0 * n1 - q1 * n0)
+    q0 = buf[B_Q0 * BLOCK + c]
+    q1 = buf[B_Q1 * BLOCK + c]
+    q2 = buf[B_Q2 * BLOCK + c]
+    u0 = buf[B_P0 * BLOCK + c] - (q1 * n2 - q2 * n1)
+    u1 = buf[B_P1 * BLOCK + c] - (q2 * n0 - q0 * n2)
+    u2 = buf[B_P2 * BLOCK + c] - (q0 * n1 - q1 * n0)
     un = u0 * n0 + u1 * n1 + u2 * n2
-    mi = own[16]
-    mj = mass[j]
+    mi = buf[B_MI * BLOCK + c]
+    mj = buf[B_MJ * BLOCK + c]
     root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
     r_eff = 0.0
     if hertz or rolling:
         r_eff = ri * rj / (ri + rj)
+    kn = kn1
+    kt = kt1
+    dn = dn1
+    dt = dt1
+    mu = mu1
+    mu_r = mur1
+    if not single:
+        kn = buf[(B_ROW + K_N) * BLOCK + c]
+        kt = buf[(B_ROW + K_T) * BLOCK + c]
+        dn = buf[(B_ROW + D_N) * BLOCK + c]
+        dt = buf[(B_ROW + D_T) * BLOCK + c]
+        mu = buf[(B_ROW + MU) * BLOCK + c]
+        mu_r = buf[(B_ROW + MU_R) * BLOCK + c]
     fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
-    g0, g1, g2 = tangential_force(
-        hist,
-        i,
-        k,
+    g0, g1, g2, x0, x1, x2 = tangential_spring(
+        buf[B_H0 * BLOCK + c],
+        buf[B_H1 * BLOCK + c],
+        buf[B_H2 * BLOCK + c],
         v0 - vn * n0,
         v1 - vn * n1,
         v2 - vn * n2,
@@ -239,78 +282,118 @@ def pair_force(
         u1 - un * n1,
         u2 - un * n2,
     )
-    m0 = 0.0
-    m1 = 0.0
-    m2 = 0.0
-    if rolling and mu_r > 0.0:
-        ii = inertia[i]
-        ij = inertia[j]
-        m0, m1, m2 = rolling_torque(
-            angvel[i, 0] - angvel[j, 0],
-            angvel[i, 1] - angvel[j, 1],
-            angvel[i, 2] - angvel[j, 2],
-            n0,
-            n1,
-            n2,
-            mu_r,
-            r_eff,
-            fn,
-            ii * ij / (ii + ij),
-            step_dt,
-        )
+    buf[B_H0 * BLOCK + c] = x0
+    buf[B_H1 * BLOCK + c] = x1
+    buf[B_H2 * BLOCK + c] = x2
     # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
-    return (
-        True,
-        fn * n0 + g0,
-        fn * n1 + g1,
-        fn * n2 + g2,
-        n1 * g2 - n2 * g1,
-        n2 * g0 - n0 * g2,
-        n0 * g1 - n1 * g0,
-        m0,
-        m1,
-        m2,
-    )
+    buf[B_E0 * BLOCK + c] = fn * n0 + g0
+    buf[B_E1 * BLOCK + c] = fn * n1 + g1
+    buf[B_E2 * BLOCK + c] = fn * n2 + g2
+    buf[B_C0 * BLOCK + c] = n1 * g2 - n2 * g1
+    buf[B_C1 * BLOCK + c] = n2 * g0 - n0 * g2
+    buf[B_C2 * BLOCK + c] = n0 * g1 - n1 * g0
+    if rolling:
+        m0 = 0.0
+        m1 = 0.0
+        m2 = 0.0
+        if mu_r > 0.0:
+            ii = buf[B_II * BLOCK + c]
+            ij = buf[B_IJ * BLOCK + c]
+            m0, m1, m2 = rolling_torque(
+                buf[B_W0 * BLOCK + c],
+                buf[B_W1 * BLOCK + c],
+                buf[B_W2 * BLOCK + c],
+                n0,
+                n1,
+                n2,
+                mu_r,
+                r_eff,
+                fn,
+                ii * ij / (ii + ij),
+                step_dt,
+            )
+        buf[B_M0 * BLOCK + c] = m0
+        buf[B_M1 * BLOCK + c] = m1
+        buf[B_M2 * BLOCK + c] = m2
+
+
+@njit(cache=True, error_model="numpy")
+def contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt):
+    """The law for the first `count` contacts of a block (module docstring): normal force,
+    tangential spring with its Coulomb cap, rolling torque, written into the output rows; the
+    spring rows are replaced by the new springs. With one material the table row is table[0, 0].
+    One loop per setting of `rolling`, so that a loop computes no unused torque."""
+    row = table[0, 0]
+    kn1, kt1, dn1, dt1, mu1, mur1 = row[K_N], row[K_T], row[D_N], row[D_T], row[MU], row[MU_R]
+    if rolling:
+        for c in range(count):
+            _contact(buf, c, hertz, True, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
+    else:
+        for c in range(count):
+            _contact(buf, c, hertz, False, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
 
 
 @njit(cache=True, inline="always")
-def own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass):
-    """The tuple `own` of pair_force for particle i."""
-    ri = radius[i]
-    return (
-        pos[i, 0],
-        pos[i, 1],
-        pos[i, 2],
-        vel[i, 0],
-        vel[i, 1],
-        vel[i, 2],
-        ri * angvel[i, 0],
-        ri * angvel[i, 1],
-        ri * angvel[i, 2],
-        vel_pred[i, 0],
-        vel_pred[i, 1],
-        vel_pred[i, 2],
-        ri * angvel_pred[i, 0],
-        ri * angvel_pred[i, 1],
-        ri * angvel_pred[i, 2],
-        ri,
-        mass[i],
-    )
+def separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic):
+    """(touching, d = x_i - x_j (3 values), |d|^2) of the pair (i, j = nbr[i, k]); clears the
+    spring of a pair that does not touch."""
+    d0 = minimum_image(x0 - pos[j, 0], length[0], periodic[0])
+    d1 = minimum_image(x1 - pos[j, 1], length[1], periodic[1])
+    d2 = minimum_image(x2 - pos[j, 2], length[2], periodic[2])
+    dist2 = d0 * d0 + d1 * d1 + d2 * d2
+    reach = ri + rj
+    if dist2 >= reach * reach:
+        if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
+            hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
+            hist[i, k, 1] = 0.0
+            hist[i, k, 2] = 0.0
+        return False, d0, d1, d2, dist2
+    return True, d0, d1, d2, dist2
 
 
 @njit(cache=True, inline="always")
-def pair_params(table, material, single, i, j):
-    """(K_N, K_T, D_N, D_T, MU, MU_R) of the pair's materials."""
-    a = np.uint64(0 if single else material[i])
-    b = np.uint64(0 if single else material[j])
-    return (
-        table[a, b, K_N],
-        table[a, b, K_T],
-        table[a, b, D_N],
-        table[a, b, D_T],
-        table[a, b, MU],
-        table[a, b, MU_R],
-    )
+def gather(
+    buf, ids, c, i, j, k, d0, d1, d2, dist2, ri, rj, vel, angvel, vel_pred, angvel_pred, mass, inertia,
+    material, hist, table, single, rolling,
+):  # fmt: skip
+    """Copy the law's inputs of the touching pair (i, j = nbr[i, k]) into slot c of the block."""
+    ids[np.uint64(ID_I * BLOCK) + c] = i
+    ids[np.uint64(ID_J * BLOCK) + c] = j
+    ids[np.uint64(ID_K * BLOCK) + c] = k
+    _put(buf, B_D0, c, d0)
+    _put(buf, B_D1, c, d1)
+    _put(buf, B_D2, c, d2)
+    _put(buf, B_DIST2, c, dist2)
+    _put(buf, B_A0, c, vel[i, 0] - vel[j, 0])
+    _put(buf, B_A1, c, vel[i, 1] - vel[j, 1])
+    _put(buf, B_A2, c, vel[i, 2] - vel[j, 2])
+    _put(buf, B_S0, c, ri * angvel[i, 0] + rj * angvel[j, 0])
+    _put(buf, B_S1, c, ri * angvel[i, 1] + rj * angvel[j, 1])
+    _put(buf, B_S2, c, ri * angvel[i, 2] + rj * angvel[j, 2])
+    _put(buf, B_P0, c, vel_pred[i, 0] - vel_pred[j, 0])
+    _put(buf, B_P1, c, vel_pred[i, 1] - vel_pred[j, 1])
+    _put(buf, B_P2, c, vel_pred[i, 2] - vel_pred[j, 2])
+    _put(buf, B_Q0, c, ri * angvel_pred[i, 0] + rj * angvel_pred[j, 0])
+    _put(buf, B_Q1, c, ri * angvel_pred[i, 1] + rj * angvel_pred[j, 1])
+    _put(buf, B_Q2, c, ri * angvel_pred[i, 2] + rj * angvel_pred[j, 2])
+    _put(buf, B_MI, c, mass[i])
+    _put(buf, B_MJ, c, mass[j])
+    _put(buf, B_RI, c, ri)
+    _put(buf, B_RJ, c, rj)
+    _put(buf, B_H0, c, hist[i, k, 0])
+    _put(buf, B_H1, c, hist[i, k, 1])
+    _put(buf, B_H2, c, hist[i, k, 2])
+    if rolling:
+        _put(buf, B_W0, c, angvel[i, 0] - angvel[j, 0])
+        _put(buf, B_W1, c, angvel[i, 1] - angvel[j, 1])
+        _put(buf, B_W2, c, angvel[i, 2] - angvel[j, 2])
+        _put(buf, B_II, c, inertia[i])
+        _put(buf, B_IJ, c, inertia[j])
+    if not single:
+        a = np.uint64(material[i])
+        b = np.uint64(material[j])
+        for col in range(COLUMNS):
+            _put(buf, B_ROW + col, c, table[a, b, col])
 
 
 @njit(cache=True, inline="always")
@@ -326,6 +409,31 @@ def cross_start(nbr, i, count, end):
 # Index arithmetic below is unsigned (np.uint64): a signed index makes Numba emit a
 # negative-index wraparound for every array access, which costs ~10 % in these loops. Never
 # compare or mix an unsigned value with a signed one (Numba would convert both to float).
+
+
+@njit(cache=True)
+def _flush_to_slots(buf, ids, count, hertz, rolling, single, table, spring_dt, step_dt, hist, cap, slots):
+    """The law for the block's contacts (pairs across chunks), then each into its slot
+    s = i*C + k, and the new springs."""
+    contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt)
+    for b in range(count):
+        c = np.uint64(b)
+        i = ids[np.uint64(ID_I * BLOCK) + c]
+        k = ids[np.uint64(ID_K * BLOCK) + c]
+        hist[i, k, 0] = _get(buf, B_H0, c)
+        hist[i, k, 1] = _get(buf, B_H1, c)
+        hist[i, k, 2] = _get(buf, B_H2, c)
+        s = i * cap + k
+        slots[s, 0] = _get(buf, B_E0, c)
+        slots[s, 1] = _get(buf, B_E1, c)
+        slots[s, 2] = _get(buf, B_E2, c)
+        slots[s, 3] = _get(buf, B_C0, c)
+        slots[s, 4] = _get(buf, B_C1, c)
+        slots[s, 5] = _get(buf, B_C2, c)
+        if rolling:
+            slots[s, 6] = _get(buf, B_M0, c)
+            slots[s, 7] = _get(buf, B_M1, c)
+            slots[s, 8] = _get(buf, B_M2, c)
 
 
 @njit(cache=True, parallel=True)
@@ -351,6 +459,8 @@ def cross_chunk_pairs(
     step_dt,
     bounds,
     slots,
+    blocks,
+    block_ids,
 ):
     """Every listed pair whose partner lies in a later chunk, into its slot s = i*C + k:
     slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling torque on i (with rolling);
@@ -359,51 +469,124 @@ def cross_chunk_pairs(
     ucap = np.uint64(cap)
     single = table.shape[0] == 1
     for c in prange(bounds.shape[0] - 1):
+        buf = blocks[c]
+        ids = block_ids[c]
         end = bounds[c + 1]
+        filled = 0
         for row in range(bounds[c], end):
             i = np.uint64(row)
             count = min(nbr_count[i], cap)
             first = cross_start(nbr, i, count, end)
             if first == count:
                 continue  # most rows: no partner beyond the chunk
-            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
+            ri = radius[i]
+            x0 = pos[i, 0]
+            x1 = pos[i, 1]
+            x2 = pos[i, 2]
             for slot in range(first, count):
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
-                params = pair_params(table, material, single, i, j)
-                touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
-                    i,
-                    k,
-                    j,
-                    own,
-                    pos,
-                    vel,
-                    angvel,
-                    vel_pred,
-                    angvel_pred,
-                    radius,
-                    mass,
-                    inertia,
-                    params,
-                    hist,
-                    hertz,
-                    rolling,
-                    length,
-                    periodic,
-                    spring_dt,
-                    step_dt,
+                rj = radius[j]
+                touching, d0, d1, d2, dist2 = separation(
+                    pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic
                 )
-                s = i * ucap + k
-                slots[s, 0] = e0
-                slots[s, 1] = e1
-                slots[s, 2] = e2
-                slots[s, 3] = c0
-                slots[s, 4] = c1
-                slots[s, 5] = c2
-                if rolling:
-                    slots[s, 6] = m0
-                    slots[s, 7] = m1
-                    slots[s, 8] = m2
+                if not touching:
+                    s = i * ucap + k
+                    for col in range(slots.shape[1]):
+                        slots[s, col] = 0.0
+                    continue
+                if filled == BLOCK:
+                    _flush_to_slots(
+                        buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, ucap, slots
+                    )
+                    filled = 0
+                gather(
+                    buf, ids, np.uint64(filled), i, j, k, d0, d1, d2, dist2, ri, rj,
+                    vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
+                )  # fmt: skip
+                filled += 1
+        _flush_to_slots(
+            buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, ucap, slots
+        )
+
+
+@njit(cache=True)
+def _flush_to_forces(
+    buf, ids, count, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt, radius, nbr_count,
+    hist, cap, slots, force, torque,
+):  # fmt: skip
+    """The law for the block's contacts, then apply them in order (the force on j is the
+    negative, its torque from r_j); then add to each of the `waiting` rows listed (rows whose
+    pairs are all in, or before, this block) its pairs across chunks from their slots."""
+    contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt)
+    b = np.uint64(0)
+    end = np.uint64(count)
+    while b < end:
+        i = ids[np.uint64(ID_I * BLOCK) + b]
+        ri = radius[i]
+        f0 = force[i, 0]
+        f1 = force[i, 1]
+        f2 = force[i, 2]
+        t0 = torque[i, 0]
+        t1 = torque[i, 1]
+        t2 = torque[i, 2]
+        while b < end and ids[np.uint64(ID_I * BLOCK) + b] == i:
+            j = ids[np.uint64(ID_J * BLOCK) + b]
+            k = ids[np.uint64(ID_K * BLOCK) + b]
+            hist[i, k, 0] = _get(buf, B_H0, b)
+            hist[i, k, 1] = _get(buf, B_H1, b)
+            hist[i, k, 2] = _get(buf, B_H2, b)
+            e0 = _get(buf, B_E0, b)
+            e1 = _get(buf, B_E1, b)
+            e2 = _get(buf, B_E2, b)
+            c0 = _get(buf, B_C0, b)
+            c1 = _get(buf, B_C1, b)
+            c2 = _get(buf, B_C2, b)
+            f0 += e0
+            f1 += e1
+            f2 += e2
+            t0 -= ri * c0
+            t1 -= ri * c1
+            t2 -= ri * c2
+            rj = radius[j]
+            force[j, 0] -= e0
+            force[j, 1] -= e1
+            force[j, 2] -= e2
+            torque[j, 0] -= rj * c0
+            torque[j, 1] -= rj * c1
+            torque[j, 2] -= rj * c2
+            if rolling:
+                m0 = _get(buf, B_M0, b)
+                m1 = _get(buf, B_M1, b)
+                m2 = _get(buf, B_M2, b)
+                t0 += m0
+                t1 += m1
+                t2 += m2
+                torque[j, 0] -= m0
+                torque[j, 1] -= m1
+                torque[j, 2] -= m2
+            b += np.uint64(1)
+        force[i, 0] = f0
+        force[i, 1] = f1
+        force[i, 2] = f2
+        torque[i, 0] = t0
+        torque[i, 1] = t1
+        torque[i, 2] = t2
+    for w in range(waiting):
+        i = np.uint64(rows[w])
+        ri = radius[i]
+        for slot in range(rows[BLOCK + w], min(nbr_count[i], cap)):
+            s = i * np.uint64(cap) + np.uint64(slot)
+            force[i, 0] += slots[s, 0]
+            force[i, 1] += slots[s, 1]
+            force[i, 2] += slots[s, 2]
+            torque[i, 0] -= ri * slots[s, 3]
+            torque[i, 1] -= ri * slots[s, 4]
+            torque[i, 2] -= ri * slots[s, 5]
+            if rolling:
+                torque[i, 0] += slots[s, 6]
+                torque[i, 1] += slots[s, 7]
+                torque[i, 2] += slots[s, 8]
 
 
 @njit(cache=True, parallel=True)
@@ -432,21 +615,29 @@ def chunk_pair_forces(
     body_acc,
     bounds,
     slots,
+    blocks,
+    block_ids,
+    block_rows,
     force,
     torque,
 ):
     """Set force = m g + the sum of the pair forces and torque = the sum of the pair torques,
     chunk by chunk: first m g minus the pairs (j, i) with j in an earlier chunk (their slots,
     ascending j), then a sweep in ascending i applying the pairs inside the chunk to both
-    members and adding the row's pairs beyond the chunk from their slots (cross_chunk_pairs
-    must have run). Each particle's terms come in ascending partner index (module docstring)."""
+    members, block by block, and adding the row's pairs beyond the chunk from their slots
+    (cross_chunk_pairs must have run). Each particle's terms come in ascending partner index
+    (module docstring)."""
     cap = nbr.shape[1]
-    ucap = np.uint64(cap)
     rcap = rev.shape[1]
     single = table.shape[0] == 1
     for c in prange(bounds.shape[0] - 1):
         begin = bounds[c]
         end = bounds[c + 1]
+        buf = blocks[c]
+        ids = block_ids[c]
+        rows = block_rows[
+            c
+        ]  # rows waiting for their slots: [0, BLOCK) the row, [BLOCK, 2 BLOCK) its first slot
         for row in range(begin, end):
             i = np.uint64(row)
             ri = radius[i]
@@ -479,82 +670,49 @@ def chunk_pair_forces(
             torque[i, 0] = t0
             torque[i, 1] = t1
             torque[i, 2] = t2
+        filled = 0
+        waiting = 0
         for row in range(begin, end):
             i = np.uint64(row)
             ri = radius[i]
-            own = own_state(i, pos, vel, angvel, vel_pred, angvel_pred, radius, mass)
-            # every pair (j, i), j < i, is in force[i] by now
-            f0 = force[i, 0]
-            f1 = force[i, 1]
-            f2 = force[i, 2]
-            t0 = torque[i, 0]
-            t1 = torque[i, 1]
-            t2 = torque[i, 2]
+            x0 = pos[i, 0]
+            x1 = pos[i, 1]
+            x2 = pos[i, 2]
             count = min(nbr_count[i], cap)
             inner = cross_start(nbr, i, count, end)
             for slot in range(inner):
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
-                params = pair_params(table, material, single, i, j)
-                touching, e0, e1, e2, c0, c1, c2, m0, m1, m2 = pair_force(
-                    i,
-                    k,
-                    j,
-                    own,
-                    pos,
-                    vel,
-                    angvel,
-                    vel_pred,
-                    angvel_pred,
-                    radius,
-                    mass,
-                    inertia,
-                    params,
-                    hist,
-                    hertz,
-                    rolling,
-                    length,
-                    periodic,
-                    spring_dt,
-                    step_dt,
+                rj = radius[j]
+                touching, d0, d1, d2, dist2 = separation(
+                    pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic
                 )
                 if not touching:
                     continue
-                f0 += e0
-                f1 += e1
-                f2 += e2
-                t0 -= ri * c0
-                t1 -= ri * c1
-                t2 -= ri * c2
-                rj = radius[j]
-                force[j, 0] -= e0
-                force[j, 1] -= e1
-                force[j, 2] -= e2
-                torque[j, 0] -= rj * c0
-                torque[j, 1] -= rj * c1
-                torque[j, 2] -= rj * c2
-                if rolling:
-                    t0 += m0
-                    t1 += m1
-                    t2 += m2
-                    torque[j, 0] -= m0
-                    torque[j, 1] -= m1
-                    torque[j, 2] -= m2
-            for slot in range(inner, count):
-                s = i * ucap + np.uint64(slot)
-                f0 += slots[s, 0]
-                f1 += slots[s, 1]
-                f2 += slots[s, 2]
-                t0 -= ri * slots[s, 3]
-                t1 -= ri * slots[s, 4]
-                t2 -= ri * slots[s, 5]
-                if rolling:
-                    t0 += slots[s, 6]
-                    t1 += slots[s, 7]
-                    t2 += slots[s, 8]
-            force[i, 0] = f0
-            force[i, 1] = f1
-            force[i, 2] = f2
-            torque[i, 0] = t0
-            torque[i, 1] = t1
-            torque[i, 2] = t2
+                if filled == BLOCK:
+                    _flush_to_forces(
+                        buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
+                        radius, nbr_count, hist, cap, slots, force, torque,
+                    )  # fmt: skip
+                    filled = 0
+                    waiting = 0
+                gather(
+                    buf, ids, np.uint64(filled), i, j, k, d0, d1, d2, dist2, ri, rj,
+                    vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
+                )  # fmt: skip
+                filled += 1
+            if inner < count:
+                if waiting == BLOCK:
+                    _flush_to_forces(
+                        buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
+                        radius, nbr_count, hist, cap, slots, force, torque,
+                    )  # fmt: skip
+                    filled = 0
+                    waiting = 0
+                rows[waiting] = row
+                rows[BLOCK + waiting] = inner
+                waiting += 1
+        _flush_to_forces(
+            buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
+            radius, nbr_count, hist, cap, slots, force, torque,
+        )  # fmt: skip

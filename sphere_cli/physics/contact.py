@@ -36,7 +36,7 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import D_N, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
+from ..kernels.contact import BLOCK, D_N, FIELDS, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
@@ -55,6 +55,11 @@ class PairContactForces:
         # resistance is on (kernels/contact.py)
         self.width = 9 if self.rolling else 6
         self.slots = np.zeros((0, self.width))
+        # per chunk, the block of touching pairs whose law is evaluated in one vectorised loop
+        # (kernels/contact.py): inputs and results, the pairs' (i, j, k), rows waiting for slots
+        self.blocks = np.zeros((0, FIELDS * BLOCK))
+        self.block_ids = np.zeros((0, 3 * BLOCK), dtype=np.uint64)
+        self.block_rows = np.zeros((0, 2 * BLOCK), dtype=np.int64)
         self.bounds = np.zeros(2, dtype=np.int64)
         self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
 
@@ -72,6 +77,10 @@ class PairContactForces:
         rows = nl.nbr.size if chunks > 1 else 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
+        if self.blocks.shape[0] != chunks:
+            self.blocks = np.zeros((chunks, FIELDS * BLOCK))
+            self.block_ids = np.zeros((chunks, 3 * BLOCK), dtype=np.uint64)
+            self.block_rows = np.zeros((chunks, 2 * BLOCK), dtype=np.int64)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
@@ -102,9 +111,19 @@ class PairContactForces:
             dt,
         )
         if self.bounds.size > 2:
-            cross_chunk_pairs(*common, self.bounds, self.slots)
+            cross_chunk_pairs(*common, self.bounds, self.slots, self.blocks, self.block_ids)
         chunk_pair_forces(
-            *common, nl.rev, nl.rev_count, box.body_acc, self.bounds, self.slots, p.force, p.torque
+            *common,
+            nl.rev,
+            nl.rev_count,
+            box.body_acc,
+            self.bounds,
+            self.slots,
+            self.blocks,
+            self.block_ids,
+            self.block_rows,
+            p.force,
+            p.torque,
         )
 
     def elastic_energy(self, state: State) -> tuple[float, int]:

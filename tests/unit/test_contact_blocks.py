@@ -1,0 +1,257 @@
+"""The pair kernels evaluate the contact law in blocks of touching pairs (kernels/contact.py):
+a block fills up in the middle of a row, a row can hold more contacts than a block, rows wait
+for their pairs across chunks. None of this may change a result: the forces, torques and
+springs must be bitwise those of a plain contact-by-contact sweep (written here in Python with
+the law's own functions, which Numba compiles without reordering any floating-point
+operation), for any number of chunks.
+
+The scene: a large sphere (index 0, so its half row lists every neighbour) wrapped in a shell
+of 200 small spheres that press into it, among 300 touching pairs of small spheres in a periodic
+box, moving and spinning at random, two materials, run for a few steps so that springs exist and
+some slide.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import numpy as np
+import pytest
+
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import parse_case
+from sphere_cli.kernels import contact as law
+from sphere_cli.kernels.neighbors import minimum_image
+from sphere_cli.simulation import advance
+
+BIG = 2.0e-3
+SMALL = 2.5e-4
+SHELL = 200
+LOOSE = 600
+BOX = 0.012
+
+
+def _particle_file(path) -> None:
+    rng = np.random.default_rng(7)
+    centre = np.full(3, 0.5 * BOX)
+    k = np.arange(SHELL) + 0.5  # Fibonacci sphere: even spacing, no two shell spheres touching
+    polar = np.arccos(1.0 - 2.0 * k / SHELL)
+    azimuth = math.pi * (1.0 + 5.0**0.5) * k
+    normal = np.stack(
+        [np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1
+    )
+    shell = centre + (BIG + SMALL * 0.97) * normal  # 3 % of a small radius into the big one
+    loose = []
+    while len(loose) < LOOSE:  # touching pairs away from the big sphere, apart from each other
+        p = rng.uniform(2.0 * SMALL, BOX - 2.0 * SMALL, 3)
+        q = rng.normal(size=3)
+        q = p + 1.96 * SMALL * q / np.linalg.norm(q)
+        if min(np.linalg.norm(p - centre), np.linalg.norm(q - centre)) < BIG + 3.0 * SMALL:
+            continue
+        if (
+            loose
+            and np.min(np.linalg.norm(np.array(loose)[:, None, :] - np.array([p, q]), axis=2)) < 2.05 * SMALL
+        ):
+            continue
+        loose += [p, q]
+    pos = np.concatenate([centre[None, :], shell, np.array(loose)])
+    radius = np.concatenate([[BIG], np.full(SHELL + LOOSE, SMALL)])
+    vel = rng.normal(0.0, 0.05, pos.shape)
+    vel[1 : SHELL + 1] -= 0.2 * normal  # the shell moves in: overlaps grow, springs load
+    rows = ["x,y,z,r,vx,vy,vz"] + [
+        ",".join(repr(float(v)) for v in (*p, r, *u)) for p, r, u in zip(pos, radius, vel, strict=True)
+    ]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def _case(path, hertz: bool) -> str:
+    contact = (
+        """
+        model = "hertz-mindlin"
+        restitution = 0.4
+        friction = 0.15
+        rolling_friction = 0.1
+        """
+        if hertz
+        else """
+        model = "linear"
+        normal_stiffness = 50.0
+        restitution = 0.4
+        friction = 0.15
+        """
+    )
+    materials = (
+        """
+        [[materials]]
+        name = "a"
+        density = 2500.0
+        youngs_modulus = 1.0e6
+        poisson_ratio = 0.3
+        [[materials]]
+        name = "b"
+        density = 7800.0
+        youngs_modulus = 5.0e6
+        poisson_ratio = 0.25
+        """
+        if hertz
+        else """
+        [[materials]]
+        name = "a"
+        density = 2500.0
+        [[materials]]
+        name = "b"
+        density = 7800.0
+        normal_stiffness = 200.0
+        """
+    )
+    return textwrap.dedent(
+        f"""
+        [simulation]
+        duration = 1.0
+        dt = 2.0e-6
+        [domain]
+        upper = [{BOX}, {BOX}, {BOX}]
+        periodic = [true, true, true]
+        gravity = [0.0, 0.0, -9.81]
+        [particles]
+        material = {{ a = 0.5, b = 0.5 }}
+        overlap_tolerance = 0.2
+        placement = {{ method = "file", path = "{path}" }}
+        [contact]
+        {textwrap.dedent(contact)}
+        {textwrap.dedent(materials)}
+        """
+    )
+
+
+def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_dt: float):
+    """(force, torque, springs) by a plain sweep in ascending i, each row in ascending j."""
+    p, box, nl = state.particles, state.box, state.neighbors
+    length, periodic = box.length, box.periodic
+    pos, vel, angvel, vel_pred, angvel_pred = p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred
+    force = p.mass[:, None] * box.body_acc[None, :]
+    torque = np.zeros_like(force)
+    hist = nl.hist.copy()
+    for i in range(p.count):
+        ri = p.radius[i]
+        for k in range(min(nl.nbr_count[i], nl.nbr.shape[1])):
+            j = nl.nbr[i, k]
+            rj = p.radius[j]
+            d = [minimum_image(pos[i, a] - pos[j, a], length[a], periodic[a]) for a in range(3)]
+            dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            if dist2 >= (ri + rj) * (ri + rj):
+                hist[i, k] = 0.0
+                continue
+            kn, kt, dn, dt, mu, mu_r = table[p.material[i], p.material[j]]
+            dist = math.sqrt(dist2)
+            inv = 1.0 / dist
+            n = [d[0] * inv, d[1] * inv, d[2] * inv]
+            delta = (ri + rj) - dist
+
+            def slip(v, w, n=n, i=i, j=j, ri=ri, rj=rj):
+                s = [ri * w[i, a] + rj * w[j, a] for a in range(3)]
+                a = [v[i, b] - v[j, b] for b in range(3)]
+                return [
+                    a[0] - (s[1] * n[2] - s[2] * n[1]),
+                    a[1] - (s[2] * n[0] - s[0] * n[2]),
+                    a[2] - (s[0] * n[1] - s[1] * n[0]),
+                ]
+
+            v = slip(vel, angvel)
+            vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+            u = slip(vel_pred, angvel_pred)
+            un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
+            root_m = math.sqrt(p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j]))
+            r_eff = ri * rj / (ri + rj) if hertz or rolling else 0.0
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
+            g0, g1, g2, x0, x1, x2 = law.tangential_spring(
+                *hist[i, k], *(v[a] - vn * n[a] for a in range(3)), *n, kt_now, ct, mu, fn, spring_dt,
+                *(u[a] - un * n[a] for a in range(3)),
+            )  # fmt: skip
+            hist[i, k] = (x0, x1, x2)
+            e = (fn * n[0] + g0, fn * n[1] + g1, fn * n[2] + g2)
+            c = (n[1] * g2 - n[2] * g1, n[2] * g0 - n[0] * g2, n[0] * g1 - n[1] * g0)
+            m = (0.0, 0.0, 0.0)
+            if rolling and mu_r > 0.0:
+                ii, ij = p.inertia[i], p.inertia[j]
+                m = law.rolling_torque(
+                    *(angvel[i, a] - angvel[j, a] for a in range(3)), *n, mu_r, r_eff, fn,
+                    ii * ij / (ii + ij), step_dt,
+                )  # fmt: skip
+            for a in range(3):
+                force[i, a] += e[a]
+                torque[i, a] -= ri * c[a]
+                force[j, a] -= e[a]
+                torque[j, a] -= rj * c[a]
+                if rolling:
+                    torque[i, a] += m[a]
+                    torque[j, a] -= m[a]
+    return force, torque, hist
+
+
+def _kernels(scene, bounds: np.ndarray, spring_dt: float):
+    """(force, torque, springs) of the block kernels with the particles cut at `bounds`."""
+    state, contact = scene.state, scene.contact
+    p, box, nl = state.particles, state.box, state.neighbors
+    chunks = bounds.size - 1
+    hist = nl.hist.copy()
+    force = np.zeros_like(p.force)
+    torque = np.zeros_like(p.torque)
+    slots = np.zeros((nl.nbr.size, contact.width))
+    blocks = np.zeros((chunks, law.FIELDS * law.BLOCK))
+    block_ids = np.zeros((chunks, 3 * law.BLOCK), dtype=np.uint64)
+    block_rows = np.zeros((chunks, 2 * law.BLOCK), dtype=np.int64)
+    common = (
+        p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.mass, p.inertia, p.material,
+        nl.nbr, nl.nbr_count, hist, contact.table, contact.hertz, contact.rolling, box.length,
+        box.periodic, spring_dt, state.clock.dt,
+    )  # fmt: skip
+    if chunks > 1:
+        law.cross_chunk_pairs(*common, bounds, slots, blocks, block_ids)
+    law.chunk_pair_forces(
+        *common,
+        nl.rev,
+        nl.rev_count,
+        box.body_acc,
+        bounds,
+        slots,
+        blocks,
+        block_ids,
+        block_rows,
+        force,
+        torque,
+    )
+    return force, torque, hist
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["linear", "hertz-rolling"])
+def scene(request, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("blocks")
+    _particle_file(folder / "particles.csv")
+    scene = build_scene(parse_case(_case(folder / "particles.csv", request.param)))
+    advance(scene, 20)
+    return scene
+
+
+def test_the_scene_exercises_every_path_of_the_blocks(scene):
+    nl = scene.state.neighbors
+    assert nl.nbr_count[0] > 3 * law.BLOCK, "the big sphere's row must span several blocks"
+    force, torque, hist = _kernels(scene, np.array([0, scene.state.particles.count]), scene.state.clock.dt)
+    listed = np.arange(nl.nbr.shape[1])[None, :] < np.minimum(nl.nbr_count, nl.nbr.shape[1])[:, None]
+    touching = np.any(hist != 0.0, axis=2) & listed
+    assert touching.sum() > 4 * law.BLOCK
+    assert scene.contact.rolling == scene.contact.hertz
+    assert len(set(scene.state.particles.material.tolist())) == 2
+
+
+@pytest.mark.parametrize("spring_dt", [0.0, 2.0e-6], ids=["initial", "step"])
+def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
+    state, contact = scene.state, scene.contact
+    expected = _reference(state, contact.table, contact.hertz, contact.rolling, spring_dt, state.clock.dt)
+    n = state.particles.count
+    # one chunk; cuts inside the shell, where the rows wait for pairs across chunks, and many
+    for bounds in ([0, n], [0, 120, n], [0, 1, 300, 301, 700, n], list(np.linspace(0, n, 12).astype(int))):
+        got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt)
+        for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
+            assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
