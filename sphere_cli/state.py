@@ -7,6 +7,7 @@ them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +88,9 @@ class NeighborList:
     rev: np.ndarray | None = None  # (N,R) int32
     rev_count: np.ndarray | None = None  # (N,) int32
     builds: int = 0
+    # largest squared displacement since the build [m^2], measured by the drift of each step
+    # (physics/motion.py); inf until then, so a check before any drift rebuilds
+    moved2: float = math.inf
 
     PROGNOSTIC = ("nbr", "nbr_count", "hist", "ref_pos")
 

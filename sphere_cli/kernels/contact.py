@@ -457,28 +457,28 @@ def cross_chunk_pairs(
     periodic,
     spring_dt,
     step_dt,
-    bounds,
+    cross_rows,
+    cross_bounds,
     slots,
     blocks,
     block_ids,
 ):
     """Every listed pair whose partner lies in a later chunk, into its slot s = i*C + k:
     slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling torque on i (with rolling);
-    zero for a pair that does not touch."""
+    zero for a pair that does not touch. cross_rows (R,2) int64: each row holding such pairs
+    and the end of its chunk; cross_bounds (T+1,) int64: piece c of those rows,
+    cross_bounds[c] <= r < cross_bounds[c+1], for thread c (any cut gives the same slots)."""
     cap = nbr.shape[1]
     ucap = np.uint64(cap)
     single = table.shape[0] == 1
-    for c in prange(bounds.shape[0] - 1):
+    for c in prange(cross_bounds.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
-        end = bounds[c + 1]
         filled = 0
-        for row in range(bounds[c], end):
-            i = np.uint64(row)
+        for r in range(cross_bounds[c], cross_bounds[c + 1]):
+            i = np.uint64(cross_rows[r, 0])
             count = min(nbr_count[i], cap)
-            first = cross_start(nbr, i, count, end)
-            if first == count:
-                continue  # most rows: no partner beyond the chunk
+            first = cross_start(nbr, i, count, cross_rows[r, 1])
             ri = radius[i]
             x0 = pos[i, 0]
             x1 = pos[i, 1]

@@ -7,21 +7,41 @@ is tracked.
 
 Arguments: pos, vel, angvel, force, torque (N,3) [m, m/s, rad/s, N, N m];
 inv_mass, inv_inertia (N,) [1/kg, 1/(kg m^2)], zero for a particle that does not move;
-lower, length (3,) [m]; periodic (3,) uint8; dt [s].
+lower, length (3,) [m]; periodic (3,) uint8; dt [s]; ref_pos (N,3) [m] the positions at the
+last build of the neighbour list (kernels/neighbors.py).
 """
 
 import math
 
 from numba import njit, prange
 
+from .neighbors import minimum_image
+
 
 @njit(cache=True, parallel=True)
 def kick_drift(
-    pos, vel, angvel, force, torque, inv_mass, inv_inertia, lower, length, periodic, dt, vel_pred, angvel_pred
+    pos,
+    vel,
+    angvel,
+    force,
+    torque,
+    inv_mass,
+    inv_inertia,
+    lower,
+    length,
+    periodic,
+    dt,
+    vel_pred,
+    angvel_pred,
+    ref_pos,
 ):
     """Half kick with the old forces, full drift, wrap into the periodic box; also the
-    prediction v_n + dt a_n of v_{n+1} that the dashpots use (vel_pred, angvel_pred)."""
+    prediction v_n + dt a_n of v_{n+1} that the dashpots use (vel_pred, angvel_pred). Returns
+    the largest squared displacement since the neighbour list was built (minimum image) [m^2],
+    measured here while the positions are at hand rather than in a pass of their own; a max
+    reduction is exact in any order, so it does not depend on the threads."""
     half = 0.5 * dt
+    worst = 0.0
     for i in prange(pos.shape[0]):
         for a in range(3):
             vel[i, a] += half * force[i, a] * inv_mass[i]
@@ -35,6 +55,11 @@ def kick_drift(
                 elif x < lower[a]:
                     x += length[a]
             pos[i, a] = x
+        d0 = minimum_image(pos[i, 0] - ref_pos[i, 0], length[0], periodic[0])
+        d1 = minimum_image(pos[i, 1] - ref_pos[i, 1], length[1], periodic[1])
+        d2 = minimum_image(pos[i, 2] - ref_pos[i, 2], length[2], periodic[2])
+        worst = max(worst, d0 * d0 + d1 * d1 + d2 * d2)
+    return worst
 
 
 @njit(cache=True, parallel=True)

@@ -185,19 +185,6 @@ def build_reverse(nbr, nbr_count, rev, rev_count):
     return longest
 
 
-@njit(cache=True, parallel=True)
-def max_displacement_sq(pos, ref_pos, length, periodic):
-    """Largest squared displacement since the list was built (minimum image) [m^2].
-    A max reduction is exact in any order, so the result does not depend on the threads."""
-    worst = 0.0
-    for i in prange(pos.shape[0]):
-        d0 = minimum_image(pos[i, 0] - ref_pos[i, 0], length[0], periodic[0])
-        d1 = minimum_image(pos[i, 1] - ref_pos[i, 1], length[1], periodic[1])
-        d2 = minimum_image(pos[i, 2] - ref_pos[i, 2], length[2], periodic[2])
-        worst = max(worst, d0 * d0 + d1 * d1 + d2 * d2)
-    return worst
-
-
 @njit(cache=True)
 def worst_overlap(pos, radius, nbr, nbr_count, length, periodic):
     """The listed pair with the largest overlap relative to the smaller radius.

@@ -42,6 +42,23 @@ from ..state import State
 from .materials import ContactTables
 
 
+def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cuts): the rows holding pairs whose partner lies beyond the row's chunk (chunk c:
+    bounds[c] <= i < bounds[c+1]), as (row, end of its chunk) (R,2) int64, and cuts (pieces+1,)
+    int64 into them giving each piece about as many of those pairs (kernels/contact.py,
+    cross_chunk_pairs)."""
+    n, cap = nbr.shape
+    end = bounds[np.searchsorted(bounds, np.arange(n), side="right")]
+    listed = np.arange(cap)[None, :] < np.minimum(nbr_count, cap)[:, None]
+    pairs = np.count_nonzero(listed & (nbr >= end[:, None]), axis=1)
+    crossing = np.flatnonzero(pairs)
+    rows = np.stack([crossing, end[crossing]], axis=1).astype(np.int64)
+    work = np.cumsum(pairs[crossing])
+    total = work[-1] if work.size else 0
+    cuts = np.searchsorted(work, np.arange(1, pieces) * (total / pieces))
+    return rows, np.concatenate(([0], cuts, [crossing.size])).astype(np.int64)
+
+
 class PairContactForces:
     phase = "forces"
 
@@ -62,6 +79,9 @@ class PairContactForces:
         self.block_rows = np.zeros((0, 2 * BLOCK), dtype=np.int64)
         self.bounds = np.zeros(2, dtype=np.int64)
         self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
+        # rows with pairs across chunks: (row, end of its chunk), shared evenly between threads
+        self.cross_rows = np.zeros((0, 2), dtype=np.int64)
+        self.cross_bounds = np.zeros(2, dtype=np.int64)
 
     def _chunks(self, nl) -> None:
         """One chunk of particles per thread, cut where the listed pairs (plus one per
@@ -74,6 +94,7 @@ class PairContactForces:
             cuts = np.searchsorted(work, np.arange(1, chunks) * (work[-1] / chunks))
             self.bounds = np.concatenate(([0], cuts, [n])).astype(np.int64)
             self.bounds_build = nl.builds
+            self.cross_rows, self.cross_bounds = rows_across_chunks(nl.nbr, nl.nbr_count, self.bounds, chunks)
         rows = nl.nbr.size if chunks > 1 else 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
@@ -111,7 +132,9 @@ class PairContactForces:
             dt,
         )
         if self.bounds.size > 2:
-            cross_chunk_pairs(*common, self.bounds, self.slots, self.blocks, self.block_ids)
+            cross_chunk_pairs(
+                *common, self.cross_rows, self.cross_bounds, self.slots, self.blocks, self.block_ids
+            )
         chunk_pair_forces(
             *common,
             nl.rev,

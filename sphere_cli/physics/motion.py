@@ -10,8 +10,10 @@ class Motion:
     phase = "integrate"
 
     def kick_drift(self, state: State) -> None:
-        p, box = state.particles, state.box
-        kick_drift(
+        """The drift also measures how far the particles have moved since the neighbour list
+        was built (NeighborSearch.prepare, next in the step, reads it)."""
+        p, box, nl = state.particles, state.box, state.neighbors
+        nl.moved2 = kick_drift(
             p.pos,
             p.vel,
             p.angvel,
@@ -25,6 +27,7 @@ class Motion:
             state.clock.dt,
             p.vel_pred,
             p.angvel_pred,
+            nl.ref_pos,
         )
 
     def kick(self, state: State) -> None:

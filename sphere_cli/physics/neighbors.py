@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NumericalError
-from ..kernels.neighbors import build_lists, build_reverse, cell_index, counting_sort, max_displacement_sq
+from ..kernels.neighbors import build_lists, build_reverse, cell_index, counting_sort
 from ..state import NeighborList, State
 
 INITIAL_CAPACITY = 8  # half rows: a settled monodisperse bed lists at most ~10 (the list grows on overflow)
@@ -55,8 +55,9 @@ class NeighborSearch:
         self.spare_hist = np.zeros_like(nl.hist)
 
     def prepare(self, state: State) -> None:
-        box, p, nl = state.box, state.particles, state.neighbors
-        if max_displacement_sq(p.pos, nl.ref_pos, box.length, box.periodic) > self.threshold2:
+        """Rebuild once some particle has moved half the skin (measured by the drift just
+        before, physics/motion.py)."""
+        if state.neighbors.moved2 > self.threshold2:
             self.rebuild(state)
 
     def rebuild(self, state: State) -> None:
@@ -98,6 +99,7 @@ class NeighborSearch:
             # narrower rows keep the springs dense in memory (settled 100 000 bed: +5 %)
             self._resize(nl, max(needed + HEADROOM, INITIAL_CAPACITY))
         nl.ref_pos[:] = p.pos
+        nl.moved2 = 0.0
         nl.builds += 1
         self._reverse(nl)
 

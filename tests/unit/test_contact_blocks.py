@@ -23,6 +23,7 @@ from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
 from sphere_cli.kernels import contact as law
 from sphere_cli.kernels.neighbors import minimum_image
+from sphere_cli.physics.contact import rows_across_chunks
 from sphere_cli.simulation import advance
 
 BIG = 2.0e-3
@@ -208,7 +209,8 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
         box.periodic, spring_dt, state.clock.dt,
     )  # fmt: skip
     if chunks > 1:
-        law.cross_chunk_pairs(*common, bounds, slots, blocks, block_ids)
+        rows, cuts = rows_across_chunks(nl.nbr, nl.nbr_count, bounds, chunks)
+        law.cross_chunk_pairs(*common, rows, cuts, slots, blocks, block_ids)
     law.chunk_pair_forces(
         *common,
         nl.rev,
