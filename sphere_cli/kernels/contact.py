@@ -188,6 +188,8 @@ BLOCK = 64
 # inputs: separation d = x_i - x_j and |d|^2; v_i - v_j, r_i w_i + r_j w_j at the half step (A, S)
 # and predicted (P, Q); masses, radii; the spring (replaced by the new one)
 B_D0, B_D1, B_D2, B_DIST2 = 0, 1, 2, 3
+# a wall contact has its normal and overlap in these rows instead
+B_N0, B_N1, B_N2, B_DELTA = 0, 1, 2, 3
 B_A0, B_A1, B_A2, B_S0, B_S1, B_S2 = 4, 5, 6, 7, 8, 9
 B_P0, B_P1, B_P2, B_Q0, B_Q1, B_Q2 = 10, 11, 12, 13, 14, 15
 B_MI, B_MJ, B_RI, B_RJ = 16, 17, 18, 19
@@ -204,30 +206,41 @@ ID_I, ID_J, ID_K = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
-def _put(buf, field, c, value):
+def to_block(buf, field, c, value):
     buf[np.uint64(field * BLOCK) + c] = value
 
 
 @njit(cache=True, inline="always")
-def _get(buf, field, c):
+def from_block(buf, field, c):
     return buf[np.uint64(field * BLOCK) + c]
 
 
 @njit(cache=True, inline="always")
-def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt):
-    """The law of contact c of a block; kn1 ... mur1: the table row when there is one material."""
-    d0 = buf[B_D0 * BLOCK + c]
-    d1 = buf[B_D1 * BLOCK + c]
-    d2 = buf[B_D2 * BLOCK + c]
-    ri = buf[B_RI * BLOCK + c]
-    rj = buf[B_RJ * BLOCK + c]
-    dist = math.sqrt(buf[B_DIST2 * BLOCK + c])
-    inv = 1.0 / dist
-    n0 = d0 * inv
-    n1 = d1 * inv
-    n2 = d2 * inv
-    delta = (ri + rj) - dist
-    # contact-point velocity of i relative to j: v_i - v_j - (r_i w_i + r_j w_j) x n
+def _law(
+    buf,
+    c,
+    n0,
+    n1,
+    n2,
+    delta,
+    root_m,
+    r_eff,
+    i_eff,
+    kn,
+    kt,
+    dn,
+    dt,
+    mu,
+    mu_r,
+    hertz,
+    rolling,
+    spring_dt,
+    step_dt,
+):
+    """The law of contact c of a block, from its normal n (from the partner to i), overlap
+    delta [m], sqrt of the reduced mass [kg^1/2], R* [m] and I* [kg m^2] (pairs and walls
+    alike): reads the velocity and spring rows, writes the results and the new spring."""
+    # contact-point velocity of i relative to the partner: v_i - v_j - (r_i w_i + r_j w_j) x n
     s0 = buf[B_S0 * BLOCK + c]
     s1 = buf[B_S1 * BLOCK + c]
     s2 = buf[B_S2 * BLOCK + c]
@@ -243,25 +256,6 @@ def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spri
     u1 = buf[B_P1 * BLOCK + c] - (q2 * n0 - q0 * n2)
     u2 = buf[B_P2 * BLOCK + c] - (q0 * n1 - q1 * n0)
     un = u0 * n0 + u1 * n1 + u2 * n2
-    mi = buf[B_MI * BLOCK + c]
-    mj = buf[B_MJ * BLOCK + c]
-    root_m = math.sqrt(mi * mj / (mi + mj))  # sqrt of the reduced mass
-    r_eff = 0.0
-    if hertz or rolling:
-        r_eff = ri * rj / (ri + rj)
-    kn = kn1
-    kt = kt1
-    dn = dn1
-    dt = dt1
-    mu = mu1
-    mu_r = mur1
-    if not single:
-        kn = buf[(B_ROW + K_N) * BLOCK + c]
-        kt = buf[(B_ROW + K_T) * BLOCK + c]
-        dn = buf[(B_ROW + D_N) * BLOCK + c]
-        dt = buf[(B_ROW + D_T) * BLOCK + c]
-        mu = buf[(B_ROW + MU) * BLOCK + c]
-        mu_r = buf[(B_ROW + MU_R) * BLOCK + c]
     fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
     g0, g1, g2, x0, x1, x2 = tangential_spring(
         buf[B_H0 * BLOCK + c],
@@ -297,8 +291,6 @@ def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spri
         m1 = 0.0
         m2 = 0.0
         if mu_r > 0.0:
-            ii = buf[B_II * BLOCK + c]
-            ij = buf[B_IJ * BLOCK + c]
             m0, m1, m2 = rolling_torque(
                 buf[B_W0 * BLOCK + c],
                 buf[B_W1 * BLOCK + c],
@@ -309,7 +301,7 @@ def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spri
                 mu_r,
                 r_eff,
                 fn,
-                ii * ij / (ii + ij),
+                i_eff,
                 step_dt,
             )
         buf[B_M0 * BLOCK + c] = m0
@@ -317,9 +309,66 @@ def _contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spri
         buf[B_M2 * BLOCK + c] = m2
 
 
+@njit(cache=True, inline="always")
+def _pair_contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt):
+    """The law of pair contact c of a block; kn1 ... mur1: the table row when there is one
+    material."""
+    d0 = buf[B_D0 * BLOCK + c]
+    d1 = buf[B_D1 * BLOCK + c]
+    d2 = buf[B_D2 * BLOCK + c]
+    ri = buf[B_RI * BLOCK + c]
+    rj = buf[B_RJ * BLOCK + c]
+    dist = math.sqrt(buf[B_DIST2 * BLOCK + c])
+    inv = 1.0 / dist
+    mi = buf[B_MI * BLOCK + c]
+    mj = buf[B_MJ * BLOCK + c]
+    r_eff = 0.0
+    if hertz or rolling:
+        r_eff = ri * rj / (ri + rj)
+    i_eff = 0.0
+    if rolling:
+        ii = buf[B_II * BLOCK + c]
+        ij = buf[B_IJ * BLOCK + c]
+        i_eff = ii * ij / (ii + ij)
+    kn = kn1
+    kt = kt1
+    dn = dn1
+    dt = dt1
+    mu = mu1
+    mu_r = mur1
+    if not single:
+        kn = buf[(B_ROW + K_N) * BLOCK + c]
+        kt = buf[(B_ROW + K_T) * BLOCK + c]
+        dn = buf[(B_ROW + D_N) * BLOCK + c]
+        dt = buf[(B_ROW + D_T) * BLOCK + c]
+        mu = buf[(B_ROW + MU) * BLOCK + c]
+        mu_r = buf[(B_ROW + MU_R) * BLOCK + c]
+    _law(
+        buf,
+        c,
+        d0 * inv,
+        d1 * inv,
+        d2 * inv,
+        (ri + rj) - dist,
+        math.sqrt(mi * mj / (mi + mj)),  # sqrt of the reduced mass
+        r_eff,
+        i_eff,
+        kn,
+        kt,
+        dn,
+        dt,
+        mu,
+        mu_r,
+        hertz,
+        rolling,
+        spring_dt,
+        step_dt,
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt):
-    """The law for the first `count` contacts of a block (module docstring): normal force,
+    """The law for the first `count` pair contacts of a block (module docstring): normal force,
     tangential spring with its Coulomb cap, rolling torque, written into the output rows; the
     spring rows are replaced by the new springs. With one material the table row is table[0, 0].
     One loop per setting of `rolling`, so that a loop computes no unused torque."""
@@ -327,10 +376,49 @@ def contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt):
     kn1, kt1, dn1, dt1, mu1, mur1 = row[K_N], row[K_T], row[D_N], row[D_T], row[MU], row[MU_R]
     if rolling:
         for c in range(count):
-            _contact(buf, c, hertz, True, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
+            _pair_contact(buf, c, hertz, True, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
     else:
         for c in range(count):
-            _contact(buf, c, hertz, False, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
+            _pair_contact(buf, c, hertz, False, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt)
+
+
+@njit(cache=True, inline="always")
+def _wall_contact(buf, c, hertz, rolling, spring_dt, step_dt):
+    """The law of wall contact c of a block: the wall is a body of infinite mass, radius and
+    inertia (m* = m_i, R* = r_i, I* = I_i), its normal and the overlap in the rows of d and
+    |d|^2, its table row always in the block (kernels/walls.py)."""
+    _law(
+        buf,
+        c,
+        buf[B_N0 * BLOCK + c],
+        buf[B_N1 * BLOCK + c],
+        buf[B_N2 * BLOCK + c],
+        buf[B_DELTA * BLOCK + c],
+        math.sqrt(buf[B_MI * BLOCK + c]),
+        buf[B_RI * BLOCK + c],
+        buf[B_II * BLOCK + c],
+        buf[(B_ROW + K_N) * BLOCK + c],
+        buf[(B_ROW + K_T) * BLOCK + c],
+        buf[(B_ROW + D_N) * BLOCK + c],
+        buf[(B_ROW + D_T) * BLOCK + c],
+        buf[(B_ROW + MU) * BLOCK + c],
+        buf[(B_ROW + MU_R) * BLOCK + c],
+        hertz,
+        rolling,
+        spring_dt,
+        step_dt,
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def wall_law(buf, count, hertz, rolling, spring_dt, step_dt):
+    """contact_law for a block of wall contacts (kernels/walls.py fills it)."""
+    if rolling:
+        for c in range(count):
+            _wall_contact(buf, c, hertz, True, spring_dt, step_dt)
+    else:
+        for c in range(count):
+            _wall_contact(buf, c, hertz, False, spring_dt, step_dt)
 
 
 @njit(cache=True, inline="always")
@@ -360,40 +448,40 @@ def gather(
     ids[np.uint64(ID_I * BLOCK) + c] = i
     ids[np.uint64(ID_J * BLOCK) + c] = j
     ids[np.uint64(ID_K * BLOCK) + c] = k
-    _put(buf, B_D0, c, d0)
-    _put(buf, B_D1, c, d1)
-    _put(buf, B_D2, c, d2)
-    _put(buf, B_DIST2, c, dist2)
-    _put(buf, B_A0, c, vel[i, 0] - vel[j, 0])
-    _put(buf, B_A1, c, vel[i, 1] - vel[j, 1])
-    _put(buf, B_A2, c, vel[i, 2] - vel[j, 2])
-    _put(buf, B_S0, c, ri * angvel[i, 0] + rj * angvel[j, 0])
-    _put(buf, B_S1, c, ri * angvel[i, 1] + rj * angvel[j, 1])
-    _put(buf, B_S2, c, ri * angvel[i, 2] + rj * angvel[j, 2])
-    _put(buf, B_P0, c, vel_pred[i, 0] - vel_pred[j, 0])
-    _put(buf, B_P1, c, vel_pred[i, 1] - vel_pred[j, 1])
-    _put(buf, B_P2, c, vel_pred[i, 2] - vel_pred[j, 2])
-    _put(buf, B_Q0, c, ri * angvel_pred[i, 0] + rj * angvel_pred[j, 0])
-    _put(buf, B_Q1, c, ri * angvel_pred[i, 1] + rj * angvel_pred[j, 1])
-    _put(buf, B_Q2, c, ri * angvel_pred[i, 2] + rj * angvel_pred[j, 2])
-    _put(buf, B_MI, c, mass[i])
-    _put(buf, B_MJ, c, mass[j])
-    _put(buf, B_RI, c, ri)
-    _put(buf, B_RJ, c, rj)
-    _put(buf, B_H0, c, hist[i, k, 0])
-    _put(buf, B_H1, c, hist[i, k, 1])
-    _put(buf, B_H2, c, hist[i, k, 2])
+    to_block(buf, B_D0, c, d0)
+    to_block(buf, B_D1, c, d1)
+    to_block(buf, B_D2, c, d2)
+    to_block(buf, B_DIST2, c, dist2)
+    to_block(buf, B_A0, c, vel[i, 0] - vel[j, 0])
+    to_block(buf, B_A1, c, vel[i, 1] - vel[j, 1])
+    to_block(buf, B_A2, c, vel[i, 2] - vel[j, 2])
+    to_block(buf, B_S0, c, ri * angvel[i, 0] + rj * angvel[j, 0])
+    to_block(buf, B_S1, c, ri * angvel[i, 1] + rj * angvel[j, 1])
+    to_block(buf, B_S2, c, ri * angvel[i, 2] + rj * angvel[j, 2])
+    to_block(buf, B_P0, c, vel_pred[i, 0] - vel_pred[j, 0])
+    to_block(buf, B_P1, c, vel_pred[i, 1] - vel_pred[j, 1])
+    to_block(buf, B_P2, c, vel_pred[i, 2] - vel_pred[j, 2])
+    to_block(buf, B_Q0, c, ri * angvel_pred[i, 0] + rj * angvel_pred[j, 0])
+    to_block(buf, B_Q1, c, ri * angvel_pred[i, 1] + rj * angvel_pred[j, 1])
+    to_block(buf, B_Q2, c, ri * angvel_pred[i, 2] + rj * angvel_pred[j, 2])
+    to_block(buf, B_MI, c, mass[i])
+    to_block(buf, B_MJ, c, mass[j])
+    to_block(buf, B_RI, c, ri)
+    to_block(buf, B_RJ, c, rj)
+    to_block(buf, B_H0, c, hist[i, k, 0])
+    to_block(buf, B_H1, c, hist[i, k, 1])
+    to_block(buf, B_H2, c, hist[i, k, 2])
     if rolling:
-        _put(buf, B_W0, c, angvel[i, 0] - angvel[j, 0])
-        _put(buf, B_W1, c, angvel[i, 1] - angvel[j, 1])
-        _put(buf, B_W2, c, angvel[i, 2] - angvel[j, 2])
-        _put(buf, B_II, c, inertia[i])
-        _put(buf, B_IJ, c, inertia[j])
+        to_block(buf, B_W0, c, angvel[i, 0] - angvel[j, 0])
+        to_block(buf, B_W1, c, angvel[i, 1] - angvel[j, 1])
+        to_block(buf, B_W2, c, angvel[i, 2] - angvel[j, 2])
+        to_block(buf, B_II, c, inertia[i])
+        to_block(buf, B_IJ, c, inertia[j])
     if not single:
         a = np.uint64(material[i])
         b = np.uint64(material[j])
         for col in range(COLUMNS):
-            _put(buf, B_ROW + col, c, table[a, b, col])
+            to_block(buf, B_ROW + col, c, table[a, b, col])
 
 
 @njit(cache=True, inline="always")
@@ -420,20 +508,20 @@ def _flush_to_slots(buf, ids, count, hertz, rolling, single, table, spring_dt, s
         c = np.uint64(b)
         i = ids[np.uint64(ID_I * BLOCK) + c]
         k = ids[np.uint64(ID_K * BLOCK) + c]
-        hist[i, k, 0] = _get(buf, B_H0, c)
-        hist[i, k, 1] = _get(buf, B_H1, c)
-        hist[i, k, 2] = _get(buf, B_H2, c)
+        hist[i, k, 0] = from_block(buf, B_H0, c)
+        hist[i, k, 1] = from_block(buf, B_H1, c)
+        hist[i, k, 2] = from_block(buf, B_H2, c)
         s = i * cap + k
-        slots[s, 0] = _get(buf, B_E0, c)
-        slots[s, 1] = _get(buf, B_E1, c)
-        slots[s, 2] = _get(buf, B_E2, c)
-        slots[s, 3] = _get(buf, B_C0, c)
-        slots[s, 4] = _get(buf, B_C1, c)
-        slots[s, 5] = _get(buf, B_C2, c)
+        slots[s, 0] = from_block(buf, B_E0, c)
+        slots[s, 1] = from_block(buf, B_E1, c)
+        slots[s, 2] = from_block(buf, B_E2, c)
+        slots[s, 3] = from_block(buf, B_C0, c)
+        slots[s, 4] = from_block(buf, B_C1, c)
+        slots[s, 5] = from_block(buf, B_C2, c)
         if rolling:
-            slots[s, 6] = _get(buf, B_M0, c)
-            slots[s, 7] = _get(buf, B_M1, c)
-            slots[s, 8] = _get(buf, B_M2, c)
+            slots[s, 6] = from_block(buf, B_M0, c)
+            slots[s, 7] = from_block(buf, B_M1, c)
+            slots[s, 8] = from_block(buf, B_M2, c)
 
 
 @njit(cache=True, parallel=True)
@@ -533,15 +621,15 @@ def _flush_to_forces(
         while b < end and ids[np.uint64(ID_I * BLOCK) + b] == i:
             j = ids[np.uint64(ID_J * BLOCK) + b]
             k = ids[np.uint64(ID_K * BLOCK) + b]
-            hist[i, k, 0] = _get(buf, B_H0, b)
-            hist[i, k, 1] = _get(buf, B_H1, b)
-            hist[i, k, 2] = _get(buf, B_H2, b)
-            e0 = _get(buf, B_E0, b)
-            e1 = _get(buf, B_E1, b)
-            e2 = _get(buf, B_E2, b)
-            c0 = _get(buf, B_C0, b)
-            c1 = _get(buf, B_C1, b)
-            c2 = _get(buf, B_C2, b)
+            hist[i, k, 0] = from_block(buf, B_H0, b)
+            hist[i, k, 1] = from_block(buf, B_H1, b)
+            hist[i, k, 2] = from_block(buf, B_H2, b)
+            e0 = from_block(buf, B_E0, b)
+            e1 = from_block(buf, B_E1, b)
+            e2 = from_block(buf, B_E2, b)
+            c0 = from_block(buf, B_C0, b)
+            c1 = from_block(buf, B_C1, b)
+            c2 = from_block(buf, B_C2, b)
             f0 += e0
             f1 += e1
             f2 += e2
@@ -556,9 +644,9 @@ def _flush_to_forces(
             torque[j, 1] -= rj * c1
             torque[j, 2] -= rj * c2
             if rolling:
-                m0 = _get(buf, B_M0, b)
-                m1 = _get(buf, B_M1, b)
-                m2 = _get(buf, B_M2, b)
+                m0 = from_block(buf, B_M0, b)
+                m1 = from_block(buf, B_M1, b)
+                m2 = from_block(buf, B_M2, b)
                 t0 += m0
                 t1 += m1
                 t2 += m2

@@ -33,7 +33,48 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
+from .contact import (
+    B_A0,
+    B_A1,
+    B_A2,
+    B_C0,
+    B_C1,
+    B_C2,
+    B_DELTA,
+    B_E0,
+    B_E1,
+    B_E2,
+    B_H0,
+    B_H1,
+    B_H2,
+    B_II,
+    B_M0,
+    B_M1,
+    B_M2,
+    B_MI,
+    B_N0,
+    B_N1,
+    B_N2,
+    B_P0,
+    B_P1,
+    B_P2,
+    B_Q0,
+    B_Q1,
+    B_Q2,
+    B_RI,
+    B_ROW,
+    B_S0,
+    B_S1,
+    B_S2,
+    B_W0,
+    B_W1,
+    B_W2,
+    BLOCK,
+    COLUMNS,
+    from_block,
+    to_block,
+    wall_law,
+)
 
 FIXED = 0
 VELOCITY = 1
@@ -50,6 +91,55 @@ C_SHEAR_AXIS = 7  # axis index of the tangential drive
 C_SHEAR = 8  # tangential velocity [m/s] or target shear traction [Pa]
 C_START = 9  # time the stage started [s]
 NC = 10
+
+
+@njit(cache=True)
+def _flush_walls(
+    buf, ids, count, hertz, rolling, spring_dt, step_dt, radius, wall_hist, force, torque, record, pforce
+):
+    """The law for a block of wall contacts, then each particle's contacts summed in wall order
+    and added to its force and torque (a particle's contacts are never split between blocks)."""
+    wall_law(buf, count, hertz, rolling, spring_dt, step_dt)
+    b = np.uint64(0)
+    end = np.uint64(count)
+    while b < end:
+        i = ids[b]
+        ri = radius[i]
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        while b < end and ids[b] == i:
+            w = ids[np.uint64(BLOCK) + b]
+            wall_hist[i, w, 0] = from_block(buf, B_H0, b)
+            wall_hist[i, w, 1] = from_block(buf, B_H1, b)
+            wall_hist[i, w, 2] = from_block(buf, B_H2, b)
+            e0 = from_block(buf, B_E0, b)
+            e1 = from_block(buf, B_E1, b)
+            e2 = from_block(buf, B_E2, b)
+            f0 += e0
+            f1 += e1
+            f2 += e2
+            if record[w]:
+                pforce[i, w, 0] = e0
+                pforce[i, w, 1] = e1
+                pforce[i, w, 2] = e2
+            t0 -= ri * from_block(buf, B_C0, b)
+            t1 -= ri * from_block(buf, B_C1, b)
+            t2 -= ri * from_block(buf, B_C2, b)
+            if rolling:
+                t0 += from_block(buf, B_M0, b)
+                t1 += from_block(buf, B_M1, b)
+                t2 += from_block(buf, B_M2, b)
+            b += np.uint64(1)
+        force[i, 0] += f0
+        force[i, 1] += f1
+        force[i, 2] += f2
+        torque[i, 0] += t0
+        torque[i, 1] += t1
+        torque[i, 2] += t2
 
 
 @njit(cache=True, parallel=True)
@@ -81,132 +171,116 @@ def wall_forces(
     pforce,
     springs,
     near,
+    pieces,
+    blocks,
+    block_ids,
 ):
     """Add the forces and torques of W plane walls on the particles listed in `near` (every
     particle that can touch a wall, see near_walls) to force/torque, and store those of the walls
     marked in record in pforce. springs (N,) uint64: bit w set where wall_hist[i, w] may be
     non-zero (kept up to date here), so a particle away from the walls reads one word instead of
-    its W springs."""
+    its W springs. The touching pairs go through blocks like the pair contacts (kernels/
+    contact.py): pieces (T+1,) int64 cut `near` into one piece per thread, blocks (T,
+    FIELDS*BLOCK) and block_ids (T, 2*BLOCK) uint64 (particle, wall) are their scratch."""
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
     recording = False
     for w in range(nw):
         recording = recording or record[w] != 0
-    for m in prange(near.shape[0]):
-        i = np.uint64(near[m])
-        if recording:
-            for w in range(nw):
-                if record[w]:
-                    pforce[i, w, 0] = 0.0
-                    pforce[i, w, 1] = 0.0
-                    pforce[i, w, 2] = 0.0
-        if inv_mass[i] == 0.0:
-            continue
-        ri = radius[i]
-        ci = np.uint64(0 if single else material[i])
-        held = springs[i]
-        f0 = 0.0
-        f1 = 0.0
-        f2 = 0.0
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        for wall in range(nw):
-            w = np.uint64(wall)  # unsigned indices: no negative-index wraparound code
-            a = np.uint64(wall_axis[w])
-            gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
-            bit = np.uint64(1) << w
-            if gap >= ri:
-                if held & bit:  # the contact has ended: its spring is gone
-                    wall_hist[i, w, 0] = 0.0
-                    wall_hist[i, w, 1] = 0.0
-                    wall_hist[i, w, 2] = 0.0
-                    held &= ~bit
+    for c in prange(pieces.shape[0] - 1):
+        buf = blocks[c]
+        ids = block_ids[c]
+        filled = 0
+        for m in range(pieces[c], pieces[c + 1]):
+            i = np.uint64(near[m])
+            if recording:
+                for w in range(nw):
+                    if record[w]:
+                        pforce[i, w, 0] = 0.0
+                        pforce[i, w, 1] = 0.0
+                        pforce[i, w, 2] = 0.0
+            if inv_mass[i] == 0.0:
                 continue
-            held |= bit
-            root_m = math.sqrt(mass[i])
-            row = wall_table[w, ci]
-            n0 = 0.0
-            n1 = 0.0
-            n2 = 0.0
-            if a == 0:
-                n0 = wall_sign[w]
-            elif a == 1:
-                n1 = wall_sign[w]
-            else:
-                n2 = wall_sign[w]
-            delta = ri - gap
-            s0 = ri * angvel[i, 0]
-            s1 = ri * angvel[i, 1]
-            s2 = ri * angvel[i, 2]
-            v0 = (vel[i, 0] - wall_vel[w, 0]) - (s1 * n2 - s2 * n1)
-            v1 = (vel[i, 1] - wall_vel[w, 1]) - (s2 * n0 - s0 * n2)
-            v2 = (vel[i, 2] - wall_vel[w, 2]) - (s0 * n1 - s1 * n0)
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            q0 = ri * angvel_pred[i, 0]
-            q1 = ri * angvel_pred[i, 1]
-            q2 = ri * angvel_pred[i, 2]
-            u0 = (vel_pred[i, 0] - wall_vel_pred[w, 0]) - (q1 * n2 - q2 * n1)
-            u1 = (vel_pred[i, 1] - wall_vel_pred[w, 1]) - (q2 * n0 - q0 * n2)
-            u2 = (vel_pred[i, 2] - wall_vel_pred[w, 2]) - (q0 * n1 - q1 * n0)
-            un = u0 * n0 + u1 * n1 + u2 * n2
-            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, un)
-            vt0 = v0 - vn * n0
-            vt1 = v1 - vn * n1
-            vt2 = v2 - vn * n2
-            g0, g1, g2 = tangential_force(
-                wall_hist,
-                i,
-                w,
-                vt0,
-                vt1,
-                vt2,
-                n0,
-                n1,
-                n2,
-                kt,
-                ct,
-                row[MU],
-                fn,
-                spring_dt,
-                u0 - un * n0,
-                u1 - un * n1,
-                u2 - un * n2,
-            )
-            f0 += fn * n0 + g0
-            f1 += fn * n1 + g1
-            f2 += fn * n2 + g2
-            if record[w]:
-                pforce[i, w, 0] = fn * n0 + g0
-                pforce[i, w, 1] = fn * n1 + g1
-                pforce[i, w, 2] = fn * n2 + g2
-            t0 -= ri * (n1 * g2 - n2 * g1)
-            t1 -= ri * (n2 * g0 - n0 * g2)
-            t2 -= ri * (n0 * g1 - n1 * g0)
-            if rolling and row[MU_R] > 0.0:
-                m0, m1, m2 = rolling_torque(
-                    angvel[i, 0],
-                    angvel[i, 1],
-                    angvel[i, 2],
-                    n0,
-                    n1,
-                    n2,
-                    row[MU_R],
-                    ri,
-                    fn,
-                    inertia[i],
-                    step_dt,
-                )
-                t0 += m0
-                t1 += m1
-                t2 += m2
-        springs[i] = held
-        force[i, 0] += f0
-        force[i, 1] += f1
-        force[i, 2] += f2
-        torque[i, 0] += t0
-        torque[i, 1] += t1
-        torque[i, 2] += t2
+            if filled + nw > BLOCK:  # room for all of this particle's walls
+                _flush_walls(
+                    buf, ids, filled, hertz, rolling, spring_dt, step_dt, radius, wall_hist, force, torque,
+                    record, pforce,
+                )  # fmt: skip
+                filled = 0
+            ri = radius[i]
+            ci = np.uint64(0 if single else material[i])
+            held = springs[i]
+            for wall in range(nw):
+                w = np.uint64(wall)  # unsigned indices: no negative-index wraparound code
+                a = np.uint64(wall_axis[w])
+                gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
+                bit = np.uint64(1) << w
+                if gap >= ri:
+                    if held & bit:  # the contact has ended: its spring is gone
+                        wall_hist[i, w, 0] = 0.0
+                        wall_hist[i, w, 1] = 0.0
+                        wall_hist[i, w, 2] = 0.0
+                        held &= ~bit
+                    continue
+                held |= bit
+                b = np.uint64(filled)
+                ids[b] = i
+                ids[np.uint64(BLOCK) + b] = w
+                n0 = 0.0
+                n1 = 0.0
+                n2 = 0.0
+                if a == 0:
+                    n0 = wall_sign[w]
+                elif a == 1:
+                    n1 = wall_sign[w]
+                else:
+                    n2 = wall_sign[w]
+                to_block(buf, B_N0, b, n0)
+                to_block(buf, B_N1, b, n1)
+                to_block(buf, B_N2, b, n2)
+                to_block(buf, B_DELTA, b, ri - gap)
+                # the wall as the partner j: its velocity, no spin
+                to_block(buf, B_A0, b, vel[i, 0] - wall_vel[w, 0])
+                to_block(buf, B_A1, b, vel[i, 1] - wall_vel[w, 1])
+                to_block(buf, B_A2, b, vel[i, 2] - wall_vel[w, 2])
+                to_block(buf, B_S0, b, ri * angvel[i, 0])
+                to_block(buf, B_S1, b, ri * angvel[i, 1])
+                to_block(buf, B_S2, b, ri * angvel[i, 2])
+                to_block(buf, B_P0, b, vel_pred[i, 0] - wall_vel_pred[w, 0])
+                to_block(buf, B_P1, b, vel_pred[i, 1] - wall_vel_pred[w, 1])
+                to_block(buf, B_P2, b, vel_pred[i, 2] - wall_vel_pred[w, 2])
+                to_block(buf, B_Q0, b, ri * angvel_pred[i, 0])
+                to_block(buf, B_Q1, b, ri * angvel_pred[i, 1])
+                to_block(buf, B_Q2, b, ri * angvel_pred[i, 2])
+                to_block(buf, B_MI, b, mass[i])
+                to_block(buf, B_RI, b, ri)
+                to_block(buf, B_H0, b, wall_hist[i, w, 0])
+                to_block(buf, B_H1, b, wall_hist[i, w, 1])
+                to_block(buf, B_H2, b, wall_hist[i, w, 2])
+                if rolling:
+                    to_block(buf, B_W0, b, angvel[i, 0])
+                    to_block(buf, B_W1, b, angvel[i, 1])
+                    to_block(buf, B_W2, b, angvel[i, 2])
+                    to_block(buf, B_II, b, inertia[i])
+                for col in range(COLUMNS):
+                    to_block(buf, B_ROW + col, b, wall_table[w, ci, col])
+                filled += 1
+            springs[i] = held
+        _flush_walls(
+            buf,
+            ids,
+            filled,
+            hertz,
+            rolling,
+            spring_dt,
+            step_dt,
+            radius,
+            wall_hist,
+            force,
+            torque,
+            record,
+            pforce,
+        )
 
 
 @njit(cache=True)

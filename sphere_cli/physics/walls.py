@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from ..kernels.contact import K_N
+from ..kernels.contact import BLOCK, FIELDS, K_N
 from ..kernels.energy import wall_elastic_energy
 from ..kernels.walls import (
     C_AMPLITUDE,
@@ -245,10 +246,15 @@ class PlaneWallForces:
         self._near_count = 0
         self._near_build = -1
         self._near_coord = None
+        # per thread, a block of wall contacts whose law is evaluated in one vectorised loop
+        # (kernels/contact.py, kernels/walls.py)
+        self._blocks = np.zeros((0, FIELDS * BLOCK))
+        self._block_ids = np.zeros((0, 2 * BLOCK), dtype=np.uint64)
+        self._pieces = np.zeros(2, dtype=np.int64)  # the near list cut into one piece per thread
 
     def scratch(self) -> list[np.ndarray]:
-        """The per-particle arrays this module keeps besides the state (memory accounting)."""
-        return [a for a in (self._near, self._springs) if a is not None]
+        """The arrays this module keeps besides the state (memory accounting)."""
+        return [a for a in (self._near, self._springs, self._blocks, self._block_ids) if a is not None]
 
     def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
         """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
@@ -274,21 +280,42 @@ class PlaneWallForces:
             )
             self._near_build = nl.builds
             self._near_coord = w.coord.copy()
+            self._pieces = self._cut(self._near[: self._near_count], w.hist)
             if w.pforce.shape[0]:
                 w.pforce[...] = 0.0  # only listed particles are written from now on
+        elif self._pieces.size != numba.get_num_threads() + 1:
+            self._pieces = self._cut(self._near[: self._near_count], w.hist)
         return self._near[: self._near_count]
+
+    def _threads_blocks(self) -> None:
+        threads = numba.get_num_threads()
+        if self._blocks.shape[0] != threads:
+            self._blocks = np.zeros((threads, FIELDS * BLOCK))
+            self._block_ids = np.zeros((threads, 2 * BLOCK), dtype=np.uint64)
+
+    @staticmethod
+    def _cut(near: np.ndarray, hist: np.ndarray) -> np.ndarray:
+        """Cuts of `near` into one piece per thread with about as much work: a particle's
+        touching walls (springs set) cost about four times its tests of the others."""
+        threads = numba.get_num_threads()
+        work = np.cumsum(1 + 4 * np.count_nonzero(np.any(hist[near] != 0.0, axis=2), axis=1))
+        total = work[-1] if work.size else 0
+        cuts = np.searchsorted(work, np.arange(1, threads) * (total / threads))
+        return np.concatenate(([0], cuts, [near.size])).astype(np.int64)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         hist = state.walls.hist
         springs = self._spring_mask(hist)
         near = self._near_walls(state, springs)
-        self._forces(state, spring_dt, hist, state.particles.force, state.particles.torque, springs, near)
+        p = state.particles
+        self._forces(state, spring_dt, hist, p.force, p.torque, springs, near, self._pieces)
 
     def _forces(
-        self, state: State, spring_dt, hist, force, torque, springs, near, record=None, pforce=None
+        self, state: State, spring_dt, hist, force, torque, springs, near, pieces, record=None, pforce=None
     ) -> None:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
+        self._threads_blocks()
         wall_forces(
             p.pos,
             p.vel,
@@ -317,6 +344,9 @@ class PlaneWallForces:
             w.pforce if pforce is None else pforce,
             springs,
             near,
+            pieces,
+            self._blocks,
+            self._block_ids,
         )
 
     def measure(self, state: State) -> None:
@@ -332,7 +362,8 @@ class PlaneWallForces:
         hist = w.hist.copy()
         springs = np.full(p.count, ~np.uint64(0), dtype=np.uint64)  # check every spring
         everyone = np.arange(p.count, dtype=np.int64)
-        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, everyone, every, pforce)
+        pieces = self._cut(everyone, hist)
+        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, everyone, pieces, every, pforce)
         wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
 
     def observables(self, state: State) -> dict:

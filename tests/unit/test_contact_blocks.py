@@ -1,9 +1,10 @@
-"""The pair kernels evaluate the contact law in blocks of touching pairs (kernels/contact.py):
+"""The pair and wall kernels evaluate the contact law in blocks of touching pairs (kernels/contact.py):
 a block fills up in the middle of a row, a row can hold more contacts than a block, rows wait
 for their pairs across chunks. None of this may change a result: the forces, torques and
 springs must be bitwise those of a plain contact-by-contact sweep (written here in Python with
 the law's own functions, which Numba compiles without reordering any floating-point
-operation), for any number of chunks.
+operation), for any number of chunks. The same for the walls (kernels/walls.py), whose blocks
+hold whole particles, so a particle's wall contacts are summed in one go.
 
 The scene: a large sphere (index 0, so its half row lists every neighbour) wrapped in a shell
 of 200 small spheres that press into it, among 300 touching pairs of small spheres in a periodic
@@ -31,6 +32,18 @@ SMALL = 2.5e-4
 SHELL = 200
 LOOSE = 600
 BOX = 0.012
+HERTZ_MATERIALS = """
+        [[materials]]
+        name = "a"
+        density = 2500.0
+        youngs_modulus = 1.0e6
+        poisson_ratio = 0.3
+        [[materials]]
+        name = "b"
+        density = 7800.0
+        youngs_modulus = 5.0e6
+        poisson_ratio = 0.25
+"""
 
 
 def _particle_file(path) -> None:
@@ -83,18 +96,7 @@ def _case(path, hertz: bool) -> str:
         """
     )
     materials = (
-        """
-        [[materials]]
-        name = "a"
-        density = 2500.0
-        youngs_modulus = 1.0e6
-        poisson_ratio = 0.3
-        [[materials]]
-        name = "b"
-        density = 7800.0
-        youngs_modulus = 5.0e6
-        poisson_ratio = 0.25
-        """
+        HERTZ_MATERIALS
         if hertz
         else """
         [[materials]]
@@ -257,3 +259,120 @@ def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
         got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt)
         for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
             assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
+
+
+def _walled_case(folder) -> str:
+    """A 6 mm box with walls on every face, each face covered by a 6 x 6 layer of spheres that
+    press 3 % of their radius into it (edge and corner spheres touch two or three walls), moving
+    and spinning at random; Hertz-Mindlin, rolling resistance, two materials."""
+    rng = np.random.default_rng(11)
+    r = 4.0e-4
+    side = 0.006
+    grid = np.linspace(1.5 * r, side - 1.5 * r, 6)
+    u, v = (a.ravel() for a in np.meshgrid(grid, grid, indexing="ij"))
+    pos = []
+    for axis in range(3):
+        for coord in (0.97 * r, side - 0.97 * r):
+            layer = np.empty((u.size, 3))
+            layer[:, axis] = coord
+            layer[:, (axis + 1) % 3] = u
+            layer[:, (axis + 2) % 3] = v
+            pos.append(layer)
+    pos = np.concatenate(pos)
+    keep = np.ones(len(pos), dtype=bool)  # drop the duplicates of neighbouring faces at the edges
+    for k in range(len(pos)):
+        if keep[k] and np.any(np.linalg.norm(pos[k + 1 :] - pos[k], axis=1)[keep[k + 1 :]] < 2.1 * r):
+            keep[k] = False
+    pos = pos[keep]
+    vel = rng.normal(0.0, 0.05, pos.shape)
+    rows = ["x,y,z,vx,vy,vz"] + [
+        ",".join(repr(float(x)) for x in (*a, *b)) for a, b in zip(pos, vel, strict=True)
+    ]
+    (folder / "walled.csv").write_text("\n".join(rows) + "\n")
+    walls = "".join(f'[[walls]]\nface = "{f}"\n' for f in ("x-", "x+", "y-", "y+", "z-", "z+"))
+    return (
+        textwrap.dedent(
+            f"""
+        [simulation]
+        duration = 1.0
+        dt = 2.0e-6
+        [domain]
+        upper = [{side}, {side}, {side}]
+        gravity = [0.0, 0.0, -9.81]
+        [particles]
+        material = {{ a = 0.5, b = 0.5 }}
+        radius = {{ distribution = "fixed", value = {r} }}
+        placement = {{ method = "file", path = "{folder / "walled.csv"}" }}
+        [contact]
+        model = "hertz-mindlin"
+        restitution = 0.4
+        friction = 0.15
+        rolling_friction = 0.1
+        """
+        )
+        + textwrap.dedent(HERTZ_MATERIALS)
+        + walls
+    )
+
+
+def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
+    scene = build_scene(parse_case(_walled_case(tmp_path)))
+    advance(scene, 20)
+    state, walls = scene.state, scene.walls
+    p, w = state.particles, state.walls
+    hertz, rolling, dt = scene.contact.hertz, scene.contact.rolling, state.clock.dt
+    expected_f = np.zeros_like(p.force)
+    expected_t = np.zeros_like(p.torque)
+    expected_h = w.hist.copy()
+    contacts = 0
+    for i in range(p.count):
+        ri = p.radius[i]
+        f = [0.0, 0.0, 0.0]
+        t = [0.0, 0.0, 0.0]
+        for k in range(len(w.faces)):
+            a = w.axis[k]
+            gap = w.sign[k] * (p.pos[i, a] - w.coord[k])
+            if gap >= ri:
+                expected_h[i, k] = 0.0
+                continue
+            contacts += 1
+            kn, kt, dn, dtt, mu, mu_r = w.table[k, p.material[i]]
+            n = [w.sign[k] if a == b else 0.0 for b in range(3)]
+
+            def slip(v, om, vw, n=n, i=i, ri=ri):
+                s = [ri * om[i, b] for b in range(3)]
+                return [
+                    (v[i, 0] - vw[0]) - (s[1] * n[2] - s[2] * n[1]),
+                    (v[i, 1] - vw[1]) - (s[2] * n[0] - s[0] * n[2]),
+                    (v[i, 2] - vw[2]) - (s[0] * n[1] - s[1] * n[0]),
+                ]
+
+            v = slip(p.vel, p.angvel, w.vel[k])
+            vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+            u = slip(p.vel_pred, p.angvel_pred, w.vel_pred[k])
+            un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dtt, hertz, ri - gap, ri, math.sqrt(p.mass[i]), un)
+            g0, g1, g2, x0, x1, x2 = law.tangential_spring(
+                *expected_h[i, k], *(v[b] - vn * n[b] for b in range(3)), *n, kt_now, ct, mu, fn, dt,
+                *(u[b] - un * n[b] for b in range(3)),
+            )  # fmt: skip
+            expected_h[i, k] = (x0, x1, x2)
+            g = (g0, g1, g2)
+            c = (n[1] * g2 - n[2] * g1, n[2] * g0 - n[0] * g2, n[0] * g1 - n[1] * g0)
+            m = (0.0, 0.0, 0.0)
+            if rolling and mu_r > 0.0:
+                m = law.rolling_torque(*p.angvel[i], *n, mu_r, ri, fn, p.inertia[i], dt)
+            for b in range(3):
+                f[b] += fn * n[b] + g[b]
+                t[b] -= ri * c[b]
+                if rolling:
+                    t[b] += m[b]
+        expected_f[i] = f
+        expected_t[i] = t
+    assert contacts > 2 * law.BLOCK, "the walls' contacts must fill several blocks"
+    p.force[...] = 0.0
+    p.torque[...] = 0.0
+    walls.forces(state)
+    assert np.array_equal(p.force, expected_f)
+    assert np.array_equal(p.torque, expected_t)
+    assert np.array_equal(w.hist, expected_h)
