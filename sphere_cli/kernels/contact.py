@@ -422,12 +422,19 @@ def wall_law(buf, count, hertz, rolling, spring_dt, step_dt):
 
 
 @njit(cache=True, inline="always")
-def separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic):
+def box_axes(length, periodic):
+    """(L_x, L_y, L_z, periodic_x, periodic_y, periodic_z) as scalars, read once per kernel:
+    the sweeps store into arrays, so the compiler would reload them from memory at every pair."""
+    return length[0], length[1], length[2], periodic[0] != 0, periodic[1] != 0, periodic[2] != 0
+
+
+@njit(cache=True, inline="always")
+def separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box):
     """(touching, d = x_i - x_j (3 values), |d|^2) of the pair (i, j = nbr[i, k]); clears the
-    spring of a pair that does not touch."""
-    d0 = minimum_image(x0 - pos[j, 0], length[0], periodic[0])
-    d1 = minimum_image(x1 - pos[j, 1], length[1], periodic[1])
-    d2 = minimum_image(x2 - pos[j, 2], length[2], periodic[2])
+    spring of a pair that does not touch. box: box_axes(length, periodic)."""
+    d0 = minimum_image(x0 - pos[j, 0], box[0], box[3])
+    d1 = minimum_image(x1 - pos[j, 1], box[1], box[4])
+    d2 = minimum_image(x2 - pos[j, 2], box[2], box[5])
     dist2 = d0 * d0 + d1 * d1 + d2 * d2
     reach = ri + rj
     if dist2 >= reach * reach:
@@ -559,6 +566,7 @@ def cross_chunk_pairs(
     cap = nbr.shape[1]
     ucap = np.uint64(cap)
     single = table.shape[0] == 1
+    box = box_axes(length, periodic)
     for c in prange(cross_bounds.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
@@ -575,9 +583,7 @@ def cross_chunk_pairs(
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
                 rj = radius[j]
-                touching, d0, d1, d2, dist2 = separation(
-                    pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic
-                )
+                touching, d0, d1, d2, dist2 = separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box)
                 if not touching:
                     s = i * ucap + k
                     for col in range(slots.shape[1]):
@@ -718,6 +724,7 @@ def chunk_pair_forces(
     cap = nbr.shape[1]
     rcap = rev.shape[1]
     single = table.shape[0] == 1
+    box = box_axes(length, periodic)
     for c in prange(bounds.shape[0] - 1):
         begin = bounds[c]
         end = bounds[c + 1]
@@ -772,9 +779,7 @@ def chunk_pair_forces(
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
                 rj = radius[j]
-                touching, d0, d1, d2, dist2 = separation(
-                    pos, hist, i, k, j, x0, x1, x2, ri, rj, length, periodic
-                )
+                touching, d0, d1, d2, dist2 = separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box)
                 if not touching:
                     continue
                 if filled == BLOCK:
