@@ -124,7 +124,8 @@ def bytes_per_particle(scene) -> float:
     arrays += [nl.nbr, nl.nbr_count, nl.hist, nl.ref_pos, nl.rev, nl.rev_count, contact.slots]
     arrays += [contact.blocks, contact.block_ids, contact.block_rows]
     search = scene.neighbors
-    arrays += [search.spare_nbr, search.spare_count, search.spare_hist, search.cell_of, search.order]
+    arrays += [nl.start, search.spare_nbr, search.spare_count, search.spare_start, search.spare_hist]
+    arrays += [search.cell_of, search.order]
     if state.walls is not None:
         arrays.append(state.walls.hist)
         arrays += scene.walls.scratch()

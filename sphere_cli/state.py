@@ -81,10 +81,11 @@ class NeighborList:
     skin: float  # [m]
     nbr: np.ndarray  # (N,C) int32, row i: the j > i within reach, ascending
     nbr_count: np.ndarray  # (N,) int32
-    hist: np.ndarray  # (N,C,3) [m] spring of pair (i, nbr[i, k]) seen from i
+    start: np.ndarray  # (N+1,) int64 pairs listed before row i (derived from nbr_count)
+    hist: np.ndarray  # (>= P,3) [m] spring of pair (i, nbr[i, k]) seen from i, at start[i] + k
     ref_pos: np.ndarray  # (N,3) positions at the last build [m]
     # reverse list, derived from the above at every build and restore (not state): rev[i] holds
-    # the flat slots j*C + k of the pairs (j, i) with j < i, ascending in j
+    # the packed indices start[j] + k of the pairs (j, i) with j < i, ascending in j
     rev: np.ndarray | None = None  # (N,R) int32
     rev_count: np.ndarray | None = None  # (N,) int32
     builds: int = 0
@@ -92,6 +93,7 @@ class NeighborList:
     # (physics/motion.py); inf until then, so a check before any drift rebuilds
     moved2: float = math.inf
 
+    # checkpoints hold hist in rows like nbr, (N,C,3) (physics/neighbors.py)
     PROGNOSTIC = ("nbr", "nbr_count", "hist", "ref_pos")
 
 

@@ -50,15 +50,16 @@ pairs across chunks go through the same blocks and law.
 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
 (N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32 half rows,
-nbr_count (N,); rev (N,R) int32 reverse slots, rev_count (N,) (kernels/neighbors.py);
-bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i < bounds[c+1]);
-hist (N,C,3) [m]; table (M,M,6) per pair of materials, columns K_N, K_T, D_N, D_T, MU, MU_R as
+nbr_count (N,); start (N+1,) int64 row starts and hist (>= P,3) [m] the packed springs (pair
+(i, nbr[i, k]) at start[i] + k); rev (N,R) int32 reverse slots, rev_count (N,)
+(kernels/neighbors.py); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
+bounds[c+1]); table (M,M,6) per pair of materials, columns K_N, K_T, D_N, D_T, MU, MU_R as
 above [N/m or Pa, N/m or Pa, kg^1/2/s or (Pa kg)^1/2 m^-1/2, same, -, -]; hertz, rolling flags;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
-limit); slots (N*C, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at i*C + k, used
-for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T, 3*BLOCK)
-uint64 (the (i, j, k) of each contact of a block), block_rows (T, 2*BLOCK) int64 (rows waiting
+limit); slots (>= P, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at start[i] + k,
+used for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T, 3*BLOCK)
+uint64 (i, j and the spring's index of each contact of a block), block_rows (T, 2*BLOCK) int64 (rows waiting
 for their slots): scratch per chunk; out force, torque (N,3) [N, N m].
 """
 
@@ -202,7 +203,7 @@ B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
 FIELDS = 43
 # per contact, in a companion uint64 array: the row i, the partner j and the slot k
-ID_I, ID_J, ID_K = 0, 1, 2
+ID_I, ID_J, ID_S = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
@@ -429,32 +430,32 @@ def box_axes(length, periodic):
 
 
 @njit(cache=True, inline="always")
-def separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box):
-    """(touching, d = x_i - x_j (3 values), |d|^2) of the pair (i, j = nbr[i, k]); clears the
-    spring of a pair that does not touch. box: box_axes(length, periodic)."""
+def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
+    """(touching, d = x_i - x_j (3 values), |d|^2) of the pair (i at x, j) whose spring is
+    hist[s]; clears the spring of a pair that does not touch. box: box_axes(length, periodic)."""
     d0 = minimum_image(x0 - pos[j, 0], box[0], box[3])
     d1 = minimum_image(x1 - pos[j, 1], box[1], box[4])
     d2 = minimum_image(x2 - pos[j, 2], box[2], box[5])
     dist2 = d0 * d0 + d1 * d1 + d2 * d2
     reach = ri + rj
     if dist2 >= reach * reach:
-        if hist[i, k, 0] != 0.0 or hist[i, k, 1] != 0.0 or hist[i, k, 2] != 0.0:
-            hist[i, k, 0] = 0.0  # the pair has separated: its spring is gone
-            hist[i, k, 1] = 0.0
-            hist[i, k, 2] = 0.0
+        if hist[s, 0] != 0.0 or hist[s, 1] != 0.0 or hist[s, 2] != 0.0:
+            hist[s, 0] = 0.0  # the pair has separated: its spring is gone
+            hist[s, 1] = 0.0
+            hist[s, 2] = 0.0
         return False, d0, d1, d2, dist2
     return True, d0, d1, d2, dist2
 
 
 @njit(cache=True, inline="always")
 def gather(
-    buf, ids, c, i, j, k, d0, d1, d2, dist2, ri, rj, vel, angvel, vel_pred, angvel_pred, mass, inertia,
+    buf, ids, c, i, j, s, d0, d1, d2, dist2, ri, rj, vel, angvel, vel_pred, angvel_pred, mass, inertia,
     material, hist, table, single, rolling,
 ):  # fmt: skip
     """Copy the law's inputs of the touching pair (i, j = nbr[i, k]) into slot c of the block."""
     ids[np.uint64(ID_I * BLOCK) + c] = i
     ids[np.uint64(ID_J * BLOCK) + c] = j
-    ids[np.uint64(ID_K * BLOCK) + c] = k
+    ids[np.uint64(ID_S * BLOCK) + c] = s
     to_block(buf, B_D0, c, d0)
     to_block(buf, B_D1, c, d1)
     to_block(buf, B_D2, c, d2)
@@ -475,9 +476,9 @@ def gather(
     to_block(buf, B_MJ, c, mass[j])
     to_block(buf, B_RI, c, ri)
     to_block(buf, B_RJ, c, rj)
-    to_block(buf, B_H0, c, hist[i, k, 0])
-    to_block(buf, B_H1, c, hist[i, k, 1])
-    to_block(buf, B_H2, c, hist[i, k, 2])
+    to_block(buf, B_H0, c, hist[s, 0])
+    to_block(buf, B_H1, c, hist[s, 1])
+    to_block(buf, B_H2, c, hist[s, 2])
     if rolling:
         to_block(buf, B_W0, c, angvel[i, 0] - angvel[j, 0])
         to_block(buf, B_W1, c, angvel[i, 1] - angvel[j, 1])
@@ -507,18 +508,16 @@ def cross_start(nbr, i, count, end):
 
 
 @njit(cache=True)
-def _flush_to_slots(buf, ids, count, hertz, rolling, single, table, spring_dt, step_dt, hist, cap, slots):
-    """The law for the block's contacts (pairs across chunks), then each into its slot
-    s = i*C + k, and the new springs."""
+def _flush_to_slots(buf, ids, count, hertz, rolling, single, table, spring_dt, step_dt, hist, slots):
+    """The law for the block's contacts (pairs across chunks), then each into its slot, at the
+    index of its spring, and the new springs."""
     contact_law(buf, count, hertz, rolling, single, table, spring_dt, step_dt)
     for b in range(count):
         c = np.uint64(b)
-        i = ids[np.uint64(ID_I * BLOCK) + c]
-        k = ids[np.uint64(ID_K * BLOCK) + c]
-        hist[i, k, 0] = from_block(buf, B_H0, c)
-        hist[i, k, 1] = from_block(buf, B_H1, c)
-        hist[i, k, 2] = from_block(buf, B_H2, c)
-        s = i * cap + k
+        s = ids[np.uint64(ID_S * BLOCK) + c]
+        hist[s, 0] = from_block(buf, B_H0, c)
+        hist[s, 1] = from_block(buf, B_H1, c)
+        hist[s, 2] = from_block(buf, B_H2, c)
         slots[s, 0] = from_block(buf, B_E0, c)
         slots[s, 1] = from_block(buf, B_E1, c)
         slots[s, 2] = from_block(buf, B_E2, c)
@@ -544,6 +543,7 @@ def cross_chunk_pairs(
     material,
     nbr,
     nbr_count,
+    start,
     hist,
     table,
     hertz,
@@ -558,13 +558,12 @@ def cross_chunk_pairs(
     blocks,
     block_ids,
 ):
-    """Every listed pair whose partner lies in a later chunk, into its slot s = i*C + k:
-    slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling torque on i (with rolling);
-    zero for a pair that does not touch. cross_rows (R,2) int64: each row holding such pairs
-    and the end of its chunk; cross_bounds (T+1,) int64: piece c of those rows,
+    """Every listed pair whose partner lies in a later chunk, into its slot s = start[i] + k
+    (the index of its spring): slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling
+    torque on i (with rolling); zero for a pair that does not touch. cross_rows (R,2) int64:
+    each row holding such pairs and the end of its chunk; cross_bounds (T+1,) int64: piece c of those rows,
     cross_bounds[c] <= r < cross_bounds[c+1], for thread c (any cut gives the same slots)."""
     cap = nbr.shape[1]
-    ucap = np.uint64(cap)
     single = table.shape[0] == 1
     box = box_axes(length, periodic)
     for c in prange(cross_bounds.shape[0] - 1):
@@ -583,31 +582,29 @@ def cross_chunk_pairs(
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
                 rj = radius[j]
-                touching, d0, d1, d2, dist2 = separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box)
+                s = np.uint64(start[i] + slot)
+                touching, d0, d1, d2, dist2 = separation(pos, hist, s, j, x0, x1, x2, ri, rj, box)
                 if not touching:
-                    s = i * ucap + k
                     for col in range(slots.shape[1]):
                         slots[s, col] = 0.0
                     continue
                 if filled == BLOCK:
                     _flush_to_slots(
-                        buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, ucap, slots
+                        buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, slots
                     )
                     filled = 0
                 gather(
-                    buf, ids, np.uint64(filled), i, j, k, d0, d1, d2, dist2, ri, rj,
+                    buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
                     vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
                 )  # fmt: skip
                 filled += 1
-        _flush_to_slots(
-            buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, ucap, slots
-        )
+        _flush_to_slots(buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, slots)
 
 
 @njit(cache=True)
 def _flush_to_forces(
     buf, ids, count, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt, radius, nbr_count,
-    hist, cap, slots, force, torque,
+    start, hist, cap, slots, force, torque,
 ):  # fmt: skip
     """The law for the block's contacts, then apply them in order (the force on j is the
     negative, its torque from r_j); then add to each of the `waiting` rows listed (rows whose
@@ -626,10 +623,10 @@ def _flush_to_forces(
         t2 = torque[i, 2]
         while b < end and ids[np.uint64(ID_I * BLOCK) + b] == i:
             j = ids[np.uint64(ID_J * BLOCK) + b]
-            k = ids[np.uint64(ID_K * BLOCK) + b]
-            hist[i, k, 0] = from_block(buf, B_H0, b)
-            hist[i, k, 1] = from_block(buf, B_H1, b)
-            hist[i, k, 2] = from_block(buf, B_H2, b)
+            s = ids[np.uint64(ID_S * BLOCK) + b]
+            hist[s, 0] = from_block(buf, B_H0, b)
+            hist[s, 1] = from_block(buf, B_H1, b)
+            hist[s, 2] = from_block(buf, B_H2, b)
             e0 = from_block(buf, B_E0, b)
             e1 = from_block(buf, B_E1, b)
             e2 = from_block(buf, B_E2, b)
@@ -670,7 +667,7 @@ def _flush_to_forces(
         i = np.uint64(rows[w])
         ri = radius[i]
         for slot in range(rows[BLOCK + w], min(nbr_count[i], cap)):
-            s = i * np.uint64(cap) + np.uint64(slot)
+            s = np.uint64(start[i] + slot)
             force[i, 0] += slots[s, 0]
             force[i, 1] += slots[s, 1]
             force[i, 2] += slots[s, 2]
@@ -696,6 +693,7 @@ def chunk_pair_forces(
     material,
     nbr,
     nbr_count,
+    start,
     hist,
     table,
     hertz,
@@ -746,7 +744,7 @@ def chunk_pair_forces(
             # the reverse row is ascending in j: pairs from earlier chunks are a prefix (none
             # for the first chunk, which then reads no reverse row)
             for m in range(min(rev_count[i], rcap) if begin > 0 else 0):
-                if rev[i, m] >= begin * cap:
+                if rev[i, m] >= start[begin]:
                     break
                 s = np.uint64(rev[i, m])
                 f0 -= slots[s, 0]
@@ -779,18 +777,19 @@ def chunk_pair_forces(
                 k = np.uint64(slot)
                 j = np.uint64(nbr[i, k])
                 rj = radius[j]
-                touching, d0, d1, d2, dist2 = separation(pos, hist, i, k, j, x0, x1, x2, ri, rj, box)
+                s = np.uint64(start[i] + slot)
+                touching, d0, d1, d2, dist2 = separation(pos, hist, s, j, x0, x1, x2, ri, rj, box)
                 if not touching:
                     continue
                 if filled == BLOCK:
                     _flush_to_forces(
                         buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
-                        radius, nbr_count, hist, cap, slots, force, torque,
+                        radius, nbr_count, start, hist, cap, slots, force, torque,
                     )  # fmt: skip
                     filled = 0
                     waiting = 0
                 gather(
-                    buf, ids, np.uint64(filled), i, j, k, d0, d1, d2, dist2, ri, rj,
+                    buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
                     vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
                 )  # fmt: skip
                 filled += 1
@@ -798,7 +797,7 @@ def chunk_pair_forces(
                 if waiting == BLOCK:
                     _flush_to_forces(
                         buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
-                        radius, nbr_count, hist, cap, slots, force, torque,
+                        radius, nbr_count, start, hist, cap, slots, force, torque,
                     )  # fmt: skip
                     filled = 0
                     waiting = 0
@@ -807,5 +806,5 @@ def chunk_pair_forces(
                 waiting += 1
         _flush_to_forces(
             buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
-            radius, nbr_count, hist, cap, slots, force, torque,
+            radius, nbr_count, start, hist, cap, slots, force, torque,
         )  # fmt: skip

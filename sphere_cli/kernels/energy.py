@@ -44,7 +44,7 @@ def _elastic(row, hertz, delta, r_eff, xi2):
 
 
 @njit(cache=True)
-def pair_elastic_energy(pos, radius, material, nbr, nbr_count, hist, table, hertz, length, periodic):
+def pair_elastic_energy(pos, radius, material, nbr, nbr_count, start, hist, table, hertz, length, periodic):
     """Returns (elastic energy [J], number of touching pairs)."""
     total = 0.0
     touching = 0
@@ -60,7 +60,8 @@ def pair_elastic_energy(pos, radius, material, nbr, nbr_count, hist, table, hert
             reach = radius[i] + radius[j]
             if d2 < reach * reach:
                 delta = reach - d2**0.5
-                xi2 = hist[i, k, 0] ** 2 + hist[i, k, 1] ** 2 + hist[i, k, 2] ** 2
+                s = start[i] + k
+                xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                 row = table[0, 0] if single else table[material[i], material[j]]
                 r_eff = radius[i] * radius[j] / reach
                 total += _elastic(row, hertz, delta, r_eff, xi2)

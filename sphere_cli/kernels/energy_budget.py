@@ -101,6 +101,7 @@ def accumulate_budget(
     material,
     nbr,
     nbr_count,
+    start,
     hist,
     table,
     hertz,
@@ -155,7 +156,8 @@ def accumulate_budget(
             touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
             if not touching:
                 if not hertz:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
-                    xi2 = hist[i, k, 0] ** 2 + hist[i, k, 1] ** 2 + hist[i, k, 2] ** 2
+                    s = start[i] + k
+                    xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                     friction += 0.5 * row[K_T] * xi2
                 continue
             rj = radius[j]
@@ -170,7 +172,7 @@ def accumulate_budget(
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
             fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, 0.0)[0]
             g0, g1, g2, d_t, f_t = _tangential(
-                scratch, i, hist[i, k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
+                scratch, i, hist[start[i] + k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             damping += -(fn - fe) * wn * dt + d_t

@@ -1,17 +1,23 @@
 """Verlet neighbour lists built from a cell list, with the contact history carried across rebuilds.
 
 A half list: row i holds every j > i (sorted ascending) with |x_i - x_j| < r_i + r_j + skin, so
-each pair is listed, and its force computed, once. The reverse list gives each particle the
-pairs in which it is the second member: rev[i] holds the flat slot j*C + k of every pair (j, i),
-j < i, with nbr[j, k] = i, sorted by j. A force kernel writes each pair's force into the pair's
-own slot, and each particle then gathers its reverse slots and its own row in that fixed order
+each pair is listed, and its force computed, once. The rows have a fixed capacity C; the springs
+of the listed pairs are stored packed, row after row: the pair (i, nbr[i, k]) has its spring at
+hist[start[i] + k], start[i] the number of pairs listed in the rows before i (a settled bed lists
+~3.5 pairs in rows of ~11 slots, so the springs take a third of the memory and bandwidth of
+padded rows). The reverse list gives each particle the pairs in which it is the second member:
+rev[i] holds the packed index start[j] + k of every pair (j, i), j < i, with nbr[j, k] = i,
+sorted by j. A force kernel can write a pair's force into the pair's own slot at that index,
+and each particle then gathers its reverse slots and its own row in that fixed order
 (ascending partner index), so the sums do not depend on the thread count (design guide 3).
 The list stays valid until some particle has moved skin/2 since the build.
 
-Arguments (N particles, C neighbour slots per particle, R reverse slots per particle):
+Arguments (N particles, C neighbour slots per particle, R reverse slots per particle, P listed
+pairs):
   pos (N,3) [m], radius (N,) [m], lower/length (3,) box corner and edge [m],
-  periodic (3,) uint8, nbr (N,C) int32, nbr_count (N,) int32, hist (N,C,3) [m] tangential springs
-  (pair (i, nbr[i, k]) seen from i), rev (N,R) int32, rev_count (N,) int32.
+  periodic (3,) uint8, nbr (N,C) int32, nbr_count (N,) int32, start (N+1,) int64,
+  hist (>= P,3) [m] tangential springs (pair (i, nbr[i, k]) seen from i, at start[i] + k),
+  rev (N,R) int32, rev_count (N,) int32.
 Capacity: a row that would exceed C (or R) stores what fits and records its true count; the
 caller sees count > C, grows the list and rebuilds (no contact is ever dropped silently).
 """
@@ -83,14 +89,10 @@ def build_lists(
     cell_start,
     order,
     skin,
-    old_nbr,
-    old_count,
-    old_hist,
     nbr,
     nbr_count,
-    hist,
 ):
-    """Fill the half rows nbr/nbr_count/hist, copying each surviving pair's history."""
+    """Fill the half rows nbr/nbr_count (their springs: carry_springs)."""
     n = pos.shape[0]
     cap = nbr.shape[1]
     offx = _axis_offsets(ncell[0], periodic[0])
@@ -140,35 +142,48 @@ def build_lists(
                                 nbr[i, k] = j
                             count += 1
         nbr_count[i] = count
-        # carry the tangential history of pairs present in both lists (both rows sorted)
-        kept = min(count, cap)
-        old = old_count[i]
-        if old > cap:
-            old = cap
-        p = 0
-        for k in range(kept):
-            j = nbr[i, k]
-            while p < old and old_nbr[i, p] < j:
-                p += 1
-            if p < old and old_nbr[i, p] == j:
-                for a in range(3):
-                    hist[i, k, a] = old_hist[i, p, a]
-            else:
-                for a in range(3):
-                    hist[i, k, a] = 0.0
         # clear the unused tail, so the buffer holds nothing from older builds (checkpoints of
         # a resumed and an uninterrupted run are then equal in every slot)
-        for k in range(kept, cap):
+        for k in range(min(count, cap), cap):
             nbr[i, k] = 0
-            for a in range(3):
-                hist[i, k, a] = 0.0
 
 
 @njit(cache=True)
-def build_reverse(nbr, nbr_count, rev, rev_count):
-    """Fill rev/rev_count from the half rows: the slots j*C + k of the pairs (j, i), j < i,
-    in ascending j (a serial pass over j keeps that order). Returns the longest reverse row
-    (more than R: the caller grows rev and calls again)."""
+def row_starts(nbr_count, cap, start):
+    """start[i] = the pairs listed in the rows before i (start[N]: all of them)."""
+    start[0] = 0
+    for i in range(nbr_count.shape[0]):
+        start[i + 1] = start[i] + min(nbr_count[i], cap)
+    return start[nbr_count.shape[0]]
+
+
+@njit(cache=True, parallel=True)
+def carry_springs(old_nbr, old_count, old_start, old_hist, nbr, nbr_count, start, hist):
+    """The springs of the new rows: a pair listed before keeps its spring, a new one starts at
+    zero (both rows are sorted, so one merge per row)."""
+    cap = nbr.shape[1]
+    old_cap = old_nbr.shape[1]
+    for i in prange(nbr.shape[0]):
+        old = min(old_count[i], old_cap)
+        p = 0
+        for k in range(min(nbr_count[i], cap)):
+            j = nbr[i, k]
+            while p < old and old_nbr[i, p] < j:
+                p += 1
+            s = start[i] + k
+            if p < old and old_nbr[i, p] == j:
+                for a in range(3):
+                    hist[s, a] = old_hist[old_start[i] + p, a]
+            else:
+                for a in range(3):
+                    hist[s, a] = 0.0
+
+
+@njit(cache=True)
+def build_reverse(nbr, nbr_count, start, rev, rev_count):
+    """Fill rev/rev_count from the half rows: the packed indices start[j] + k of the pairs
+    (j, i), j < i, in ascending j (a serial pass over j keeps that order). Returns the longest
+    reverse row (more than R: the caller grows rev and calls again)."""
     cap = nbr.shape[1]
     rcap = rev.shape[1]
     rev_count[:] = 0
@@ -178,7 +193,7 @@ def build_reverse(nbr, nbr_count, rev, rev_count):
             i = nbr[j, k]
             m = rev_count[i]
             if m < rcap:
-                rev[i, m] = j * cap + k
+                rev[i, m] = start[j] + k
             rev_count[i] = m + 1
             if m + 1 > longest:
                 longest = m + 1

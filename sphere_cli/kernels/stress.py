@@ -52,6 +52,7 @@ def contact_moments(
     material,
     nbr,
     nbr_count,
+    start,
     hist,
     table,
     hertz,
@@ -90,7 +91,7 @@ def contact_moments(
             r_eff = ri * rj / (ri + rj)
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
             for a in range(3):
-                scratch[i, 0, a] = hist[i, k, a]
+                scratch[i, 0, a] = hist[start[i] + k, a]
             g0, g1, g2 = tangential_force(
                 scratch, i, 0, 0.0, 0.0, 0.0, n0, n1, n2, kt, ct, row[MU], fn, 0.0,
                 u0 - un * n0, u1 - un * n1, u2 - un * n2,

@@ -95,7 +95,7 @@ class PairContactForces:
             self.bounds = np.concatenate(([0], cuts, [n])).astype(np.int64)
             self.bounds_build = nl.builds
             self.cross_rows, self.cross_bounds = rows_across_chunks(nl.nbr, nl.nbr_count, self.bounds, chunks)
-        rows = nl.nbr.size if chunks > 1 else 0
+        rows = nl.hist.shape[0] if chunks > 1 else 0  # one per spring
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
         if self.blocks.shape[0] != chunks:
@@ -122,6 +122,7 @@ class PairContactForces:
             p.material,
             nl.nbr,
             nl.nbr_count,
+            nl.start,
             nl.hist,
             self.table,
             self.hertz,
@@ -157,6 +158,7 @@ class PairContactForces:
             p.material,
             nl.nbr,
             nl.nbr_count,
+            nl.start,
             nl.hist,
             self.table,
             self.hertz,

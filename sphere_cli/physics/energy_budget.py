@@ -128,6 +128,7 @@ class EnergyBudget:
             p.material,
             nl.nbr,
             nl.nbr_count,
+            nl.start,
             self.hist,
             contact.table,
             contact.hertz,

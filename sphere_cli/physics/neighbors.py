@@ -7,7 +7,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NumericalError
-from ..kernels.neighbors import build_lists, build_reverse, cell_index, counting_sort
+from ..kernels.neighbors import (
+    build_lists,
+    build_reverse,
+    carry_springs,
+    cell_index,
+    counting_sort,
+    row_starts,
+)
 from ..state import NeighborList, State
 
 INITIAL_CAPACITY = 8  # half rows: a settled monodisperse bed lists at most ~10 (the list grows on overflow)
@@ -18,6 +25,9 @@ INITIAL_CAPACITY = 8  # half rows: a settled monodisperse bed lists at most ~10 
 SHRINK_SLACK = 4
 HEADROOM = 2
 QUIET_BUILDS = 20
+# the packed springs are allocated for this many times the pairs listed (rebuilds add or drop a
+# few pairs; more than that reallocates them)
+SPRING_ROOM = 1.25
 
 
 def allocate_neighbor_list(n: int, skin: float, capacity: int | None = None) -> NeighborList:
@@ -27,7 +37,8 @@ def allocate_neighbor_list(n: int, skin: float, capacity: int | None = None) -> 
         skin=skin,
         nbr=np.zeros((n, capacity), dtype=np.int32),
         nbr_count=np.zeros(n, dtype=np.int32),
-        hist=np.zeros((n, capacity, 3)),
+        start=np.zeros(n + 1, dtype=np.int64),
+        hist=np.zeros((0, 3)),
         ref_pos=np.zeros((n, 3)),
         rev=np.zeros((n, capacity), dtype=np.int32),
         rev_count=np.zeros(n, dtype=np.int32),
@@ -52,6 +63,7 @@ class NeighborSearch:
     def _spare_like(self, nl: NeighborList):
         self.spare_nbr = np.zeros_like(nl.nbr)
         self.spare_count = np.zeros_like(nl.nbr_count)
+        self.spare_start = np.zeros_like(nl.start)
         self.spare_hist = np.zeros_like(nl.hist)
 
     def prepare(self, state: State) -> None:
@@ -77,26 +89,36 @@ class NeighborSearch:
                 self.cell_start,
                 self.order,
                 nl.skin,
-                nl.nbr,
-                nl.nbr_count,
-                nl.hist,
                 self.spare_nbr,
                 self.spare_count,
-                self.spare_hist,
             )
             needed = int(self.spare_count.max()) if p.count else 0
             if needed <= nl.nbr.shape[1]:
                 break
             self._grow(nl, needed)
             self.builds_since_growth = 0
+        pairs = int(row_starts(self.spare_count, self.spare_nbr.shape[1], self.spare_start))
+        if self.spare_hist.shape[0] < pairs:
+            self.spare_hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
+        carry_springs(
+            nl.nbr,
+            nl.nbr_count,
+            nl.start,
+            nl.hist,
+            self.spare_nbr,
+            self.spare_count,
+            self.spare_start,
+            self.spare_hist,
+        )
         nl.nbr, self.spare_nbr = self.spare_nbr, nl.nbr
         nl.nbr_count, self.spare_count = self.spare_count, nl.nbr_count
+        nl.start, self.spare_start = self.spare_start, nl.start
         nl.hist, self.spare_hist = self.spare_hist, nl.hist
         self.builds_since_growth += 1
         quiet = self.builds_since_growth > QUIET_BUILDS
         if quiet and nl.nbr.shape[1] >= needed + SHRINK_SLACK and nl.nbr.shape[1] > INITIAL_CAPACITY:
             # rows far wider than the longest one (a bed that has settled, a smaller skin):
-            # narrower rows keep the springs dense in memory (settled 100 000 bed: +5 %)
+            # narrower rows take less memory (the springs are packed whatever the width)
             self._resize(nl, max(needed + HEADROOM, INITIAL_CAPACITY))
         nl.ref_pos[:] = p.pos
         nl.moved2 = 0.0
@@ -106,13 +128,13 @@ class NeighborSearch:
     @staticmethod
     def _reverse(nl: NeighborList) -> None:
         """Rebuild the reverse list from the half rows, widening it if a row overflows."""
-        if nl.nbr.size >= 2**31:
+        if nl.start[-1] >= 2**31:
             raise NumericalError(
-                f"the neighbour list needs {nl.nbr.shape[0]} x {nl.nbr.shape[1]} pair slots, more than the "
-                "2^31 its int32 slot indices address; use fewer particles per run or a smaller neighbor_skin"
+                f"the neighbour list holds {nl.start[-1]} pairs, more than the 2^31 its int32 indices "
+                "address; use fewer particles per run or a smaller neighbor_skin"
             )
         while True:
-            longest = build_reverse(nl.nbr, nl.nbr_count, nl.rev, nl.rev_count)
+            longest = build_reverse(nl.nbr, nl.nbr_count, nl.start, nl.rev, nl.rev_count)
             if longest <= nl.rev.shape[1]:
                 return
             nl.rev = np.zeros((nl.nbr.shape[0], max(longest + 4, int(1.5 * nl.rev.shape[1]))), dtype=np.int32)
@@ -122,20 +144,22 @@ class NeighborSearch:
         self._resize(nl, max(needed + 4, int(1.5 * nl.nbr.shape[1])))
 
     def _resize(self, nl: NeighborList, capacity: int) -> None:
-        """Rows of `capacity` slots holding the current list (at least its longest row)."""
+        """Rows of `capacity` slots holding the current list (at least its longest row; the
+        packed springs and row starts stay as they are)."""
         n = nl.nbr.shape[0]
         nbr = np.zeros((n, capacity), dtype=np.int32)
-        hist = np.zeros((n, capacity, 3))
         width = min(nl.nbr.shape[1], capacity)
         nbr[:, :width] = nl.nbr[:, :width]
-        hist[:, :width] = nl.hist[:, :width]
-        nl.nbr, nl.hist = nbr, hist
-        self._spare_like(nl)
+        nl.nbr = nbr
+        self.spare_nbr = np.zeros_like(nl.nbr)
 
     @staticmethod
     def prognostic_state(state: State) -> dict:
+        """The list with its springs in rows (N,C,3) like the rows of nbr: the checkpoint's
+        layout does not depend on how the springs are packed."""
         nl = state.neighbors
         arrays = {name: getattr(nl, name) for name in NeighborList.PROGNOSTIC}
+        arrays["hist"] = spring_rows(nl)
         arrays["skin"] = np.float64(nl.skin)
         return arrays
 
@@ -146,17 +170,40 @@ class NeighborSearch:
         for name in NeighborList.PROGNOSTIC:
             setattr(nl, name, np.array(arrays[name]))
         _keep_upper_half(nl)
+        _pack_springs(nl)
         self._spare_like(nl)
         self._reverse(nl)
         if float(arrays["skin"]) != nl.skin:
             self.rebuild(state)
 
 
+def _listed(nl: NeighborList) -> np.ndarray:
+    """(N,C) bool: the slots of nbr that hold a listed pair."""
+    cap = nl.nbr.shape[1]
+    return np.arange(cap)[None, :] < np.minimum(nl.nbr_count, cap)[:, None]
+
+
+def spring_rows(nl: NeighborList) -> np.ndarray:
+    """The packed springs laid out like nbr, (N,C,3), zero in the unused slots."""
+    rows = np.zeros(nl.nbr.shape + (3,))
+    rows[_listed(nl)] = nl.hist[: nl.start[-1]]
+    return rows
+
+
+def _pack_springs(nl: NeighborList) -> None:
+    """nl.hist holds springs in rows (N,C,3) (a checkpoint): pack them, and set the row starts."""
+    row_starts(nl.nbr_count, nl.nbr.shape[1], nl.start)
+    pairs = int(nl.start[-1])
+    hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
+    hist[:pairs] = nl.hist[_listed(nl)]
+    nl.hist = hist
+
+
 def _keep_upper_half(nl: NeighborList) -> None:
     """A checkpoint written before the half list holds full rows (each pair twice, its two
     springs exact negatives): keep each row's j > i, which is the half list of the same build."""
     n, cap = nl.nbr.shape
-    listed = np.arange(cap)[None, :] < np.minimum(nl.nbr_count, cap)[:, None]
+    listed = _listed(nl)
     keep = listed & (nl.nbr > np.arange(n)[:, None])
     if np.array_equal(keep, listed):
         return

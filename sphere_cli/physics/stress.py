@@ -67,6 +67,7 @@ class StressProbe:
             p.material,
             nl.nbr,
             nl.nbr_count,
+            nl.start,
             nl.hist,
             self.contact.table,
             self.contact.hertz,
