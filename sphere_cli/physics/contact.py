@@ -73,7 +73,7 @@ class PairContactForces:
         self.width = 9 if self.rolling else 6
         self.slots = np.zeros((0, self.width))
         # per chunk, the block of touching pairs whose law is evaluated in one vectorised loop
-        # (kernels/contact.py): inputs and results, the pairs' (i, j, k), rows waiting for slots
+        # (kernels/contact.py): inputs and results, each pair's (i, j, spring index), rows waiting for slots
         self.blocks = np.zeros((0, FIELDS * BLOCK))
         self.block_ids = np.zeros((0, 3 * BLOCK), dtype=np.uint64)
         self.block_rows = np.zeros((0, 2 * BLOCK), dtype=np.int64)
