@@ -202,8 +202,11 @@ B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 # outputs: force on i, n x F_t, rolling torque on i
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
 FIELDS = 43
-# per contact, in a companion uint64 array: the row i, the partner j and the slot k
+# per contact, in a companion uint64 array: the row i, the partner j and its spring's index
 ID_I, ID_J, ID_S = 0, 1, 2
+# a block's fill count starts from this (an int64, not the literal 0, which would make Numba
+# compile the flush functions a second time for a literal count)
+ZERO = np.int64(0)
 
 
 @njit(cache=True, inline="always")
@@ -569,7 +572,7 @@ def cross_chunk_pairs(
     for c in prange(cross_bounds.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
-        filled = 0
+        filled = ZERO
         for r in range(cross_bounds[c], cross_bounds[c + 1]):
             i = np.uint64(cross_rows[r, 0])
             count = min(nbr_count[i], cap)
@@ -592,7 +595,7 @@ def cross_chunk_pairs(
                     _flush_to_slots(
                         buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, slots
                     )
-                    filled = 0
+                    filled = ZERO
                 gather(
                     buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
                     vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
@@ -763,8 +766,8 @@ def chunk_pair_forces(
             torque[i, 0] = t0
             torque[i, 1] = t1
             torque[i, 2] = t2
-        filled = 0
-        waiting = 0
+        filled = ZERO
+        waiting = ZERO
         for row in range(begin, end):
             i = np.uint64(row)
             ri = radius[i]
@@ -786,8 +789,8 @@ def chunk_pair_forces(
                         buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
                         radius, nbr_count, start, hist, cap, slots, force, torque,
                     )  # fmt: skip
-                    filled = 0
-                    waiting = 0
+                    filled = ZERO
+                    waiting = ZERO
                 gather(
                     buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
                     vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
@@ -799,8 +802,8 @@ def chunk_pair_forces(
                         buf, ids, filled, waiting, rows, hertz, rolling, single, table, spring_dt, step_dt,
                         radius, nbr_count, start, hist, cap, slots, force, torque,
                     )  # fmt: skip
-                    filled = 0
-                    waiting = 0
+                    filled = ZERO
+                    waiting = ZERO
                 rows[waiting] = row
                 rows[BLOCK + waiting] = inner
                 waiting += 1

@@ -71,6 +71,7 @@ from .contact import (
     B_W2,
     BLOCK,
     COLUMNS,
+    ZERO,
     from_block,
     to_block,
     wall_law,
@@ -190,7 +191,7 @@ def wall_forces(
     for c in prange(pieces.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
-        filled = 0
+        filled = ZERO
         for m in range(pieces[c], pieces[c + 1]):
             i = np.uint64(near[m])
             if recording:
@@ -206,7 +207,7 @@ def wall_forces(
                     buf, ids, filled, hertz, rolling, spring_dt, step_dt, radius, wall_hist, force, torque,
                     record, pforce,
                 )  # fmt: skip
-                filled = 0
+                filled = ZERO
             ri = radius[i]
             ci = np.uint64(0 if single else material[i])
             held = springs[i]
