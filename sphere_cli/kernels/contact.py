@@ -416,13 +416,11 @@ def _wall_contact(buf, c, hertz, rolling, spring_dt, step_dt):
 
 @njit(cache=True, error_model="numpy")
 def wall_law(buf, count, hertz, rolling, spring_dt, step_dt):
-    """contact_law for a block of wall contacts (kernels/walls.py fills it)."""
-    if rolling:
-        for c in range(count):
-            _wall_contact(buf, c, hertz, True, spring_dt, step_dt)
-    else:
-        for c in range(count):
-            _wall_contact(buf, c, hertz, False, spring_dt, step_dt)
+    """contact_law for a block of wall contacts (kernels/walls.py fills it); one loop for both
+    settings of rolling (the walls' contacts are few, and a second loop costs seconds of
+    compilation)."""
+    for c in range(count):
+        _wall_contact(buf, c, hertz, rolling, spring_dt, step_dt)
 
 
 @njit(cache=True, inline="always")
