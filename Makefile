@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_DIR ?= runs/demo
 
-.PHONY: install demo test bench docs lint clean
+.PHONY: install demo test bench bench-lean docs lint clean
 
 $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -31,11 +31,16 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/sphere bench
 
+# sphere against a lean hand-written C kernel of the same scene, side by side (needs gcc)
+bench-lean: $(STAMP)
+	$(BIN)/python benchmarks/lean_kernel/compare.py 10000 200 11
+	$(BIN)/python benchmarks/lean_kernel/compare.py 100000 50 9
+
 docs: $(STAMP)
 	$(BIN)/python -m sphere_cli.docgen docs/case-reference.md
 
 lint: $(STAMP)
-	$(BIN)/ruff check sphere_cli tests
+	$(BIN)/ruff check sphere_cli tests benchmarks
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
