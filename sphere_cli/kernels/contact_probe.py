@@ -13,6 +13,7 @@ wall_vel (W,3) [m/s].
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .neighbors import minimum_image
@@ -36,14 +37,15 @@ def pair_normal(pos, radius, i, j, length, periodic):
 @njit(cache=True, inline="always")
 def wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord):
     """(touching, n0, n1, n2, overlap delta [m]) of particle i and wall w."""
-    a = wall_axis[w]
+    a = np.uint64(wall_axis[w])  # unsigned: no negative-index wraparound code (the wall kernel's hot loop)
     gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
-    if gap >= radius[i]:
+    ri = radius[i]
+    if gap >= ri:
         return False, 0.0, 0.0, 0.0, 0.0
     n0 = wall_sign[w] if a == 0 else 0.0
     n1 = wall_sign[w] if a == 1 else 0.0
     n2 = wall_sign[w] if a == 2 else 0.0
-    return True, n0, n1, n2, radius[i] - gap
+    return True, n0, n1, n2, ri - gap
 
 
 @njit(cache=True, inline="always")

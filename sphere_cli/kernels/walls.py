@@ -76,6 +76,7 @@ from .contact import (
     to_block,
     wall_law,
 )
+from .contact_probe import wall_normal
 
 FIXED = 0
 VELOCITY = 1
@@ -213,10 +214,9 @@ def wall_forces(
             held = springs[i]
             for wall in range(nw):
                 w = np.uint64(wall)  # unsigned indices: no negative-index wraparound code
-                a = np.uint64(wall_axis[w])
-                gap = wall_sign[w] * (pos[i, a] - wall_coord[w])
+                touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
                 bit = np.uint64(1) << w
-                if gap >= ri:
+                if not touching:
                     if held & bit:  # the contact has ended: its spring is gone
                         wall_hist[i, w, 0] = 0.0
                         wall_hist[i, w, 1] = 0.0
@@ -227,19 +227,10 @@ def wall_forces(
                 b = np.uint64(filled)
                 ids[b] = i
                 ids[np.uint64(BLOCK) + b] = w
-                n0 = 0.0
-                n1 = 0.0
-                n2 = 0.0
-                if a == 0:
-                    n0 = wall_sign[w]
-                elif a == 1:
-                    n1 = wall_sign[w]
-                else:
-                    n2 = wall_sign[w]
                 to_block(buf, B_N0, b, n0)
                 to_block(buf, B_N1, b, n1)
                 to_block(buf, B_N2, b, n2)
-                to_block(buf, B_DELTA, b, ri - gap)
+                to_block(buf, B_DELTA, b, delta)
                 # the wall as the partner j: its velocity, no spin
                 to_block(buf, B_A0, b, vel[i, 0] - wall_vel[w, 0])
                 to_block(buf, B_A1, b, vel[i, 1] - wall_vel[w, 1])
