@@ -40,6 +40,7 @@ from ..kernels.contact import BLOCK, D_N, FIELDS, K_N, K_T, chunk_pair_forces, c
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
+from .neighbors import listed_slots
 
 
 def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray, np.ndarray]:
@@ -47,10 +48,8 @@ def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray,
     bounds[c] <= i < bounds[c+1]), as (row, end of its chunk) (R,2) int64, and cuts (pieces+1,)
     int64 into them giving each piece about as many of those pairs (kernels/contact.py,
     cross_chunk_pairs)."""
-    n, cap = nbr.shape
-    end = bounds[np.searchsorted(bounds, np.arange(n), side="right")]
-    listed = np.arange(cap)[None, :] < np.minimum(nbr_count, cap)[:, None]
-    pairs = np.count_nonzero(listed & (nbr >= end[:, None]), axis=1)
+    end = bounds[np.searchsorted(bounds, np.arange(nbr.shape[0]), side="right")]
+    pairs = np.count_nonzero(listed_slots(nbr, nbr_count) & (nbr >= end[:, None]), axis=1)
     crossing = np.flatnonzero(pairs)
     rows = np.stack([crossing, end[crossing]], axis=1).astype(np.int64)
     work = np.cumsum(pairs[crossing])

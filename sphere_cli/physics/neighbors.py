@@ -177,16 +177,16 @@ class NeighborSearch:
             self.rebuild(state)
 
 
-def _listed(nl: NeighborList) -> np.ndarray:
+def listed_slots(nbr: np.ndarray, nbr_count: np.ndarray) -> np.ndarray:
     """(N,C) bool: the slots of nbr that hold a listed pair."""
-    cap = nl.nbr.shape[1]
-    return np.arange(cap)[None, :] < np.minimum(nl.nbr_count, cap)[:, None]
+    cap = nbr.shape[1]
+    return np.arange(cap)[None, :] < np.minimum(nbr_count, cap)[:, None]
 
 
 def spring_rows(nl: NeighborList) -> np.ndarray:
     """The packed springs laid out like nbr, (N,C,3), zero in the unused slots."""
     rows = np.zeros(nl.nbr.shape + (3,))
-    rows[_listed(nl)] = nl.hist[: nl.start[-1]]
+    rows[listed_slots(nl.nbr, nl.nbr_count)] = nl.hist[: nl.start[-1]]
     return rows
 
 
@@ -195,7 +195,7 @@ def _pack_springs(nl: NeighborList) -> None:
     row_starts(nl.nbr_count, nl.nbr.shape[1], nl.start)
     pairs = int(nl.start[-1])
     hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
-    hist[:pairs] = nl.hist[_listed(nl)]
+    hist[:pairs] = nl.hist[listed_slots(nl.nbr, nl.nbr_count)]
     nl.hist = hist
 
 
@@ -203,7 +203,7 @@ def _keep_upper_half(nl: NeighborList) -> None:
     """A checkpoint written before the half list holds full rows (each pair twice, its two
     springs exact negatives): keep each row's j > i, which is the half list of the same build."""
     n, cap = nl.nbr.shape
-    listed = _listed(nl)
+    listed = listed_slots(nl.nbr, nl.nbr_count)
     keep = listed & (nl.nbr > np.arange(n)[:, None])
     if np.array_equal(keep, listed):
         return
