@@ -13,8 +13,10 @@ last build of the neighbour list (kernels/neighbors.py).
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
+from .layout import U3, flat
 from .neighbors import minimum_image
 
 
@@ -39,26 +41,36 @@ def kick_drift(
     prediction v_n + dt a_n of v_{n+1} that the dashpots use (vel_pred, angvel_pred). Returns
     the largest squared displacement since the neighbour list was built (minimum image) [m^2],
     measured here while the positions are at hand rather than in a pass of their own; a max
-    reduction is exact in any order, so it does not depend on the threads."""
+    reduction is exact in any order, so it does not depend on the threads. Two loops: the kick
+    vectorises, the drift with its reduction does not, and together they would not either."""
     half = 0.5 * dt
+    v, w, f, t = flat(vel), flat(angvel), flat(force), flat(torque)
+    v_pred, w_pred = flat(vel_pred), flat(angvel_pred)
+    for i in prange(pos.shape[0]):
+        u = np.uint64(i)
+        for a in range(3):
+            m = U3 * u + np.uint64(a)
+            v[m] += half * f[m] * inv_mass[u]
+            w[m] += half * t[m] * inv_inertia[u]
+            v_pred[m] = v[m] + half * f[m] * inv_mass[u]
+            w_pred[m] = w[m] + half * t[m] * inv_inertia[u]
+    x, x_ref = flat(pos), flat(ref_pos)
     worst = 0.0
     for i in prange(pos.shape[0]):
+        u = np.uint64(i)
+        moved2 = 0.0
         for a in range(3):
-            vel[i, a] += half * force[i, a] * inv_mass[i]
-            angvel[i, a] += half * torque[i, a] * inv_inertia[i]
-            vel_pred[i, a] = vel[i, a] + half * force[i, a] * inv_mass[i]
-            angvel_pred[i, a] = angvel[i, a] + half * torque[i, a] * inv_inertia[i]
-            x = pos[i, a] + dt * vel[i, a]
+            m = U3 * u + np.uint64(a)
+            y = x[m] + dt * v[m]
             if periodic[a]:
-                if x >= lower[a] + length[a]:
-                    x -= length[a]
-                elif x < lower[a]:
-                    x += length[a]
-            pos[i, a] = x
-        d0 = minimum_image(pos[i, 0] - ref_pos[i, 0], length[0], periodic[0])
-        d1 = minimum_image(pos[i, 1] - ref_pos[i, 1], length[1], periodic[1])
-        d2 = minimum_image(pos[i, 2] - ref_pos[i, 2], length[2], periodic[2])
-        worst = max(worst, d0 * d0 + d1 * d1 + d2 * d2)
+                if y >= lower[a] + length[a]:
+                    y -= length[a]
+                elif y < lower[a]:
+                    y += length[a]
+            x[m] = y
+            d = minimum_image(y - x_ref[m], length[a], periodic[a])
+            moved2 += d * d
+        worst = max(worst, moved2)
     return worst
 
 
@@ -66,10 +78,13 @@ def kick_drift(
 def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt):
     """Second half kick with the new forces."""
     half = 0.5 * dt
+    v, w, f, t = flat(vel), flat(angvel), flat(force), flat(torque)
     for i in prange(vel.shape[0]):
+        u = np.uint64(i)
         for a in range(3):
-            vel[i, a] += half * force[i, a] * inv_mass[i]
-            angvel[i, a] += half * torque[i, a] * inv_inertia[i]
+            m = U3 * u + np.uint64(a)
+            v[m] += half * f[m] * inv_mass[u]
+            w[m] += half * t[m] * inv_inertia[u]
 
 
 @njit(cache=True)

@@ -77,6 +77,7 @@ from .contact import (
     wall_law,
 )
 from .contact_probe import wall_normal
+from .layout import U1, U2, U3, flat
 
 FIXED = 0
 VELOCITY = 1
@@ -106,6 +107,7 @@ def _flush_walls(
     end = np.uint64(count)
     while b < end:
         i = ids[b]
+        i3 = U3 * i
         ri = radius[i]
         f0 = 0.0
         f1 = 0.0
@@ -136,12 +138,12 @@ def _flush_walls(
                 t1 += from_block(buf, B_M1, b)
                 t2 += from_block(buf, B_M2, b)
             b += np.uint64(1)
-        force[i, 0] += f0
-        force[i, 1] += f1
-        force[i, 2] += f2
-        torque[i, 0] += t0
-        torque[i, 1] += t1
-        torque[i, 2] += t2
+        force[i3] += f0
+        force[i3 + U1] += f1
+        force[i3 + U2] += f2
+        torque[i3] += t0
+        torque[i3 + U1] += t1
+        torque[i3 + U2] += t2
 
 
 @njit(cache=True, parallel=True)
@@ -186,6 +188,8 @@ def wall_forces(
     FIELDS*BLOCK) and block_ids (T, 2*BLOCK) uint64 (particle, wall) are their scratch."""
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
+    vel, angvel, vel_pred, angvel_pred = flat(vel), flat(angvel), flat(vel_pred), flat(angvel_pred)
+    force, torque = flat(force), flat(torque)
     recording = False
     for w in range(nw):
         recording = recording or record[w] != 0
@@ -195,6 +199,7 @@ def wall_forces(
         filled = ZERO
         for m in range(pieces[c], pieces[c + 1]):
             i = np.uint64(near[m])
+            i3 = U3 * i
             if recording:
                 for w in range(nw):
                     if record[w]:
@@ -232,27 +237,27 @@ def wall_forces(
                 to_block(buf, B_N2, b, n2)
                 to_block(buf, B_DELTA, b, delta)
                 # the wall as the partner j: its velocity, no spin
-                to_block(buf, B_A0, b, vel[i, 0] - wall_vel[w, 0])
-                to_block(buf, B_A1, b, vel[i, 1] - wall_vel[w, 1])
-                to_block(buf, B_A2, b, vel[i, 2] - wall_vel[w, 2])
-                to_block(buf, B_S0, b, ri * angvel[i, 0])
-                to_block(buf, B_S1, b, ri * angvel[i, 1])
-                to_block(buf, B_S2, b, ri * angvel[i, 2])
-                to_block(buf, B_P0, b, vel_pred[i, 0] - wall_vel_pred[w, 0])
-                to_block(buf, B_P1, b, vel_pred[i, 1] - wall_vel_pred[w, 1])
-                to_block(buf, B_P2, b, vel_pred[i, 2] - wall_vel_pred[w, 2])
-                to_block(buf, B_Q0, b, ri * angvel_pred[i, 0])
-                to_block(buf, B_Q1, b, ri * angvel_pred[i, 1])
-                to_block(buf, B_Q2, b, ri * angvel_pred[i, 2])
+                to_block(buf, B_A0, b, vel[i3] - wall_vel[w, 0])
+                to_block(buf, B_A1, b, vel[i3 + U1] - wall_vel[w, 1])
+                to_block(buf, B_A2, b, vel[i3 + U2] - wall_vel[w, 2])
+                to_block(buf, B_S0, b, ri * angvel[i3])
+                to_block(buf, B_S1, b, ri * angvel[i3 + U1])
+                to_block(buf, B_S2, b, ri * angvel[i3 + U2])
+                to_block(buf, B_P0, b, vel_pred[i3] - wall_vel_pred[w, 0])
+                to_block(buf, B_P1, b, vel_pred[i3 + U1] - wall_vel_pred[w, 1])
+                to_block(buf, B_P2, b, vel_pred[i3 + U2] - wall_vel_pred[w, 2])
+                to_block(buf, B_Q0, b, ri * angvel_pred[i3])
+                to_block(buf, B_Q1, b, ri * angvel_pred[i3 + U1])
+                to_block(buf, B_Q2, b, ri * angvel_pred[i3 + U2])
                 to_block(buf, B_MI, b, mass[i])
                 to_block(buf, B_RI, b, ri)
                 to_block(buf, B_H0, b, wall_hist[i, w, 0])
                 to_block(buf, B_H1, b, wall_hist[i, w, 1])
                 to_block(buf, B_H2, b, wall_hist[i, w, 2])
                 if rolling:
-                    to_block(buf, B_W0, b, angvel[i, 0])
-                    to_block(buf, B_W1, b, angvel[i, 1])
-                    to_block(buf, B_W2, b, angvel[i, 2])
+                    to_block(buf, B_W0, b, angvel[i3])
+                    to_block(buf, B_W1, b, angvel[i3 + U1])
+                    to_block(buf, B_W2, b, angvel[i3 + U2])
                     to_block(buf, B_II, b, inertia[i])
                 for col in range(COLUMNS):
                     to_block(buf, B_ROW + col, b, wall_table[w, ci, col])
