@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import time as wallclock
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -68,13 +69,22 @@ def _signal_handlers(stop: StopFlag, enabled: bool):
     def polite(signum, _frame):
         name = signal.Signals(signum).name
         if signum == signal.SIGINT and stop.reason is not None:
+            stop.interrupted = True
             raise KeyboardInterrupt
         stop.request(f"{name} received")
 
+    def drop_interrupt(unraisable):
+        # a KeyboardInterrupt raised inside a finalizer or weakref callback (h5py's, say) is
+        # dropped there by Python with a traceback; the loop raises it again at the next step
+        if not issubclass(unraisable.exc_type, KeyboardInterrupt):
+            previous_hook(unraisable)
+
     previous = {s: signal.signal(s, polite) for s in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, drop_interrupt
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         for s, handler in previous.items():
             signal.signal(s, handler)
 

@@ -63,6 +63,9 @@ class StopFlag:
 
     def __init__(self):
         self.reason: str | None = None
+        # a second SIGINT: stop at once, with no final checkpoint (its KeyboardInterrupt is
+        # raised where it lands, and raised again at the next step if Python dropped it there)
+        self.interrupted = False
 
     def request(self, reason: str) -> None:
         if self.reason is None:
@@ -157,6 +160,8 @@ class Loop:
         started = wallclock.monotonic()
         start_step = clock.step
         while clock.step < self.end_step and not scene.finished:
+            if self.stop.interrupted:
+                raise KeyboardInterrupt
             if self.stop.reason is not None:
                 break
             if self.max_wall_seconds is not None and wallclock.monotonic() - started >= self.max_wall_seconds:
@@ -183,6 +188,8 @@ class Loop:
             if self.status.due(step, now):
                 self.progress.update(scene, step - start_step, now - started)
                 self.status.done(now)
+        if self.stop.interrupted:
+            raise KeyboardInterrupt
         check_stable(scene)
         self.output.frame(scene)
         if self.observations is not None:

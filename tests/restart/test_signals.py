@@ -9,12 +9,17 @@ import subprocess
 import sys
 import textwrap
 import time
+import weakref
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
 from sphere_cli import api
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.simulation import Loop, StopFlag
 
 CASE = """
     [simulation]
@@ -107,3 +112,29 @@ def test_wall_time_budget(tmp_path: Path):
     assert proc.returncode == 75, proc.stderr
     assert "wall-time" in proc.stderr
     assert len(list_checkpoints(tmp_path / "run" / "checkpoints")) >= 2
+
+
+def test_second_interrupt_inside_a_finalizer_still_stops(capfd):
+    """A signal lands between any two bytecodes, also inside a weakref callback, where Python
+    drops the handler's KeyboardInterrupt and prints its traceback: the run must not print it
+    and must still stop at the next step without its final checkpoint."""
+    stop = StopFlag()
+
+    class Body:
+        pass
+
+    with api._signal_handlers(stop, enabled=True):
+        signal.raise_signal(signal.SIGINT)  # the first: a checkpoint at the next step
+        assert stop.reason == "SIGINT received" and not stop.interrupted
+        body = Body()
+        weakref.finalize(body, signal.raise_signal, signal.SIGINT)
+        del body  # the second SIGINT is handled inside the finalizer
+        assert stop.interrupted
+    assert "Traceback" not in capfd.readouterr().err
+    scene = build_scene(parse_case(textwrap.dedent(CASE)))
+    loop = Loop(
+        scene, 10, output=None, stop=stop, max_wall_seconds=None, progress=SimpleNamespace(interval=1.0)
+    )
+    with pytest.raises(KeyboardInterrupt):
+        loop.run()
+    assert scene.state.clock.step == 0
