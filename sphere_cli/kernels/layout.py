@@ -11,7 +11,6 @@ arrays and has a stride the compiler knows.
 import numpy as np
 from numba import njit
 
-U0 = np.uint64(0)
 U1 = np.uint64(1)
 U2 = np.uint64(2)
 U3 = np.uint64(3)

@@ -20,6 +20,15 @@ from .layout import U3, flat
 from .neighbors import minimum_image
 
 
+@njit(cache=True, inline="always")
+def half_kick(v, w, f, t, inv_mass, inv_inertia, half, u):
+    """v += dt/2 F/m and w += dt/2 T/I for particle u (unsigned) of the flat views."""
+    for a in range(3):
+        m = U3 * u + np.uint64(a)
+        v[m] += half * f[m] * inv_mass[u]
+        w[m] += half * t[m] * inv_inertia[u]
+
+
 @njit(cache=True, parallel=True)
 def kick_drift(
     pos,
@@ -48,10 +57,9 @@ def kick_drift(
     v_pred, w_pred = flat(vel_pred), flat(angvel_pred)
     for i in prange(pos.shape[0]):
         u = np.uint64(i)
+        half_kick(v, w, f, t, inv_mass, inv_inertia, half, u)
         for a in range(3):
             m = U3 * u + np.uint64(a)
-            v[m] += half * f[m] * inv_mass[u]
-            w[m] += half * t[m] * inv_inertia[u]
             v_pred[m] = v[m] + half * f[m] * inv_mass[u]
             w_pred[m] = w[m] + half * t[m] * inv_inertia[u]
     x, x_ref = flat(pos), flat(ref_pos)
@@ -80,11 +88,7 @@ def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt):
     half = 0.5 * dt
     v, w, f, t = flat(vel), flat(angvel), flat(force), flat(torque)
     for i in prange(vel.shape[0]):
-        u = np.uint64(i)
-        for a in range(3):
-            m = U3 * u + np.uint64(a)
-            v[m] += half * f[m] * inv_mass[u]
-            w[m] += half * t[m] * inv_inertia[u]
+        half_kick(v, w, f, t, inv_mass, inv_inertia, half, np.uint64(i))
 
 
 @njit(cache=True)
