@@ -60,7 +60,8 @@ tangential spring's growth, 0 for the forces of the initial state), step_dt [s] 
 limit); slots (>= P, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at start[i] + k,
 used for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T, 3*BLOCK)
 uint64 (i, j and the spring's index of each contact of a block), block_rows (T, 2*BLOCK) int64 (rows waiting
-for their slots): scratch per chunk; out force, torque (N,3) [N, N m].
+for their slots): scratch per chunk; out force, torque (N,3) [N, N m]. The (N,3) arrays and hist
+must be C-contiguous: the kernels read them through flat views (kernels/layout.py).
 """
 
 import math

@@ -8,7 +8,8 @@ is tracked.
 Arguments: pos, vel, angvel, force, torque (N,3) [m, m/s, rad/s, N, N m];
 inv_mass, inv_inertia (N,) [1/kg, 1/(kg m^2)], zero for a particle that does not move;
 lower, length (3,) [m]; periodic (3,) uint8; dt [s]; ref_pos (N,3) [m] the positions at the
-last build of the neighbour list (kernels/neighbors.py).
+last build of the neighbour list (kernels/neighbors.py). The (N,3) arrays must be C-contiguous:
+the kernels read them through flat views (kernels/layout.py).
 """
 
 import math

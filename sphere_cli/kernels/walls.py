@@ -25,7 +25,8 @@ with particle i may be non-zero (W <= 64); record (W,) uint8: for the walls mark
 each particle's wall force in pforce (N,W,3) [N] (their reaction, summed by wall_totals);
 mode (W,2) int64 normal mode (FIXED, VELOCITY, STRESS) and shear mode (FIXED = none, VELOCITY,
 STRESS); control (W,NC) columns C_*; attached (K,) int64 particles glued to wall attached_wall
-(K,) int64.
+(K,) int64. The particles' (N,3) arrays must be C-contiguous: the contact kernel reads them
+through flat views (kernels/layout.py).
 """
 
 import math
