@@ -176,12 +176,14 @@ def wall_forces(
     pforce,
     springs,
     near,
+    reach,
     pieces,
     blocks,
     block_ids,
 ):
     """Add the forces and torques of W plane walls on the particles listed in `near` (every
-    particle that can touch a wall, see near_walls) to force/torque, and store those of the walls
+    particle that can touch a wall, see near_walls; reach (>= len(near),) uint64: bit w set where
+    near[m] can touch wall w, the only walls tested) to force/torque, and store those of the walls
     marked in record in pforce. springs (N,) uint64: bit w set where wall_hist[i, w] may be
     non-zero (kept up to date here), so a particle away from the walls reads one word instead of
     its W springs. The touching pairs go through blocks like the pair contacts (kernels/
@@ -218,10 +220,13 @@ def wall_forces(
             ri = radius[i]
             ci = np.uint64(0 if single else material[i])
             held = springs[i]
+            walls = reach[m]
             for wall in range(nw):
                 w = np.uint64(wall)  # unsigned indices: no negative-index wraparound code
-                touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
                 bit = np.uint64(1) << w
+                if not walls & bit:
+                    continue
+                touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
                 if not touching:
                     if held & bit:  # the contact has ended: its spring is gone
                         wall_hist[i, w, 0] = 0.0
@@ -282,27 +287,34 @@ def wall_forces(
 
 
 @njit(cache=True)
-def near_walls(pos, radius, inv_mass, wall_axis, wall_sign, wall_coord, margin, springs, wall_hist, near):
+def near_walls(
+    pos, radius, inv_mass, wall_axis, wall_sign, wall_coord, margin, springs, wall_hist, near, reach
+):
     """List in `near` the particles that move by forces and lie within their radius + margin
-    of some wall; return how many. A particle left out cannot touch a wall until it, or the
-    wall, has moved margin/2 (the caller rebuilds the list before that); its springs are
-    cleared here (a particle that jumped away within one step keeps none)."""
+    of some wall, and in `reach` (uint64) the bit mask of those walls; return how many. A wall
+    left out cannot touch the particle until it, or the wall, has moved margin/2 (the caller
+    rebuilds the list before that); its spring is cleared here (a particle that jumped away
+    within one step keeps none)."""
     count = 0
     for i in range(pos.shape[0]):
-        close = False
+        close = np.uint64(0)
         if inv_mass[i] != 0.0:
             for w in range(wall_axis.shape[0]):
                 gap = wall_sign[w] * (pos[i, wall_axis[w]] - wall_coord[w])
-                close = close or gap < radius[i] + margin
-        if close:
+                if gap < radius[i] + margin:
+                    close |= np.uint64(1) << np.uint64(w)
+        if close != 0:
             near[count] = i
+            reach[count] = close
             count += 1
-        elif springs[i] != 0:
-            springs[i] = 0
+        far = springs[i] & ~close
+        if far != 0:
+            springs[i] &= close
             for w in range(wall_axis.shape[0]):
-                wall_hist[i, w, 0] = 0.0
-                wall_hist[i, w, 1] = 0.0
-                wall_hist[i, w, 2] = 0.0
+                if far & (np.uint64(1) << np.uint64(w)):
+                    wall_hist[i, w, 0] = 0.0
+                    wall_hist[i, w, 1] = 0.0
+                    wall_hist[i, w, 2] = 0.0
     return count
 
 

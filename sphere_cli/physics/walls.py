@@ -243,6 +243,7 @@ class PlaneWallForces:
         # particle has moved half the neighbour skin since the neighbour list was built (the
         # list is rebuilt with it) and no wall has moved half the skin since this list was made
         self._near = np.zeros(0, dtype=np.int64)
+        self._reach = np.zeros(0, dtype=np.uint64)  # per listed particle, the walls it can touch
         self._near_count = 0
         self._near_build = -1
         self._near_coord = None
@@ -254,7 +255,11 @@ class PlaneWallForces:
 
     def scratch(self) -> list[np.ndarray]:
         """The arrays this module keeps besides the state (memory accounting)."""
-        return [a for a in (self._near, self._springs, self._blocks, self._block_ids) if a is not None]
+        return [
+            a
+            for a in (self._near, self._reach, self._springs, self._blocks, self._block_ids)
+            if a is not None
+        ]
 
     def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
         """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
@@ -275,8 +280,19 @@ class PlaneWallForces:
         ):
             if self._near.shape[0] != p.count:
                 self._near = np.zeros(p.count, dtype=np.int64)
+                self._reach = np.zeros(p.count, dtype=np.uint64)
             self._near_count = near_walls(
-                p.pos, p.radius, p.inv_mass, w.axis, w.sign, w.coord, nl.skin, springs, w.hist, self._near
+                p.pos,
+                p.radius,
+                p.inv_mass,
+                w.axis,
+                w.sign,
+                w.coord,
+                nl.skin,
+                springs,
+                w.hist,
+                self._near,
+                self._reach,
             )
             self._near_build = nl.builds
             self._near_coord = w.coord.copy()
@@ -308,10 +324,21 @@ class PlaneWallForces:
         springs = self._spring_mask(hist)
         near = self._near_walls(state, springs)
         p = state.particles
-        self._forces(state, spring_dt, hist, p.force, p.torque, springs, near, self._pieces)
+        self._forces(state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces)
 
     def _forces(
-        self, state: State, spring_dt, hist, force, torque, springs, near, pieces, record=None, pforce=None
+        self,
+        state: State,
+        spring_dt,
+        hist,
+        force,
+        torque,
+        springs,
+        near,
+        reach,
+        pieces,
+        record=None,
+        pforce=None,
     ) -> None:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
@@ -344,6 +371,7 @@ class PlaneWallForces:
             w.pforce if pforce is None else pforce,
             springs,
             near,
+            reach,
             pieces,
             self._blocks,
             self._block_ids,
@@ -360,10 +388,13 @@ class PlaneWallForces:
         pforce = np.zeros((p.count, len(w.faces), 3))
         scratch = np.zeros_like(p.force)
         hist = w.hist.copy()
-        springs = np.full(p.count, ~np.uint64(0), dtype=np.uint64)  # check every spring
+        every_wall = np.full(p.count, ~np.uint64(0), dtype=np.uint64)
+        springs = every_wall.copy()  # check every spring
         everyone = np.arange(p.count, dtype=np.int64)
         pieces = self._cut(everyone, hist)
-        self._forces(state, 0.0, hist, scratch, scratch.copy(), springs, everyone, pieces, every, pforce)
+        self._forces(
+            state, 0.0, hist, scratch, scratch.copy(), springs, everyone, every_wall, pieces, every, pforce
+        )
         wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
 
     def observables(self, state: State) -> dict:
