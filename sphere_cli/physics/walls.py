@@ -276,7 +276,10 @@ class PlaneWallForces:
         if (
             self._near_build != nl.builds
             or self._near_coord is None
-            or np.abs(w.coord - self._near_coord).max(initial=0.0) >= 0.5 * nl.skin
+            or (
+                w.coord.tobytes() != self._near_coord.tobytes()  # cheaper than the test below
+                and np.abs(w.coord - self._near_coord).max(initial=0.0) >= 0.5 * nl.skin
+            )
         ):
             if self._near.shape[0] != p.count:
                 self._near = np.zeros(p.count, dtype=np.int64)
