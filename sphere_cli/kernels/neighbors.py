@@ -25,6 +25,8 @@ caller sees count > C, grows the list and rebuilds (no contact is ever dropped s
 import numpy as np
 from numba import njit, prange
 
+from .layout import U1, U2, U3, flat
+
 
 @njit(cache=True, inline="always")
 def minimum_image(d, length, periodic):
@@ -76,6 +78,16 @@ def _axis_offsets(n, periodic):
     return np.array([-1, 0, 1], dtype=np.int64)
 
 
+@njit(cache=True, inline="always")
+def _wrap_cell(g, n, periodic):
+    """Cell g along an axis of n cells, wrapped if periodic; -1 if it lies off the grid."""
+    if g < 0 or g >= n:
+        if not periodic:
+            return -1
+        return (g + n) % n
+    return g
+
+
 @njit(cache=True, parallel=True)
 def build_lists(
     pos,
@@ -92,47 +104,66 @@ def build_lists(
     nbr,
     nbr_count,
 ):
-    """Fill the half rows nbr/nbr_count (their springs: carry_springs)."""
+    """Fill the half rows nbr/nbr_count (their springs: carry_springs). The cells are numbered
+    with z fastest, so the stencil's cells cz-1..cz+1 of each (x, y) column are one run of
+    `order`: 9 runs per particle instead of 27 cells (a second run where a periodic z wraps)."""
     n = pos.shape[0]
     cap = nbr.shape[1]
+    nz = ncell[2]
     offx = _axis_offsets(ncell[0], periodic[0])
     offy = _axis_offsets(ncell[1], periodic[1])
-    offz = _axis_offsets(ncell[2], periodic[2])
+    x = flat(pos)
+    # scalars, read once: the row stores could alias the arrays, which would be reloaded
+    lx, ly, lz = length[0], length[1], length[2]
+    px, py, pz = periodic[0] != 0, periodic[1] != 0, periodic[2] != 0
     for i in prange(n):
         c = cell_of[i]
-        cz = c % ncell[2]
-        cy = (c // ncell[2]) % ncell[1]
-        cx = c // (ncell[2] * ncell[1])
+        cz = c % nz
+        cy = (c // nz) % ncell[1]
+        cx = c // (nz * ncell[1])
+        # the z cells of the stencil: [z0, z1], and [z2, z2] where a periodic axis wraps
+        z0 = max(cz - 1, 0)
+        z1 = min(cz + 1, nz - 1)
+        z2 = -1
+        if periodic[2] and nz >= 3:
+            if cz == 0:
+                z2 = nz - 1
+            elif cz == nz - 1:
+                z2 = 0
+        i3 = U3 * np.uint64(i)
+        xi = x[i3]
+        yi = x[i3 + U1]
+        zi = x[i3 + U2]
+        ri = radius[i]
         count = 0
         for ox in offx:
-            gx = cx + ox
-            if gx < 0 or gx >= ncell[0]:
-                if not periodic[0]:
-                    continue
-                gx = (gx + ncell[0]) % ncell[0]
+            gx = _wrap_cell(cx + ox, ncell[0], periodic[0])
+            if gx < 0:
+                continue
             for oy in offy:
-                gy = cy + oy
-                if gy < 0 or gy >= ncell[1]:
-                    if not periodic[1]:
-                        continue
-                    gy = (gy + ncell[1]) % ncell[1]
-                for oz in offz:
-                    gz = cz + oz
-                    if gz < 0 or gz >= ncell[2]:
-                        if not periodic[2]:
-                            continue
-                        gz = (gz + ncell[2]) % ncell[2]
-                    g = (gx * ncell[1] + gy) * ncell[2] + gz
-                    for s in range(cell_start[g], cell_start[g + 1]):
+                gy = _wrap_cell(cy + oy, ncell[1], periodic[1])
+                if gy < 0:
+                    continue
+                column = (gx * ncell[1] + gy) * nz
+                for run in range(2):
+                    if run == 0:
+                        first = cell_start[column + z0]
+                        last = cell_start[column + z1 + 1]
+                    elif z2 >= 0:
+                        first = cell_start[column + z2]
+                        last = cell_start[column + z2 + 1]
+                    else:
+                        break
+                    for s in range(first, last):
                         j = order[s]
                         if j <= i:
                             continue
-                        d2 = 0.0
-                        for a in range(3):
-                            d = minimum_image(pos[j, a] - pos[i, a], length[a], periodic[a])
-                            d2 += d * d
-                        reach = radius[i] + radius[j] + skin
-                        if d2 < reach * reach:
+                        j3 = U3 * np.uint64(j)
+                        dx = minimum_image(x[j3] - xi, lx, px)
+                        dy = minimum_image(x[j3 + U1] - yi, ly, py)
+                        dz = minimum_image(x[j3 + U2] - zi, lz, pz)
+                        reach = ri + radius[j] + skin
+                        if dx * dx + dy * dy + dz * dz < reach * reach:
                             if count < cap:
                                 # insertion keeps the row sorted by j: a fixed summation order
                                 k = count
