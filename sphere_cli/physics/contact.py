@@ -48,6 +48,8 @@ def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray,
     bounds[c] <= i < bounds[c+1]), as (row, end of its chunk) (R,2) int64, and cuts (pieces+1,)
     int64 into them giving each piece about as many of those pairs (kernels/contact.py,
     cross_chunk_pairs)."""
+    if bounds.size == 2:  # one chunk holds every pair
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(pieces + 1, dtype=np.int64)
     end = bounds[np.searchsorted(bounds, np.arange(nbr.shape[0]), side="right")]
     pairs = np.count_nonzero(listed_slots(nbr, nbr_count) & (nbr >= end[:, None]), axis=1)
     crossing = np.flatnonzero(pairs)
