@@ -125,7 +125,7 @@ def build_lists(
         z0 = max(cz - 1, 0)
         z1 = min(cz + 1, nz - 1)
         z2 = -1
-        if periodic[2] and nz >= 3:
+        if pz and nz >= 3:
             if cz == 0:
                 z2 = nz - 1
             elif cz == nz - 1:
@@ -137,11 +137,11 @@ def build_lists(
         ri = radius[i]
         count = 0
         for ox in offx:
-            gx = _wrap_cell(cx + ox, ncell[0], periodic[0])
+            gx = _wrap_cell(cx + ox, ncell[0], px)
             if gx < 0:
                 continue
             for oy in offy:
-                gy = _wrap_cell(cy + oy, ncell[1], periodic[1])
+                gy = _wrap_cell(cy + oy, ncell[1], py)
                 if gy < 0:
                     continue
                 column = (gx * ncell[1] + gy) * nz
