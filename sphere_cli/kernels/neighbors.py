@@ -92,10 +92,8 @@ def _wrap_cell(g, n, periodic):
 def build_lists(
     pos,
     radius,
-    lower,
     length,
     periodic,
-    cell_size,
     ncell,
     cell_of,
     cell_start,
@@ -104,7 +102,8 @@ def build_lists(
     nbr,
     nbr_count,
 ):
-    """Fill the half rows nbr/nbr_count (their springs: carry_springs). The cells are numbered
+    """Fill the half rows nbr/nbr_count (their springs: carry_springs) from the cells of
+    cell_index and counting_sort (cell_of, cell_start, order). The cells are numbered
     with z fastest, so the stencil's cells cz-1..cz+1 of each (x, y) column are one run of
     `order`: 9 runs per particle instead of 27 cells (a second run where a periodic z wraps)."""
     n = pos.shape[0]

@@ -80,10 +80,8 @@ class NeighborSearch:
             build_lists(
                 p.pos,
                 p.radius,
-                box.lower,
                 box.length,
                 box.periodic,
-                self.cell_size,
                 self.ncell,
                 self.cell_of,
                 self.cell_start,
