@@ -15,6 +15,7 @@ import numpy as np
 from .build.scene import build_scene
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict
 from .config.schema import NON_PHYSICS_KEYS, Case
+from .cores import shared_cores_note
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
 from .io.checkpoint import newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
@@ -42,11 +43,23 @@ def schema() -> dict:
     return Case.model_json_schema()
 
 
-def _set_threads(case: Case) -> None:
-    if case.simulation.threads is not None:
-        import numba
+def _set_threads(case: Case) -> str | None:
+    """Set the run's thread count. Warns at once (stderr) when other busy processes share the
+    cores (sphere_cli/cores.py) and returns the warning for the run's log. Measured before any
+    kernel runs, so that no thread of this run counts as busy."""
+    import numba
 
+    if case.simulation.threads is not None:
         numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
+    note = shared_cores_note(numba.get_num_threads())
+    if note is not None:
+        print(f"sphere: warning: {note}", file=sys.stderr)
+    return note
+
+
+def _log_note(log, note: str | None) -> None:
+    if note is not None:
+        log.warning("%s", note)
 
 
 def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
@@ -158,7 +171,7 @@ def run(
     until: float | None = None,
 ) -> RunResult:
     loaded = _with_duration(load_case(case_path), until)
-    _set_threads(loaded.case)
+    note = _set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
     scene = build_scene(loaded)
@@ -168,6 +181,7 @@ def run(
     phash = physics_hash(resolved)
     log = rundir.logger()
     log.info("case %s -> %s", case_path, rundir.path)
+    _log_note(log, note)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
     output.first(scene)
@@ -186,7 +200,7 @@ def resume(
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     loaded = _with_duration(load_case(rundir.case), until)
-    _set_threads(loaded.case)
+    note = _set_threads(loaded.case)
     remove_stale_temporaries(rundir.checkpoints)
     log = rundir.logger()
     ck = newest_valid_checkpoint(rundir.checkpoints, log=log.warning)
@@ -212,6 +226,7 @@ def resume(
         )
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
+    _log_note(log, note)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.last_checkpoint = ck.path
     try:

@@ -27,6 +27,7 @@ import numpy as np
 
 from .build.scene import build_scene
 from .config.load import parse_case
+from .cores import shared_cores_note
 from .io.checkpoint import newest_valid_checkpoint
 from .simulation import advance
 
@@ -144,6 +145,11 @@ def run_benchmark(
     out_dir.mkdir(parents=True, exist_ok=True)
     max_threads = numba.config.NUMBA_NUM_THREADS
     results = {"machine": _machine(), "steps": steps, "repeats": repeats, "rows": []}
+    # sampled before any kernel runs, so that no thread of the benchmark counts as busy
+    note = shared_cores_note(min(max(threads, default=1), max_threads))
+    results["shared_cores_note"] = note
+    if note is not None:
+        log(f"warning: {note}")
     t0 = time.perf_counter()
     warm = build_scene(parse_case(canonical_case(64)))
     advance(warm, 1)

@@ -1,0 +1,83 @@
+"""The warning before a run whose OpenMP threads would share their cores with other busy
+processes (sphere_cli/cores.py): when it is given, how the busy cores are counted, and that a
+real busy process is seen."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from sphere_cli.cores import busy_cores, measure_busy_cores, shared_cores_note
+
+# first lines of /proc/stat: user nice system idle iowait irq softirq steal guest guest_nice
+LINE = "cpu  {user} 0 {system} {idle} {iowait} 0 {softirq} {steal} 0 0\nintr 1 2 3\n"
+
+
+def stat(user=0, system=0, idle=0, iowait=0, softirq=0, steal=0) -> str:
+    return LINE.format(user=user, system=system, idle=idle, iowait=iowait, softirq=softirq, steal=steal)
+
+
+def test_busy_cores_counts_user_system_and_interrupts_only():
+    cores = os.cpu_count() or 1
+    before = stat(100, 50, 1000, 10, 5, 7)
+    # 40 + 20 + 10 of 200 ticks busy; idle 100, iowait 20 and steal 10 are not
+    after = stat(140, 70, 1100, 30, 15, 17)
+    assert busy_cores(before, after) == pytest.approx(cores * 70 / 200)
+    assert busy_cores(before, before) == 0.0
+
+
+@pytest.mark.parametrize(
+    "threads, cores, busy, expected",
+    [
+        (1, 2, 2.0, False),  # one thread never waits for another
+        (2, 2, 0.0, False),
+        (2, 2, 0.4, False),  # noise, within the margin
+        (2, 2, 1.0, True),  # one busy process on one of our two cores
+        (2, 4, 2.0, False),  # it leaves two cores free
+        (4, 4, 1.0, True),
+        (8, 64, 56.0, False),
+        (8, 64, 57.0, True),
+    ],
+)
+def test_the_note_is_given_when_busy_processes_leave_fewer_free_cores_than_threads(
+    threads, cores, busy, expected
+):
+    note = shared_cores_note(threads, cores=cores, busy=busy, wait_policy="", layer="default")
+    assert (note is not None) is expected
+    if expected:
+        assert "OMP_WAIT_POLICY=PASSIVE" in note and f"{busy:.1f}" in note and f"{threads} threads" in note
+
+
+@pytest.mark.parametrize("policy", ["PASSIVE", "passive", " Passive "])
+def test_no_note_with_the_passive_wait_policy(policy):
+    assert shared_cores_note(2, cores=2, busy=2.0, wait_policy=policy, layer="default") is None
+    assert shared_cores_note(2, cores=2, busy=2.0, wait_policy="ACTIVE", layer="default") is not None
+
+
+@pytest.mark.parametrize(
+    "layer, expected", [("workqueue", False), ("tbb", False), ("omp", True), ("default", True)]
+)
+def test_no_note_for_threading_layers_that_do_not_spin(layer, expected):
+    note = shared_cores_note(2, cores=2, busy=2.0, wait_policy="", layer=layer)
+    assert (note is not None) is expected
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="reads /proc/stat (Linux)")
+def test_a_busy_process_on_every_core_is_seen():
+    cores = os.cpu_count() or 1
+    spin = "import time\nend = time.time() + 5\nwhile time.time() < end: pass\n"
+    children = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(cores)]
+    try:
+        time.sleep(0.3)  # let them start
+        busy = measure_busy_cores(0.5)
+    finally:
+        for child in children:
+            child.kill()
+            child.wait()
+    # every core runs one spinning child; the bound leaves 40 % to a hypervisor's steal, which
+    # is not counted as busy
+    assert busy is not None and busy >= 0.6 * cores
