@@ -43,14 +43,19 @@ def schema() -> dict:
     return Case.model_json_schema()
 
 
-def _set_threads(case: Case) -> str | None:
-    """Set the run's thread count. Warns at once (stderr) when other busy processes share the
-    cores (sphere_cli/cores.py) and returns the warning for the run's log. Measured before any
-    kernel runs, so that no thread of this run counts as busy."""
+def _set_threads(case: Case) -> None:
+    if case.simulation.threads is not None:
+        import numba
+
+        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
+
+
+def _shared_cores_warning() -> str | None:
+    """Warn at once (stderr) when other busy processes share the run's cores
+    (sphere_cli/cores.py); returns the warning for the run's log. Called once the command is
+    known to go ahead and before any kernel runs, so that no thread of this run counts as busy."""
     import numba
 
-    if case.simulation.threads is not None:
-        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
     note = shared_cores_note(numba.get_num_threads())
     if note is not None:
         print(f"sphere: warning: {note}", file=sys.stderr)
@@ -171,9 +176,10 @@ def run(
     until: float | None = None,
 ) -> RunResult:
     loaded = _with_duration(load_case(case_path), until)
-    note = _set_threads(loaded.case)
+    _set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
+    note = _shared_cores_warning()
     scene = build_scene(loaded)
     rundir.prepare_new(overwrite)
     rundir.case.write_text(loaded.text, encoding="utf-8")
@@ -200,7 +206,7 @@ def resume(
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     loaded = _with_duration(load_case(rundir.case), until)
-    note = _set_threads(loaded.case)
+    _set_threads(loaded.case)
     remove_stale_temporaries(rundir.checkpoints)
     log = rundir.logger()
     ck = newest_valid_checkpoint(rundir.checkpoints, log=log.warning)
@@ -224,6 +230,7 @@ def resume(
             f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
+    note = _shared_cores_warning()
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
     _log_note(log, note)

@@ -17,7 +17,8 @@ from cli_test_support import TINY, edit, sphere_inproc
 )
 def test_sphere_run_warns_on_stderr_and_in_its_log(tmp_path, monkeypatch):
     """A 2-thread run started while every core is busy: the warning comes at once on stderr and
-    stays in run.log; with OMP_WAIT_POLICY=PASSIVE neither has it."""
+    stays in run.log; a command refused (a run directory that exists) gives only its error; with
+    OMP_WAIT_POLICY=PASSIVE neither has it."""
     case = edit(TINY, "[simulation]\n", "[simulation]\nthreads = 2\n")
     case = edit(case, "duration = 0.002", "duration = 0.0002")
     (tmp_path / "case.toml").write_text(case)
@@ -28,6 +29,7 @@ def test_sphere_run_warns_on_stderr_and_in_its_log(tmp_path, monkeypatch):
     try:
         time.sleep(0.3)
         busy = sphere_inproc("run", "case.toml", "-o", "busy", "-q", cwd=tmp_path)
+        refused = sphere_inproc("run", "case.toml", "-o", "busy", "-q", cwd=tmp_path)
     finally:
         for child in children:
             child.kill()
@@ -35,6 +37,8 @@ def test_sphere_run_warns_on_stderr_and_in_its_log(tmp_path, monkeypatch):
     assert busy.code == 0, busy.stderr
     assert "sphere: warning: other processes keep" in busy.stderr
     assert "OMP_WAIT_POLICY=PASSIVE" in (tmp_path / "busy" / "run.log").read_text()
+    assert refused.code != 0 and "sphere: error:" in refused.stderr
+    assert "warning" not in refused.stderr
 
     monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")
     calm = sphere_inproc("run", "case.toml", "-o", "calm", "-q", cwd=tmp_path)
