@@ -1,13 +1,18 @@
 """Checkpoints: everything a bitwise restart needs, written atomically and checksummed.
 
 RUN_DIR/checkpoints/ckpt-<step>.h5 holds /sphere/state/<module>/<array> (fletcher32 on every
-chunk), the clock, the case text and its physics hash, and `complete = 1` written last. The
-file is built under a temporary name, fsynced and renamed, so a kill at any moment leaves the
-previous checkpoints untouched. The newest K are kept.
+chunk), the clock, the case text and its physics hash, `complete = 1`, and `digest`: a SHA-256
+of every other attribute and every dataset (name, dtype, shape and bytes), so that a changed
+`step`, `dt` or scalar, which no chunk checksum covers, is found too. The file is built under a
+temporary name, fsynced and renamed, so a kill at any moment leaves the previous checkpoints
+untouched. The newest K are kept. Reading verifies everything before anything is trusted; any
+failure to read makes the file invalid (the caller falls back to an older one).
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 import re
 from dataclasses import dataclass
@@ -19,7 +24,7 @@ import numpy as np
 from ..errors import OutputError
 from .atomic import publish
 
-FORMAT = 1
+FORMAT = 2  # 2: with the digest
 NAME = re.compile(r"^ckpt-(\d{12})\.h5$")
 
 
@@ -52,47 +57,72 @@ def write_checkpoint(
     state = scene.state
     final = checkpoint_path(directory, state.clock.step)
     tmp = directory / f".{final.name}.tmp"
+    image = _checkpoint_image(scene, case_text, resolved, physics_hash)
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["step"] = state.clock.step
-            f.attrs["time"] = state.clock.time
-            f.attrs["dt"] = state.clock.dt
-            f.attrs["physics_hash"] = physics_hash
-            f.attrs["case_toml"] = case_text
-            f.attrs["resolved_case"] = json.dumps(resolved)
-            root = f.create_group("sphere/state")
-            for module_name, module in scene.stateful_modules.items():
-                group = root.create_group(module_name)
-                for name, array in module.prognostic_state(state).items():
-                    array = np.asarray(array)
-                    if array.ndim == 0 or array.size == 0:
-                        group.create_dataset(name, data=array)
-                    else:
-                        group.create_dataset(name, data=array, fletcher32=True, chunks=True)
-            f.attrs["complete"] = 1
+        write_file(tmp, image)
         publish(tmp, final)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise OutputError(f"{final}: cannot write checkpoint ({exc})") from None
+        raise OutputError(f"{final}: cannot write checkpoint ({exc.strerror or exc})") from None
     for old in list_checkpoints(directory)[:-keep]:
         old.unlink(missing_ok=True)
     return final
 
 
+def _checkpoint_image(scene, case_text: str, resolved: dict, physics_hash: str) -> bytes:
+    """The checkpoint file's bytes, built in memory: HDF5 never writes to the disk itself, so a
+    full disk is one clean OSError of the plain write (inside HDF5 it ends in a crash)."""
+    state = scene.state
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["step"] = state.clock.step
+        f.attrs["time"] = state.clock.time
+        f.attrs["dt"] = state.clock.dt
+        f.attrs["physics_hash"] = physics_hash
+        f.attrs["case_toml"] = case_text
+        f.attrs["resolved_case"] = json.dumps(resolved)
+        root = f.create_group("sphere/state")
+        for module_name, module in scene.stateful_modules.items():
+            group = root.create_group(module_name)
+            for name, array in module.prognostic_state(state).items():
+                array = np.asarray(array)
+                if array.ndim == 0 or array.size == 0:
+                    group.create_dataset(name, data=array)
+                else:
+                    group.create_dataset(name, data=array, fletcher32=True, chunks=True)
+        f.attrs["complete"] = 1
+    with h5py.File(buffer, "r+") as f:
+        f.attrs["digest"] = _digest(f)
+    return buffer.getvalue()
+
+
+def write_file(path: Path, data: bytes) -> None:
+    with open(path, "wb") as out:
+        out.write(data)
+
+
 def read_checkpoint(path: Path) -> CheckpointData:
-    """Read and verify a checkpoint: every chunk's checksum, and the completion mark."""
+    """Read and verify a checkpoint: the completion mark, the format, the digest of every
+    attribute and dataset, and (while reading) every chunk's checksum."""
     try:
         with h5py.File(path, "r") as f:
-            if int(f.attrs.get("complete", 0)) != 1 or int(f.attrs.get("format", -1)) != FORMAT:
-                raise OutputError(f"{path}: incomplete or unknown checkpoint format")
+            if int(f.attrs.get("complete", 0)) != 1:
+                raise OutputError(f"{path}: incomplete checkpoint")
+            if int(f.attrs.get("format", -1)) != FORMAT:
+                raise OutputError(f"{path}: checkpoint format {f.attrs.get('format')} is not {FORMAT}")
+            if str(f.attrs.get("digest", "")) != _digest(f):
+                raise OutputError(f"{path}: digest mismatch (an attribute or dataset was changed)")
+            step = int(f.attrs["step"])
+            if NAME.match(path.name) and int(NAME.match(path.name).group(1)) != step:
+                raise OutputError(f"{path}: holds step {step}, not the step of its name")
             arrays = {}
             for module_name, group in f["sphere/state"].items():
                 arrays[module_name] = {name: ds[()] for name, ds in group.items()}
             return CheckpointData(
                 path=path,
-                step=int(f.attrs["step"]),
+                step=step,
                 dt=float(f.attrs["dt"]),
                 physics_hash=str(f.attrs["physics_hash"]),
                 case_text=str(f.attrs["case_toml"]),
@@ -101,8 +131,37 @@ def read_checkpoint(path: Path) -> CheckpointData:
             )
     except OutputError:
         raise
-    except (OSError, KeyError, ValueError) as exc:
-        raise OutputError(f"{path}: unreadable or corrupt checkpoint ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - a damaged file can fail in any way inside h5py
+        raise OutputError(f"{path}: unreadable or corrupt checkpoint ({type(exc).__name__}: {exc})") from None
+
+
+def _digest(f: h5py.File) -> str:
+    """SHA-256 of every attribute (but the digest) and every dataset, in name order."""
+    sha = hashlib.sha256()
+
+    def add(kind: str, name: str, value) -> None:
+        if isinstance(value, bytes | str):
+            data, form = (value.encode() if isinstance(value, str) else value), "str"
+        else:
+            array = np.ascontiguousarray(value)
+            data, form = array.tobytes(), f"{array.dtype.str}{array.shape}"
+        sha.update(f"{kind}:{name}:{form}:{len(data)}:".encode())
+        sha.update(data)
+
+    def attributes(name: str, obj) -> None:
+        for key in sorted(obj.attrs):
+            if not (name == "/" and key == "digest"):
+                add("attr", f"{name}@{key}", obj.attrs[key])
+
+    names: list[str] = []
+    f.visit(names.append)
+    attributes("/", f)
+    for name in sorted(names):
+        obj = f[name]
+        attributes(name, obj)
+        if isinstance(obj, h5py.Dataset):
+            add("data", name, obj[()])
+    return sha.hexdigest()
 
 
 def newest_valid_checkpoint(directory: Path, log=None) -> CheckpointData | None:

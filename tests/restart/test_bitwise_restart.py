@@ -16,10 +16,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from restart_support import CASE, assert_same_state, final_state, frames, step_dt
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
-from sphere_cli.config.load import load_case
 from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 
@@ -27,100 +26,55 @@ CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
 STEPS = 240
 
 
-def _dt(case_path: Path) -> float:
-    return build_scene(load_case(case_path)).state.clock.dt
-
-
-def _final_state(run_dir: Path) -> dict:
-    return read_checkpoint(list_checkpoints(run_dir / "checkpoints")[-1]).arrays
-
-
-def _assert_same_state(a: dict, b: dict) -> None:
-    assert a.keys() == b.keys()
-    for module in a:
-        assert a[module].keys() == b[module].keys()
-        for name in a[module]:
-            assert np.array_equal(a[module][name], b[module][name]), f"{module}/{name} differs"
-
-
-def _frames(run_dir: Path) -> dict[int, np.ndarray]:
-    with h5py.File(run_dir / "trajectory.h5", "r") as f:
-        g = f["particles/trajectory/position"]
-        return {int(s): v for s, v in zip(g["step"][...], g["value"][...], strict=True)}
-
-
 @pytest.mark.parametrize("config", CONFIGS, ids=[c.stem for c in CONFIGS])
 def test_resume_is_bitwise_identical(config: Path, tmp_path: Path):
-    dt = _dt(config)
+    dt = step_dt(config)
     end = STEPS * dt
     whole = api.run(config, tmp_path / "whole", until=end)
     api.run(config, tmp_path / "split", until=0.5 * end)
     split = api.resume(tmp_path / "split", until=end)
     assert whole.step == split.step == STEPS
-    _assert_same_state(_final_state(tmp_path / "whole"), _final_state(tmp_path / "split"))
-    a, b = _frames(tmp_path / "whole"), _frames(tmp_path / "split")
+    assert_same_state(final_state(tmp_path / "whole"), final_state(tmp_path / "split"))
+    a, b = frames(tmp_path / "whole"), frames(tmp_path / "split")
     for step in a.keys() & b.keys():
         assert np.array_equal(a[step], b[step])
     assert a.keys() <= b.keys()
 
 
-CASE = """
-    [simulation]
-    duration = {duration}
-    [domain]
-    upper = [0.01, 0.01, 0.02]
-    [particles]
-    count = 40
-    density = 2500.0
-    radius = {{ distribution = "uniform", min = 0.0007, max = 0.0009 }}
-    [contact]
-    model = "linear"
-    normal_stiffness = 1.0e4
-    [[walls]]
-    face = "z-"
-    [output.frames]
-    every_steps = 50
-    [output.checkpoints]
-    every_steps = 100
-    keep = 3
-"""
-
 # Runs the case in a child process that SIGKILLs itself while writing the checkpoint of step
-# 300: after `datasets` arrays of that checkpoint are on disk, or just before the rename.
+# 300: after `part` of its bytes are on disk (the file is built in memory, then written), or
+# just before the rename.
 KILLER = """
 import os, signal, sys
-import h5py
-from sphere_cli import api
 from sphere_cli.io import checkpoint
 
-target, datasets = int(sys.argv[3]), int(sys.argv[4])
-original_create = h5py.Group.create_dataset
+target, part = int(sys.argv[3]), float(sys.argv[4])
+original_write = checkpoint.write_file
 original_publish = checkpoint.publish
-written = [0]
 
-def create_dataset(self, name, *args, **kwargs):
-    if f"{target:012d}" in self.file.filename:
-        written[0] += 1
-        if datasets and written[0] > datasets:
-            os.kill(os.getpid(), signal.SIGKILL)
-    return original_create(self, name, *args, **kwargs)
+def write_file(path, data):
+    if f"{target:012d}" in path.name and part:
+        original_write(path, data[: int(part * len(data))])
+        os.kill(os.getpid(), signal.SIGKILL)
+    original_write(path, data)
 
 def publish(tmp, final):
-    if f"{target:012d}" in final.name and not datasets:
+    if f"{target:012d}" in final.name and not part:
         os.kill(os.getpid(), signal.SIGKILL)
     original_publish(tmp, final)
 
-h5py.Group.create_dataset = create_dataset
+checkpoint.write_file = write_file
 checkpoint.publish = publish
+from sphere_cli import api
 api.run(sys.argv[1], sys.argv[2])
 """
 
 
-@pytest.mark.parametrize("datasets", [0, 3], ids=["before-rename", "mid-write"])
-def test_kill_during_checkpoint_write(tmp_path: Path, datasets: int):
+@pytest.mark.parametrize("part", [0, 0.6], ids=["before-rename", "mid-write"])
+def test_kill_during_checkpoint_write(tmp_path: Path, part: float):
     dt_case = tmp_path / "probe.toml"
     dt_case.write_text(textwrap.dedent(CASE.format(duration=1.0)))
-    dt = _dt(dt_case)
+    dt = step_dt(dt_case)
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(CASE.format(duration=repr(400 * dt))))
     api.run(case, tmp_path / "whole")
@@ -128,7 +82,7 @@ def test_kill_during_checkpoint_write(tmp_path: Path, datasets: int):
     script = tmp_path / "killer.py"
     script.write_text(KILLER)
     child = subprocess.run(
-        [sys.executable, str(script), str(case), str(tmp_path / "killed"), "300", str(datasets)],
+        [sys.executable, str(script), str(case), str(tmp_path / "killed"), "300", str(part)],
         capture_output=True,
         text=True,
         env=os.environ.copy(),
@@ -140,7 +94,7 @@ def test_kill_during_checkpoint_write(tmp_path: Path, datasets: int):
 
     result = api.resume(tmp_path / "killed")
     assert result.step == 400
-    _assert_same_state(_final_state(tmp_path / "whole"), _final_state(tmp_path / "killed"))
+    assert_same_state(final_state(tmp_path / "whole"), final_state(tmp_path / "killed"))
     assert not list((tmp_path / "killed" / "checkpoints").glob(".*.tmp"))
 
 
@@ -152,7 +106,7 @@ def test_changed_skin_on_resume_is_still_bitwise(tmp_path: Path):
     )
     probe = tmp_path / "probe.toml"
     probe.write_text(textwrap.dedent(low.format(duration=1.0)))
-    dt = _dt(probe)
+    dt = step_dt(probe)
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(low.format(duration=repr(4000 * dt))))  # the bed has landed
     api.run(case, tmp_path / "whole")
@@ -160,7 +114,7 @@ def test_changed_skin_on_resume_is_still_bitwise(tmp_path: Path):
     edited = tmp_path / "split" / "case.toml"
     edited.write_text(edited.read_text().replace("[simulation]", "[simulation]\nneighbor_skin = 1.5"))
     api.resume(tmp_path / "split")
-    whole, split = _final_state(tmp_path / "whole"), _final_state(tmp_path / "split")
+    whole, split = final_state(tmp_path / "whole"), final_state(tmp_path / "split")
     for module in ("particles", "walls"):
         for name in whole[module]:
             assert np.array_equal(whole[module][name], split[module][name]), f"{module}/{name}"
@@ -212,12 +166,12 @@ def test_hertz_mixture_with_contacts_resumes_bitwise(tmp_path: Path):
     carry tangential springs: the resumed run ends bitwise equal to the uninterrupted one."""
     probe = tmp_path / "probe.toml"
     probe.write_text(textwrap.dedent(HERTZ_CASE.format(duration=1.0)))
-    dt = _dt(probe)
+    dt = step_dt(probe)
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(HERTZ_CASE.format(duration=repr(6000 * dt))))
     api.run(case, tmp_path / "whole")
     api.run(case, tmp_path / "split", until=4500 * dt)
-    middle = _final_state(tmp_path / "split")
+    middle = final_state(tmp_path / "split")
     assert set(middle["particles"]["material"]) == {0, 1}
     with h5py.File(tmp_path / "split" / "trajectory.h5", "r") as f:  # H5MD species = material id
         species = f["particles/trajectory/species"]
@@ -226,7 +180,7 @@ def test_hertz_mixture_with_contacts_resumes_bitwise(tmp_path: Path):
     assert np.count_nonzero(middle["neighbors"]["hist"]) > 40  # springs in play at the stop
     assert np.count_nonzero(middle["walls"]["hist"]) > 4
     api.resume(tmp_path / "split")
-    whole, split = _final_state(tmp_path / "whole"), _final_state(tmp_path / "split")
+    whole, split = final_state(tmp_path / "whole"), final_state(tmp_path / "split")
     for module in ("particles", "walls"):
         for name in whole[module]:
             assert np.array_equal(whole[module][name], split[module][name]), f"{module}/{name}"
