@@ -17,10 +17,12 @@ from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolv
 from .config.schema import NON_PHYSICS_KEYS, Case
 from .cores import shared_cores_note
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
-from .io.checkpoint import newest_valid_checkpoint, remove_stale_temporaries
+from .io.atomic import write_text_atomic
+from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
+from .io.trajectory import TrajectoryLocked, TrajectoryLost
 from .simulation import Loop, StopFlag, end_step_for
 
 
@@ -158,6 +160,9 @@ def _drive(
         log.error("%s", exc)
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
         raise
+    except OutputError as exc:
+        log.error("%s", exc)
+        raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
         raise
@@ -181,18 +186,35 @@ def run(
     rundir.check_new(overwrite)
     note = _shared_cores_warning()
     scene = build_scene(loaded)
-    rundir.prepare_new(overwrite)
-    rundir.case.write_text(loaded.text, encoding="utf-8")
+    rundir.prepare_new(overwrite, Path(case_path))
+    try:
+        try:
+            write_text_atomic(rundir.case, loaded.text)
+            log = rundir.logger()
+            log.info("case %s -> %s", case_path, rundir.path)
+            if rundir.replaced is not None:
+                log.info("the run replaced is kept at %s until the first checkpoint", rundir.replaced)
+            _log_note(log, note)
+            output = start_output(scene, rundir, loaded, log)
+        except BaseException:
+            rundir.abandon_new()
+            raise
+        return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+    finally:
+        rundir.close_logger()
+        rundir.unlock()
+
+
+def start_output(scene, rundir: RunDirectory, loaded: LoadedCase, log) -> RunOutput:
+    """A new trajectory with the starting frame, and the first checkpoint (from then on the run
+    can be resumed)."""
     resolved = resolved_dict(loaded.case)
     phash = physics_hash(resolved)
-    log = rundir.logger()
-    log.info("case %s -> %s", case_path, rundir.path)
-    _log_note(log, note)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
     output.first(scene)
     output.checkpoint(scene)
-    return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+    return output
 
 
 def resume(
@@ -205,18 +227,37 @@ def resume(
     rundir = RunDirectory(Path(run_dir))
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
+    rundir.lock()
+    try:
+        return _resume_locked(rundir, until, max_wall_time, handle_signals, show_progress)
+    finally:
+        rundir.close_logger()
+        rundir.unlock()
+
+
+def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, show_progress) -> RunResult:
     loaded = _with_duration(load_case(rundir.case), until)
     _set_threads(loaded.case)
+    if rundir.xdmf.exists() and not rundir.xdmf.is_file():
+        raise OutputError(f"{rundir.xdmf}: is not a file; remove or rename it, then resume again")
     remove_stale_temporaries(rundir.checkpoints)
     log = rundir.logger()
     ck = newest_valid_checkpoint(rundir.checkpoints, log=log.warning)
+    if ck is None and not list_checkpoints(rundir.checkpoints):
+        # stopped before its first checkpoint: nothing was computed that a new start would not redo
+        log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
+        fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
+        fresh = _with_duration(fresh, until)
+        note = _shared_cores_warning()
+        scene = build_scene(fresh)
+        _log_note(log, note)
+        output = start_output(scene, rundir, fresh, log)
+        return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
     if ck is None:
-        rundir.close_logger()
         raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
     resolved = resolved_dict(loaded.case)
     phash = physics_hash(resolved)
     if phash != ck.physics_hash:
-        rundir.close_logger()
         changed = ", ".join(_changed_keys(ck.resolved, resolved)) or "(unknown)"
         raise ResumeRefused(
             f"{rundir.case}: changed in a way that alters the physics since {ck.path.name} was written "
@@ -225,7 +266,6 @@ def resume(
         )
     old_fields = ck.resolved["output"]["fields"]
     if loaded.case.output.fields != old_fields:
-        rundir.close_logger()
         raise ResumeRefused(
             f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
             "the trajectory file holds the original fields. Restore them, or start a new run."
@@ -238,13 +278,17 @@ def resume(
     output.last_checkpoint = ck.path
     try:
         output.trajectory.truncate_after(ck.step)
-        output.trajectory.record_resume(ck.step, provenance())
+    except TrajectoryLocked:
+        raise
     except OutputError as exc:
-        aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
-        rundir.trajectory_path.rename(aside)
-        log.warning("%s; moved it to %s and started a new trajectory file", exc, aside.name)
+        if not isinstance(exc, TrajectoryLost):
+            aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
+            rundir.trajectory_path.rename(aside)
+            exc = f"{exc}; moved it to {aside.name}"
+        log.warning("%s: a new trajectory file starts at %s", exc, ck.path.name)
         output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
         output.first(scene)
+    output.trajectory.record_resume(ck.step, provenance())
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
 
 

@@ -54,3 +54,9 @@ class MissingDependency(SphereError):
     """An optional package a command needs is not installed (EX_UNAVAILABLE)."""
 
     exit_code = 69
+
+
+class RunBusy(SphereError):
+    """Another process holds the run directory's writer lock (EX_CANTCREAT)."""
+
+    exit_code = 73

@@ -5,6 +5,7 @@ A crash or kill at any point leaves either the old file or the new one, never a 
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -26,5 +27,28 @@ def publish(tmp: Path, final: Path) -> None:
 
 def write_text_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    publish(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        publish(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# Room left beyond a write's own bytes: HDF5 adds chunk indices and metadata as a file grows.
+FREE_SPACE_MARGIN = 1 << 20
+
+
+def require_free_space(path: Path, nbytes: int) -> None:
+    """Raise OSError(ENOSPC) before a write into the HDF5 library that would not fit: HDF5 meets
+    a full disk in the middle of its own writes and then crashes the process, where a plain write
+    fails cleanly."""
+    stats = os.statvfs(path.parent)
+    free = stats.f_bavail * stats.f_frsize
+    need = 2 * nbytes + FREE_SPACE_MARGIN
+    if free < need:
+        raise OSError(
+            errno.ENOSPC,
+            f"No space left on device: {free / 2**20:.1f} MiB free, "
+            f"the write needs about {need / 2**20:.1f} MiB",
+        )

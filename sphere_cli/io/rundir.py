@@ -1,72 +1,186 @@
 """The run directory: case copy, trajectory + XDMF, checkpoints, status.json and run.log.
 
+RUN_DIR/.sphere-run        marker: written first, names the directory as sphere's; the lock file
 RUN_DIR/case.toml          the case as given (edit non-physics keys here before `resume`)
 RUN_DIR/trajectory.h5      frames and observables (H5MD)
 RUN_DIR/trajectory.xmf     ParaView sidecar
 RUN_DIR/checkpoints/       ckpt-<step>.h5, newest K kept
 RUN_DIR/status.json        progress for batch monitoring, rewritten atomically
 RUN_DIR/run.log            what happened, appended by every run and resume
+RUN_DIR/plots/             the figures of `sphere plot`
+
+One process writes a run directory at a time: `run` and `resume` hold an exclusive lock
+(flock) on the marker from start to end, and a second writer is refused (RunBusy). Readers
+take no lock. `--overwrite` replaces only a directory that sphere wrote (the marker, and no
+file sphere did not write), moves it aside rather than deleting it, and deletes it only once
+the new run has published its first checkpoint.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import logging
+import os
+import re
 import shutil
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..errors import OutputError, UsageError
+from ..errors import OutputError, RunBusy, UsageError
 from ..physics.fluid import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
+from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
 from .trajectory import Trajectory, is_grid_field
 from .xdmf import write_xdmf
 
-MARKERS = ("case.toml", "trajectory.h5", "checkpoints", "status.json")
+MARKER = ".sphere-run"
+# what sphere writes at the top of a run directory (atomic writes leave ".<name>.tmp" for an instant)
+OWN_FILES = re.compile(
+    r"^(\.sphere-run|case\.toml|trajectory\.h5|trajectory\.xmf|status\.json|run\.log"
+    r"|trajectory\.unreadable-\d+\.h5|\.(case\.toml|trajectory\.xmf|status\.json)\.tmp)$"
+)
+OWN_FOLDERS = {
+    "checkpoints": lambda name: bool(CHECKPOINT_NAME.match(name) or re.match(r"^\.ckpt-\d+\.h5\.tmp$", name)),
+    "plots": lambda name: name.endswith(".png"),
+}
 
 
 class RunDirectory:
     def __init__(self, path: Path):
         self.path = Path(path)
+        self.marker = self.path / MARKER
         self.case = self.path / "case.toml"
         self.trajectory_path = self.path / "trajectory.h5"
         self.xdmf = self.path / "trajectory.xmf"
         self.checkpoints = self.path / "checkpoints"
         self.status_path = self.path / "status.json"
         self.log_path = self.path / "run.log"
+        self._lock_fd: int | None = None
+        # the old run moved aside by --overwrite, kept until the new run's first checkpoint
+        self.replaced: Path | None = None
 
     def is_run(self) -> bool:
         return self.case.is_file()
 
     def check_new(self, overwrite: bool) -> None:
-        """Refuse, before any work, to clobber an existing run unless told to."""
+        """Refuse, before any work, to clobber an existing run unless told to, and to let
+        --overwrite touch anything that is not a sphere run."""
         p = self.path
         if p.exists() and not p.is_dir():
             raise OutputError(f"{p}: exists and is not a directory")
-        if p.is_dir() and any(p.iterdir()):
-            if not overwrite:
-                raise UsageError(
-                    f"{p}: the run directory exists and is not empty; choose another with -o, "
-                    "continue it with `sphere resume`, or pass --overwrite to replace it"
-                )
-            if not any((p / m).exists() for m in MARKERS):
-                raise UsageError(f"{p}: --overwrite refused: this directory does not look like a sphere run")
+        if not (p.is_dir() and any(p.iterdir())):
+            return
+        if not overwrite:
+            raise UsageError(
+                f"{p}: the run directory exists and is not empty; choose another with -o, "
+                "continue it with `sphere resume`, or pass --overwrite to replace it"
+            )
+        _refuse_special(p)
+        marked = self.marker.is_file()
+        foreign = self.foreign_entries() if marked else sorted(e.name for e in p.iterdir())
+        shown = ", ".join(foreign[:8]) + (f" and {len(foreign) - 8} more" if len(foreign) > 8 else "")
+        if not marked:
+            raise UsageError(
+                f"{p}: --overwrite refused: sphere did not create this directory as a run directory "
+                f"(it has no {MARKER} marker) and it holds {shown}; remove it yourself or choose "
+                "another with -o"
+            )
+        if foreign:
+            raise UsageError(
+                f"{p}: --overwrite refused: the directory holds files sphere did not write ({shown}); "
+                "move them elsewhere or choose another run directory with -o"
+            )
 
-    def prepare_new(self, overwrite: bool) -> None:
+    def foreign_entries(self) -> list[str]:
+        """Entries of the directory that sphere did not write, as paths relative to it."""
+        foreign = []
+        for entry in sorted(self.path.iterdir()):
+            own_folder = OWN_FOLDERS.get(entry.name)
+            if own_folder is not None and entry.is_dir() and not entry.is_symlink():
+                inside = sorted(e.name for e in entry.iterdir())
+                foreign += [f"{entry.name}/{name}" for name in inside if not own_folder(name)]
+            elif not (OWN_FILES.match(entry.name) and entry.is_file() and not entry.is_symlink()):
+                foreign.append(entry.name + ("/" if entry.is_dir() else ""))
+        return foreign
+
+    def prepare_new(self, overwrite: bool, case_path: Path | None = None) -> None:
+        """Create the directory, its marker (locked for this process) and checkpoints/. With
+        --overwrite the old run is first locked (refused if in use) and moved aside."""
         p = self.path
         self.check_new(overwrite)
         if p.is_dir() and any(p.iterdir()):
-            shutil.rmtree(p)
+            self.lock()
+            stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
+            aside = p.with_name(f".{p.name}.replaced-{stamp}-{os.getpid()}")
+            try:
+                p.rename(aside)
+            except OSError as exc:
+                raise OutputError(f"{p}: cannot move the old run aside to {aside.name} ({exc})") from None
+            self.unlock()
+            self.replaced = aside
         try:
             p.mkdir(parents=True, exist_ok=True)
+            info = {"sphere_run": 1, "created": datetime.now(UTC).isoformat(timespec="seconds")}
+            if case_path is not None:
+                info["case"] = str(Path(case_path).resolve())
+            write_text_atomic(self.marker, json.dumps(info) + "\n")
+            self.lock()
             self.checkpoints.mkdir(exist_ok=True)
-            probe = p / ".write-test"
-            probe.write_text("")
-            probe.unlink()
         except OSError as exc:
             raise OutputError(f"{p}: cannot create the run directory ({exc})") from None
         remove_stale_temporaries(self.checkpoints)
+
+    def first_checkpoint_written(self) -> None:
+        """The new run can be resumed on its own: the old run moved aside is no longer needed."""
+        if self.replaced is not None:
+            shutil.rmtree(self.replaced, ignore_errors=True)
+            self.replaced = None
+
+    def abandon_new(self) -> None:
+        """The new run failed before its first checkpoint: put the old run back."""
+        if self.replaced is None:
+            return
+        self.close_logger()
+        self.unlock()
+        shutil.rmtree(self.path, ignore_errors=True)
+        self.replaced.rename(self.path)
+        self.replaced = None
+
+    def case_origin(self) -> Path | None:
+        """The case file the run was started from (its folder resolves relative paths), if known."""
+        try:
+            origin = json.loads(self.marker.read_text(encoding="utf-8")).get("case")
+        except (OSError, ValueError, AttributeError):
+            return None
+        return Path(origin) if isinstance(origin, str) else None
+
+    def lock(self) -> None:
+        """Take the run directory's exclusive writer lock (RunBusy if another process holds it)."""
+        if self._lock_fd is not None:
+            return
+        try:
+            fd = os.open(self.marker, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputError(f"{self.marker}: cannot open the run directory's lock ({exc})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise RunBusy(
+                    f"{self.path}: another sphere process is writing this run directory (it holds the lock "
+                    f"on {MARKER}); wait for it to end, or stop it, before `run --overwrite` or `resume`"
+                ) from None
+            raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
+        self._lock_fd = fd
+
+    def unlock(self) -> None:
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # closing releases the flock
+            self._lock_fd = None
 
     def logger(self) -> logging.Logger:
         log = logging.getLogger(f"sphere.run.{self.path.resolve()}")
@@ -74,7 +188,7 @@ class RunDirectory:
         log.propagate = False
         if not log.handlers:
             try:
-                handler = logging.FileHandler(self.log_path, encoding="utf-8")
+                handler = _LogFile(self.log_path, encoding="utf-8")
             except OSError as exc:
                 raise OutputError(f"{self.log_path}: cannot open the log ({exc})") from None
             handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
@@ -93,6 +207,25 @@ class RunDirectory:
             write_text_atomic(self.status_path, json.dumps(info, indent=2) + "\n")
         except OSError as exc:
             raise OutputError(f"{self.status_path}: cannot write status ({exc})") from None
+
+
+class _LogFile(logging.FileHandler):
+    """run.log; a line that cannot be written (a full disk) is dropped, not printed as a
+    traceback: the error that matters reaches the user on stderr anyway."""
+
+    def handleError(self, record) -> None:  # noqa: N802 - logging's name
+        pass
+
+
+def _refuse_special(p: Path) -> None:
+    """--overwrite never replaces /, the home directory, or the working directory or one above it."""
+    target = p.resolve()
+    cwd = Path.cwd().resolve()
+    if target == Path(target.anchor) or target == Path.home().resolve() or cwd.is_relative_to(target):
+        raise UsageError(
+            f"{p}: --overwrite refused: {target} is the root, the home or the working directory "
+            "(or holds it); give a run directory of its own with -o"
+        )
 
 
 class RunOutput:
@@ -134,14 +267,17 @@ class RunOutput:
             times = f["/particles/trajectory/position/time"][...].tolist()
             moving = f"/fluid/{MOVING_GRID_SPACING}/value"
             spacing = f[moving][...] if moving in f else None
-        write_xdmf(
-            self.rundir.xdmf,
-            self.rundir.trajectory_path.name,
-            times,
-            scene.state.particles.count,
-            self.fields,
-            fluid=_xdmf_fluid(scene, spacing),
-        )
+        try:
+            write_xdmf(
+                self.rundir.xdmf,
+                self.rundir.trajectory_path.name,
+                times,
+                scene.state.particles.count,
+                self.fields,
+                fluid=_xdmf_fluid(scene, spacing),
+            )
+        except OSError as exc:
+            raise OutputError(f"{self.rundir.xdmf}: cannot write the ParaView sidecar ({exc})") from None
 
     def checkpoint(self, scene) -> None:
         step = scene.state.clock.step
@@ -150,6 +286,7 @@ class RunOutput:
         self.last_checkpoint = write_checkpoint(
             self.rundir.checkpoints, scene, self.case_text, self.resolved, self.physics_hash, self.keep
         )
+        self.rundir.first_checkpoint_written()
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)
 
 

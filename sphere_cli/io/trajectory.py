@@ -28,6 +28,7 @@ import h5py
 import numpy as np
 
 from ..errors import OutputError
+from .atomic import require_free_space
 
 FIELD_UNITS = {
     "position": "m",
@@ -75,6 +76,7 @@ class Trajectory:
         state = scene.state
         n = state.particles.count
         try:
+            require_free_space(self.path, 64 * n)
             with h5py.File(self.path, "w") as f:
                 h5 = f.create_group("h5md")
                 h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
@@ -118,16 +120,20 @@ class Trajectory:
     def append(self, scene) -> None:
         state = scene.state
         step, time = state.clock.step, state.clock.time
+        fluid = scene.fluid.output_fields(state) if scene.fluid is not None else {}
+        frame_bytes = len(self.fields) * state.particles.pos.nbytes
+        frame_bytes += sum(np.asarray(value).nbytes for value, _ in fluid.values())
         try:
+            require_free_space(self.path, frame_bytes)
             with h5py.File(self.path, "a") as f:
                 part = f[GROUP]
                 if part["position/step"].shape[0] and part["position/step"][-1] >= step:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
                 for field in self.fields:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
-                if scene.fluid is not None:
+                if fluid:
                     grid = scene.fluid.grid()
-                    for name, (value, _unit) in scene.fluid.output_fields(state).items():
+                    for name, (value, _unit) in fluid.items():
                         _append(f["fluid"][name], step, time, _file_order(value, grid))
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot append a frame ({exc})") from None
@@ -136,6 +142,7 @@ class Trajectory:
         """One sample: name -> (value, unit), value a number or an array of fixed shape."""
         clock = scene.state.clock
         try:
+            require_free_space(self.path, sum(np.asarray(v).nbytes for v, _ in observables.values()))
             with h5py.File(self.path, "a") as f:
                 obs = f["observables"]
                 for name, (value, unit) in observables.items():
@@ -150,21 +157,39 @@ class Trajectory:
             raise OutputError(f"{self.path}: cannot append observables ({exc})") from None
 
     def truncate_after(self, step: int) -> None:
-        """Drop frames later than `step` (they are recomputed by a resumed run)."""
+        """Keep what a resume from `step` continues: in every series, the prefix of strictly
+        increasing steps up to `step` with step, time and value cut to one length (a kill
+        during an append can leave a resized series whose last step was never written, or
+        datasets of unequal length); the particle and fluid frames, written together, keep the
+        frames they all have. Raises TrajectoryLost when the file is missing or empty,
+        TrajectoryLocked when another program holds it, OutputError when it is damaged."""
+        if not self.path.is_file() or self.path.stat().st_size == 0:
+            raise TrajectoryLost(f"{self.path}: missing or empty")
         try:
             with h5py.File(self.path, "a") as f:
+                frames = []
                 for group in _series_groups(f):
-                    steps = group["step"][...]
-                    keep = int(np.searchsorted(steps, step, side="right"))
-                    if keep < steps.size:
-                        for name in ("step", "time", "value"):
-                            group[name].resize(keep, axis=0)
+                    keep = _valid_prefix(group, step)
+                    if not group.name.startswith("/observables"):
+                        frames.append(group)
+                    _cut(group, keep)
+                common = min((g["step"].shape[0] for g in frames), default=0)
+                for group in frames:
+                    _cut(group, common)
         except OSError as exc:
+            if "unable to lock file" in str(exc):
+                raise TrajectoryLocked(
+                    f"{self.path}: held open by another program (HDF5 locks the file while it is open); "
+                    "close it there and resume again"
+                ) from None
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
+        except Exception as exc:  # noqa: BLE001 - a damaged file can fail in any way inside h5py
+            raise OutputError(f"{self.path}: damaged trajectory ({type(exc).__name__}: {exc})") from None
 
     def record_resume(self, step: int, provenance: dict) -> None:
         """Keep the provenance of every resume (host, job id, threads may differ each time)."""
         try:
+            require_free_space(self.path, 0)
             with h5py.File(self.path, "a") as f:
                 resumes = f.require_group("sphere/provenance/resumes")
                 group = resumes.create_group(f"{len(resumes):04d}")
@@ -173,6 +198,29 @@ class Trajectory:
                     group.attrs[key] = value
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
+
+
+class TrajectoryLost(OutputError):
+    """The trajectory file is missing or empty: a resume starts a new one."""
+
+
+class TrajectoryLocked(OutputError):
+    """Another program holds the trajectory file open; it is not damaged."""
+
+
+def _valid_prefix(group: h5py.Group, step: int) -> int:
+    """How many leading samples have step, time and value, steps strictly increasing, all <= step."""
+    n = min(group[name].shape[0] for name in ("step", "time", "value"))
+    steps = group["step"][:n]
+    good = steps <= step
+    good[1:] &= np.diff(steps) > 0
+    return n if good.all() else int(np.argmin(good))
+
+
+def _cut(group: h5py.Group, keep: int) -> None:
+    for name in ("step", "time", "value"):
+        if group[name].shape[0] != keep:
+            group[name].resize(keep, axis=0)
 
 
 def _create_fluid(f: h5py.File, scene) -> None:

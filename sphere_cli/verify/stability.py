@@ -757,9 +757,8 @@ def nan_guard(quick: bool) -> dict:
     particle, and never reach a checkpoint."""
     from .. import api
     from ..build.scene import build_scene
-    from ..config.load import load_case, physics_hash, resolved_dict
-    from ..io.provenance import provenance
-    from ..io.rundir import RunDirectory, RunOutput
+    from ..config.load import load_case
+    from ..io.rundir import RunDirectory
 
     poison_step, index, every = 237, 3, 100
     rng = np.random.default_rng(1)
@@ -785,18 +784,15 @@ def nan_guard(quick: bool) -> dict:
         rundir = RunDirectory(folder / "run")
         rundir.prepare_new(False)
         rundir.case.write_text(loaded.text, encoding="utf-8")
-        resolved = resolved_dict(loaded.case)
-        phash = physics_hash(resolved)
         log = rundir.logger()
-        output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
-        output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
-        output.frame(scene)
-        output.checkpoint(scene)
+        output = api.start_output(scene, rundir, loaded, log)
         error = None
         try:
             api._drive(scene, rundir, output, log, None, False, False)
         except SphereError as exc:
             error = exc
+        finally:
+            rundir.unlock()
         checks = _guard_checks(error, rundir.path, index, poison_step, every)
         status = rundir.status_path.read_text() if rundir.status_path.exists() else ""
         checks.append(

@@ -440,8 +440,12 @@ def test_existing_run_directory_needs_overwrite(tmp_path):
     assert_clean_error(result, 2, "out", "--overwrite")
     assert marker.exists(), "a refused run must not touch the existing directory"
     result = sphere("run", "case.toml", "-o", "out", "-q", "--overwrite", cwd=tmp_path)
+    assert_clean_error(result, 2, "out", "files sphere did not write (mine.txt)")
+    assert marker.read_text() == "keep me", "--overwrite must not delete a file sphere did not write"
+    marker.unlink()
+    result = sphere("run", "case.toml", "-o", "out", "-q", "--overwrite", cwd=tmp_path)
     assert_clean_error(result, 0)
-    assert not marker.exists() and (tmp_path / "out" / "trajectory.h5").is_file()
+    assert (tmp_path / "out" / "trajectory.h5").is_file()
 
 
 def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):
@@ -449,7 +453,7 @@ def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):
     (tmp_path / "thesis").mkdir()
     (tmp_path / "thesis" / "chapter1.tex").write_text("precious")
     result = sphere("run", "case.toml", "-o", "thesis", "-q", "--overwrite", cwd=tmp_path)
-    assert_clean_error(result, 2, "thesis", "does not look like a sphere run")
+    assert_clean_error(result, 2, "thesis", "sphere did not create this directory", "chapter1.tex")
     assert (tmp_path / "thesis" / "chapter1.tex").read_text() == "precious"
 
 

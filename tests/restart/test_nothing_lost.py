@@ -1,0 +1,418 @@
+"""Nothing is lost, whatever happens to a run: a kill before the first checkpoint, torn frames,
+tampered or damaged checkpoints, a deleted trajectory, a second writer, a reader, --overwrite
+of a directory that is not a run, a full disk.
+
+Each test injects the damage at the instant it would happen (a child process that SIGKILLs
+itself at a chosen call, or an edit of the files), then checks that the run ends as an
+uninterrupted run does, bit for bit, or that the command refuses with a clear error and
+leaves every file as it was.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from restart_support import CASE, assert_same_state, final_state, frames, step_dt
+
+from sphere_cli import api
+from sphere_cli.errors import OutputError, RunBusy, UsageError
+from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.io.rundir import RunDirectory
+
+END = 400  # steps of the case
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("case")
+    probe = root / "probe.toml"
+    probe.write_text(textwrap.dedent(CASE.format(duration=1.0)))
+    path = root / "case.toml"
+    path.write_text(textwrap.dedent(CASE.format(duration=repr(END * step_dt(probe)))))
+    return path
+
+
+@pytest.fixture(scope="module")
+def whole(case) -> Path:
+    """The uninterrupted run (checkpoints at 200, 300, 400; frames every 50 steps)."""
+    api.run(case, case.parent / "whole")
+    return case.parent / "whole"
+
+
+def _sphere(*args, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sphere_cli.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, **(env or {})},
+    )
+
+
+def _clean_error(result: subprocess.CompletedProcess, code: int, *fragments: str) -> None:
+    shown = f"exit {result.returncode}\nstderr:\n{result.stderr}"
+    assert result.returncode == code, shown
+    assert "Traceback" not in result.stderr and "Exception ignored" not in result.stderr, shown
+    errors = [line for line in result.stderr.splitlines() if line.startswith("sphere: error:")]
+    assert len(errors) == 1, shown
+    for fragment in fragments:
+        assert fragment in result.stderr, f"{fragment!r} missing\n{shown}"
+
+
+def _series(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every step/time/value series of a trajectory file."""
+    out = {}
+    with h5py.File(path, "r") as f:
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "step" in obj:
+                out[name] = {k: obj[k][...] for k in ("step", "time", "value")}
+
+        f.visititems(visit)
+    return out
+
+
+def _assert_same_trajectory(a: Path, b: Path) -> None:
+    """Every series of b holds exactly the samples of a: same steps, times and values."""
+    sa, sb = _series(a / "trajectory.h5"), _series(b / "trajectory.h5")
+    assert sa.keys() == sb.keys()
+    for name in sa:
+        for key in ("step", "time", "value"):
+            assert np.array_equal(sa[name][key], sb[name][key]), f"{name}/{key} differs"
+
+
+def _tree_digest(path: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(path)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(path.rglob("*"))
+        if p.is_file()
+    }
+
+
+# --- a kill before the first checkpoint --------------------------------------------------------
+
+KILL_AT = """
+import os, signal, sys
+from sphere_cli.io import checkpoint, trajectory
+
+where = sys.argv[3]
+
+def die(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+if where == "after-case":  # case.toml is written, nothing else yet
+    trajectory.Trajectory.create = die
+else:  # the first frame is written, the first checkpoint is about to be published
+    checkpoint.publish = die
+from sphere_cli import api
+api.run(sys.argv[1], sys.argv[2], overwrite=len(sys.argv) > 4)
+"""
+
+
+def _killed_run(case: Path, run: Path, where: str, overwrite: bool = False) -> None:
+    script = case.parent / "kill_at.py"
+    script.write_text(KILL_AT)
+    args = [sys.executable, str(script), str(case), str(run), where] + (["overwrite"] if overwrite else [])
+    child = subprocess.run(args, capture_output=True, text=True)
+    assert child.returncode == -9, child.stderr
+    assert (run / "case.toml").is_file() and not list_checkpoints(run / "checkpoints")
+
+
+@pytest.mark.parametrize("where", ["after-case", "before-first-checkpoint"])
+def test_kill_before_the_first_checkpoint_resumes_from_step_0(case, whole, tmp_path, where):
+    run = tmp_path / "killed"
+    _killed_run(case, run, where)
+    result = _sphere("resume", run, "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "starting again from step 0" in (run / "run.log").read_text()
+    assert_same_state(final_state(whole), final_state(run))
+    _assert_same_trajectory(whole, run)
+
+
+# --- torn frames ---------------------------------------------------------------------------------
+
+
+def _tear(path: Path) -> None:
+    """What a kill during an append leaves: series resized with a last step never written (0),
+    and step, time and value of unequal length."""
+    with h5py.File(path, "a") as f:
+        torn = ("particles/trajectory/position", "particles/trajectory/velocity", "observables/contacts")
+        for name in torn:
+            group = f[name]
+            for key in ("step", "time", "value"):
+                group[key].resize(group[key].shape[0] + 1, axis=0)
+        group = f["particles/trajectory/force"]
+        group["step"].resize(group["step"].shape[0] + 1, axis=0)
+        group["step"][-1] = 10**9
+
+
+@pytest.mark.parametrize("resume_from", ["newest", "older"])
+def test_torn_frames_are_cut_to_the_checkpoint_on_resume(case, whole, tmp_path, resume_from):
+    run = tmp_path / "torn"
+    api.run(case, run, until=250 * step_dt(case))
+    if resume_from == "older":
+        list_checkpoints(run / "checkpoints")[-1].unlink()  # resume from 200: frames at 250 go too
+    _tear(run / "trajectory.h5")
+    api.resume(run)
+    series = _series(run / "trajectory.h5")
+    for name, s in series.items():
+        assert s["step"].size == s["time"].size == s["value"].shape[0], name
+        assert np.all(np.diff(s["step"]) > 0), name
+    assert series["particles/trajectory/position"]["step"].tolist() == list(range(0, END + 1, 50))
+    assert_same_state(final_state(whole), final_state(run))
+    _assert_same_trajectory(whole, run)
+
+
+# --- what is read back from a checkpoint ---------------------------------------------------------
+
+
+def _tamper_attribute(path: Path, name: str) -> None:
+    with h5py.File(path, "r+") as f:
+        value = f.attrs[name]
+        f.attrs[name] = value + "0" if isinstance(value, str) else value * 2 + 1
+
+
+def _tamper_scalar(path: Path) -> None:
+    with h5py.File(path, "r+") as f:
+        scalars = []
+        f["sphere/state"].visititems(lambda n, o: scalars.append(o) if isinstance(o, h5py.Dataset) else None)
+        scalar = next(ds for ds in scalars if ds.ndim == 0 and ds.dtype.kind in "iuf")
+        scalar[()] = scalar[()] + 1
+
+
+def _damage_object_header(path: Path) -> None:
+    """Garble the object header of the positions (no checksum of HDF5's own covers it)."""
+    with h5py.File(path, "r") as f:
+        address = h5py.h5o.get_info(f["sphere/state/particles/pos"].id).addr
+    with open(path, "r+b") as raw:
+        raw.seek(address + 4)
+        raw.write(b"\xff" * 48)
+
+
+DAMAGE = {
+    "step": lambda p: _tamper_attribute(p, "step"),
+    "dt": lambda p: _tamper_attribute(p, "dt"),
+    "time": lambda p: _tamper_attribute(p, "time"),
+    "physics_hash": lambda p: _tamper_attribute(p, "physics_hash"),
+    "scalar-dataset": _tamper_scalar,
+    "object-header": _damage_object_header,
+}
+
+
+@pytest.mark.parametrize("damage", DAMAGE)
+def test_damaged_newest_checkpoint_falls_back_to_the_previous(whole, tmp_path, damage):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    newest = list_checkpoints(run / "checkpoints")[-1]
+    DAMAGE[damage](newest)
+    with pytest.raises(OutputError):
+        read_checkpoint(newest)
+    summary = api.inspect(run)
+    assert [c["valid"] for c in summary["checkpoints"]] == [True, True, False]
+    _clean_error(_sphere("inspect", newest, cwd=tmp_path), 74, newest.name)
+    result = _sphere("resume", run, "-q", cwd=tmp_path)  # neither a traceback nor "the case changed" (78)
+    assert result.returncode == 0, result.stderr
+    log = (run / "run.log").read_text()
+    assert f"skipping {newest.name}" in log and "resuming from ckpt-000000000300.h5" in log
+    assert_same_state(final_state(whole), final_state(run))
+
+
+# --- the trajectory and its sidecar on resume ----------------------------------------------------
+
+
+@pytest.mark.parametrize("damage", ["deleted", "empty"])
+def test_a_lost_trajectory_starts_again_from_the_checkpoint(case, whole, tmp_path, damage):
+    run = tmp_path / "run"
+    api.run(case, run, until=250 * step_dt(case))
+    path = run / "trajectory.h5"
+    path.unlink() if damage == "deleted" else path.write_bytes(b"")
+    result = _sphere("resume", run, "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "a new trajectory file starts at ckpt-000000000250.h5" in (run / "run.log").read_text()
+    kept = frames(run)
+    assert sorted(kept) == list(range(250, END + 1, 50))
+    for step, value in frames(whole).items():
+        if step >= 250:
+            assert np.array_equal(kept[step], value)
+    assert_same_state(final_state(whole), final_state(run))
+
+
+def test_a_sidecar_replaced_by_a_directory_is_a_clear_error(whole, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    (run / "trajectory.xmf").unlink()
+    (run / "trajectory.xmf").mkdir()
+    before = _tree_digest(run)
+    result = _sphere("resume", run, "-q", "--until", 1.0, cwd=tmp_path)
+    _clean_error(result, 74, "trajectory.xmf", "not a file")
+    assert _tree_digest(run) == before
+
+
+# --- one writer, any number of readers -----------------------------------------------------------
+
+HOLD = """
+import sys, time
+{take}
+print("holding", flush=True)
+time.sleep(120)
+"""
+
+
+def _holder(take: str) -> subprocess.Popen:
+    child = subprocess.Popen(
+        [sys.executable, "-c", HOLD.format(take=take)], stdout=subprocess.PIPE, text=True
+    )
+    assert child.stdout.readline().strip() == "holding"
+    return child
+
+
+def test_a_second_writer_is_refused(case, whole, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = _tree_digest(run)
+    holder = _holder(f"from sphere_cli.io.rundir import RunDirectory\nRunDirectory({str(run)!r}).lock()")
+    try:
+        for args in (("resume", run, "--until", 1.0), ("run", case, "-o", run, "--overwrite")):
+            _clean_error(_sphere(*args, "-q", cwd=tmp_path), 73, str(run), "another sphere process")
+        assert _tree_digest(run) == before
+        with pytest.raises(RunBusy):
+            RunDirectory(run).lock()
+    finally:
+        holder.kill()
+        holder.wait()
+    released = RunDirectory(run)
+    released.lock()  # released with its holder
+    released.unlock()
+
+
+def test_a_reader_holding_the_trajectory_is_not_damage(whole, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = (run / "trajectory.h5").read_bytes()
+    reader = _holder(f"import h5py\nf = h5py.File({str(run / 'trajectory.h5')!r}, 'r')")
+    try:
+        result = _sphere("resume", run, "-q", "--until", 1.0, cwd=tmp_path)
+    finally:
+        reader.kill()
+        reader.wait()
+    _clean_error(result, 74, "trajectory.h5", "held open by another program")
+    assert (run / "trajectory.h5").read_bytes() == before
+    assert not list(run.glob("trajectory.unreadable-*"))
+
+
+# --- --overwrite ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("where", ["root", "home", "cwd", "above-cwd"])
+def test_overwrite_refuses_the_root_home_and_working_directories(tmp_path, monkeypatch, where):
+    home = tmp_path / "home"
+    (home / "work").mkdir(parents=True)
+    (home / "work" / "notes.txt").write_text("mine")
+    (home / RunDirectory(home).marker.name).write_text("")  # even one that looks like a run
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(home / "work")
+    target = {"root": Path("/"), "home": home, "cwd": Path("."), "above-cwd": Path("..")}[where]
+    with pytest.raises(UsageError, match="root, the home or the working directory"):
+        RunDirectory(target).check_new(overwrite=True)
+
+
+def test_overwrite_of_the_working_directory_deletes_nothing(whole, case, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = _tree_digest(run)
+    _clean_error(_sphere("run", case, "-o", ".", "--overwrite", "-q", cwd=run), 2, "working directory")
+    assert _tree_digest(run) == before
+
+
+def test_overwrite_refuses_a_file_sphere_did_not_write_inside_checkpoints(whole, case, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    (run / "checkpoints" / "notes.txt").write_text("mine")
+    before = _tree_digest(run)
+    result = _sphere("run", case, "-o", run, "--overwrite", "-q", cwd=tmp_path)
+    _clean_error(result, 2, "files sphere did not write", "checkpoints/notes.txt")
+    assert _tree_digest(run) == before
+
+
+def test_overwrite_keeps_the_old_run_until_the_first_checkpoint(whole, case, tmp_path, monkeypatch):
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = _tree_digest(run)
+
+    def fail(*args, **kwargs):
+        raise OutputError("the first checkpoint failed")
+
+    monkeypatch.setattr("sphere_cli.io.rundir.write_checkpoint", fail)
+    with pytest.raises(OutputError):
+        api.run(case, run, overwrite=True)
+    assert _tree_digest(run) == before, "a new run that failed must give the old one back"
+    assert not list(tmp_path.glob(".run.replaced-*"))
+
+    _killed_run(case, run, "before-first-checkpoint", overwrite=True)
+    (aside,) = tmp_path.glob(".run.replaced-*")
+    assert _tree_digest(aside) == before, "a kill must leave the old run whole beside the new one"
+
+    monkeypatch.undo()
+    shutil.rmtree(aside)
+    shutil.rmtree(run)
+    shutil.copytree(whole, run)
+    api.run(case, run, overwrite=True)
+    assert not list(tmp_path.glob(".run.replaced-*")), "the old run goes once the new one can resume"
+    assert_same_state(final_state(whole), final_state(run))
+
+
+# --- a full disk ---------------------------------------------------------------------------------
+
+FULL_DISK_CASE = CASE.replace("count = 40", "count = 400").replace(
+    "upper = [0.01, 0.01, 0.02]", "upper = [0.03, 0.03, 0.04]"
+)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MiB tmpfs (needs root and mount(2): skipped elsewhere)."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    try:
+        subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)], check=True, capture_output=True
+        )
+    except (OSError, subprocess.CalledProcessError) as exc:
+        pytest.skip(f"cannot mount a small tmpfs here ({exc}); the full-disk test needs root")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+@pytest.mark.parametrize("schedule", ["frames", "checkpoints"])
+def test_a_full_disk_stops_cleanly_and_resumes_bitwise(tmp_path, small_disk, schedule):
+    # frames: the trajectory fills the disk; checkpoints: 20 kept checkpoints fill it between frames
+    frames_every, checkpoints_every, keep = (5, 100, 3) if schedule == "frames" else (50, 5, 20)
+    text = FULL_DISK_CASE.replace("every_steps = 50", f"every_steps = {frames_every}")
+    text = text.replace("every_steps = 100", f"every_steps = {checkpoints_every}")
+    text = text.replace("keep = 3", f"keep = {keep}")
+    probe = tmp_path / "probe.toml"
+    probe.write_text(textwrap.dedent(text.format(duration=1.0)))
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(text.format(duration=repr(END * step_dt(probe)))))
+    api.run(case, tmp_path / "whole")
+
+    run = small_disk / "run"
+    result = _sphere("run", case, "-o", run, "-q", cwd=tmp_path)
+    _clean_error(result, 74, "No space left on device")
+    newest = list_checkpoints(run / "checkpoints")[-1]
+    assert read_checkpoint(newest).step < END
+    subprocess.run(["mount", "-o", "remount,size=64m", str(small_disk)], check=True)
+    result = _sphere("resume", run, "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert_same_state(final_state(tmp_path / "whole"), final_state(run))
+    _assert_same_trajectory(tmp_path / "whole", run)
