@@ -17,7 +17,6 @@ from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolv
 from .config.schema import NON_PHYSICS_KEYS, Case
 from .cores import shared_cores_note
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
-from .io.atomic import write_text_atomic
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
 from .io.provenance import provenance
@@ -186,10 +185,9 @@ def run(
     rundir.check_new(overwrite)
     note = _shared_cores_warning()
     scene = build_scene(loaded)
-    rundir.prepare_new(overwrite, Path(case_path))
     try:
         try:
-            write_text_atomic(rundir.case, loaded.text)
+            rundir.prepare_new(overwrite, loaded.text, Path(case_path))
             log = rundir.logger()
             log.info("case %s -> %s", case_path, rundir.path)
             if rundir.replaced is not None:

@@ -1,8 +1,8 @@
 """`sphere`: the command line. Parses arguments, calls `api`, maps errors to exit codes.
 
 Exit codes (design guide §6): 0 done; 2 usage; 65 bad case file; 66 missing input;
-69 optional package missing (plot without matplotlib); 70 numerical failure; 74 I/O failure;
-75 stopped early on request; 78 resume refused.
+69 optional package missing (plot without matplotlib); 70 numerical failure; 73 run directory
+in use by another sphere process; 74 I/O failure; 75 stopped early on request; 78 resume refused.
 """
 
 from __future__ import annotations
@@ -81,7 +81,12 @@ def run(
     output: Path | None = typer.Option(
         None, "-o", "--output", help="Run directory (default runs/<case name>)."
     ),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory."),
+    overwrite: bool = typer.Option(
+        False,
+        "--overwrite",
+        help="Replace an existing run directory (only one sphere wrote; the old run is kept aside "
+        "until the new run's first checkpoint).",
+    ),
     until: float | None = typer.Option(
         None, "--until", callback=check_end_time, help="End time [s] instead of simulation.duration."
     ),

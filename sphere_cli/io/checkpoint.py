@@ -131,7 +131,7 @@ def read_checkpoint(path: Path) -> CheckpointData:
             )
     except OutputError:
         raise
-    except Exception as exc:  # noqa: BLE001 - a damaged file can fail in any way inside h5py
+    except Exception as exc:  # a damaged file can fail in any way inside h5py
         raise OutputError(f"{path}: unreadable or corrupt checkpoint ({type(exc).__name__}: {exc})") from None
 
 

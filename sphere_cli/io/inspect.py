@@ -22,7 +22,7 @@ def summarize(path: Path) -> dict:
     try:
         with h5py.File(path, "r") as f:
             is_trajectory = "h5md" in f
-    except OSError as exc:
+    except Exception as exc:  # a damaged file can fail in any way inside h5py
         raise OutputError(f"{path}: not a readable HDF5 file ({exc})") from None
     return _trajectory(path) if is_trajectory else _checkpoint(path)
 
@@ -84,8 +84,8 @@ def _trajectory(path: Path) -> dict:
                 "last_observables": obs,
                 "provenance": dict(f["sphere/provenance"].attrs.items()),
             }
-    except (OSError, KeyError) as exc:
-        raise OutputError(f"{path}: not a readable sphere trajectory ({exc})") from None
+    except Exception as exc:  # a damaged file can fail in any way inside h5py
+        raise OutputError(f"{path}: not a readable sphere trajectory ({type(exc).__name__}: {exc})") from None
 
 
 def _fluid(f: h5py.File) -> dict | None:

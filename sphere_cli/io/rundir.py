@@ -71,7 +71,7 @@ class RunDirectory:
         p = self.path
         if p.exists() and not p.is_dir():
             raise OutputError(f"{p}: exists and is not a directory")
-        if not (p.is_dir() and any(p.iterdir())):
+        if not (p.is_dir() and any(p.iterdir())) or self.unstarted():
             return
         if not overwrite:
             raise UsageError(
@@ -106,12 +106,17 @@ class RunDirectory:
                 foreign.append(entry.name + ("/" if entry.is_dir() else ""))
         return foreign
 
-    def prepare_new(self, overwrite: bool, case_path: Path | None = None) -> None:
-        """Create the directory, its marker (locked for this process) and checkpoints/. With
+    def unstarted(self) -> bool:
+        """Holds only what a start killed before its case.toml was written leaves."""
+        return {e.name for e in self.path.iterdir()} <= {MARKER, ".case.toml.tmp"}
+
+    def prepare_new(self, overwrite: bool, case_text: str, case_path: Path | None = None) -> None:
+        """Create the directory: its marker first (locked for this process), then case.toml,
+        then checkpoints/, so that a directory with a case.toml can always be resumed. With
         --overwrite the old run is first locked (refused if in use) and moved aside."""
         p = self.path
         self.check_new(overwrite)
-        if p.is_dir() and any(p.iterdir()):
+        if p.is_dir() and any(p.iterdir()) and not self.unstarted():
             self.lock()
             stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
             aside = p.with_name(f".{p.name}.replaced-{stamp}-{os.getpid()}")
@@ -128,6 +133,7 @@ class RunDirectory:
                 info["case"] = str(Path(case_path).resolve())
             write_text_atomic(self.marker, json.dumps(info) + "\n")
             self.lock()
+            write_text_atomic(self.case, case_text)
             self.checkpoints.mkdir(exist_ok=True)
         except OSError as exc:
             raise OutputError(f"{p}: cannot create the run directory ({exc})") from None

@@ -183,7 +183,7 @@ class Trajectory:
                     "close it there and resume again"
                 ) from None
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
-        except Exception as exc:  # noqa: BLE001 - a damaged file can fail in any way inside h5py
+        except Exception as exc:  # a damaged file can fail in any way inside h5py
             raise OutputError(f"{self.path}: damaged trajectory ({type(exc).__name__}: {exc})") from None
 
     def record_resume(self, step: int, provenance: dict) -> None:

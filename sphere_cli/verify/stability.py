@@ -782,8 +782,7 @@ def nan_guard(quick: bool) -> dict:
         scene = build_scene(loaded)
         scene.contact = _PoisonedForces(scene.contact, poison_step, index)
         rundir = RunDirectory(folder / "run")
-        rundir.prepare_new(False)
-        rundir.case.write_text(loaded.text, encoding="utf-8")
+        rundir.prepare_new(False, loaded.text)
         log = rundir.logger()
         output = api.start_output(scene, rundir, loaded, log)
         error = None

@@ -103,14 +103,21 @@ def _tree_digest(path: Path) -> dict[str, str]:
 
 KILL_AT = """
 import os, signal, sys
-from sphere_cli.io import checkpoint, trajectory
+from sphere_cli.io import checkpoint, rundir, trajectory
 
 where = sys.argv[3]
 
 def die(*args, **kwargs):
     os.kill(os.getpid(), signal.SIGKILL)
 
-if where == "after-case":  # case.toml is written, nothing else yet
+def before_case(path, text):
+    if path.name == "case.toml":
+        die()
+    write_text_atomic(path, text)
+
+if where == "before-case":  # the directory and its marker exist, case.toml does not
+    write_text_atomic, rundir.write_text_atomic = rundir.write_text_atomic, before_case
+elif where == "after-case":  # case.toml is written, nothing else yet
     trajectory.Trajectory.create = die
 else:  # the first frame is written, the first checkpoint is about to be published
     checkpoint.publish = die
@@ -125,16 +132,28 @@ def _killed_run(case: Path, run: Path, where: str, overwrite: bool = False) -> N
     args = [sys.executable, str(script), str(case), str(run), where] + (["overwrite"] if overwrite else [])
     child = subprocess.run(args, capture_output=True, text=True)
     assert child.returncode == -9, child.stderr
-    assert (run / "case.toml").is_file() and not list_checkpoints(run / "checkpoints")
+    assert not list_checkpoints(run / "checkpoints")
 
 
 @pytest.mark.parametrize("where", ["after-case", "before-first-checkpoint"])
 def test_kill_before_the_first_checkpoint_resumes_from_step_0(case, whole, tmp_path, where):
     run = tmp_path / "killed"
     _killed_run(case, run, where)
+    assert (run / "case.toml").is_file()
     result = _sphere("resume", run, "-q", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "starting again from step 0" in (run / "run.log").read_text()
+    assert_same_state(final_state(whole), final_state(run))
+    _assert_same_trajectory(whole, run)
+
+
+def test_kill_before_the_case_is_written_leaves_a_directory_run_accepts(case, whole, tmp_path):
+    """What a batch script does when RUN_DIR has no case.toml: `sphere run` again, no --overwrite."""
+    run = tmp_path / "killed"
+    _killed_run(case, run, "before-case")
+    assert not (run / "case.toml").exists()
+    result = _sphere("run", case, "-o", run, "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
     assert_same_state(final_state(whole), final_state(run))
     _assert_same_trajectory(whole, run)
 
