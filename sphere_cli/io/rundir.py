@@ -40,7 +40,7 @@ MARKER = ".sphere-run"
 # what sphere writes at the top of a run directory (atomic writes leave ".<name>.tmp" for an instant)
 OWN_FILES = re.compile(
     r"^(\.sphere-run|case\.toml|trajectory\.h5|trajectory\.xmf|status\.json|run\.log"
-    r"|trajectory\.unreadable-\d+\.h5|\.(case\.toml|trajectory\.xmf|status\.json)\.tmp)$"
+    r"|trajectory\.unreadable-\d+\.h5|\.(sphere-run|case\.toml|trajectory\.xmf|status\.json)\.tmp)$"
 )
 OWN_FOLDERS = {
     "checkpoints": lambda name: bool(CHECKPOINT_NAME.match(name) or re.match(r"^\.ckpt-\d+\.h5\.tmp$", name)),
@@ -108,7 +108,7 @@ class RunDirectory:
 
     def unstarted(self) -> bool:
         """Holds only what a start killed before its case.toml was written leaves."""
-        return {e.name for e in self.path.iterdir()} <= {MARKER, ".case.toml.tmp"}
+        return {e.name for e in self.path.iterdir()} <= {MARKER, f".{MARKER}.tmp", ".case.toml.tmp"}
 
     def prepare_new(self, overwrite: bool, case_text: str, case_path: Path | None = None) -> None:
         """Create the directory: its marker first (locked for this process), then case.toml,
@@ -219,7 +219,7 @@ class _LogFile(logging.FileHandler):
     """run.log; a line that cannot be written (a full disk) is dropped, not printed as a
     traceback: the error that matters reaches the user on stderr anyway."""
 
-    def handleError(self, record) -> None:  # noqa: N802 - logging's name
+    def handleError(self, record) -> None:
         pass
 
 
