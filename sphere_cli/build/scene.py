@@ -11,7 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config.load import LoadedCase
+from ..config.consistency import MANY_STEPS, step_problem
+from ..config.load import LoadedCase, warn
+from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
@@ -35,6 +37,10 @@ from ..physics.walls import (
 from ..state import Box, Clock, Particles, State
 from .packing import lattice_positions, random_positions, read_particle_file
 from .radii import draw_radii
+
+# dt = "auto" set by a fluid limit this many times below that of the particles alone is more
+# likely a wrong unit (a viscosity in cP, say) than the physics meant: warned of
+FLUID_LIMIT_RATIO = 1e3
 
 
 @dataclass
@@ -108,6 +114,10 @@ class Scene:
             module.forces(self.state, spring_dt=0.0)
 
 
+# Extreme values (a density of 1e-308 kg/m^3, a stiffness of 1e308 N/m) overflow masses and limits
+# to 0 or inf; the dt they give is refused by name (_resolve_dt), so numpy's warnings would only
+# print source lines to the user before that message.
+@np.errstate(all="ignore")
 def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     """Build the scene of a case; with `restart` (a CheckpointData), the particles come from the
     checkpoint (placement files are not needed again) and every module's state is restored."""
@@ -199,11 +209,12 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     )
     if walls_state is not None:
         dt_limit, dt_reason = _driven_wall_limit(case, walls_state, scales, box, dt_limit, dt_reason)
+    solid_limit = dt_limit
     if fluid is not None:
         fluid_limit, fluid_reason = fluid.dt_limit()
         if fluid_limit < dt_limit:
             dt_limit, dt_reason = fluid_limit, fluid_reason
-    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason)
+    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit)
     if case.stages:
         stages = Stages(case, walls_state, scales, contact)
     elif walls_state is not None:
@@ -296,6 +307,11 @@ def _initial_particles(loaded: LoadedCase, rng):
         pos, radius, velocity = read_particle_file(spec.placement, loaded.base_dir)
         if radius is None:
             radius = draw_radii(spec.radius, pos.shape[0], rng)
+        # only now are the particles known: the case alone was checked without them
+        loc = ("particles", "placement", "path")
+        problems = memory_problems(loaded.case, radius.size, float(radius.max()), loc)
+        if problems:
+            raise loaded.error(*problems[0])
     else:
         radius = draw_radii(spec.radius, spec.count, rng)
         if isinstance(spec.placement, LatticePlacement):
@@ -354,7 +370,9 @@ def _check_overlaps(loaded: LoadedCase, state: State) -> None:
         )
 
 
-def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str) -> float:
+def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: float) -> float:
+    """dt of the case, given the smallest stability limit (and what sets it) and the smallest of
+    the particles and walls alone [s]."""
     sim = loaded.case.simulation
     if sim.dt == "auto":
         if not math.isfinite(dt_limit):
@@ -363,11 +381,39 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str) -> float:
                 "no contact can occur (one particle, no walls) and nothing else limits the step, "
                 'so "auto" has no limit; give dt in seconds',
             )
-        return sim.dt_safety * dt_limit
+        dt = sim.dt_safety * dt_limit
+        _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({reason}): ')
+        steps = sim.duration / dt
+        if math.isfinite(solid_limit) and dt_limit * FLUID_LIMIT_RATIO < solid_limit:
+            viscosity = getattr(loaded.case.fluid, "viscosity", None)
+            hint = "" if viscosity is None else f" (fluid.viscosity = {viscosity:g} Pa s)"
+            warn(
+                loaded.describe(
+                    ("simulation", "dt"),
+                    f"gives {dt:.3g} s, set by {reason}, {solid_limit / dt_limit:.3g} times below the "
+                    f"limit of the particles alone ({solid_limit:.3g} s): {steps:.3g} steps to reach "
+                    f"t = {sim.duration:g} s; check the fluid's parameters{hint}",
+                )
+            )
+        elif steps > MANY_STEPS:
+            warn(
+                loaded.describe(
+                    ("simulation", "dt"),
+                    f"gives {dt:.3g} s ({reason}): {steps:.3g} steps to reach t = {sim.duration:g} s",
+                )
+            )
+        return dt
     if sim.dt > dt_limit:
         raise loaded.error(
             ("simulation", "dt"),
             f"above the stability limit {dt_limit:.4g} s ({reason}); "
             f'use dt <= {dt_limit:.4g} s or dt = "auto"',
         )
+    _check_steps(loaded, sim.dt)  # the case was checked, but --until may have changed duration
     return float(sim.dt)
+
+
+def _check_steps(loaded: LoadedCase, dt: float, prefix: str = "") -> None:
+    problem = step_problem(loaded.case.simulation.duration, dt)
+    if problem is not None:
+        raise loaded.error(("simulation", "dt"), prefix + problem)

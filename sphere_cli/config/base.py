@@ -5,12 +5,21 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr
+
+
+def _int64(value: int) -> int:
+    # TOML integers are 64-bit, but tomli reads any length; larger ones would overflow the
+    # float and int64 arithmetic of the checks and the arrays
+    if not -(2**63) <= value < 2**63:
+        raise ValueError(f"TOML integers are 64-bit: expected at most {2**63 - 1}")
+    return value
+
 
 # Numbers and flags are strict: TOML `true` is not 1, and "2500" is not a number. An integer is
 # still accepted where a float is expected.
 Real = Annotated[float, Field(strict=True)]
-Count = Annotated[int, Field(strict=True)]
+Count = Annotated[int, Field(strict=True), AfterValidator(_int64)]
 Flag = Annotated[bool, Field(strict=True)]
 Vec3 = tuple[Real, Real, Real]
 FACES = ("x-", "x+", "y-", "y+", "z-", "z+")

@@ -2,17 +2,30 @@
 
 Checked on the case alone (no scene is built): walls against periodic axes, the box against
 the particles, placements against the box, materials against the contact law and the names
-that refer to them, schedules that can never fire.
+that refer to them, schedules that can never fire, and sizes that cannot fit: more spheres than
+the region holds, more memory than the machine has (memory.py), more steps than the clock counts.
+Also the warnings of `case_warnings`: allowed, but probably not meant.
 """
 
 from __future__ import annotations
 
 import math
+import os
 
 from .fluid_grid import grid_cells
-from .schema import LAW_KEYS, Case, FilePlacement
+from .memory import memory_problems
+from .schema import LAW_KEYS, Case, FilePlacement, LognormalRadius
 
 AXIS = {"x": 0, "y": 1, "z": 2}
+# equal spheres fill at most pi/sqrt(18) of space (Kepler's conjecture, proved by Hales 2005)
+DENSEST_PACKING = math.pi / math.sqrt(18.0)
+# Clock.time is step * dt in float64: beyond 2^53 steps the step count is no longer exact there,
+# and successive steps share one time
+MAX_STEPS = 2**53
+# more steps than this are allowed but warned of: days of run time even for a few particles
+MANY_STEPS = 1e9
+# lognormal radii outside [min, max] are redrawn (build/radii.py): at most this many draws
+MAX_RADIUS_DRAWS = 1e9
 
 
 def check_consistency(case: Case) -> list[tuple[tuple, str]]:
@@ -63,6 +76,7 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
             problems.append(
                 (("particles", "count"), "the count comes from the placement file; remove this key")
             )
+        problems += memory_problems(case, 0, None)  # the particles are counted once read
     else:
         if case.particles.count is None:
             problems.append((("particles", "count"), "required for lattice and random placement"))
@@ -86,9 +100,13 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
                     f"the placement region is smaller than one particle diameter ({diameter:g} m)",
                 )
             )
+        if case.particles.count is not None:
+            problems += _size_problems(case, lower, upper)
 
     problems += _material_problems(case)
     problems += _fluid_grid_problems(case, extent, diameter)
+    problems += _path_problems(case)
+    problems += _step_problems(case)
 
     frames = case.output.frames
     if frames.every_time is None and frames.every_steps is None and frames.every_wall_minutes is None:
@@ -104,6 +122,107 @@ def _fluid_grid_problems(case: Case, extent: list[float], diameter: float) -> li
         return []
     _, key, problem = grid_cells(grid, extent, diameter)
     return [] if problem is None else [(("fluid", "grid", key), problem)]
+
+
+def _size_problems(case: Case, lower, upper) -> list[tuple[tuple, str]]:
+    """Counts of a lattice or random placement that cannot fit the region, the memory or the
+    drawing of the radii (the exact lattice capacity is checked when the scene is built)."""
+    problems: list[tuple[tuple, str]] = []
+    count = case.particles.count
+    dist = case.particles.radius
+    volume = math.prod(hi - lo for lo, hi in zip(lower, upper, strict=True))
+    equal = dist.smallest == dist.largest
+    # unequal spheres pack denser than equal ones, without a simple bound but the space itself
+    fraction = DENSEST_PACKING if equal else 1.0
+    r = dist.smallest
+    solid = count * 4.0 / 3.0 * math.pi * r * r * r  # not r**3: that raises on overflow
+    if solid > fraction * volume:
+        problems.append(
+            (
+                ("particles", "count"),
+                f"{count} spheres of radius {'' if equal else 'at least '}{dist.smallest:g} m fill "
+                f"{solid:.3g} m^3, more than the {volume:.3g} m^3 placement region holds"
+                + (f" even at the densest packing ({DENSEST_PACKING:.1%})" if equal else ""),
+            )
+        )
+    problems += memory_problems(case, count, dist.largest)
+    if isinstance(dist, LognormalRadius):
+        # the share of ln(r) ~ N(ln median, sigma^2) in [min, max], on either side of the median
+        erf = [
+            math.erf((math.log(r) - math.log(dist.median)) / (dist.sigma * math.sqrt(2.0)))
+            for r in (dist.min, dist.max)
+        ]
+        kept = 0.5 * (erf[1] - erf[0])
+        draws = count / kept if kept > 0 else math.inf
+        if draws > MAX_RADIUS_DRAWS:
+            problems.append(
+                (
+                    ("particles", "radius"),
+                    f"min and max keep {kept:.2g} of the lognormal distribution, so drawing {count} "
+                    f"radii (those outside are redrawn) would take about {draws:.2g} draws; widen "
+                    "[min, max] or raise sigma",
+                )
+            )
+    return problems
+
+
+def _path_problems(case: Case) -> list[tuple[tuple, str]]:
+    """File names the operating system cannot open (the only path key is the placement file's)."""
+    placement = case.particles.placement
+    if not isinstance(placement, FilePlacement):
+        return []
+    loc = ("particles", "placement", "path")
+    encoded = os.fsencode(placement.path)
+    if b"\0" in encoded:
+        return [(loc, "a file name cannot hold the NUL character")]
+    try:
+        name_max, path_max = os.pathconf(".", "PC_NAME_MAX"), os.pathconf(".", "PC_PATH_MAX")
+    except (ValueError, OSError, AttributeError):  # not POSIX: the POSIX minimum of Linux
+        name_max, path_max = 255, 4096
+    longest = max(len(name) for name in encoded.split(b"/"))
+    if len(encoded) >= path_max or longest > name_max:
+        return [
+            (
+                loc,
+                f"{len(encoded)} bytes long, its longest name {longest} bytes: this system opens "
+                f"paths of less than {path_max} bytes, with names of at most {name_max}",
+            )
+        ]
+    return []
+
+
+def _step_problems(case: Case) -> list[tuple[tuple, str]]:
+    sim = case.simulation
+    if sim.dt == "auto":  # checked when the scene is built and dt is known
+        return []
+    problem = step_problem(sim.duration, sim.dt)
+    return [] if problem is None else [(("simulation", "dt"), problem)]
+
+
+def step_problem(duration: float, dt: float) -> str | None:
+    """Why steps of `dt` cannot reach `duration` [s] (None if they can)."""
+    steps = duration / dt if dt > 0 else math.inf  # an "auto" dt can underflow to 0
+    if steps <= MAX_STEPS:
+        return None
+    many = f"{steps:.3g}" if math.isfinite(steps) else "more than 1e+308"
+    return (
+        f"{duration:g} s in steps of {dt:.3g} s take {many} steps, more than 2^53, beyond "
+        "which the float64 time of a step is no longer exact; is dt in seconds?"
+    )
+
+
+def case_warnings(case: Case) -> list[tuple[tuple, str]]:
+    """Values that are allowed but probably not meant, each against its key (dt = "auto" is
+    judged when the scene is built and its limits are known)."""
+    sim = case.simulation
+    if sim.dt != "auto" and sim.duration / sim.dt > MANY_STEPS:
+        return [
+            (
+                ("simulation", "dt"),
+                f"the run takes {sim.duration / sim.dt:.3g} steps to reach duration = {sim.duration:g} s",
+            )
+        ]
+    return []
 
 
 def particle_materials(case: Case) -> dict[str, float]:
@@ -138,6 +257,7 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
                     )
                 )
 
+    known = _known(names)  # once: a message per unknown name must not sort them all again
     used: dict[str, tuple] = {}  # material name -> where it is used
     fractions = particle_materials(case)
     spec = case.particles.material
@@ -154,7 +274,7 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
         for name, fraction in fractions.items():
             loc = ("particles", "material") if isinstance(spec, str) else ("particles", "material", name)
             if name not in names:
-                problems.append((loc, f"no material of this name in [[materials]] (known: {sorted(names)})"))
+                problems.append((loc, f"no material of this name in [[materials]] ({known})"))
                 continue
             used[name] = loc
             if not fraction > 0:
@@ -174,7 +294,7 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
             problems.append(
                 (
                     ("walls", i, "material"),
-                    f"no material of this name in [[materials]] (known: {sorted(names)})",
+                    f"no material of this name in [[materials]] ({known})",
                 )
             )
         else:
@@ -203,7 +323,7 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
                 problems.append(
                     (
                         ("contact", "pairs", i, "materials"),
-                        f"no material {name!r} in [[materials]] (known: {sorted(names)})",
+                        f"no material {name!r} in [[materials]] ({known})",
                     )
                 )
         key = frozenset(pair.materials)
@@ -213,6 +333,13 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
             )
         seen.setdefault(key, i)
     return problems
+
+
+def _known(names) -> str:
+    listed = sorted(names)
+    if len(listed) > 10:
+        return f"known: {listed[:10]} and {len(listed) - 10} more"
+    return f"known: {listed}"
 
 
 def wall_motion_problems(motion, loc: tuple) -> list[tuple[tuple, str]]:

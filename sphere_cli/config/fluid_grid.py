@@ -75,8 +75,10 @@ def grid_cells(
     else:
         key = "cell_size"
         size = config.cell_size if config.cell_size is not None else AUTO_CELL_DIAMETERS * diameter
-        # a length that is a whole number of cells up to round-off gets that number
-        shape = tuple(max(1, math.floor(float(L) / size * (1.0 + 1e-12))) for L in length)
+        # a length that is a whole number of cells up to round-off gets that number; a cell_size
+        # far below any particle (refused below) can overflow the float, capped at 2^62 cells
+        ratios = (float(L) / size * (1.0 + 1e-12) for L in length)
+        shape = tuple(max(1, math.floor(min(r, 2.0**62))) for r in ratios)
     edges = [float(L) / n for L, n in zip(length, shape, strict=True)]
     ax = min(range(3), key=lambda a: edges[a])
     problem = None

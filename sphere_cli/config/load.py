@@ -1,14 +1,22 @@
-"""Read a TOML case file into a validated `Case`, with errors that name the key, value and line.
+"""Read a TOML case file into a validated `Case`, with errors that name the key, value and line,
+and warnings (stderr) about values that are allowed but probably not meant.
 
 Also: the resolved case as a plain dict (every default filled in), its rendering as a tree,
 and the hash of the physics-relevant part that `resume` compares against a checkpoint.
+
+Hostile input stays cheap: the file is read only if it is a regular file of at most
+MAX_CASE_BYTES, nesting is bounded, and the lines of the keys are found in one scan whatever
+the number of errors, of which the first MAX_ERRORS are reported.
 """
 
 from __future__ import annotations
 
 import copy
 import hashlib
+import io
 import json
+import stat
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,9 +24,17 @@ import tomli
 from pydantic import ValidationError
 
 from ..errors import CaseError, MissingInputError, SphereError
-from .consistency import check_consistency
-from .locate import find_line, format_location
+from .consistency import case_warnings, check_consistency
+from .locate import KeyLines, format_location
 from .schema import NON_PHYSICS_KEYS, Case, Strict
+
+# Case files are a few kB (the particles of a large scene come from a placement file); 1 MiB,
+# some 12 000 stages, still validates in about a second, where 16 MiB would take fifteen.
+MAX_CASE_BYTES = 2**20
+# Tables and arrays within each other: a case needs five levels (stages[0].walls[0].face);
+# far deeper input would exhaust the recursion of the validation and of the messages.
+MAX_DEPTH = 32
+MAX_ERRORS = 20  # error lines reported; the rest are counted
 
 
 @dataclass(frozen=True)
@@ -31,23 +47,55 @@ class LoadedCase:
     def base_dir(self) -> Path:
         return self.path.parent if self.path is not None else Path.cwd()
 
-    def error(self, loc: tuple, message: str) -> CaseError:
-        """A CaseError about the key at `loc`, found while building the scene."""
+    def describe(self, loc: tuple, message: str) -> str:
+        """`case.toml:LINE: key = value: message` about the key at `loc`."""
         where = str(self.path) if self.path is not None else "<case>"
         data = tomli.loads(self.text)
-        return CaseError(_one_error(where, self.text, loc, _value_at(data, loc), message))
+        return _one_error(where, KeyLines(self.text), loc, _value_at(data, loc), message)
+
+    def error(self, loc: tuple, message: str) -> CaseError:
+        """A CaseError about the key at `loc`, found while building the scene."""
+        return CaseError(self.describe(loc, message))
+
+
+def warn(message: str) -> None:
+    """Tell the user (stderr) of something in the case that is allowed but probably not meant."""
+    print(f"sphere: warning: {message}", file=sys.stderr)
+
+
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a named pipe"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def load_case(path: str | Path) -> LoadedCase:
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode):
+            # a device or pipe could be endless or block: not opened at all
+            kind = next((name for test, name in _KINDS if test(mode)), "not a regular file")
+            raise MissingInputError(f"{path}: is {kind}; a case file is a TOML text file")
+        with path.open("rb") as file:
+            data = file.read(MAX_CASE_BYTES + 1)
     except FileNotFoundError:
         raise MissingInputError(f"{path}: case file not found") from None
-    except UnicodeDecodeError as exc:
-        raise CaseError(f"{path}: a case file must be UTF-8 text ({exc})") from None
     except OSError as exc:
         raise MissingInputError(f"{path}: cannot read case file ({exc.strerror or exc})") from None
+    if len(data) > MAX_CASE_BYTES:
+        raise CaseError(
+            f"{path}: larger than {MAX_CASE_BYTES // 2**20} MiB, the most a case file may hold "
+            "(the particles of a large scene come from particles.placement.path)"
+        )
+    try:
+        # decoded as read_text would, universal newlines included
+        text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8").read()
+    except UnicodeDecodeError as exc:
+        raise CaseError(f"{path}: a case file must be UTF-8 text ({exc})") from None
     return parse_case(text, path)
 
 
@@ -60,19 +108,50 @@ def parse_case(text: str, path: Path | None = None) -> LoadedCase:
         if line is None:
             raise CaseError(f"{where}: not valid TOML: {exc}") from None
         raise CaseError(f"{where}:{line}: not valid TOML: {exc.msg} (column {exc.colno})") from None
+    except RecursionError as exc:  # tomli's own limits: 400 levels of nesting, 1000 parts of a key
+        raise CaseError(f"{where}: not a usable case file: {exc}") from None
+    deep = _too_deep(data)
+    if deep is not None:
+        message = f"nested more than {MAX_DEPTH} tables or arrays deep (a case needs five levels)"
+        raise CaseError(_report(where, text, [(deep, _MISSING, message)]))
     try:
         case = Case.model_validate(data)
     except ValidationError as exc:
-        raise CaseError(_describe_validation_error(exc, data, text, where)) from None
+        raise CaseError(_report(where, text, _validation_errors(exc, data))) from None
     problems = check_consistency(case)
     if problems:
-        lines = []
-        for loc, message in problems:
-            value = _value_at(data, loc)
-            lines.append(_one_error(where, text, loc, value, message))
-        raise CaseError("\n".join(lines))
+        raise CaseError(_report(where, text, [(loc, _value_at(data, loc), msg) for loc, msg in problems]))
+    warnings = case_warnings(case)
+    if warnings:
+        lines = KeyLines(text)
+        for loc, message in warnings:
+            warn(_one_error(where, lines, loc, _value_at(data, loc), message))
     _remember_source(case, (where, text))
     return LoadedCase(case=case, text=text, path=path)
+
+
+def _too_deep(data) -> tuple | None:
+    """The key path of a value nested deeper than MAX_DEPTH (None if none is), found without
+    recursion."""
+    stack = [((), data)]
+    while stack:
+        loc, node = stack.pop()
+        if len(loc) > MAX_DEPTH:
+            return loc
+        if isinstance(node, dict):
+            stack.extend(((*loc, key), value) for key, value in node.items())
+        elif isinstance(node, list):
+            stack.extend(((*loc, i), value) for i, value in enumerate(node))
+    return None
+
+
+def _report(where: str, text: str, errors: list[tuple[tuple, object, str]]) -> str:
+    """One line per (loc, value, message), the first MAX_ERRORS of them."""
+    lines = KeyLines(text)
+    shown = [_one_error(where, lines, loc, value, message) for loc, value, message in errors[:MAX_ERRORS]]
+    if len(errors) > MAX_ERRORS:
+        shown.append(f"... and {len(errors) - MAX_ERRORS} more errors")
+    return "\n".join(shown)
 
 
 def _remember_source(model, source: tuple[str, str]) -> None:
@@ -98,11 +177,11 @@ def case_error(model, loc: tuple, message: str, error=CaseError) -> SphereError:
         value = _value_at(tomli.loads(text), loc)
     except tomli.TOMLDecodeError:
         value = _MISSING
-    return error(_one_error(where, text, loc, value, message))
+    return error(_one_error(where, KeyLines(text), loc, value, message))
 
 
-def _one_error(where: str, text: str, loc: tuple, value, message: str) -> str:
-    line = find_line(text, loc)
+def _one_error(where: str, lines: KeyLines, loc: tuple, value, message: str) -> str:
+    line = lines.find(loc)
     place = f"{where}:{line}" if line else where
     key = format_location(loc) if loc else "(top level)"
     shown = "" if value is _MISSING else f" = {_toml_value(value)}"
@@ -153,8 +232,9 @@ def _clean_location(data, loc: tuple) -> tuple:
     return tuple(cleaned)
 
 
-def _describe_validation_error(exc: ValidationError, data, text: str, where: str) -> str:
-    lines = []
+def _validation_errors(exc: ValidationError, data) -> list[tuple[tuple, object, str]]:
+    """(loc, value, message) of each error pydantic found, worded for a case file."""
+    errors = []
     for err in exc.errors(include_url=False):
         loc = _clean_location(data, tuple(err["loc"]))
         message = err["msg"]
@@ -169,11 +249,14 @@ def _describe_validation_error(exc: ValidationError, data, text: str, where: str
         elif err["type"] == "union_tag_not_found":
             loc += (err.get("ctx", {}).get("discriminator", "").strip("'"),)
             message = "required key is missing (it selects the kind; `sphere schema` lists the choices)"
+        elif err["type"] == "too_long":
+            ctx = err.get("ctx", {})
+            message = f"{ctx.get('actual_length')} entries; at most {ctx.get('max_length')} are allowed"
         elif message.startswith("Value error, "):
             message = message[len("Value error, ") :]
         value = _value_at(data, loc) if err["type"] not in ("missing", "union_tag_not_found") else _MISSING
-        lines.append(_one_error(where, text, loc, value, message))
-    return "\n".join(lines)
+        errors.append((loc, value, message))
+    return errors
 
 
 def resolved_dict(case: Case) -> dict:

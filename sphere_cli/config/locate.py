@@ -24,24 +24,40 @@ def find_line(toml_text: str, path: KeyPath) -> int | None:
     not in the document, the line of the deepest enclosing key or table that is present is
     returned; None when nothing matches.
     """
-    lines = _DocumentScanner(toml_text).scan()
-    matched: KeyPath = ()
-    index = 0
-    while index < len(path):
-        candidate = matched + (path[index],)
-        if candidate in lines:
-            matched = candidate
-            index += 1
-        elif (
-            matched
-            and isinstance(path[index], str)
-            and index + 1 < len(path)
-            and matched + (path[index + 1],) in lines
-        ):
-            index += 1
-        else:
-            break
-    return lines[matched] if matched else None
+    return KeyLines(toml_text).find(path)
+
+
+class KeyLines:
+    """The lines of every key path of a TOML document, scanned once: `find` is `find_line`
+    without the scan, so locating many errors in one document stays linear in its size."""
+
+    def __init__(self, toml_text: str) -> None:
+        scanner = _DocumentScanner(toml_text)
+        try:
+            scanner.scan()
+        except RecursionError:  # inline tables nested deeper than the stack: keep what was found
+            pass
+        self.lines = scanner.lines
+
+    def find(self, path: KeyPath) -> int | None:
+        lines = self.lines
+        matched: KeyPath = ()
+        index = 0
+        while index < len(path):
+            candidate = matched + (path[index],)
+            if candidate in lines:
+                matched = candidate
+                index += 1
+            elif (
+                matched
+                and isinstance(path[index], str)
+                and index + 1 < len(path)
+                and matched + (path[index + 1],) in lines
+            ):
+                index += 1
+            else:
+                break
+        return lines[matched] if matched else None
 
 
 def format_location(path: KeyPath) -> str:

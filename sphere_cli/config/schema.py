@@ -9,6 +9,7 @@ Cross-field rules (walls against periodic axes, particles against the box) live 
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -62,7 +63,10 @@ class Simulation(Strict):
             return value
         if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
             raise ValueError('expected a positive number of seconds or "auto"')
-        return float(value)
+        try:
+            return float(value)
+        except OverflowError:  # an integer of hundreds of digits
+            raise ValueError("too large for a number of seconds") from None
 
 
 class Domain(Strict):
@@ -268,7 +272,11 @@ class Stage(Strict):
     )
     walls: list[StageWall] = Field(
         default_factory=list,
-        description="Wall modes from the start of this stage; walls not listed keep their mode.",
+        max_length=len(FACES),
+        description=(
+            "Wall modes from the start of this stage (at most one table per wall); walls not listed "
+            "keep their mode."
+        ),
     )
 
 
@@ -297,6 +305,10 @@ class FixedRadius(Strict):
     def largest(self) -> float:
         return self.value
 
+    @property
+    def smallest(self) -> float:
+        return self.value
+
 
 class UniformRadius(Strict):
     distribution: Literal["uniform"]
@@ -312,6 +324,10 @@ class UniformRadius(Strict):
     @property
     def largest(self) -> float:
         return self.max
+
+    @property
+    def smallest(self) -> float:
+        return self.min
 
 
 class LognormalRadius(Strict):
@@ -331,6 +347,10 @@ class LognormalRadius(Strict):
     def largest(self) -> float:
         return self.max
 
+    @property
+    def smallest(self) -> float:
+        return self.min
+
 
 class BimodalRadius(Strict):
     distribution: Literal["bimodal"]
@@ -341,6 +361,10 @@ class BimodalRadius(Strict):
     @property
     def largest(self) -> float:
         return max(self.small, self.large)
+
+    @property
+    def smallest(self) -> float:
+        return min(self.small, self.large)
 
 
 RadiusDistribution = Annotated[
@@ -636,7 +660,7 @@ class Observables(Schedule):
     @field_validator("quantities")
     @classmethod
     def _unique(cls, value):
-        repeated = sorted({q for q in value if value.count(q) > 1})
+        repeated = sorted(q for q, n in Counter(value).items() if n > 1)
         if repeated:
             raise ValueError(f"listed more than once: {', '.join(repeated)}")
         return value
@@ -686,7 +710,11 @@ class Case(Strict):
         default_factory=list,
         description="Materials of particles and walls, referred to by name (one table per material).",
     )
-    walls: list[Wall] = Field(default_factory=list, description="Plane walls, one table per wall.")
+    walls: list[Wall] = Field(
+        default_factory=list,
+        max_length=len(FACES),
+        description="Plane walls, one table per wall (at most one on each face of the box).",
+    )
     fluid: Fluid | None = Field(
         None,
         description="The fluid saturating the particles, if any (a dry scene has no [fluid] section).",

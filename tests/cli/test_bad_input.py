@@ -294,7 +294,8 @@ def test_dt_above_stability_limit_names_the_limit(tmp_path):
 
 
 def test_lattice_too_small_for_the_count(tmp_path):
-    text = edit(TINY, "count = 20", "count = 2000")
+    # 300 spheres would fit the box at the densest packing (691), but not its 250 lattice sites
+    text = edit(TINY, "count = 20", "count = 300")
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(
