@@ -21,7 +21,7 @@ from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_sta
 from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
-from .io.trajectory import TrajectoryLocked, TrajectoryLost
+from .io.trajectory import TrajectoryLost
 from .simulation import Loop, StopFlag, end_step_for
 
 
@@ -276,8 +276,6 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
     output.last_checkpoint = ck.path
     try:
         output.trajectory.truncate_after(ck.step)
-    except TrajectoryLocked:
-        raise
     except OutputError as exc:
         if not isinstance(exc, TrajectoryLost):
             aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import h5py
@@ -53,7 +54,21 @@ def _checkpoint_entry(path: Path) -> dict:
         return {"file": path.name, "valid": False, "error": str(exc)}
 
 
+# A running run may be appending a frame while the trajectory is read: its metadata can then be
+# caught half-written, and reading again a moment later finds the frame complete
+READ_RETRY_DELAYS = (0.2, 0.5, 1.0)
+
+
 def _trajectory(path: Path) -> dict:
+    for delay in READ_RETRY_DELAYS:
+        try:
+            return _read_trajectory(path)
+        except OutputError:
+            time.sleep(delay)
+    return _read_trajectory(path)
+
+
+def _read_trajectory(path: Path) -> dict:
     try:
         with h5py.File(path, "r") as f:
             params = f["parameters"].attrs

@@ -33,8 +33,8 @@ from ..physics.fluid import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
-from .trajectory import Trajectory, is_grid_field
-from .xdmf import write_xdmf
+from .trajectory import Trajectory, is_grid_field, open_as_writer
+from .xdmf import frame_grid, write_xdmf
 
 MARKER = ".sphere-run"
 # what sphere writes at the top of a run directory (atomic writes leave ".<name>.tmp" for an instant)
@@ -244,10 +244,10 @@ class RunOutput:
         self.physics_hash = physics_hash
         self.log = log
         self.fields = list(scene.case.output.fields)
-        self.trajectory = Trajectory(rundir.trajectory_path, self.fields)
+        self.trajectory = Trajectory(rundir.trajectory_path, self.fields, log)
         self.keep = scene.case.output.checkpoints.keep
         self.last_checkpoint: Path | None = None
-        self.frame_times: list[float] = []
+        self.xdmf_grids: list[tuple[str, str]] = []  # the sidecar's grids of each frame so far
         self.observables_follow_frames = scene.case.output.observables.follows_frames
 
     def frame(self, scene) -> None:
@@ -267,21 +267,26 @@ class RunOutput:
         self.trajectory.append_observables(scene, scene.observer.sample())
 
     def _refresh_xdmf(self, scene) -> None:
-        import h5py
-
-        with h5py.File(self.rundir.trajectory_path, "r") as f:
+        """Add the grids of the frames not yet in the sidecar (all of them after a resume) and
+        replace it."""
+        with open_as_writer(self.rundir.trajectory_path, "r") as f:
             times = f["/particles/trajectory/position/time"][...].tolist()
             moving = f"/fluid/{MOVING_GRID_SPACING}/value"
             spacing = f[moving][...] if moving in f else None
-        try:
-            write_xdmf(
-                self.rundir.xdmf,
-                self.rundir.trajectory_path.name,
-                times,
-                scene.state.particles.count,
-                self.fields,
-                fluid=_xdmf_fluid(scene, spacing),
+        grids = self.xdmf_grids[: len(times)]
+        fluid = _xdmf_fluid(scene)
+        for k in range(len(grids), len(times)):
+            frame_fluid = None
+            if fluid is not None:
+                grid, fields = fluid
+                frame_fluid = (grid, fields, grid.spacing if spacing is None else spacing[k])
+            n = scene.state.particles.count
+            grids.append(
+                frame_grid(self.rundir.trajectory_path.name, k, times[k], n, self.fields, frame_fluid)
             )
+        self.xdmf_grids = grids
+        try:
+            write_xdmf(self.rundir.xdmf, grids)
         except OSError as exc:
             raise OutputError(f"{self.rundir.xdmf}: cannot write the ParaView sidecar ({exc})") from None
 
@@ -296,8 +301,8 @@ class RunOutput:
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)
 
 
-def _xdmf_fluid(scene, spacing):
-    """(grid, {field name: components}, spacing per frame or None) of the fluid's 3D fields, or None."""
+def _xdmf_fluid(scene):
+    """(grid, {field name: components}) of the fluid's 3D fields, or None."""
     fluid = scene.fluid
     grid = fluid.grid() if fluid is not None else None
     if grid is None:
@@ -306,4 +311,4 @@ def _xdmf_fluid(scene, spacing):
     for name, (value, _unit) in fluid.output_fields(scene.state).items():
         if is_grid_field(value, grid):
             fields[name] = 1 if value.ndim == 3 else value.shape[3]
-    return grid, fields, spacing
+    return grid, fields

@@ -1,7 +1,7 @@
 """The trajectory file: frames appended on the output schedule, in the H5MD 1.1 layout.
 
 /h5md                          version, author, creator
-/particles/trajectory/box      dimension, boundary, edges
+/particles/trajectory/box      @dimension, @boundary, edges {step, time, value (3,)}, offset
 /particles/trajectory/radius   time-independent (N,) [m]
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
@@ -15,13 +15,21 @@
                                (z slowest, x fastest: the order XDMF/ParaView read)
 /parameters                    the case file, the resolved case, the physics hash, dt
 /sphere/provenance             versions, threads, host, job id (attributes)
+/sphere/xdmf/<series>/<frame>  one HDF5 virtual dataset per frame and per field shown in ParaView:
+                               a view of that frame's row of the series, no copy (xdmf.py)
+/sphere/xdmf/vertices          0 .. N-1, the particles' vertex cells for XDMF's Polyvertex
 
-The file is opened only while a frame is written, so a crash between frames leaves it whole.
+The file is opened only while a frame is written, so a crash between frames leaves it whole,
+and without HDF5's file lock (`open_as_writer`): a notebook or ParaView holding the file open
+must not stop the run. One writer at a time is guaranteed by the run directory's own lock
+(rundir.py). A write that fails is logged and retried (WRITE_RETRY_DELAYS) before the run gives up.
 """
 
 from __future__ import annotations
 
 import json
+import re
+import time
 from pathlib import Path
 
 import h5py
@@ -45,17 +53,51 @@ FIELD_SOURCE = {
     "torque": "torque",
 }
 GROUP = "/particles/trajectory"
+# Per-frame views of the frame series for the XDMF sidecar: ParaView's XDMF 3 readers do not read
+# hyperslabs of a time series, but read a virtual dataset as they read any other
+VIEWS = "/sphere/xdmf"
+VERTICES = f"{VIEWS}/vertices"  # 0 .. N-1: the Polyvertex connectivity (one vertex cell per particle)
+# Seconds waited before each new try of a failed frame or observables write: a file server's
+# hiccup or a disk freed by another job in the meantime does not end the run
+WRITE_RETRY_DELAYS = (1.0, 2.0, 4.0)
+
+
+def open_as_writer(path: Path, mode: str) -> h5py.File:
+    """The trajectory opened by the run that writes it (in any mode). HDF5's lock is off: a
+    reader's lock (h5py's default) would otherwise make the writer fail, and the run directory's
+    lock already keeps any second writer out."""
+    return h5py.File(path, mode, locking=False)
+
+
+# A unit string of the H5MD units module: factors separated by single spaces, an optional number
+# first, then symbols each followed by an optional signed non-zero integer power ("m s-1")
+_UNIT_NUMBER = re.compile(r"[0-9]+(\.[0-9]+)?")
+_UNIT_SYMBOL = re.compile(r"([A-Za-z]+)(-?[1-9][0-9]*)?")
+
+
+def set_unit(item, unit: str) -> None:
+    """Attach `unit` to a dataset in the notation of H5MD's units module (a programming error
+    otherwise: every unit is written through here). Stored as h5py stores a str, which the
+    readers in use (MDAnalysis, pyh5md) compare with str keys; H5MD's fixed-length strings would
+    read back as bytes there."""
+    factors = unit.split(" ")
+    if _UNIT_NUMBER.fullmatch(factors[0]):
+        factors = factors[1:]
+    symbols = [_UNIT_SYMBOL.fullmatch(f) for f in factors]
+    if not all(symbols) or len({m.group(1) for m in symbols}) != len(symbols):
+        raise ValueError(f"{unit!r} is not an H5MD unit string")
+    item.attrs["unit"] = unit
 
 
 def _time_series(parent: h5py.Group, name: str, shape: tuple, dtype, unit: str) -> None:
     g = parent.create_group(name)
     g.create_dataset("step", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(256,))
     t = g.create_dataset("time", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(256,))
-    t.attrs["unit"] = "s"
+    set_unit(t, "s")
     chunk = (max(1, 256 // int(np.prod(shape))), *shape) if shape else (256,)
     v = g.create_dataset("value", shape=(0, *shape), maxshape=(None, *shape), dtype=dtype, chunks=chunk)
     if unit:
-        v.attrs["unit"] = unit
+        set_unit(v, unit)
 
 
 def _append(g: h5py.Group, step: int, time: float, value) -> None:
@@ -68,16 +110,17 @@ def _append(g: h5py.Group, step: int, time: float, value) -> None:
 
 
 class Trajectory:
-    def __init__(self, path: Path, fields: list[str]):
+    def __init__(self, path: Path, fields: list[str], log=None):
         self.path = path
         self.fields = ["position", *fields]
+        self.log = log  # where failed tries are reported (the run's log), or None
 
     def create(self, scene, case_text: str, resolved: dict, physics_hash: str, provenance: dict) -> None:
         state = scene.state
         n = state.particles.count
         try:
             require_free_space(self.path, 64 * n)
-            with h5py.File(self.path, "w") as f:
+            with open_as_writer(self.path, "w") as f:
                 h5 = f.create_group("h5md")
                 h5.attrs["version"] = np.array([1, 1], dtype=np.int32)
                 h5.create_group("author").attrs["name"] = provenance.get("user", "")
@@ -91,11 +134,11 @@ class Trajectory:
                 box = part.create_group("box")
                 box.attrs["dimension"] = 3
                 box.attrs["boundary"] = np.array([b"periodic" if p else b"none" for p in state.box.periodic])
-                edges = box.create_dataset("edges", data=state.box.length)
-                edges.attrs["unit"] = "m"
-                box.create_dataset("offset", data=state.box.lower).attrs["unit"] = "m"
-                part.create_dataset("radius", data=state.particles.radius).attrs["unit"] = "m"
-                part.create_dataset("mass", data=state.particles.mass).attrs["unit"] = "kg"
+                # time-dependent, one row per frame: the form MDAnalysis reads
+                _time_series(box, "edges", (3,), np.float64, "m")
+                set_unit(box.create_dataset("offset", data=state.box.lower), "m")
+                set_unit(part.create_dataset("radius", data=state.particles.radius), "m")
+                set_unit(part.create_dataset("mass", data=state.particles.mass), "kg")
                 species = part.create_dataset("species", data=state.particles.material)
                 species.attrs["materials"] = np.array([name.encode() for name in scene.tables.names])
                 for field in self.fields:
@@ -103,6 +146,7 @@ class Trajectory:
                 obs = f.create_group("observables")  # series are created by their first sample
                 if scene.fluid is not None:
                     _create_fluid(f, scene)
+                f.create_dataset(VERTICES, data=np.arange(n, dtype=np.int64))
                 if state.walls is not None:
                     obs.attrs["wall_faces"] = np.array([face.encode() for face in state.walls.faces])
                 params = f.create_group("parameters")
@@ -123,28 +167,37 @@ class Trajectory:
         fluid = scene.fluid.output_fields(state) if scene.fluid is not None else {}
         frame_bytes = len(self.fields) * state.particles.pos.nbytes
         frame_bytes += sum(np.asarray(value).nbytes for value, _ in fluid.values())
-        try:
+
+        def write(retry: bool) -> None:
             require_free_space(self.path, frame_bytes)
-            with h5py.File(self.path, "a") as f:
+            with open_as_writer(self.path, "a") as f:
+                if retry:  # a failed try may have left this frame in some series only
+                    _cut_frames(f, step - 1)
                 part = f[GROUP]
                 if part["position/step"].shape[0] and part["position/step"][-1] >= step:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
                 for field in self.fields:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
+                if isinstance(part["box/edges"], h5py.Group):  # a dataset in files before 2026-12
+                    _append(part["box/edges"], step, time, state.box.length)
                 if fluid:
                     grid = scene.fluid.grid()
                     for name, (value, _unit) in fluid.items():
                         _append(f["fluid"][name], step, time, _file_order(value, grid))
-        except OSError as exc:
-            raise OutputError(f"{self.path}: cannot append a frame ({exc})") from None
+                _add_views(f, part["position/step"].shape[0] - 1)
+
+        self._with_retries(f"the frame of step {step}", "cannot append a frame", write)
 
     def append_observables(self, scene, observables: dict[str, tuple]) -> None:
         """One sample: name -> (value, unit), value a number or an array of fixed shape."""
         clock = scene.state.clock
-        try:
+
+        def write(retry: bool) -> None:
             require_free_space(self.path, sum(np.asarray(v).nbytes for v, _ in observables.values()))
-            with h5py.File(self.path, "a") as f:
+            with open_as_writer(self.path, "a") as f:
                 obs = f["observables"]
+                if retry:  # a failed try may have written some of the series
+                    _cut_to([obs[name] for name in observables if name in obs], clock.step - 1)
                 for name, (value, unit) in observables.items():
                     value = np.asarray(value, dtype=np.float64)
                     if name not in obs:
@@ -153,8 +206,27 @@ class Trajectory:
                     if group["step"].shape[0] and group["step"][-1] >= clock.step:
                         continue  # already recorded (the end sample of a resumed run)
                     _append(group, clock.step, clock.time, value)
-        except OSError as exc:
-            raise OutputError(f"{self.path}: cannot append observables ({exc})") from None
+
+        self._with_retries(f"the observables of step {clock.step}", "cannot append observables", write)
+
+    def _with_retries(self, what: str, failure: str, write) -> None:
+        """Run write(retry) until it succeeds, logging each failure, up to len(WRITE_RETRY_DELAYS)
+        more tries; then raise OutputError."""
+        for attempt, delay in enumerate((*WRITE_RETRY_DELAYS, None)):
+            try:
+                write(attempt > 0)
+                if attempt and self.log is not None:
+                    self.log.warning("%s written to %s at try %d", what, self.path.name, attempt + 1)
+                return
+            except OSError as exc:
+                if delay is None:
+                    tries = len(WRITE_RETRY_DELAYS) + 1
+                    raise OutputError(f"{self.path}: {failure} ({exc}; {tries} tries)") from None
+                if self.log is not None:
+                    self.log.warning(
+                        "%s: cannot write %s (%s); trying again in %g s", self.path.name, what, exc, delay
+                    )
+                time.sleep(delay)
 
     def truncate_after(self, step: int) -> None:
         """Keep what a resume from `step` continues: in every series, the prefix of strictly
@@ -162,26 +234,19 @@ class Trajectory:
         during an append can leave a resized series whose last step was never written, or
         datasets of unequal length); the particle and fluid frames, written together, keep the
         frames they all have. Raises TrajectoryLost when the file is missing or empty,
-        TrajectoryLocked when another program holds it, OutputError when it is damaged."""
+        OutputError when it is damaged (readers holding it open are no obstacle)."""
         if not self.path.is_file() or self.path.stat().st_size == 0:
             raise TrajectoryLost(f"{self.path}: missing or empty")
         try:
-            with h5py.File(self.path, "a") as f:
-                frames = []
-                for group in _series_groups(f):
-                    keep = _valid_prefix(group, step)
-                    if not group.name.startswith("/observables"):
-                        frames.append(group)
-                    _cut(group, keep)
-                common = min((g["step"].shape[0] for g in frames), default=0)
-                for group in frames:
-                    _cut(group, common)
+            with open_as_writer(self.path, "a") as f:
+                _cut_frames(f, step)
+                _cut_to([f["observables"][name] for name in f["observables"]], step)
+                # files before 2026-12 have no views
+                if VERTICES not in f:
+                    f.create_dataset(VERTICES, data=np.arange(f[GROUP]["radius"].shape[0], dtype=np.int64))
+                for k in range(f[GROUP]["position/step"].shape[0]):
+                    _add_views(f, k)
         except OSError as exc:
-            if "unable to lock file" in str(exc):
-                raise TrajectoryLocked(
-                    f"{self.path}: held open by another program (HDF5 locks the file while it is open); "
-                    "close it there and resume again"
-                ) from None
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
         except Exception as exc:  # a damaged file can fail in any way inside h5py
             raise OutputError(f"{self.path}: damaged trajectory ({type(exc).__name__}: {exc})") from None
@@ -190,7 +255,7 @@ class Trajectory:
         """Keep the provenance of every resume (host, job id, threads may differ each time)."""
         try:
             require_free_space(self.path, 0)
-            with h5py.File(self.path, "a") as f:
+            with open_as_writer(self.path, "a") as f:
                 resumes = f.require_group("sphere/provenance/resumes")
                 group = resumes.create_group(f"{len(resumes):04d}")
                 group.attrs["from_step"] = step
@@ -202,10 +267,6 @@ class Trajectory:
 
 class TrajectoryLost(OutputError):
     """The trajectory file is missing or empty: a resume starts a new one."""
-
-
-class TrajectoryLocked(OutputError):
-    """Another program holds the trajectory file open; it is not damaged."""
 
 
 def _valid_prefix(group: h5py.Group, step: int) -> int:
@@ -221,6 +282,17 @@ def _cut(group: h5py.Group, keep: int) -> None:
     for name in ("step", "time", "value"):
         if group[name].shape[0] != keep:
             group[name].resize(keep, axis=0)
+
+
+def _cut_to(groups: list, step: int, together: bool = False) -> None:
+    """Cut each series to its valid prefix up to `step`; `together`: then all to the shortest
+    (the particle and fluid frames, written together)."""
+    for group in groups:
+        _cut(group, _valid_prefix(group, step))
+    if together:
+        common = min((g["step"].shape[0] for g in groups), default=0)
+        for group in groups:
+            _cut(group, common)
 
 
 def _create_fluid(f: h5py.File, scene) -> None:
@@ -249,8 +321,57 @@ def _file_order(value, grid) -> np.ndarray:
     return value
 
 
-def _series_groups(f: h5py.File):
-    parents = [f[GROUP], f["observables"]] + ([f["fluid"]] if "fluid" in f else [])
+def _cut_frames(f: h5py.File, step: int) -> None:
+    """Keep the frames up to `step` that every frame series has, and their views only."""
+    groups = list(_frame_groups(f))
+    _cut_to(groups, step, together=True)
+    frames = groups[0]["step"].shape[0]
+    if VIEWS in f:
+        for series in _view_series(f[VIEWS]):
+            for name in [n for n in series if int(n) >= frames]:
+                del series[name]
+
+
+def _view_series(group: h5py.Group):
+    """The groups of /sphere/xdmf that hold views (named by frame)."""
+    for item in group.values():
+        if isinstance(item, h5py.Group):
+            if any(isinstance(v, h5py.Dataset) for v in item.values()):
+                yield item
+            else:
+                yield from _view_series(item)
+
+
+def xdmf_view(series: str, frame: int) -> str:
+    """Path of the view of frame `frame` of the series at `series` (its value dataset's group)."""
+    return f"{VIEWS}{series}/{frame:08d}"
+
+
+def _add_views(f: h5py.File, frame: int) -> None:
+    """The views of frame `frame` of every frame series ParaView shows: the particle fields and
+    the fluid's grid fields (a virtual dataset maps to its row; '.' is this file, wherever it is
+    moved)."""
+    series = [
+        g.name
+        for g in f[GROUP].values()
+        if isinstance(g, h5py.Group) and "step" in g and g.name != f"{GROUP}/box"
+    ]
+    if "fluid" in f and "shape" in f["fluid"].attrs:
+        cells = tuple(int(n) for n in f["fluid"].attrs["shape"][::-1])
+        series += [f"/fluid/{n}" for n, g in f["fluid"].items() if g["value"].shape[1:4] == cells]
+    for path in series:
+        view = xdmf_view(path, frame)
+        if view in f:
+            continue
+        value = f[path]["value"]
+        layout = h5py.VirtualLayout(shape=value.shape[1:], dtype=value.dtype)
+        layout[...] = h5py.VirtualSource(".", value.name, shape=value.shape, dtype=value.dtype)[frame]
+        f.create_virtual_dataset(view, layout)
+
+
+def _frame_groups(f: h5py.File):
+    """The series written with each frame: particle fields, box edges and fluid fields."""
+    parents = [f[GROUP], f[GROUP]["box"]] + ([f["fluid"]] if "fluid" in f else [])
     for parent in parents:
         for name in parent:
             item = parent[name]

@@ -1,11 +1,18 @@
-"""XDMF 3 sidecar so ParaView opens the particles of trajectory.h5 without copying data.
+"""XDMF 3 sidecar so ParaView opens trajectory.h5 without copying data.
 
-One grid per frame: a Polyvertex topology over the N particles, the position hyperslab of that
-frame as geometry, radius (cell-independent, written once) and each vector field as node
-attributes. With a fluid on a 3D grid, each frame is a spatial collection of the particles and
-a 3DCoRectMesh whose cell attributes are the fluid fields (stored z-major, see trajectory.py),
-with the grid spacing of that frame when the grid moves (one that follows the top wall).
-Rewritten atomically after each frame.
+A temporal collection with one grid per frame: a Polyvertex topology over the N particles, the
+frame's positions as geometry, radius (time-independent) and each vector field as node
+attributes. With a fluid on a 3D grid, a second temporal collection beside it holds a
+3DCoRectMesh per frame whose cell attributes are the fluid fields (stored z-major, see
+trajectory.py), with the grid spacing of that frame when the grid moves (one that follows the top
+wall).
+
+Each frame's arrays are the per-frame virtual datasets of trajectory.py (VIEWS), referenced as
+plain HDF datasets: both ParaView's XDMF 3 readers and the legacy XDMF reader (VTK's
+vtkXdmfReader) read those, where the XDMF 3 readers read no hyperslab of a time series. Block
+names are the same in every frame ("particles", "fluid"), so a selection made at one frame holds
+at all. The file is replaced atomically after each frame; the text of the frames before is kept
+in memory, so only the new frame is formatted.
 """
 
 from __future__ import annotations
@@ -13,58 +20,35 @@ from __future__ import annotations
 from pathlib import Path
 
 from .atomic import write_text_atomic
-
-VECTOR_NAMES = {
-    "velocity": "velocity",
-    "angular_velocity": "angular_velocity",
-    "force": "force",
-    "torque": "torque",
-}
+from .trajectory import GROUP, VERTICES, xdmf_view
 
 
-def _slab(h5name: str, dataset: str, frame: int, frames: int, n: int) -> str:
+def _hdf(h5name: str, dataset: str, dims: tuple) -> str:
     return (
-        f'<DataItem ItemType="HyperSlab" Dimensions="{n} 3" Type="HyperSlab">'
-        f'<DataItem Dimensions="3 3" Format="XML">{frame} 0 0 1 1 1 1 {n} 3</DataItem>'
-        f'<DataItem Dimensions="{frames} {n} 3" NumberType="Float" Precision="8" Format="HDF">'
-        f"{h5name}:{dataset}</DataItem></DataItem>"
-    )
-
-
-def _grid_slab(h5name: str, name: str, frame: int, frames: int, cells: tuple, components: int) -> str:
-    nz, ny, nx = cells
-    inner = f"{nz} {ny} {nx}" + (f" {components}" if components > 1 else "")
-    rank = 4 if components > 1 else 3
-    start = " ".join(["0"] * rank)
-    stride = " ".join(["1"] * (rank + 1))
-    count = f"1 {inner}"
-    return (
-        f'<DataItem ItemType="HyperSlab" Dimensions="{inner}" Type="HyperSlab">'
-        f'<DataItem Dimensions="3 {rank + 1}" Format="XML">{frame} {start} {stride} {count}</DataItem>'
-        f'<DataItem Dimensions="{frames} {inner}" NumberType="Float" Precision="8" Format="HDF">'
-        f"{h5name}:/fluid/{name}/value</DataItem></DataItem>"
+        f'<DataItem Dimensions="{" ".join(map(str, dims))}" NumberType="Float" Precision="8" '
+        f'Format="HDF">{h5name}:{dataset}</DataItem>'
     )
 
 
 def _xml_vector(*values: float) -> str:
-    text = " ".join(repr(v) for v in values)
+    text = " ".join(repr(float(v)) for v in values)
     item = f'<DataItem Dimensions="{len(values)}" NumberType="Float" Precision="8" Format="XML">'
     return f"{item}{text}</DataItem>"
 
 
-def _fluid_grid(h5name: str, k: int, frames: int, grid, fields: dict, spacing=None) -> str:
-    """`spacing`: None for a fixed grid, else (frames, 3) [m] the spacing of each frame."""
+def _fluid_grid(h5name: str, k: int, time: float, grid, fields: dict, spacing) -> str:
+    """`spacing`: (3,) [m] the cell edges of this frame."""
     nx, ny, nz = (int(c) for c in grid.shape)
     ox, oy, oz = (float(c) for c in grid.origin)
-    dx, dy, dz = (float(c) for c in (grid.spacing if spacing is None else spacing[k]))
+    dx, dy, dz = (float(c) for c in spacing)
     attrs = "".join(
         f'<Attribute Name="{name}" AttributeType="{"Vector" if comps == 3 else "Scalar"}" Center="Cell">'
-        + _grid_slab(h5name, name, k, frames, (nz, ny, nx), comps)
+        + _hdf(h5name, xdmf_view(f"/fluid/{name}", k), (nz, ny, nx) + ((comps,) if comps > 1 else ()))
         + "</Attribute>"
         for name, comps in fields.items()
     )
     return (
-        f'<Grid Name="fluid{k}" GridType="Uniform">'
+        f'<Grid Name="fluid" GridType="Uniform"><Time Value="{time!r}"/>'
         f'<Topology TopologyType="3DCoRectMesh" Dimensions="{nz + 1} {ny + 1} {nx + 1}"/>'
         f'<Geometry GeometryType="ORIGIN_DXDYDZ">'
         f"{_xml_vector(oz, oy, ox)}{_xml_vector(dz, dy, dx)}"
@@ -72,45 +56,45 @@ def _fluid_grid(h5name: str, k: int, frames: int, grid, fields: dict, spacing=No
     )
 
 
-def write_xdmf(path: Path, h5name: str, times, n: int, fields: list[str], fluid=None) -> None:
-    """`fluid`: None, or (FluidGrid, {field name: components}, spacing) for the 3D fluid fields,
-    spacing None for a fixed grid or (frames, 3) [m] per frame for a moving one."""
-    frames = len(times)
-    grids = []
-    for k, t in enumerate(times):
-        attrs = [
-            f'<Attribute Name="radius" AttributeType="Scalar" Center="Node">'
-            f'<DataItem Dimensions="{n}" NumberType="Float" Precision="8" Format="HDF">'
-            f"{h5name}:/particles/trajectory/radius</DataItem></Attribute>"
-        ]
-        for field in fields:
-            attrs.append(
-                f'<Attribute Name="{VECTOR_NAMES[field]}" AttributeType="Vector" Center="Node">'
-                + _slab(h5name, f"/particles/trajectory/{field}/value", k, frames, n)
-                + "</Attribute>"
-            )
-        particles = (
-            f'<Grid Name="{"particles" if fluid else "frame"}{k}" GridType="Uniform"><Time Value="{t!r}"/>'
-            f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}"/>'
-            f'<Geometry GeometryType="XYZ">'
-            + _slab(h5name, "/particles/trajectory/position/value", k, frames, n)
-            + "</Geometry>"
-            + "".join(attrs)
-            + "</Grid>"
+def frame_grid(h5name: str, k: int, time: float, n: int, fields: list[str], fluid=None) -> str:
+    """The grids of frame `k` at `time` [s]: the particles' and, with `fluid` = (FluidGrid,
+    {field name: components}, spacing (3,) [m] of this frame), the 3D fluid fields' (else "")."""
+    attrs = [
+        '<Attribute Name="radius" AttributeType="Scalar" Center="Node">'
+        + _hdf(h5name, f"{GROUP}/radius", (n,))
+        + "</Attribute>"
+    ]
+    for field in fields:
+        attrs.append(
+            f'<Attribute Name="{field}" AttributeType="Vector" Center="Node">'
+            + _hdf(h5name, xdmf_view(f"{GROUP}/{field}", k), (n, 3))
+            + "</Attribute>"
         )
-        if fluid is None:
-            grids.append(particles)
-        else:
-            grids.append(
-                f'<Grid Name="frame{k}" GridType="Collection" CollectionType="Spatial"><Time Value="{t!r}"/>'
-                + particles
-                + _fluid_grid(h5name, k, frames, *fluid)
-                + "</Grid>"
-            )
-    text = (
-        '<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>'
-        '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">\n'
-        + "\n".join(grids)
-        + "\n</Grid></Domain></Xdmf>\n"
+    particles = (
+        f'<Grid Name="particles" GridType="Uniform"><Time Value="{float(time)!r}"/>'
+        f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
+        f'<DataItem Dimensions="{n}" NumberType="Int" Precision="8" Format="HDF">'
+        f"{h5name}:{VERTICES}</DataItem>"
+        "</Topology>"
+        '<Geometry GeometryType="XYZ">'
+        + _hdf(h5name, xdmf_view(f"{GROUP}/position", k), (n, 3))
+        + "</Geometry>"
+        + "".join(attrs)
+        + "</Grid>"
     )
-    write_text_atomic(path, text)
+    return particles, ("" if fluid is None else _fluid_grid(h5name, k, float(time), *fluid))
+
+
+def write_xdmf(path: Path, grids: list[tuple[str, str]]) -> None:
+    """The sidecar of the frames whose (particle, fluid) grids (frame_grid) are given, replaced
+    atomically: a temporal collection of the particles and, with a fluid, one of the fluid cells
+    beside it (in one collection of both per frame, the readers would rename the blocks of
+    every frame but the first)."""
+    collections = [("particles", [p for p, _ in grids])]
+    if grids and grids[0][1]:
+        collections.append(("fluid", [fl for _, fl in grids]))
+    text = '<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>\n'
+    for name, frames in collections:
+        text += f'<Grid Name="{name}" GridType="Collection" CollectionType="Temporal">\n'
+        text += "\n".join(frames) + "\n</Grid>\n"
+    write_text_atomic(path, text + "</Domain></Xdmf>\n")

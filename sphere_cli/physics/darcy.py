@@ -174,8 +174,8 @@ class Darcy(FluidModule):
         return {
             "pressure": (s.pressure, "Pa"),
             "porosity": (s.porosity, "1"),
-            "permeability": (s.permeability, "m^2"),
-            "darcy_velocity": (s.velocity, "m/s"),
+            "permeability": (s.permeability, "m2"),
+            "darcy_velocity": (s.velocity, "m s-1"),
         }
 
     def grid(self) -> FluidGrid:

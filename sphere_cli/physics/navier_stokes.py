@@ -487,9 +487,9 @@ class NavierStokes(FluidModule):
         fs = self.fs
         fields = {
             "pressure": (fs.p, "Pa"),
-            "velocity": (fs.v, "m/s"),
+            "velocity": (fs.v, "m s-1"),
             "porosity": (fs.phi, "1"),
-            "interaction_force": (fs.f_exchange, "N/m^3"),
+            "interaction_force": (fs.f_exchange, "N m-3"),
         }
         if self.top_wall is not None:
             fields[MOVING_GRID_SPACING] = (self._grid.spacing, "m")
@@ -507,8 +507,8 @@ class NavierStokes(FluidModule):
         }
         if self.top_wall is not None:
             values["fluid_grid_height"] = (fs.height, "m")
-            values["fluid_pore_volume"] = (float(fs.phi.sum()) * self._grid.cell_volume, "m^3")
-            values["fluid_top_outflow_volume"] = (fs.outflow, "m^3")
+            values["fluid_pore_volume"] = (float(fs.phi.sum()) * self._grid.cell_volume, "m3")
+            values["fluid_top_outflow_volume"] = (fs.outflow, "m3")
         return values
 
     def summary(self) -> dict[str, str]:

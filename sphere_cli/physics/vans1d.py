@@ -327,7 +327,7 @@ class Vans1d(FluidModule):
         return {
             "bed_shear_stress": (tau, "Pa"),
             "shields_number": (shields, "1"),
-            "sediment_flux": (flux, "m^2/s"),
+            "sediment_flux": (flux, "m2 s-1"),
             "q_star": (flux / scale if scale > 0 else math.nan, "1"),
         }
 
@@ -336,10 +336,10 @@ class Vans1d(FluidModule):
         prof = f.profiles
         return {
             "layer_height": (f.column.centres, "m"),
-            "fluid_velocity": (f.column.u, "m/s"),
+            "fluid_velocity": (f.column.u, "m s-1"),
             "solid_fraction": (prof.phi, "1"),
-            "particle_velocity": (prof.vel, "m/s"),
-            "drag": (prof.drag, "N/m^3"),
+            "particle_velocity": (prof.vel, "m s-1"),
+            "drag": (prof.drag, "N m-3"),
         }
 
     def summary(self) -> dict:

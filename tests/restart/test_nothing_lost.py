@@ -25,6 +25,7 @@ from restart_support import CASE, assert_same_state, final_state, frames, step_d
 
 from sphere_cli import api
 from sphere_cli.errors import OutputError, RunBusy, UsageError
+from sphere_cli.io import trajectory
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.io.rundir import RunDirectory
 
@@ -314,19 +315,107 @@ def test_a_second_writer_is_refused(case, whole, tmp_path):
     released.unlock()
 
 
-def test_a_reader_holding_the_trajectory_is_not_damage(whole, tmp_path):
+def test_a_resume_goes_on_while_a_reader_holds_the_trajectory(case, whole, tmp_path):
+    """h5py's default open takes HDF5's file lock; the run's writes ignore it (the run directory's
+    lock keeps the one writer), so the resumed run cuts and appends frames as if no one read."""
     run = tmp_path / "run"
-    shutil.copytree(whole, run)
-    before = (run / "trajectory.h5").read_bytes()
+    half = repr(END // 2 * step_dt(case))
+    assert _sphere("run", case, "-o", run, "-q", "--until", half, cwd=tmp_path).returncode == 0
     reader = _holder(f"import h5py\nf = h5py.File({str(run / 'trajectory.h5')!r}, 'r')")
     try:
-        result = _sphere("resume", run, "-q", "--until", 1.0, cwd=tmp_path)
+        result = _sphere("resume", run, "-q", cwd=tmp_path)
+        assert reader.poll() is None, "the reader must still hold the file"
     finally:
         reader.kill()
         reader.wait()
-    _clean_error(result, 74, "trajectory.h5", "held open by another program")
-    assert (run / "trajectory.h5").read_bytes() == before
+    assert result.returncode == 0, result.stderr
+    assert_same_state(final_state(whole), final_state(run))
+    _assert_same_trajectory(whole, run)
     assert not list(run.glob("trajectory.unreadable-*"))
+
+
+LONG = 20  # the whole-run reader's case runs LONG times END steps: 160 frames
+
+
+def test_a_run_goes_on_while_readers_hold_and_inspect_it(tmp_path):
+    """A notebook opens trajectory.h5 as soon as it appears and holds it to the end, and
+    `sphere inspect` reads the run while it goes: the run ends with every frame."""
+    from sphere_cli.io.inspect import summarize
+
+    probe = tmp_path / "probe.toml"
+    probe.write_text(textwrap.dedent(CASE.format(duration=1.0)))
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE.format(duration=repr(LONG * END * step_dt(probe)))))
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sphere_cli.cli", "run", case, "-o", run, "-q"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    held = None
+    seen = inspected = None
+    try:
+        while proc.poll() is None and held is None:
+            try:
+                held = h5py.File(run / "trajectory.h5", "r")  # default locking, as a notebook
+                seen = held["particles/trajectory/position/step"].shape[0]
+            except (OSError, KeyError):  # not there yet, or caught while being created
+                held = None
+        while proc.poll() is None and inspected is None:
+            summary = summarize(run)
+            if "trajectory" in summary and "frames" in summary["trajectory"]:
+                inspected = summary["trajectory"]["frames"]
+        stderr = proc.communicate(timeout=600)[1]
+    finally:
+        proc.kill()
+        if held is not None:
+            held.close()
+    assert proc.returncode == 0, stderr
+    total = LONG * END // 50 + 1
+    assert seen is not None and seen < total, "the reader must open the file while the run goes on"
+    assert inspected is not None and inspected <= total
+    steps = frames(run)
+    assert sorted(steps) == list(range(0, LONG * END + 1, 50))
+
+
+@pytest.fixture
+def quick_retries(monkeypatch):
+    monkeypatch.setattr(trajectory, "WRITE_RETRY_DELAYS", (0.0, 0.0, 0.0))
+
+
+def _failing(monkeypatch, fail_calls: set[int]):
+    """open_as_writer raises OSError at the appends numbered in fail_calls (0 = the first)."""
+    real = trajectory.open_as_writer
+    calls = []
+
+    def flaky(path, mode):
+        if mode == "a":
+            calls.append(mode)
+            if len(calls) - 1 in fail_calls:
+                raise OSError(5, "Input/output error (injected)")
+        return real(path, mode)
+
+    monkeypatch.setattr(trajectory, "open_as_writer", flaky)
+
+
+def test_a_failed_frame_write_is_retried_and_logged(case, whole, tmp_path, monkeypatch, quick_retries):
+    _failing(monkeypatch, {3, 4})  # two failed tries of one write, then it goes through
+    run = tmp_path / "run"
+    api.run(case, run)
+    log = (run / "run.log").read_text()
+    assert log.count("trying again in 0 s") == 2, log
+    assert "Input/output error (injected)" in log and "at try 3" in log, log
+    _assert_same_trajectory(whole, run)
+
+
+def test_a_frame_that_cannot_be_written_fails_after_the_retries(case, tmp_path, monkeypatch, quick_retries):
+    _failing(monkeypatch, set(range(6, 10_000)))
+    run = tmp_path / "run"
+    with pytest.raises(OutputError, match="4 tries"):
+        api.run(case, run)
+    log = (run / "run.log").read_text()
+    assert log.count("trying again") == len(trajectory.WRITE_RETRY_DELAYS), log
+    read_checkpoint(list_checkpoints(run / "checkpoints")[-1])  # the newest checkpoint verifies
 
 
 # --- --overwrite ---------------------------------------------------------------------------------
