@@ -19,24 +19,53 @@ from . import api
 from .errors import SphereError, StoppedEarly
 
 app = typer.Typer(
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    # help texts are plain text: rich markup would take "[s]" or "sphere-cli[plot]" for its tags
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
     help="sphere: discrete-element simulation of dry and fluid-saturated granular materials.",
 )
 
-DURATION = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*([smhd]?)\s*$")
-UNIT_SECONDS = {"": 1.0, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+SECONDS = re.compile(r"\d+(?:\.\d*)?")
+# SLURM's time forms (sbatch --time): MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS
+CLOCK = re.compile(
+    r"(?:(?P<days>\d+)-(?P<dh>\d+)(?::(?P<dm>\d+))?(?::(?P<ds>\d+))?|(?P<a>\d+):(?P<b>\d+)(?::(?P<c>\d+))?)"
+)
+# a sum of numbers with units: 90s, 45m, 2h30m, 1d12h, 1.5h
+COMPOUND = re.compile(r"(?:\d+(?:\.\d*)?[smhd])+")
+UNIT_SECONDS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+WALL_TIME_HELP = (
+    "Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00."
+)
 
 
 def parse_wall_time(text: str | None) -> float | None:
-    """'90', '90s', '45m', '2h', '1.5d' -> seconds."""
+    """'3600' (seconds), '45m', '2h30m', '1.5d', or SLURM's '30:00', '2:30:00', '1-12:00:00' ->
+    seconds."""
     if text is None:
         return None
-    match = DURATION.match(text)
-    if not match:
-        raise typer.BadParameter(f"{text!r}: expected a duration such as 3600, 45m, 2h or 1.5d")
-    return float(match.group(1)) * UNIT_SECONDS[match.group(2)]
+    s = text.strip().lower().replace(" ", "")
+    seconds = None
+    if SECONDS.fullmatch(s):
+        seconds = float(s)
+    elif match := CLOCK.fullmatch(s):
+        g = {k: int(v) if v is not None else 0 for k, v in match.groupdict().items()}
+        if match["days"] is not None:
+            seconds = g["days"] * 86400.0 + g["dh"] * 3600.0 + g["dm"] * 60.0 + g["ds"]
+        elif match["c"] is not None:  # HH:MM:SS
+            seconds = g["a"] * 3600.0 + g["b"] * 60.0 + g["c"]
+        else:  # MM:SS
+            seconds = g["a"] * 60.0 + g["b"]
+    elif COMPOUND.fullmatch(s):
+        seconds = sum(float(n) * UNIT_SECONDS[u] for n, u in re.findall(r"(\d+(?:\.\d*)?)([smhd])", s))
+    if seconds is None:
+        raise typer.BadParameter(
+            f"{text!r}: expected a duration: seconds (3600), with units (45m, 2h30m, 1.5d) "
+            "or as SLURM writes it (30:00, 2:30:00, 1-12:00:00)"
+        )
+    return seconds
 
 
 def check_end_time(value: float | None) -> float | None:
@@ -46,6 +75,23 @@ def check_end_time(value: float | None) -> float | None:
     return value
 
 
+def _show_version(value: bool) -> None:
+    if value:
+        from .io.provenance import provenance
+
+        typer.echo(f"sphere {provenance()['sphere_version']}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(
+        False, "--version", callback=_show_version, is_eager=True, help="Print the version and exit."
+    ),
+) -> None:
+    """sphere: discrete-element simulation of dry and fluid-saturated granular materials."""
+
+
 def _fail(exc: SphereError) -> None:
     typer.echo(f"sphere: error: {exc}", err=True)
     raise typer.Exit(exc.exit_code)
@@ -53,11 +99,11 @@ def _fail(exc: SphereError) -> None:
 
 @app.command()
 def validate(
-    case: Path = typer.Argument(..., help="Case file (TOML)."),
+    case: Path = typer.Argument(..., metavar="CASE", help="Case file (TOML)."),
     as_json: bool = typer.Option(False, "--json", help="Print the resolved case as JSON."),
 ) -> None:
     """Check a case file without running it; print the resolved case (defaults filled in)."""
-    from .config.load import render_tree
+    from .config.load import render_toml
 
     try:
         resolved = api.validate(case)
@@ -66,7 +112,8 @@ def validate(
     if as_json:
         typer.echo(json.dumps(resolved, indent=2))
     else:
-        typer.echo(f"{case}: valid\n" + render_tree(resolved))
+        typer.echo(f"# {case}: valid. The case as it runs, every default filled in (valid TOML)\n")
+        typer.echo(render_toml(resolved), nl=False)
 
 
 @app.command()
@@ -77,7 +124,7 @@ def schema() -> None:
 
 @app.command()
 def run(
-    case: Path = typer.Argument(..., help="Case file (TOML)."),
+    case: Path = typer.Argument(..., metavar="CASE", help="Case file (TOML)."),
     output: Path | None = typer.Option(
         None, "-o", "--output", help="Run directory (default runs/<case name>)."
     ),
@@ -91,7 +138,9 @@ def run(
         None, "--until", callback=check_end_time, help="End time [s] instead of simulation.duration."
     ),
     max_wall_time: str | None = typer.Option(
-        None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
+        None,
+        "--max-wall-time",
+        help="Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00.",
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
 ) -> None:
@@ -115,12 +164,14 @@ def run(
 
 @app.command()
 def resume(
-    run_dir: Path = typer.Argument(..., help="Run directory written by `sphere run`."),
+    run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="Run directory written by `sphere run`."),
     until: float | None = typer.Option(
         None, "--until", callback=check_end_time, help="New end time [s] (default: the case's duration)."
     ),
     max_wall_time: str | None = typer.Option(
-        None, "--max-wall-time", help="Checkpoint and exit 75 after this long (e.g. 2h, 45m, 3600)."
+        None,
+        "--max-wall-time",
+        help="Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00.",
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
 ) -> None:
@@ -142,7 +193,7 @@ def resume(
 
 @app.command()
 def inspect(
-    path: Path = typer.Argument(..., help="Run directory, trajectory.h5 or checkpoint file."),
+    path: Path = typer.Argument(..., metavar="PATH", help="Run directory, trajectory.h5 or checkpoint file."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
 ) -> None:
     """Summarise any output: case, particles, time reached, energies, checkpoints and their integrity."""
@@ -157,7 +208,7 @@ def inspect(
 
 @app.command()
 def plot(
-    run_dir: Path = typer.Argument(..., help="Run directory (or its trajectory.h5)."),
+    run_dir: Path = typer.Argument(..., metavar="RUN_DIR", help="Run directory (or its trajectory.h5)."),
     output: Path | None = typer.Option(
         None, "-o", "--output", help="Folder for the PNG files (default RUN_DIR/plots)."
     ),

@@ -15,6 +15,7 @@ import copy
 import hashlib
 import io
 import json
+import re
 import stat
 import sys
 from dataclasses import dataclass
@@ -192,19 +193,23 @@ _MISSING = object()
 
 
 def _toml_value(value) -> str:
-    """A value as it would be written in TOML (short: long tables and arrays are elided)."""
-    if isinstance(value, bool):
-        text = "true" if value else "false"
-    elif isinstance(value, str):
-        text = json.dumps(value)
-    elif isinstance(value, dict):
-        text = "{ " + ", ".join(f"{format_location((k,))} = {_toml_value(v)}" for k, v in value.items())
-        text += " }"
-    elif isinstance(value, list):
-        text = "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    else:
-        text = str(value)
+    """A value as it would be written in TOML, for messages (long tables and arrays elided)."""
+    text = _toml_text(value)
     return text if len(text) <= 80 else text[:76] + " ..."
+
+
+def _toml_text(value) -> str:
+    """A value written in TOML (inline tables and arrays; None, not set, is left out of tables)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # JSON's escapes are TOML's
+    if isinstance(value, dict):
+        items = [f"{_toml_key(k)} = {_toml_text(v)}" for k, v in value.items() if v is not None]
+        return "{ " + ", ".join(items) + " }" if items else "{}"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_text(v) for v in value) + "]"
+    return repr(value) if isinstance(value, float) else str(value)
 
 
 def _value_at(data, loc: tuple):
@@ -276,18 +281,38 @@ def physics_hash(resolved: dict) -> str:
     return hashlib.sha256(blob).hexdigest()
 
 
-def render_tree(data, indent: str = "") -> str:
-    """Render nested dicts/lists as an indented tree for `sphere validate`."""
-    out = []
-    if isinstance(data, dict):
-        for key, value in data.items():
-            if isinstance(value, dict) or (isinstance(value, list) and value and isinstance(value[0], dict)):
-                out.append(f"{indent}{key}")
-                out.append(render_tree(value, indent + "  "))
-            else:
-                out.append(f"{indent}{key} = {json.dumps(value)}")
-    elif isinstance(data, list):
-        for i, item in enumerate(data):
-            out.append(f"{indent}[{i}]")
-            out.append(render_tree(item, indent + "  "))
-    return "\n".join(line for line in out if line)
+def render_toml(data: dict) -> str:
+    """The resolved case as TOML that loads back to the same case: tables for dicts, arrays of
+    tables for lists of dicts, keys whose value is None (not set) left out."""
+    out: list[str] = []
+    _toml_table(data, (), out)
+    return "\n".join(out).strip() + "\n"
+
+
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _toml_key(key) -> str:
+    key = str(key)
+    return key if _BARE_KEY.fullmatch(key) else json.dumps(key, ensure_ascii=False)
+
+
+def _is_table_array(value) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _toml_table(table: dict, path: tuple, out: list[str]) -> None:
+    nested = []
+    for key, value in table.items():
+        if value is None:
+            continue
+        if (isinstance(value, dict) and value) or _is_table_array(value):
+            nested.append((key, value))
+        else:
+            out.append(f"{_toml_key(key)} = {_toml_text(value)}")
+    for key, value in nested:
+        name = ".".join(_toml_key(k) for k in (*path, key))
+        for item in value if isinstance(value, list) else [value]:
+            out.append("")
+            out.append(f"[[{name}]]" if isinstance(value, list) else f"[{name}]")
+            _toml_table(item, (*path, key), out)

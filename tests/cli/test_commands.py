@@ -20,21 +20,38 @@ from cli_test_support import (
     sphere_inproc,
 )
 
+from sphere_cli import api
 from sphere_cli.cli import parse_wall_time
+
+CONFIGS = Path(__file__).parents[2] / "configs"
 
 # --- validate and schema ---------------------------------------------------------------------------
 
 
-def test_validate_prints_the_resolved_tree(tmp_path):
+def test_validate_prints_the_resolved_case_as_toml(tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(TINY)
     result = sphere("validate", case)
     assert_clean_error(result, 0)
-    assert result.stdout.startswith(f"{case}: valid\n")
-    assert "\nsimulation\n" in result.stdout
-    assert re.search(r"^  dt_safety = 0\.1$", result.stdout, re.M)  # a default, filled in
-    assert re.search(r"^    distribution = \"uniform\"$", result.stdout, re.M)
-    assert re.search(r"^  \[0\]\n    face = \"z-\"$", result.stdout, re.M)
+    assert result.stdout.startswith(f"# {case}: valid")
+    assert "\n[simulation]\n" in result.stdout
+    assert re.search(r"^dt_safety = 0\.1$", result.stdout, re.M)  # a default, filled in
+    assert re.search(r"^\[particles\.radius\]\ndistribution = \"uniform\"$", result.stdout, re.M)
+    assert re.search(r"^\[\[walls\]\]\nface = \"z-\"$", result.stdout, re.M)
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in CONFIGS.glob("*.toml")))
+def test_what_validate_prints_runs_as_the_same_case(tmp_path, name):
+    """Saved and validated again, the output of `sphere validate` is the same resolved case."""
+    source = CONFIGS / f"{name}.toml"
+    result = sphere_inproc("validate", source)
+    assert_clean_error(result, 0)
+    saved = tmp_path / f"{name}.toml"
+    saved.write_text(result.stdout)
+    shutil.copy(CONFIGS / "bedload-bed.csv", tmp_path)  # the bedload bed, beside the case
+    again = sphere_inproc("validate", saved, "--json")
+    assert_clean_error(again, 0)
+    assert json.loads(again.stdout) == api.validate(source)
 
 
 def test_validate_json_fills_in_defaults(tmp_path):
@@ -92,7 +109,7 @@ def test_validate_does_not_build_the_scene(tmp_path):
 
 
 def test_every_example_config_validates():
-    configs = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
+    configs = sorted(CONFIGS.glob("*.toml"))
     assert configs
     for case in configs:
         assert_clean_error(sphere_inproc("validate", case), 0)
@@ -146,7 +163,10 @@ def test_run_writes_the_run_directory(tiny_run):
     assert status["step"] == status["end_step"] == TINY_END_STEP
     checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
     assert checkpoints == ["ckpt-000000001350.h5", "ckpt-000000001400.h5", "ckpt-000000001423.h5"]  # keep = 3
-    assert "trajectory.h5:/particles/trajectory/position/value" in (run / "trajectory.xmf").read_text()
+    assert (
+        "trajectory.h5:/sphere/xdmf/particles/trajectory/position/00000000"
+        in (run / "trajectory.xmf").read_text()
+    )
     log = (run / "run.log").read_text()
     assert "running from step 0 to 1423" in log and "done at step 1423" in log
 
@@ -252,13 +272,28 @@ def test_max_wall_time_with_units_parses(tmp_path):
 
 @pytest.mark.parametrize(
     ("text", "seconds"),
-    [("3600", 3600.0), ("90s", 90.0), ("45m", 2700.0), ("2h", 7200.0), ("1.5d", 129600.0), (" 0 ", 0.0)],
+    [
+        ("3600", 3600.0),
+        ("90s", 90.0),
+        ("45m", 2700.0),
+        ("2h", 7200.0),
+        ("1.5d", 129600.0),
+        (" 0 ", 0.0),
+        ("2h30m", 9000.0),
+        ("1d12h", 129600.0),
+        # SLURM's forms (sbatch --time)
+        ("30:00", 1800.0),
+        ("2:30:00", 9000.0),
+        ("1-12:00:00", 129600.0),
+        ("1-12", 129600.0),
+        ("1-12:30", 131400.0),
+    ],
 )
 def test_parse_wall_time(text, seconds):
     assert parse_wall_time(text) == seconds
 
 
-@pytest.mark.parametrize("text", ["banana", "-1h", "2 hours", "1e3", "h", ""])
+@pytest.mark.parametrize("text", ["banana", "-1h", "2 hours", "1e3", "h", "", "1:2:3:4", "2h30", "1-", "::"])
 def test_parse_wall_time_rejects(text):
     with pytest.raises(typer.BadParameter):
         parse_wall_time(text)
@@ -282,7 +317,32 @@ def test_until_must_be_a_positive_time(tmp_path, until):
 
 
 def test_help_of_every_command():
-    for command in ("run", "resume", "inspect", "validate", "schema"):
-        result = sphere_inproc(command, "--help")
-        assert_clean_error(result, 0)
-        assert "Usage" in result.stdout
+    for command in ("run", "resume", "inspect", "validate", "schema", "plot", "bench", "verify"):
+        for flag in ("--help", "-h"):
+            result = sphere_inproc(command, flag)
+            assert_clean_error(result, 0)
+            assert "Usage" in result.stdout
+
+
+def test_help_is_plain_text_with_flags_as_flags():
+    """No markup eats bracketed text; a flag takes no value, so none is shown."""
+    plot = sphere("plot", "--help").stdout
+    assert "pip install 'sphere-cli[plot]'" in " ".join(plot.split())
+    run = sphere("run", "-h").stdout
+    assert "End time [s]" in run
+    assert re.search(r"^\s+--overwrite\s+Replace", run, re.M), run
+    assert re.search(r"^\s+-q, --quiet\s+No progress", run, re.M), run
+    assert "<bool>" not in run and "╭" not in run
+
+
+def test_version():
+    result = sphere("--version")
+    assert_clean_error(result, 0)
+    assert re.fullmatch(r"sphere \d+\.\d+\.\d+\S*\n", result.stdout), result.stdout
+
+
+def test_shell_completion_can_be_shown_and_installed():
+    result = sphere("--show-completion", "bash")
+    assert_clean_error(result, 0)
+    assert "complete" in result.stdout and "sphere" in result.stdout
+    assert "--install-completion" in sphere("-h").stdout
