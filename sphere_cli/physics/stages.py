@@ -138,7 +138,8 @@ class Stages:
         return False
 
     def observables(self) -> dict:
-        return {"stage": float(self.index)}
+        # after the last stage ends (the run's end frame) the state is still the last stage's
+        return {"stage": float(min(self.index, len(self.stages) - 1))}
 
     def prognostic_state(self, state: State) -> dict:
         return {

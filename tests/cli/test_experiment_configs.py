@@ -49,7 +49,9 @@ def test_experiment_runs_every_stage(tmp_path, name):
     api.run(case, tmp_path / "run")
     with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
         obs = f["observables"]
-        assert set(obs["stage/value"][...].tolist()) == set(map(float, range(stages + 1)))
+        # every stage sampled, the end sample in the last one (not one past it)
+        stage = obs["stage/value"][...]
+        assert set(stage.tolist()) == set(map(float, range(stages))) and stage[-1] == stages - 1
         faces = [face.decode() for face in obs.attrs["wall_faces"]]
         for series in (
             "wall_position",
