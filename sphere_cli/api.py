@@ -146,7 +146,9 @@ def _drive(
         with _signal_handlers(stop, handle_signals):
             outcome = loop.run()
         wall = wallclock.monotonic() - started
-        rate = (clock.step - start_step) * scene.state.particles.count / wall if wall > 0 else 0.0
+        rate = (
+            progress.rate(clock.step) * scene.state.particles.count
+        )  # the first step's compilation left out
         if outcome != "done":
             log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
             raise StoppedEarly(
@@ -184,12 +186,20 @@ def run(
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
     note = _shared_cores_warning()
-    scene = build_scene(loaded)
     try:
+        # the directory and status.json exist from the start: a batch job's monitor sees the run
+        # while its first scene compiles the kernels (a minute or more on a machine's first run)
+        rundir.prepare_new(overwrite, loaded.text, Path(case_path))
         try:
-            rundir.prepare_new(overwrite, loaded.text, Path(case_path))
             log = rundir.logger()
             log.info("case %s -> %s", case_path, rundir.path)
+            rundir.write_starting()
+            _announce_building(show_progress)
+            scene = build_scene(loaded)
+        except BaseException:
+            rundir.discard_new()  # a case refused while building leaves nothing behind
+            raise
+        try:
             if rundir.replaced is not None:
                 log.info("the run replaced is kept at %s until the first checkpoint", rundir.replaced)
             _log_note(log, note)
@@ -201,6 +211,15 @@ def run(
     finally:
         rundir.close_logger()
         rundir.unlock()
+
+
+def _announce_building(show_progress: bool) -> None:
+    if show_progress:
+        print(
+            "[sphere] building the scene and compiling the kernels (cached after a first run) ...",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def start_output(scene, rundir: RunDirectory, loaded: LoadedCase, log) -> RunOutput:
@@ -247,6 +266,8 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_duration(fresh, until)
         note = _shared_cores_warning()
+        rundir.write_starting()
+        _announce_building(show_progress)
         scene = build_scene(fresh)
         _log_note(log, note)
         output = start_output(scene, rundir, fresh, log)
@@ -269,6 +290,8 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
     note = _shared_cores_warning()
+    rundir.write_starting()
+    _announce_building(show_progress)
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
     _log_note(log, note)

@@ -169,6 +169,8 @@ class Loop:
                 break
             stage_ended = advance(scene, 1)
             step = clock.step
+            if self.progress.rate_start is None:
+                self.progress.first_step_done(step)
             if stage_ended:
                 self._stage_ended(scene)
             if step % self.check_every == 0:

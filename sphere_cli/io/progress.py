@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import sys
+import time
 
 from tqdm import tqdm
 
@@ -29,6 +30,7 @@ class Progress:
         self.enabled = enabled
         self.status_every = status_every
         self.last_status = float("-inf")
+        self.rate_start: tuple[int, float] | None = None  # (step, monotonic time [s]) after the first step
         if enabled and self.stream.isatty():
             self.bar = tqdm(
                 total=end_step,
@@ -39,9 +41,23 @@ class Progress:
                 mininterval=0.5,
             )
 
+    def first_step_done(self, step: int) -> None:
+        """The rate counts from here: the first step compiles the step's kernels (seconds to
+        minutes on a machine's first run), which would make the first ETAs days long."""
+        self.rate_start = (step, time.monotonic())
+
+    def rate(self, step: int) -> float:
+        """Steps per second [1/s] from the end of the first step to now."""
+        if self.rate_start is None:
+            return 0.0
+        steps, seconds = step - self.rate_start[0], time.monotonic() - self.rate_start[1]
+        return steps / seconds if steps > 0 and seconds > 0 else 0.0
+
     def info(self, scene, steps_done: int, elapsed: float, state: str = "running") -> dict:
         clock = scene.state.clock
-        rate = steps_done / elapsed if elapsed > 0 else 0.0
+        rate = self.rate(clock.step)
+        if state == "done":  # a staged run may end before its duration: its true end
+            self.end_step = clock.step
         remaining = self.end_step - clock.step
         return {
             "state": state,
@@ -71,6 +87,7 @@ class Progress:
         if not self.enabled:
             return
         if self.bar is not None:
+            self.bar.total = self.end_step
             self.bar.n = info["step"]
             self.bar.set_postfix_str(
                 f"t={info['time']:.4g}/{info['end_time']:.4g} s, "

@@ -61,6 +61,7 @@ class RunDirectory:
         self._lock_fd: int | None = None
         # the old run moved aside by --overwrite, kept until the new run's first checkpoint
         self.replaced: Path | None = None
+        self.created = False  # prepare_new made the directory itself
 
     def is_run(self) -> bool:
         return self.case.is_file()
@@ -127,6 +128,7 @@ class RunDirectory:
             self.unlock()
             self.replaced = aside
         try:
+            self.created = not p.exists()
             p.mkdir(parents=True, exist_ok=True)
             info = {"sphere_run": 1, "created": datetime.now(UTC).isoformat(timespec="seconds")}
             if case_path is not None:
@@ -154,6 +156,36 @@ class RunDirectory:
         shutil.rmtree(self.path, ignore_errors=True)
         self.replaced.rename(self.path)
         self.replaced = None
+
+    def discard_new(self) -> None:
+        """The new run was refused while its scene was built (a bad case): leave no trace of it,
+        and the old run back where --overwrite had moved it aside."""
+        if self.replaced is not None:
+            self.abandon_new()
+            return
+        self.close_logger()
+        self.unlock()
+        if not self.path.is_dir():
+            return
+        for entry in self.path.iterdir():  # only what sphere wrote: the directory was empty
+            if entry.name in OWN_FOLDERS and entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry, ignore_errors=True)
+            elif OWN_FILES.match(entry.name):
+                entry.unlink(missing_ok=True)
+        if self.created:
+            try:
+                self.path.rmdir()
+            except OSError:  # something else appeared in it meanwhile: left as it is
+                pass
+
+    def write_starting(self) -> None:
+        """status.json while the scene is built and the kernels compiled, before the first step."""
+        self.write_status(
+            {
+                "state": "starting",
+                "activity": "building the scene and compiling the kernels (cached after a first run)",
+            }
+        )
 
     def case_origin(self) -> Path | None:
         """The case file the run was started from (its folder resolves relative paths), if known."""

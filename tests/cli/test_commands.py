@@ -346,3 +346,56 @@ def test_shell_completion_can_be_shown_and_installed():
     assert_clean_error(result, 0)
     assert "complete" in result.stdout and "sphere" in result.stdout
     assert "--install-completion" in sphere("-h").stdout
+
+
+# --- what a batch job's log and monitor see ----------------------------------------------------------
+
+
+def test_status_exists_while_the_scene_is_built(tmp_path, monkeypatch):
+    """The run directory and status.json ("starting") exist before the scene is built and the
+    kernels compiled, and the terminal says what is going on."""
+    from sphere_cli.build import scene as scene_module
+
+    seen = {}
+    real = scene_module.build_scene
+
+    def watching(loaded, restart=None):
+        status = tmp_path / "run" / "status.json"
+        seen["status"] = json.loads(status.read_text()) if status.is_file() else None
+        return real(loaded, restart)
+
+    monkeypatch.setattr(api, "build_scene", watching)
+    (tmp_path / "case.toml").write_text(TINY)
+    result = sphere_inproc("run", "case.toml", "-o", "run", cwd=tmp_path)
+    assert_clean_error(result, 0)
+    assert seen["status"]["state"] == "starting" and "compiling" in seen["status"]["activity"]
+    assert "[sphere] building the scene and compiling the kernels" in result.stderr
+
+
+def test_a_case_refused_while_building_leaves_no_directory(tmp_path):
+    text = edit(TINY, 'dt = "auto"', "dt = 1.0")  # above the stability limit: refused by the build
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "run", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "stability limit")
+    assert not (tmp_path / "run").exists()
+    (tmp_path / "empty").mkdir()  # a directory the user made stays, empty
+    result = sphere_inproc("run", "case.toml", "-o", "empty", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65)
+    assert (tmp_path / "empty").is_dir() and not list((tmp_path / "empty").iterdir())
+
+
+def test_the_rate_leaves_out_the_first_step():
+    """The first step compiles the step's kernels: the rate and ETA count from its end."""
+    from types import SimpleNamespace
+
+    from sphere_cli.io.progress import Progress
+
+    progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, enabled=False)
+    scene = SimpleNamespace(state=SimpleNamespace(clock=SimpleNamespace(step=1, time=1e-5)))
+    assert progress.info(scene, 1, 30.0)["eta_seconds"] is None  # no rate before the first step ends
+    progress.first_step_done(1)
+    progress.rate_start = (1, progress.rate_start[1] - 2.0)  # as if 2 s had passed since
+    scene.state.clock.step = 201
+    info = progress.info(scene, 201, 32.0)
+    assert info["steps_per_second"] == pytest.approx(100.0, rel=0.05)  # 200 steps in 2 s, not 201 in 32
+    assert info["eta_seconds"] == pytest.approx(8.0, rel=0.05)

@@ -7,6 +7,7 @@ for a few hundred steps and tests/physics/test_direct_shear.py runs the direct s
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -47,6 +48,9 @@ def test_experiment_runs_every_stage(tmp_path, name):
     case = tmp_path / "case.toml"
     case.write_text(shortened(source.read_text()))
     api.run(case, tmp_path / "run")
+    status = json.loads((tmp_path / "run" / "status.json").read_text())
+    # stages end on their own conditions: the end reported is where the run truly ended
+    assert status["state"] == "done" and status["end_step"] == status["step"] and status["eta_seconds"] == 0
     with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
         obs = f["observables"]
         # every stage sampled, the end sample in the last one (not one past it)
