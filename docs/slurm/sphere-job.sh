@@ -8,6 +8,9 @@
 # sphere writes a checkpoint and exits 75. The script then requeues the job, and the next start
 # runs `sphere resume`, which continues bitwise identically. See docs/user-guide.md, section 7.
 #
+# To stop the chain: `scancel JOBID`. Its SIGTERM makes sphere checkpoint too, but after a
+# SIGTERM the script does not requeue; a later sbatch of the same command continues the run.
+#
 #SBATCH --job-name=sphere
 #SBATCH --ntasks=1
 #SBATCH --cpus-per-task=8
@@ -23,8 +26,9 @@ CASE=${CASE:?set CASE to the case file, e.g. sbatch --export=ALL,CASE=case.toml 
 SPHERE=${SPHERE:-sphere}   # or the full path, e.g. $HOME/sphere/.venv/bin/sphere
 name=$(basename "$CASE" .toml)
 
-# Ensemble member: a copy of the case with its own seed and its own run directory.
-if [ -n "${SLURM_ARRAY_TASK_ID:-}" ]; then
+# Ensemble member: a copy of the case with its own seed and its own run directory (once: a
+# resubmitted member, SPHERE_SEEDED=1, already has both).
+if [ -n "${SLURM_ARRAY_TASK_ID:-}" ] && [ -z "${SPHERE_SEEDED:-}" ]; then
     seed=$SLURM_ARRAY_TASK_ID
     member="$(dirname "$CASE")/$name-seed$seed.toml"
     if [ ! -f "$member" ]; then
@@ -53,9 +57,12 @@ else
 fi
 pid=$!
 
-# Pass SIGUSR1 (from --signal) and SIGTERM (scancel, time limit) on to sphere.
+# Pass SIGUSR1 (from --signal, before the time limit) and SIGTERM (scancel) on to sphere, which
+# checkpoints on either; only the first means "requeue".
 signalled=0
-trap 'signalled=1; kill -USR1 "$pid" 2>/dev/null' USR1 TERM
+cancelled=0
+trap 'signalled=1; kill -USR1 "$pid" 2>/dev/null' USR1
+trap 'signalled=1; cancelled=1; kill -USR1 "$pid" 2>/dev/null' TERM
 while :; do
     wait "$pid"
     rc=$?
@@ -68,17 +75,25 @@ while :; do
     break
 done
 
-if [ "$rc" -eq 75 ]; then
+if [ "$rc" -eq 75 ] && [ "$cancelled" = 1 ]; then
+    echo "sphere-job: cancelled (SIGTERM); checkpoint written, not requeued: sbatch again to continue"
+elif [ "$rc" -eq 75 ]; then
     echo "sphere-job: stopped early with a checkpoint (exit 75); requeueing"
     job=$SLURM_JOB_ID
     if [ -n "${SLURM_ARRAY_TASK_ID:-}" ]; then
         job=${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}
     fi
-    if ! scontrol requeue "$job"; then
-        # Requeueing not allowed here: submit this script again, as a plain job, for the same
-        # case and run directory (for an array task: its own seeded case).
-        script=$(scontrol show job "$SLURM_JOB_ID" | sed -nE 's/^[[:space:]]*Command=([^ ]*).*/\1/p')
-        sbatch --export=ALL,CASE="$CASE",RUN_DIR="$RUN_DIR",SPHERE="$SPHERE" "$script"
+    if scontrol requeue "$job"; then
+        exit 0  # the segment did what it should: sacct lists it as REQUEUED, not FAILED
     fi
+    # Requeueing not allowed here: submit this script again, as a plain job, for the same case
+    # and run directory. An array task's variables must not reach it (it would seed its seeded
+    # case again, in a run directory inside its own): removed, and SPHERE_SEEDED marks it.
+    script=$(scontrol show job "$SLURM_JOB_ID" | sed -nE 's/^[[:space:]]*Command=([^ ]*).*/\1/p')
+    if env -u SLURM_ARRAY_TASK_ID -u SLURM_ARRAY_JOB_ID SPHERE_SEEDED=1 \
+        sbatch --export=ALL,CASE="$CASE",RUN_DIR="$RUN_DIR",SPHERE="$SPHERE",SPHERE_SEEDED=1 "$script"; then
+        exit 0
+    fi
+    echo "sphere-job: could neither requeue nor resubmit; continue with: sphere resume $RUN_DIR" >&2
 fi
 exit "$rc"
