@@ -97,8 +97,9 @@ def whole(tmp_path_factory):
 
 def test_every_stage_runs_and_ends_on_its_condition(whole):
     _, result, stage, times = whole
-    assert set(stage.tolist()) == {0.0, 1.0, 2.0, 3.0}
-    starts = [times[np.argmax(stage == k)] for k in (1, 2, 3)]
+    assert set(stage.tolist()) == {0.0, 1.0, 2.0} and stage[-1] == 2.0  # the end sample: the last stage
+    # when stages 1 and 2 started, and when the run ended: with the last stage
+    starts = [times[np.argmax(stage == k)] for k in (1, 2)] + [times[-1]]
     assert starts[0] == pytest.approx(0.0003, abs=0.0001)  # kinetic energy test after min_time
     assert starts[1] - starts[0] == pytest.approx(0.0004, abs=1e-5)  # duration
     assert starts[2] - starts[1] == pytest.approx(3e-5 / 0.1, abs=2e-5)  # shear displacement
