@@ -346,7 +346,8 @@ def test_version():
 def test_shell_completion_can_be_shown_and_installed():
     # typer finds the shell among the parent processes: run from bash, as a user would
     proc = subprocess.run(
-        ["bash", "-c", f"{Path(sys.executable).parent / 'sphere'} --show-completion"],
+        # a second command keeps bash from replacing itself with sphere (it would not be a parent)
+        ["bash", "-c", f"{Path(sys.executable).parent / 'sphere'} --show-completion; exit $?"],
         capture_output=True,
         text=True,
         timeout=120,

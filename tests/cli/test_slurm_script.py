@@ -2,7 +2,8 @@
 `sphere`, `scontrol` and `sbatch` on PATH (no SLURM controller here): SIGUSR1 before the time limit
 requeues and ends the segment with exit 0 (sacct: REQUEUED, not FAILED); scancel's SIGTERM
 checkpoints and ends the chain; the fallback resubmission of an array task runs its own seeded
-case in its own run directory, never a second nested member.
+case in its own run directory, never a second nested member. And the other batch setting a
+user meets first: `make demo`'s OpenMP wait policy.
 """
 
 from __future__ import annotations
@@ -116,3 +117,23 @@ def test_the_fallback_resubmission_of_an_array_task_is_not_seeded_again(job, tmp
     assert resubmitted.returncode == 0
     assert _log(logs, "sphere").split() == ["run", "cases/bed-seed3.toml", "-o", "runs/bed-seed3"]
     assert not (tmp_path / "cases" / "bed-seed3-seed3.toml").exists()
+
+
+def test_make_demo_waits_passively_unless_told_otherwise():
+    """`make demo` on a shared machine: OpenMP threads that spin made it 20 times slower."""
+    root = SCRIPT.parents[2]
+    recipe = subprocess.run(["make", "-n", "demo"], cwd=root, capture_output=True, text=True)
+    assert recipe.returncode == 0, recipe.stderr
+    run = next(line for line in recipe.stdout.splitlines() if "sphere run configs/demo.toml" in line)
+    assert run.startswith("OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-PASSIVE} "), run
+    for policy, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
+        env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+        if policy:
+            env["OMP_WAIT_POLICY"] = policy
+        shell = subprocess.run(
+            ["sh", "-c", run.split(" ")[0] + " sh -c 'echo $OMP_WAIT_POLICY'"],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
+        assert shell.stdout.strip() == expected
