@@ -1,7 +1,8 @@
 """Particle-particle contacts: linear or Hertz-Mindlin normal law, tangential spring with a Coulomb
 cap, optional constant-torque rolling resistance; per-pair parameters from an (M, M, 6) table.
 
-Normal force on i from j, overlap delta, reduced mass m* = m_i m_j/(m_i + m_j), normal approach
+Normal force on i from j, overlap delta, reduced mass m* = 1/(1/m_i + 1/m_j) (m_i where j is
+prescribed, `reduced`), normal approach
 speed v_n (predicted full-step velocity), clamped so it is never attractive:
   linear (Cundall & Strack 1979):  F_n = max(0, k_n delta - c_n v_n),  c_n = 2 zeta sqrt(k_n m*);
   Hertz with the Tsuji dashpot (Tsuji, Tanaka & Ishida 1992, Powder Technol. 71:239):
@@ -48,8 +49,10 @@ the results in the block's order, which is the sweep's. Each contact gets the sa
 in the same order as a contact-by-contact evaluation, so the forces are bitwise the same; the
 pairs across chunks go through the same blocks and law.
 
-Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, mass, inertia
-(N,) [m, kg, kg m^2]; material (N,) int32 index into the table; nbr (N,C) int32 half rows,
+Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, inv_mass,
+inv_inertia (N,) [m, 1/kg, 1/(kg m^2)] (0 for a prescribed particle: the reduced mass of its
+contacts is the other's mass, `reduced`); mass (N,) [kg] for m g; material (N,) int32 index
+into the table; nbr (N,C) int32 half rows,
 nbr_count (N,); start (N+1,) int64 row starts and hist (>= P,3) [m] the packed springs (pair
 (i, nbr[i, k]) at start[i] + k); rev (N,R) int32 reverse slots, rev_count (N,)
 (kernels/neighbors.py); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
@@ -195,10 +198,11 @@ B_D0, B_D1, B_D2, B_DIST2 = 0, 1, 2, 3
 B_N0, B_N1, B_N2, B_DELTA = 0, 1, 2, 3
 B_A0, B_A1, B_A2, B_S0, B_S1, B_S2 = 4, 5, 6, 7, 8, 9
 B_P0, B_P1, B_P2, B_Q0, B_Q1, B_Q2 = 10, 11, 12, 13, 14, 15
-B_MI, B_MJ, B_RI, B_RJ = 16, 17, 18, 19
+B_MI, B_RI, B_RJ = 16, 18, 19  # B_MI: the contact's reduced mass m* (row 17 unused)
 B_H0, B_H1, B_H2 = 20, 21, 22
-# with rolling resistance: w_i - w_j at the half step, the two moments of inertia
-B_W0, B_W1, B_W2, B_II, B_IJ = 23, 24, 25, 26, 27
+# with rolling resistance: w_i - w_j at the half step, the reduced moment of inertia I* (row 27
+# unused)
+B_W0, B_W1, B_W2, B_II = 23, 24, 25, 26
 # with several materials: the pair's table row
 B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 # outputs: force on i, n x F_t, rolling torque on i
@@ -316,6 +320,16 @@ def _law(
 
 
 @njit(cache=True, inline="always")
+def reduced(inv_a, inv_b):
+    """The reduced mass m* = 1/(1/m_a + 1/m_b) [kg] (or moment of inertia) of two bodies from
+    their inverses, as the integrator moves them: a prescribed body (inverse 0: fixed, driven,
+    glued to a wall) leaves the other's own mass, as a wall does; 0 between two prescribed ones,
+    whose contact moves nothing."""
+    s = inv_a + inv_b
+    return 1.0 / s if s > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
 def _pair_contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1, spring_dt, step_dt):
     """The law of pair contact c of a block; kn1 ... mur1: the table row when there is one
     material."""
@@ -326,16 +340,12 @@ def _pair_contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1,
     rj = buf[B_RJ * BLOCK + c]
     dist = math.sqrt(buf[B_DIST2 * BLOCK + c])
     inv = 1.0 / dist
-    mi = buf[B_MI * BLOCK + c]
-    mj = buf[B_MJ * BLOCK + c]
     r_eff = 0.0
     if hertz or rolling:
         r_eff = ri * rj / (ri + rj)
     i_eff = 0.0
     if rolling:
-        ii = buf[B_II * BLOCK + c]
-        ij = buf[B_IJ * BLOCK + c]
-        i_eff = ii * ij / (ii + ij)
+        i_eff = buf[B_II * BLOCK + c]
     kn = kn1
     kt = kt1
     dn = dn1
@@ -356,7 +366,7 @@ def _pair_contact(buf, c, hertz, rolling, single, kn1, kt1, dn1, dt1, mu1, mur1,
         d1 * inv,
         d2 * inv,
         (ri + rj) - dist,
-        math.sqrt(mi * mj / (mi + mj)),  # sqrt of the reduced mass
+        math.sqrt(buf[B_MI * BLOCK + c]),  # sqrt of the reduced mass
         r_eff,
         i_eff,
         kn,
@@ -454,8 +464,8 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
 
 @njit(cache=True, inline="always")
 def gather(
-    buf, ids, c, i, j, s, d0, d1, d2, dist2, ri, rj, vel, angvel, vel_pred, angvel_pred, mass, inertia,
-    material, hist, table, single, rolling,
+    buf, ids, c, i, j, s, d0, d1, d2, dist2, ri, rj, vel, angvel, vel_pred, angvel_pred, inv_mass,
+    inv_inertia, material, hist, table, single, rolling,
 ):  # fmt: skip
     """Copy the law's inputs of the touching pair (i, j = nbr[i, k]) into slot c of the block."""
     i3 = U3 * i
@@ -480,8 +490,7 @@ def gather(
     to_block(buf, B_Q0, c, ri * angvel_pred[i3] + rj * angvel_pred[j3])
     to_block(buf, B_Q1, c, ri * angvel_pred[i3 + U1] + rj * angvel_pred[j3 + U1])
     to_block(buf, B_Q2, c, ri * angvel_pred[i3 + U2] + rj * angvel_pred[j3 + U2])
-    to_block(buf, B_MI, c, mass[i])
-    to_block(buf, B_MJ, c, mass[j])
+    to_block(buf, B_MI, c, reduced(inv_mass[i], inv_mass[j]))
     to_block(buf, B_RI, c, ri)
     to_block(buf, B_RJ, c, rj)
     to_block(buf, B_H0, c, hist[s3])
@@ -491,8 +500,7 @@ def gather(
         to_block(buf, B_W0, c, angvel[i3] - angvel[j3])
         to_block(buf, B_W1, c, angvel[i3 + U1] - angvel[j3 + U1])
         to_block(buf, B_W2, c, angvel[i3 + U2] - angvel[j3 + U2])
-        to_block(buf, B_II, c, inertia[i])
-        to_block(buf, B_IJ, c, inertia[j])
+        to_block(buf, B_II, c, reduced(inv_inertia[i], inv_inertia[j]))
     if not single:
         a = np.uint64(material[i])
         b = np.uint64(material[j])
@@ -547,8 +555,8 @@ def cross_chunk_pairs(
     vel_pred,
     angvel_pred,
     radius,
-    mass,
-    inertia,
+    inv_mass,
+    inv_inertia,
     material,
     nbr,
     nbr_count,
@@ -607,7 +615,8 @@ def cross_chunk_pairs(
                     filled = ZERO
                 gather(
                     buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
-                    vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
+                    vel, angvel, vel_pred, angvel_pred, inv_mass, inv_inertia, material, hist, table, single,
+                    rolling,
                 )  # fmt: skip
                 filled += 1
         _flush_to_slots(buf, ids, filled, hertz, rolling, single, table, spring_dt, step_dt, hist, slots)
@@ -704,8 +713,8 @@ def chunk_pair_forces(
     vel_pred,
     angvel_pred,
     radius,
-    mass,
-    inertia,
+    inv_mass,
+    inv_inertia,
     material,
     nbr,
     nbr_count,
@@ -721,6 +730,7 @@ def chunk_pair_forces(
     rev,
     rev_count,
     body_acc,
+    mass,
     bounds,
     slots,
     blocks,
@@ -813,7 +823,8 @@ def chunk_pair_forces(
                     waiting = ZERO
                 gather(
                     buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
-                    vel, angvel, vel_pred, angvel_pred, mass, inertia, material, hist, table, single, rolling,
+                    vel, angvel, vel_pred, angvel_pred, inv_mass, inv_inertia, material, hist, table, single,
+                    rolling,
                 )  # fmt: skip
                 filled += 1
             if inner < count:

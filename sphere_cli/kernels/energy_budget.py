@@ -46,7 +46,7 @@ import math
 
 from numba import njit, prange
 
-from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, rolling_torque, tangential_force
+from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, reduced, rolling_torque, tangential_force
 from .contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
 
 GRAVITY = 0
@@ -98,6 +98,7 @@ def accumulate_budget(
     mass,
     inertia,
     inv_mass,
+    inv_inertia,
     material,
     nbr,
     nbr_count,
@@ -167,7 +168,7 @@ def accumulate_budget(
             un = u0 * n0 + u1 * n1 + u2 * n2
             w0, w1, w2 = pair_slip(vel, angvel, i, j, ri, rj, n0, n1, n2)
             wn = w0 * n0 + w1 * n1 + w2 * n2
-            root_m = math.sqrt(mi * mass[j] / (mi + mass[j]))
+            root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
             r_eff = ri * rj / (ri + rj)
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
             fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, 0.0)[0]
@@ -188,13 +189,11 @@ def accumulate_budget(
             m1 = 0.0
             m2 = 0.0
             if rolling and row[MU_R] > 0.0:
-                ii = inertia[i]
-                ij = inertia[j]
                 m0, m1, m2 = rolling_torque(
                     angvel_half[i, 0] - angvel_half[j, 0],
                     angvel_half[i, 1] - angvel_half[j, 1],
                     angvel_half[i, 2] - angvel_half[j, 2],
-                    n0, n1, n2, row[MU_R], r_eff, fn, ii * ij / (ii + ij), dt,
+                    n0, n1, n2, row[MU_R], r_eff, fn, reduced(inv_inertia[i], inv_inertia[j]), dt,
                 )  # fmt: skip
                 r0 = angvel[i, 0] - angvel[j, 0]
                 r1 = angvel[i, 1] - angvel[j, 1]

@@ -21,7 +21,7 @@ import math
 
 from numba import njit
 
-from .contact import D_N, D_T, K_N, K_T, MU, normal_law, tangential_force
+from .contact import D_N, D_T, K_N, K_T, MU, normal_law, reduced, tangential_force
 from .contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
 
 
@@ -87,7 +87,7 @@ def contact_moments(
             row = table[0, 0] if single else table[ci, material[j]]
             u0, u1, u2 = pair_slip(vel_pred, angvel_pred, i, j, ri, rj, n0, n1, n2)
             un = u0 * n0 + u1 * n1 + u2 * n2
-            root_m = math.sqrt(mi * mass[j] / (mi + mass[j]))
+            root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
             r_eff = ri * rj / (ri + rj)
             fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
             for a in range(3):

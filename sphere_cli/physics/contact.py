@@ -118,8 +118,8 @@ class PairContactForces:
             p.vel_pred,
             p.angvel_pred,
             p.radius,
-            p.mass,
-            p.inertia,
+            p.inv_mass,  # the reduced mass follows the motion the integrator applies
+            p.inv_inertia,
             p.material,
             nl.nbr,
             nl.nbr_count,
@@ -142,6 +142,7 @@ class PairContactForces:
             nl.rev,
             nl.rev_count,
             box.body_acc,
+            p.mass,
             self.bounds,
             self.slots,
             self.blocks,

@@ -125,6 +125,7 @@ class EnergyBudget:
             p.mass,
             p.inertia,
             p.inv_mass,
+            p.inv_inertia,
             p.material,
             nl.nbr,
             nl.nbr_count,

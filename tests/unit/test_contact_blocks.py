@@ -167,7 +167,7 @@ def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_
             vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
             u = slip(vel_pred, angvel_pred)
             un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
-            root_m = math.sqrt(p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j]))
+            root_m = math.sqrt(law.reduced(p.inv_mass[i], p.inv_mass[j]))
             r_eff = ri * rj / (ri + rj) if hertz or rolling else 0.0
             fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
             g0, g1, g2, x0, x1, x2 = law.tangential_spring(
@@ -179,10 +179,9 @@ def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_
             c = (n[1] * g2 - n[2] * g1, n[2] * g0 - n[0] * g2, n[0] * g1 - n[1] * g0)
             m = (0.0, 0.0, 0.0)
             if rolling and mu_r > 0.0:
-                ii, ij = p.inertia[i], p.inertia[j]
                 m = law.rolling_torque(
                     *(angvel[i, a] - angvel[j, a] for a in range(3)), *n, mu_r, r_eff, fn,
-                    ii * ij / (ii + ij), step_dt,
+                    law.reduced(p.inv_inertia[i], p.inv_inertia[j]), step_dt,
                 )  # fmt: skip
             for a in range(3):
                 force[i, a] += e[a]
@@ -208,7 +207,7 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
     block_ids = np.zeros((chunks, 3 * law.BLOCK), dtype=np.uint64)
     block_rows = np.zeros((chunks, 2 * law.BLOCK), dtype=np.int64)
     common = (
-        p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.mass, p.inertia, p.material,
+        p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.inv_mass, p.inv_inertia, p.material,
         nl.nbr, nl.nbr_count, nl.start, hist, contact.table, contact.hertz, contact.rolling, box.length,
         box.periodic, spring_dt, state.clock.dt,
     )  # fmt: skip
@@ -220,6 +219,7 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
         nl.rev,
         nl.rev_count,
         box.body_acc,
+        p.mass,
         bounds,
         slots,
         blocks,
