@@ -53,16 +53,21 @@ def floor_force(scene) -> np.ndarray:
 
 
 def test_static_immersed_bed_floor_carries_the_buoyant_weight():
-    """The lattice collapses into a random bed within 0.4 s; at 0.5 s the bed is at rest (rms
-    velocity about 3e-4 m/s) and the floor force equals the buoyant weight to 1e-5 (measured)."""
+    """The lattice collapses into a random bed, which comes to rest (kinetic energy below 1e-8 J,
+    rms velocity about 3e-4 m/s) between 0.5 and 0.6 s depending on the realisation (the last
+    bits of the arithmetic change it); once at rest, the floor force equals the buoyant weight to
+    1e-5 (measured)."""
     scene = build_scene(parse_case(STILL_BED))
     state = scene.state
     p = state.particles
-    advance(scene, round(0.5 / state.clock.dt))
+    chunk = round(0.05 / state.clock.dt)
+    advance(scene, round(0.4 / state.clock.dt))
+    while 0.5 * float(np.sum(p.mass[:, None] * p.vel**2)) >= 1e-8 and state.clock.time < 1.0:
+        advance(scene, chunk)
     kinetic = 0.5 * float(np.sum(p.mass[:, None] * p.vel**2))
     weight = float(np.sum(p.mass)) * 9.81
     buoyant_weight = float(np.sum(p.mass - 1000.0 * 4.0 / 3.0 * math.pi * p.radius**3)) * 9.81
-    assert kinetic < 1e-8  # J: at rest
+    assert kinetic < 1e-8  # J: at rest within 1 s
     assert floor_force(scene)[2] == pytest.approx(buoyant_weight, rel=0.01)
     assert abs(floor_force(scene)[2] - weight) > 0.3 * weight  # the buoyancy is not negligible
 
