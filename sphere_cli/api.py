@@ -36,8 +36,13 @@ class RunResult:
 
 
 def validate(path: str | Path) -> dict:
-    """Validate a case file without building anything; returns the resolved case."""
-    return resolved_dict(load_case(path).case)
+    """Validate a case file without building the scene (a lattice placement's capacity is
+    checked, as `run` would); returns the resolved case."""
+    from .build.scene import check_placement
+
+    loaded = load_case(path)
+    check_placement(loaded)
+    return resolved_dict(loaded.case)
 
 
 def schema() -> dict:

@@ -20,12 +20,12 @@ def _region(placement, case):
     return lower, upper
 
 
-def lattice_positions(placement: LatticePlacement, case, radius, rng) -> np.ndarray:
-    """Simple-cubic sites filled bottom layer first (z, then y, then x slowest)."""
+def lattice_sites(placement: LatticePlacement, case, radius) -> tuple[np.ndarray, float]:
+    """(sites along x, y, z; spacing [m]) of the lattice for these radii, refused (CaseError on
+    particles.count) when it cannot hold them all. Also run by `sphere validate`."""
     rmax = radius.max()
     spacing = placement.spacing * 2.0 * rmax
     lower, upper = _region(placement, case)
-    first = lower + rmax
     sites = np.floor((upper - lower - 2.0 * rmax) / spacing + 1e-9).astype(np.int64) + 1
     capacity = int(np.prod(sites))
     if capacity < radius.size:
@@ -36,6 +36,15 @@ def lattice_positions(placement: LatticePlacement, case, radius, rng) -> np.ndar
             f"{sites[2]} at spacing {spacing:g} m); enlarge the box or region, lower "
             "particles.placement.spacing, or use fewer particles",
         )
+    return sites, spacing
+
+
+def lattice_positions(placement: LatticePlacement, case, radius, rng) -> np.ndarray:
+    """Simple-cubic sites filled bottom layer first (z, then y, then x slowest)."""
+    rmax = radius.max()
+    sites, spacing = lattice_sites(placement, case, radius)
+    lower, upper = _region(placement, case)
+    first = lower + rmax
     k = np.arange(radius.size)
     ix = k % sites[0]
     iy = (k // sites[0]) % sites[1]
@@ -103,10 +112,41 @@ def _read_csv(path: Path):
             f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz); got {names}"
         )
     data = np.atleast_1d(data)
+    _refuse_unparsed(path, text, data, names)
     pos = np.stack([data["x"], data["y"], data["z"]], axis=1)
     radius = np.asarray(data["r"], dtype=np.float64) if "r" in names else None
     vel = np.stack([data["vx"], data["vy"], data["vz"]], axis=1) if {"vx", "vy", "vz"} <= set(names) else None
     return _checked(path, pos, radius, vel)
+
+
+def _refuse_unparsed(path: Path, text: str, data, names) -> None:
+    """A field numpy could not read as a number (it reads it as NaN), or one that is not finite,
+    named by its line, column and text."""
+    bad = []  # (row, column) of the first bad field of each column
+    for c, name in enumerate(names):
+        rows = np.flatnonzero(~np.isfinite(data[name]))
+        if rows.size:
+            bad.append((int(rows[0]), c))
+    if not bad:
+        return
+    row, column = min(bad)
+    # the rows numpy read: the lines after the header that are neither blank nor comments
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.split("#")[0].strip()]
+    number, line = lines[row + 1]
+    fields = line.split("#")[0].split(",")
+    field = fields[column].strip() if column < len(fields) else ""
+    raise CaseError(
+        f"{path}:{number}: column {names[column]} (column {column + 1}) = {field!r}: "
+        + ("not a finite number" if field and _is_float(field) else "not a number")
+    )
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_hdf5(path: Path):

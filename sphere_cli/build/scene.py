@@ -35,7 +35,7 @@ from ..physics.walls import (
     rough_layers,
 )
 from ..state import Box, Clock, Particles, State
-from .packing import lattice_positions, random_positions, read_particle_file
+from .packing import lattice_positions, lattice_sites, random_positions, read_particle_file
 from .radii import draw_radii
 
 # dt = "auto" set by a fluid limit this many times below that of the particles alone is more
@@ -298,6 +298,16 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
     scene.state.clock.step = restart.step
     for module in fresh:  # observed from the resume step on
         module.start()
+
+
+def check_placement(loaded: LoadedCase) -> None:
+    """What `sphere validate` can check of the placement without building the scene: a lattice
+    that cannot hold the particles (their radii drawn as the build draws them, from the seed).
+    Random insertion is only known by doing it, and placement files are read by `run`."""
+    spec = loaded.case.particles
+    if isinstance(spec.placement, LatticePlacement):
+        radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
+        lattice_sites(spec.placement, loaded.case, radius)
 
 
 def _initial_particles(loaded: LoadedCase, rng):

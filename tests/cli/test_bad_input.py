@@ -297,10 +297,11 @@ def test_lattice_too_small_for_the_count(tmp_path):
     # 300 spheres would fit the box at the densest packing (691), but not its 250 lattice sites
     text = edit(TINY, "count = 20", "count = 300")
     (tmp_path / "case.toml").write_text(text)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(
-        result, 65, "particles.count", f"case.toml:{line_of(text, 'count =')}:", "lattice", "holds only"
-    )
+    for command in (("validate", "case.toml"), ("run", "case.toml", "-o", "out", "-q")):  # alike
+        result = sphere_inproc(*command, cwd=tmp_path)
+        assert_clean_error(
+            result, 65, "particles.count", f"case.toml:{line_of(text, 'count =')}:", "lattice", "holds only"
+        )
 
 
 def test_random_insertion_that_cannot_fit_the_count(tmp_path):
@@ -379,7 +380,11 @@ def test_missing_placement_file(tmp_path):
         ("x,y,z,r\n0.005,0.005,0.005,0.001\n0.002,0.002\n", "not a readable CSV"),  # ragged row
         ("a,b,c\n1,2,3\n", "must name columns x, y, z"),
         ("x,y,z,r\n", "N >= 1"),  # header only
-        ("x,y,z,r\n0.005,0.005,abc,0.001\n", "non-finite"),
+        ("x,y,z,r\n0.005,0.005,abc,0.001\n", "spheres.csv:2: column z (column 3) = 'abc': not a number"),
+        (
+            "x,y,z,r\n# a comment\n\n0.005,0.005,0.005,0.001\n0.007,0.005,0.005,inf\n",
+            "spheres.csv:5: column r (column 4) = 'inf': not a finite number",
+        ),
         ("x,y,z,r\n0.005,0.005,0.005,-0.001\n", "radii must be > 0"),
         ("", "must name columns x, y, z"),  # empty file
         (b"x,y,z,r\n\xff\xfe,0,0,0\n", "not a readable CSV"),  # not UTF-8
@@ -389,6 +394,7 @@ def test_missing_placement_file(tmp_path):
         "no-xyz-header",
         "no-rows",
         "not-a-number",
+        "not-finite-after-a-comment",
         "negative-radius",
         "empty-file",
         "not-utf8",
