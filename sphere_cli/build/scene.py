@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config.consistency import MANY_STEPS, step_problem
+from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
@@ -319,7 +319,8 @@ def _initial_particles(loaded: LoadedCase, rng):
             radius = draw_radii(spec.radius, pos.shape[0], rng)
         # only now are the particles known: the case alone was checked without them
         loc = ("particles", "placement", "path")
-        problems = memory_problems(loaded.case, radius.size, float(radius.max()), loc)
+        problems = box_problems(loaded.case, 2.0 * float(radius.max()))
+        problems += memory_problems(loaded.case, radius.size, float(radius.max()), loc)
         if problems:
             raise loaded.error(*problems[0])
     else:

@@ -52,25 +52,10 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
     problems += _stage_problems(case, seen)
     problems += _group_problems(case)
 
-    for ax in range(3):
-        if extent[ax] < diameter:
-            problems.append(
-                (
-                    ("domain", "upper"),
-                    f"the box is {extent[ax]:g} m along {'xyz'[ax]}, smaller than the "
-                    f"largest particle diameter {diameter:g} m",
-                )
-            )
-        elif dom.periodic[ax] and extent[ax] < 2.0 * diameter:
-            problems.append(
-                (
-                    ("domain", "periodic"),
-                    f"a periodic axis must be at least two largest diameters long "
-                    f"({2 * diameter:g} m); {'xyz'[ax]} is {extent[ax]:g} m",
-                )
-            )
-
     placement = case.particles.placement
+    if not isinstance(placement, FilePlacement):  # a file's radii are checked once read
+        problems += box_problems(case, diameter)
+
     if isinstance(placement, FilePlacement):
         if case.particles.count is not None:
             problems.append(
@@ -111,6 +96,32 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
     frames = case.output.frames
     if frames.every_time is None and frames.every_steps is None and frames.every_wall_minutes is None:
         problems.append((("output", "frames"), "set every_time, every_steps or every_wall_minutes"))
+    return problems
+
+
+def box_problems(case: Case, diameter: float) -> list[tuple[tuple, str]]:
+    """The box against the largest particle diameter [m]: each side at least one, a periodic
+    side at least two (the case's radius distribution, or the radii of a placement file)."""
+    problems: list[tuple[tuple, str]] = []
+    dom = case.domain
+    for ax in range(3):
+        extent = dom.upper[ax] - dom.lower[ax]
+        if extent < diameter:
+            problems.append(
+                (
+                    ("domain", "upper"),
+                    f"the box is {extent:g} m along {'xyz'[ax]}, smaller than the "
+                    f"largest particle diameter {diameter:g} m",
+                )
+            )
+        elif dom.periodic[ax] and extent < 2.0 * diameter:
+            problems.append(
+                (
+                    ("domain", "periodic"),
+                    f"a periodic axis must be at least two largest diameters long "
+                    f"({2 * diameter:g} m); {'xyz'[ax]} is {extent:g} m",
+                )
+            )
     return problems
 
 

@@ -617,3 +617,23 @@ def test_auto_dt_without_any_possible_contact(tmp_path):
     result = sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "simulation.dt")
     assert "no contact can occur" in result.stderr
+
+
+def test_small_spheres_from_a_file_fit_a_small_box(tmp_path):
+    """The box is measured against the file's radii (10 um), not the radius distribution's
+    default (1 mm), which the file overrides."""
+    text = edit(FROM_FILE, "upper = [0.01, 0.01, 0.01]", "upper = [0.001, 0.001, 0.001]")
+    (tmp_path / "case.toml").write_text(text)
+    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.0003,0.0005,0.0005,1e-5\n0.0007,0.0005,0.0005,1e-5\n")
+    assert_clean_error(sphere_inproc("validate", "case.toml", cwd=tmp_path), 0)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", "--until", "1e-7", cwd=tmp_path)
+    assert_clean_error(result, 0)
+
+
+def test_a_sphere_from_a_file_larger_than_the_box(tmp_path):
+    text = edit(FROM_FILE, "upper = [0.01, 0.01, 0.01]", "upper = [0.001, 0.001, 0.001]")
+    (tmp_path / "case.toml").write_text(text)
+    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.0005,0.0005,0.0005,0.0006\n")
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "domain.upper", "smaller than the largest particle diameter 0.0012 m")
+    assert not (tmp_path / "out").exists()
