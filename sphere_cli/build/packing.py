@@ -80,7 +80,8 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
 
 
 def read_particle_file(placement: FilePlacement, base_dir: Path):
-    """Returns (position (N,3), radius (N,) or None, velocity (N,3) or None)."""
+    """Returns (position (N,3), radius (N,) or None, velocity (N,3) or None, angular velocity
+    (N,3) or None)."""
     path = Path(placement.path)
     if not path.is_absolute():
         path = base_dir / path
@@ -109,14 +110,20 @@ def _read_csv(path: Path):
     names = data.dtype.names or ()
     if not {"x", "y", "z"} <= set(names):
         raise CaseError(
-            f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz); got {names}"
+            f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz, wx, wy, wz); "
+            f"got {names}"
         )
     data = np.atleast_1d(data)
     _refuse_unparsed(path, text, data, names)
     pos = np.stack([data["x"], data["y"], data["z"]], axis=1)
     radius = np.asarray(data["r"], dtype=np.float64) if "r" in names else None
-    vel = np.stack([data["vx"], data["vy"], data["vz"]], axis=1) if {"vx", "vy", "vz"} <= set(names) else None
-    return _checked(path, pos, radius, vel)
+    vel, angvel = (_vector(data, names, columns) for columns in (("vx", "vy", "vz"), ("wx", "wy", "wz")))
+    return _checked(path, pos, radius, vel, angvel)
+
+
+def _vector(data, names, columns) -> np.ndarray | None:
+    """The (N,3) vector of these three columns, or None if the file has not all three."""
+    return np.stack([data[c] for c in columns], axis=1) if set(columns) <= set(names) else None
 
 
 def _refuse_unparsed(path: Path, text: str, data, names) -> None:
@@ -159,15 +166,16 @@ def _read_hdf5(path: Path):
             pos = np.asarray(f["position"], dtype=np.float64)
             radius = np.asarray(f["radius"], dtype=np.float64) if "radius" in f else None
             vel = np.asarray(f["velocity"], dtype=np.float64) if "velocity" in f else None
+            angvel = np.asarray(f["angular_velocity"], dtype=np.float64) if "angular_velocity" in f else None
     except (OSError, ValueError, TypeError) as exc:
         raise CaseError(f"{path}: not a readable HDF5 particle file ({exc})") from None
-    return _checked(path, pos, radius, vel)
+    return _checked(path, pos, radius, vel, angvel)
 
 
-def _checked(path, pos, radius, vel):
+def _checked(path, pos, radius, vel, angvel):
     if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] == 0:
         raise CaseError(f"{path}: positions must be an (N,3) array with N >= 1, got shape {pos.shape}")
-    for name, arr in (("position", pos), ("radius", radius), ("velocity", vel)):
+    for name, arr in (("position", pos), ("radius", radius), ("velocity", vel), ("angular_velocity", angvel)):
         if arr is not None and not np.all(np.isfinite(arr)):
             raise CaseError(f"{path}: {name} holds non-finite values")
     if radius is not None:
@@ -176,6 +184,7 @@ def _checked(path, pos, radius, vel):
         bad = np.flatnonzero(radius <= 0)
         if bad.size:
             raise CaseError(f"{path}: radius of particle {bad[0]} is {radius[bad[0]]}; radii must be > 0")
-    if vel is not None and vel.shape != pos.shape:
-        raise CaseError(f"{path}: velocity must be an (N,3) array like position")
-    return pos, radius, vel
+    for name, arr in (("velocity", vel), ("angular_velocity", angvel)):
+        if arr is not None and arr.shape != pos.shape:
+            raise CaseError(f"{path}: {name} must be an (N,3) array like position")
+    return pos, radius, vel, angvel

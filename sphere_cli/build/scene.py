@@ -126,7 +126,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     tables = contact_tables(case)
     n_placed = None
     if restart is None:
-        pos, radius, vel = _initial_particles(loaded, rng)
+        pos, radius, vel, angvel = _initial_particles(loaded, rng)
         material = assign_materials(tables.fractions, radius.size, rng)
         n_placed = radius.size
         rough_pos, rough_radius, rough_wall = rough_layers(case, case.domain.lower, case.domain.upper)
@@ -134,10 +134,11 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
             pos = np.concatenate([pos, rough_pos])
             radius = np.concatenate([radius, rough_radius])
             vel = np.concatenate([vel, np.zeros_like(rough_pos)])
+            angvel = np.concatenate([angvel, np.zeros_like(rough_pos)])
             material = np.concatenate([material, np.zeros(rough_radius.size, dtype=np.int32)])
     else:
         saved = restart.arrays["particles"]
-        pos, radius, vel = saved["pos"], saved["radius"], saved["vel"]
+        pos, radius, vel, angvel = saved["pos"], saved["radius"], saved["vel"], saved["angvel"]
         material = np.zeros(radius.size, dtype=np.int32)  # restored with the particles
         if "material" in saved:
             material[:] = saved["material"]
@@ -148,7 +149,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     particles = Particles(
         pos=pos,
         vel=vel,
-        angvel=np.zeros((n, 3)),
+        angvel=angvel,
         force=np.zeros((n, 3)),
         torque=np.zeros((n, 3)),
         radius=radius,
@@ -158,7 +159,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         inv_inertia=1.0 / inertia,
         material=material,
         vel_pred=vel.copy(),
-        angvel_pred=np.zeros((n, 3)),
+        angvel_pred=angvel.copy(),
     )
     dom = case.domain
     box = Box(
@@ -174,7 +175,12 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         _check_inside(loaded, box, pos[:n_placed], radius[:n_placed])
         placed = slice(0, n_placed)
         apply_groups(
-            case, pos[placed], vel[placed], particles.inv_mass[placed], particles.inv_inertia[placed]
+            case,
+            pos[placed],
+            vel[placed],
+            angvel[placed],
+            particles.inv_mass[placed],
+            particles.inv_inertia[placed],
         )
         particles.inv_mass[n_placed:] = 0.0
         particles.inv_inertia[n_placed:] = 0.0
@@ -312,9 +318,9 @@ def check_placement(loaded: LoadedCase) -> None:
 
 def _initial_particles(loaded: LoadedCase, rng):
     spec = loaded.case.particles
-    velocity = None
+    velocity = angular_velocity = None
     if isinstance(spec.placement, FilePlacement):
-        pos, radius, velocity = read_particle_file(spec.placement, loaded.base_dir)
+        pos, radius, velocity, angular_velocity = read_particle_file(spec.placement, loaded.base_dir)
         if radius is None:
             radius = draw_radii(spec.radius, pos.shape[0], rng)
         # only now are the particles known: the case alone was checked without them
@@ -333,10 +339,13 @@ def _initial_particles(loaded: LoadedCase, rng):
             raise TypeError(f"unknown placement {spec.placement!r}")
     if velocity is None:
         velocity = np.tile(np.array(spec.velocity, dtype=np.float64), (radius.size, 1))
+    if angular_velocity is None:
+        angular_velocity = np.tile(np.array(spec.angular_velocity, dtype=np.float64), (radius.size, 1))
     return (
         np.ascontiguousarray(pos, dtype=np.float64),
         np.ascontiguousarray(radius, dtype=np.float64),
         np.ascontiguousarray(velocity, dtype=np.float64),
+        np.ascontiguousarray(angular_velocity, dtype=np.float64),
     )
 
 

@@ -450,6 +450,13 @@ class Particles(Strict):
     )
     placement: Placement = Field(default_factory=LatticePlacement, description="Where the spheres start.")
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial velocity of every particle [m/s].")
+    angular_velocity: Vec3 = Field(
+        (0.0, 0.0, 0.0),
+        description=(
+            "Initial angular velocity of every particle (with a file, used only if the file has none) "
+            "[rad/s]."
+        ),
+    )
     seed: Count = Field(0, ge=0, description="Seed of the random numbers for radii and positions [-].")
     overlap_tolerance: Real = Field(
         0.05,

@@ -145,7 +145,7 @@ def rough_layers(case, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def apply_groups(
-    case, pos: np.ndarray, vel: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray
+    case, pos: np.ndarray, vel: np.ndarray, angvel: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray
 ) -> None:
     """Give the particles of each [[particles.groups]] region their prescribed motion: no
     response to forces (inv_mass = inv_inertia = 0), no spin, a fixed velocity (zero if fixed)."""
@@ -154,6 +154,7 @@ def apply_groups(
         inv_mass[inside] = 0.0
         inv_inertia[inside] = 0.0
         vel[inside] = 0.0 if group.motion == "fixed" else np.array(group.velocity)
+        angvel[inside] = 0.0
 
 
 class WallScales:

@@ -13,6 +13,7 @@ import shutil
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from cli_test_support import (
     FROM_FILE,
@@ -637,3 +638,28 @@ def test_a_sphere_from_a_file_larger_than_the_box(tmp_path):
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "domain.upper", "smaller than the largest particle diameter 0.0012 m")
     assert not (tmp_path / "out").exists()
+
+
+def test_initial_angular_velocity_from_the_case_and_from_a_file(tmp_path):
+    """particles.angular_velocity for every particle; wx, wy, wz columns of a placement file win
+    over it; a particle of a fixed group does not spin."""
+    from sphere_cli.api import run_in_memory
+
+    spin = edit(TINY, "density = 2500.0", "density = 2500.0\nangular_velocity = [0.0, 0.0, 30.0]")
+    state = run_in_memory(spin, 0).state
+    assert np.array_equal(state.particles.angvel, np.tile([0.0, 0.0, 30.0], (20, 1)))
+    assert np.array_equal(state.particles.angvel_pred, state.particles.angvel)
+    text = FROM_FILE.replace("density = 2500.0", "density = 2500.0\nangular_velocity = [1.0, 1.0, 1.0]")
+    text += (
+        "[[particles.groups]]\nregion_lower = [0.0, 0.0, 0.0]\nregion_upper = [0.005, 0.01, 0.01]\n"
+        'motion = "fixed"\n'
+    )
+    (tmp_path / "spheres.csv").write_text(
+        "x,y,z,r,wx,wy,wz\n0.003,0.005,0.005,0.001,0,0,5\n0.007,0.005,0.005,0.001,0,-2,0\n"
+    )
+    state = run_in_memory(text, 0, tmp_path).state
+    assert np.array_equal(state.particles.angvel, [[0.0, 0.0, 0.0], [0.0, -2.0, 0.0]])  # the first is fixed
+    (tmp_path / "case.toml").write_text(text)
+    (tmp_path / "spheres.csv").write_text("x,y,z,r,wx,wy,wz\n0.007,0.005,0.005,0.001,0,1,nan\n")
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "spheres.csv:2: column wz (column 7) = 'nan': not a finite number")
