@@ -151,9 +151,8 @@ def _drive(
         with _signal_handlers(stop, handle_signals):
             outcome = loop.run()
         wall = wallclock.monotonic() - started
-        rate = (
-            progress.rate(clock.step) * scene.state.particles.count
-        )  # the first step's compilation left out
+        # the first step's compilation left out
+        rate = progress.rate(clock.step) * scene.state.particles.count
         if outcome != "done":
             log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
             raise StoppedEarly(
@@ -198,8 +197,7 @@ def run(
         try:
             log = rundir.logger()
             log.info("case %s -> %s", case_path, rundir.path)
-            rundir.write_starting()
-            _announce_building(show_progress)
+            _starting(rundir, show_progress)
             scene = build_scene(loaded)
         except BaseException:
             rundir.discard_new()  # a case refused while building leaves nothing behind
@@ -218,7 +216,9 @@ def run(
         rundir.unlock()
 
 
-def _announce_building(show_progress: bool) -> None:
+def _starting(rundir: RunDirectory, show_progress: bool) -> None:
+    """status.json and the terminal say what happens before the first step."""
+    rundir.write_starting()
     if show_progress:
         print(
             "[sphere] building the scene and compiling the kernels (cached after a first run) ...",
@@ -271,8 +271,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_duration(fresh, until)
         note = _shared_cores_warning()
-        rundir.write_starting()
-        _announce_building(show_progress)
+        _starting(rundir, show_progress)
         scene = build_scene(fresh)
         _log_note(log, note)
         output = start_output(scene, rundir, fresh, log)
@@ -295,8 +294,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
     note = _shared_cores_warning()
-    rundir.write_starting()
-    _announce_building(show_progress)
+    _starting(rundir, show_progress)
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
     _log_note(log, note)

@@ -158,7 +158,6 @@ class Loop:
         state = scene.state
         clock = state.clock
         started = wallclock.monotonic()
-        start_step = clock.step
         while clock.step < self.end_step and not scene.finished:
             if self.stop.interrupted:
                 raise KeyboardInterrupt
@@ -188,7 +187,7 @@ class Loop:
                 self.output.checkpoint(scene)
                 self.checkpoints.done(now)
             if self.status.due(step, now):
-                self.progress.update(scene, step - start_step, now - started)
+                self.progress.update(scene, now - started)
                 self.status.done(now)
         if self.stop.interrupted:
             raise KeyboardInterrupt
@@ -198,12 +197,7 @@ class Loop:
             self.output.observe(scene)
         self.output.checkpoint(scene)
         finished = clock.step >= self.end_step or scene.finished
-        self.progress.update(
-            scene,
-            clock.step - start_step,
-            wallclock.monotonic() - started,
-            state="done" if finished else "stopped",
-        )
+        self.progress.update(scene, wallclock.monotonic() - started, state="done" if finished else "stopped")
         return "done" if finished else self.stop.reason
 
     def _stage_ended(self, scene) -> None:

@@ -53,7 +53,7 @@ class Progress:
         steps, seconds = step - self.rate_start[0], time.monotonic() - self.rate_start[1]
         return steps / seconds if steps > 0 and seconds > 0 else 0.0
 
-    def info(self, scene, steps_done: int, elapsed: float, state: str = "running") -> dict:
+    def info(self, scene, elapsed: float, state: str = "running") -> dict:
         clock = scene.state.clock
         rate = self.rate(clock.step)
         if state == "done":  # a staged run may end before its duration: its true end
@@ -78,8 +78,8 @@ class Progress:
         """How often the loop should call update() [s of wall time]."""
         return min(0.5, self.status_every) if self.bar is not None else self.status_every
 
-    def update(self, scene, steps_done: int, elapsed: float, state: str = "running") -> None:
-        info = self.info(scene, steps_done, elapsed, state)
+    def update(self, scene, elapsed: float, state: str = "running") -> None:
+        info = self.info(scene, elapsed, state)
         due = state != "running" or elapsed - self.last_status >= self.status_every
         if due:
             self.rundir.write_status(info)
