@@ -624,8 +624,7 @@ def test_small_spheres_from_a_file_fit_a_small_box(tmp_path):
     """The box is measured against the file's radii (10 um), not the radius distribution's
     default (1 mm), which the file overrides."""
     text = edit(FROM_FILE, "upper = [0.01, 0.01, 0.01]", "upper = [0.001, 0.001, 0.001]")
-    (tmp_path / "case.toml").write_text(text)
-    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.0003,0.0005,0.0005,1e-5\n0.0007,0.0005,0.0005,1e-5\n")
+    _file_case(tmp_path, "x,y,z,r\n0.0003,0.0005,0.0005,1e-5\n0.0007,0.0005,0.0005,1e-5\n", text)
     assert_clean_error(sphere_inproc("validate", "case.toml", cwd=tmp_path), 0)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", "--until", "1e-7", cwd=tmp_path)
     assert_clean_error(result, 0)
@@ -633,8 +632,7 @@ def test_small_spheres_from_a_file_fit_a_small_box(tmp_path):
 
 def test_a_sphere_from_a_file_larger_than_the_box(tmp_path):
     text = edit(FROM_FILE, "upper = [0.01, 0.01, 0.01]", "upper = [0.001, 0.001, 0.001]")
-    (tmp_path / "case.toml").write_text(text)
-    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.0005,0.0005,0.0005,0.0006\n")
+    _file_case(tmp_path, "x,y,z,r\n0.0005,0.0005,0.0005,0.0006\n", text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "domain.upper", "smaller than the largest particle diameter 0.0012 m")
     assert not (tmp_path / "out").exists()
@@ -654,12 +652,11 @@ def test_initial_angular_velocity_from_the_case_and_from_a_file(tmp_path):
         "[[particles.groups]]\nregion_lower = [0.0, 0.0, 0.0]\nregion_upper = [0.005, 0.01, 0.01]\n"
         'motion = "fixed"\n'
     )
-    (tmp_path / "spheres.csv").write_text(
-        "x,y,z,r,wx,wy,wz\n0.003,0.005,0.005,0.001,0,0,5\n0.007,0.005,0.005,0.001,0,-2,0\n"
+    _file_case(
+        tmp_path, "x,y,z,r,wx,wy,wz\n0.003,0.005,0.005,0.001,0,0,5\n0.007,0.005,0.005,0.001,0,-2,0\n", text
     )
     state = run_in_memory(text, 0, tmp_path).state
     assert np.array_equal(state.particles.angvel, [[0.0, 0.0, 0.0], [0.0, -2.0, 0.0]])  # the first is fixed
-    (tmp_path / "case.toml").write_text(text)
-    (tmp_path / "spheres.csv").write_text("x,y,z,r,wx,wy,wz\n0.007,0.005,0.005,0.001,0,1,nan\n")
+    _file_case(tmp_path, "x,y,z,r,wx,wy,wz\n0.007,0.005,0.005,0.001,0,1,nan\n", text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "spheres.csv:2: column wz (column 7) = 'nan': not a finite number")

@@ -401,10 +401,10 @@ def test_the_rate_leaves_out_the_first_step():
 
     progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, enabled=False)
     scene = SimpleNamespace(state=SimpleNamespace(clock=SimpleNamespace(step=1, time=1e-5)))
-    assert progress.info(scene, 1, 30.0)["eta_seconds"] is None  # no rate before the first step ends
+    assert progress.info(scene, 30.0)["eta_seconds"] is None  # no rate before the first step ends
     progress.first_step_done(1)
     progress.rate_start = (1, progress.rate_start[1] - 2.0)  # as if 2 s had passed since
     scene.state.clock.step = 201
-    info = progress.info(scene, 201, 32.0)
+    info = progress.info(scene, 32.0)
     assert info["steps_per_second"] == pytest.approx(100.0, rel=0.05)  # 200 steps in 2 s, not 201 in 32
     assert info["eta_seconds"] == pytest.approx(8.0, rel=0.05)
