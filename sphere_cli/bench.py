@@ -7,6 +7,9 @@ The settled bed is made once by letting the same particles, placed on a denser l
 (SETTLE_SPACING), fall for SETTLE_TIME of simulated time with the canonical contact law and dt;
 it is cached under the user cache directory, keyed by the text of that case (an interrupted
 settling resumes from its last checkpoint).
+A last row times the sparse scene of the neighbour-search issue: one sphere of 0.5 mm in a
+1 m cube falling onto its floor, SPARSE_STEPS steps (the search's memory and time follow the
+particle count, not the box volume over the particle size: physics/neighbors.py).
 Compile (or cache-load) time is measured apart from run time; each row reports the median of
 `repeats` runs of `steps` steps, and the best of them (on a machine shared with other jobs, many
 short runs and their best approach what an idle machine gives).
@@ -38,6 +41,24 @@ SPACING = 1.2
 SETTLE_SPACING = 1.05
 SETTLE_TIME = 0.15  # s
 SETTLE_CHECKPOINTS = 0.01  # s of simulated time between checkpoints while settling
+SPARSE_STEPS = 1000
+SPARSE_CASE = """
+title = "sparse benchmark scene: one small sphere in a 1 m cube"
+[simulation]
+duration = 1.0
+dt = 5.0e-6
+[domain]
+upper = [1.0, 1.0, 1.0]
+[particles]
+count = 1
+density = 2500.0
+radius = 0.0005
+[contact]
+model = "linear"
+normal_stiffness = 1.0e4
+[[walls]]
+face = "z-"
+"""
 
 
 def canonical_case(
@@ -126,7 +147,7 @@ def bytes_per_particle(scene) -> float:
     arrays += [contact.blocks, contact.block_ids, contact.block_rows]
     search = scene.neighbors
     arrays += [nl.start, search.spare_nbr, search.spare_count, search.spare_start, search.spare_hist]
-    arrays += [search.cell_of, search.order]
+    arrays += [search.cell_of, search.order, search.cell_start, search.cell_key]
     if state.walls is not None:
         arrays.append(state.walls.hist)
         arrays += scene.walls.scratch()
@@ -194,9 +215,22 @@ def run_benchmark(
                 )
             numba.set_num_threads(max_threads)
     _speedups(results, log)
+    results["sparse"] = _sparse_row(log)
     (out_dir / "bench.json").write_text(json.dumps(results, indent=2))
     log(f"results written to {out_dir / 'bench.json'}")
     return results
+
+
+def _sparse_row(log) -> dict:
+    scene = build_scene(parse_case(SPARSE_CASE))
+    search = scene.neighbors
+    cells = search.cell_start.nbytes + search.cell_key.nbytes
+    seconds = min(_time_steps(scene, SPARSE_STEPS, 3))
+    log(
+        f"sparse scene (1 sphere of 0.5 mm in a 1 m cube, {search.ncell.prod():.3g} cells of the search): "
+        f"{SPARSE_STEPS} steps in {seconds:.3f} s, {cells} B of cell index"
+    )
+    return {"steps": SPARSE_STEPS, "seconds": seconds, "cell_index_bytes": cells}
 
 
 def _mean_contacts(scene) -> float:

@@ -12,6 +12,7 @@ from ..config.load import case_error
 from ..config.schema import FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import CaseError, MissingInputError
 from ..kernels.packing import insert_random
+from ..physics.neighbors import CELLS_PER_PARTICLE
 
 
 def _region(placement, case):
@@ -60,7 +61,9 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
     lo = lower + radius[:, None, None]
     hi = upper - radius[:, None, None]
     cand = lo + (hi - lo) * rng.random((radius.size, placement.max_attempts, 3))
-    cell = 2.0 * radius.max()
+    # cells of one largest diameter, coarser where that would be more than a few per particle
+    # (uniform candidates fill them evenly, so a coarser cell only costs a few more checks)
+    cell = max(2.0 * radius.max(), (np.prod(upper - lower) / (CELLS_PER_PARTICLE * radius.size)) ** (1 / 3))
     ncell = np.maximum(np.floor((upper - lower) / cell).astype(np.int64), 1)
     pos = np.zeros((radius.size, 3))
     # large spheres first: they are the hardest to fit

@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass
 
 from ..errors import UsageError
+from ..physics.neighbors import CELLS_PER_PARTICLE, DENSE_FLOOR
 from .fluid_grid import grid_cells
 from .schema import Case, RandomPlacement
 
@@ -24,7 +25,7 @@ LIMIT_VARIABLE = "SPHERE_MEMORY_GIB"
 # 1020 B measured on a settled bed with six walls on 1 and 2 threads (docs/performance.md). What
 # the builder needs besides (radii, placement) is less, and freed before the loop.
 PARTICLE_BYTES = 1024
-# the grids of the neighbour search and of random insertion: one int64 per cell
+# the cells of the neighbour search and of random insertion: one int64 per cell
 GRID_CELL_BYTES = 8
 # random placement draws every candidate position at once: 3 float64, held twice while sorted
 CANDIDATE_BYTES = 48
@@ -115,14 +116,16 @@ def _parts(case: Case, count: int, largest: float, count_loc: tuple) -> list[_Pa
                     particles=glued,
                 )
             )
-    # cells of two largest radii plus the skin (physics/neighbors.py)
+    # cells of two largest radii plus the skin, each listed while there are few per particle,
+    # else only the occupied ones (physics/neighbors.py)
     reach = (2.0 + case.simulation.neighbor_skin) * largest
+    listed = min(_cells(length, reach), CELLS_PER_PARTICLE * float(count) + DENSE_FLOOR)
     parts.append(
         _Part(
-            _cells(length, reach) * GRID_CELL_BYTES,
+            listed * GRID_CELL_BYTES,
             ("domain", "upper"),
-            f"the neighbour search cuts the box into {_shape(length, reach)} cells of {reach:.3g} m, "
-            "two largest radii and the skin (lengths are in metres)",
+            f"the neighbour search lists {listed:.3g} of the {_shape(length, reach)} cells of "
+            f"{reach:.3g} m (two largest radii and the skin) that cut the box",
         )
     )
     placement = case.particles.placement
@@ -142,10 +145,10 @@ def _parts(case: Case, count: int, largest: float, count_loc: tuple) -> list[_Pa
         region = [hi - lo for lo, hi in zip(lower, upper, strict=True)]
         parts.append(
             _Part(
-                _cells(region, 2.0 * largest) * GRID_CELL_BYTES,
+                min(_cells(region, 2.0 * largest), CELLS_PER_PARTICLE * float(count)) * GRID_CELL_BYTES,
                 ("particles", "placement"),
-                f"random insertion cuts the region into {_shape(region, 2.0 * largest)} cells of one "
-                "largest diameter",
+                "random insertion cuts the region into cells of one largest diameter, at most "
+                f"{CELLS_PER_PARTICLE} per particle",
                 transient=True,
             )
         )

@@ -446,7 +446,10 @@ class Particles(Strict):
     )
     radius: RadiusDistribution = Field(
         default_factory=lambda: FixedRadius(value=1e-3),
-        description="Radius distribution (with a file, used only if the file has no radii).",
+        description=(
+            "Radius distribution, or a number: every particle of that radius [m] (with a file, "
+            "used only if the file has no radii)."
+        ),
     )
     placement: Placement = Field(default_factory=LatticePlacement, description="Where the spheres start.")
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial velocity of every particle [m/s].")
@@ -473,6 +476,9 @@ class Particles(Strict):
     @model_validator(mode="before")
     @classmethod
     def _default_tags(cls, data):
+        radius = data.get("radius") if isinstance(data, dict) else None
+        if isinstance(radius, int | float) and not isinstance(radius, bool):  # one radius for all
+            data = {**data, "radius": {"distribution": "fixed", "value": radius}}
         data = _default_tag(data, "radius", "distribution", "fixed")
         return _default_tag(data, "placement", "method", "lattice")
 

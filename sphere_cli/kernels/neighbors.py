@@ -12,6 +12,12 @@ and each particle then gathers its reverse slots and its own row in that fixed o
 (ascending partner index), so the sums do not depend on the thread count (design guide 3).
 The list stays valid until some particle has moved skin/2 since the build.
 
+Cells: cubes of at least two largest radii plus the skin, numbered with z fastest. Where there
+are few enough cells (a few per particle) every cell has its run in `cell_start`; where there
+are not (a sparse scene: one small sphere in a 1 m box would need 10^11 cells), only the
+occupied cells are listed, their numbers sorted in `cell_key`, and a cell's run is found by
+binary search, so memory and time follow the particle count, not the box volume.
+
 Arguments (N particles, C neighbour slots per particle, R reverse slots per particle, P listed
 pairs):
   pos (N,3) [m], radius (N,) [m], lower/length (3,) box corner and edge [m],
@@ -69,6 +75,32 @@ def counting_sort(cell_of, ncells_total, cell_start, order):
 
 
 @njit(cache=True)
+def sort_occupied(cell_of, order, cell_key, cell_start):
+    """Particles ordered by cell number (stable), the occupied cells' numbers ascending in
+    cell_key[:M] and cell m's particles order[cell_start[m]:cell_start[m+1]]. Returns M."""
+    order[:] = np.argsort(cell_of, kind="mergesort")
+    used = 0
+    for s in range(order.shape[0]):
+        c = cell_of[order[s]]
+        if used == 0 or cell_key[used - 1] != c:
+            cell_key[used] = c
+            cell_start[used] = s
+            used += 1
+    cell_start[used] = order.shape[0]
+    return used
+
+
+@njit(cache=True, inline="always")
+def _cell_run(cell_start, cell_key, used, first, last):
+    """The part of `order` holding the cells numbered first..last: direct indices into
+    cell_start when every cell is listed (used < 0), else a binary search of the occupied ones."""
+    if used < 0:
+        return cell_start[first], cell_start[last + 1]
+    keys = cell_key[:used]
+    return cell_start[np.searchsorted(keys, first)], cell_start[np.searchsorted(keys, last, side="right")]
+
+
+@njit(cache=True)
 def _axis_offsets(n, periodic):
     """Distinct neighbouring cell offsets along one axis (fewer than 3 cells: no duplicates)."""
     if n == 1:
@@ -97,13 +129,16 @@ def build_lists(
     ncell,
     cell_of,
     cell_start,
+    cell_key,
+    used,
     order,
     skin,
     nbr,
     nbr_count,
 ):
     """Fill the half rows nbr/nbr_count (their springs: carry_springs) from the cells of
-    cell_index and counting_sort (cell_of, cell_start, order). The cells are numbered
+    cell_index and counting_sort (every cell: used = -1) or sort_occupied (the `used` occupied
+    cells numbered in cell_key) (cell_of, cell_start, order). The cells are numbered
     with z fastest, so the stencil's cells cz-1..cz+1 of each (x, y) column are one run of
     `order`: 9 runs per particle instead of 27 cells (a second run where a periodic z wraps)."""
     n = pos.shape[0]
@@ -146,11 +181,9 @@ def build_lists(
                 column = (gx * ncell[1] + gy) * nz
                 for run in range(2):
                     if run == 0:
-                        first = cell_start[column + z0]
-                        last = cell_start[column + z1 + 1]
+                        first, last = _cell_run(cell_start, cell_key, used, column + z0, column + z1)
                     elif z2 >= 0:
-                        first = cell_start[column + z2]
-                        last = cell_start[column + z2 + 1]
+                        first, last = _cell_run(cell_start, cell_key, used, column + z2, column + z2)
                     else:
                         break
                     for s in range(first, last):

@@ -14,6 +14,7 @@ from ..kernels.neighbors import (
     cell_index,
     counting_sort,
     row_starts,
+    sort_occupied,
 )
 from ..state import NeighborList, State
 
@@ -28,6 +29,14 @@ QUIET_BUILDS = 20
 # the packed springs are allocated for this many times the pairs listed (rebuilds add or drop a
 # few pairs; more than that reallocates them)
 SPRING_ROOM = 1.25
+# Every cell gets its entry (8 B) while the cells number at most this many per particle (plus
+# DENSE_FLOOR); beyond, only the occupied cells are listed and searched (kernels/neighbors.py):
+# a settled bed fills ~1 cell per 10 particles, so only a box mostly empty goes the sparse way.
+CELLS_PER_PARTICLE = 8
+DENSE_FLOOR = 4096
+# cells along one axis at most (2^60 cells in all fit the int64 cell numbers); more would be
+# cells wider than needed, which costs pairs checked, never pairs missed
+AXIS_CELLS = 2**20
 
 
 def allocate_neighbor_list(n: int, skin: float, capacity: int | None = None) -> NeighborList:
@@ -45,16 +54,25 @@ def allocate_neighbor_list(n: int, skin: float, capacity: int | None = None) -> 
     )
 
 
+def search_cells(length: np.ndarray, largest: float, skin: float) -> np.ndarray:
+    """Cells along each axis: as many as fit cubes of two largest radii plus the skin (a pair
+    that can touch before the next build lies in neighbouring cells), at least 1, at most AXIS_CELLS."""
+    reach = 2.0 * largest + skin
+    return np.clip(np.floor(np.asarray(length, dtype=float) / reach), 1, AXIS_CELLS).astype(np.int64)
+
+
 class NeighborSearch:
     phase = "prepare"
 
     def __init__(self, state: State):
         box, p, nl = state.box, state.particles, state.neighbors
-        reach = 2.0 * float(p.radius.max()) + nl.skin
-        self.ncell = np.maximum(np.floor(box.length / reach).astype(np.int64), 1)
+        self.ncell = search_cells(box.length, float(p.radius.max()), nl.skin)
         self.cell_size = box.length / self.ncell
         self.cell_of = np.zeros(p.count, dtype=np.int64)
-        self.cell_start = np.zeros(int(np.prod(self.ncell)) + 1, dtype=np.int64)
+        cells = float(np.prod(self.ncell.astype(float)))
+        self.dense = cells <= CELLS_PER_PARTICLE * p.count + DENSE_FLOOR
+        self.cell_start = np.zeros((int(cells) if self.dense else p.count) + 1, dtype=np.int64)
+        self.cell_key = np.zeros(0 if self.dense else p.count, dtype=np.int64)
         self.order = np.zeros(p.count, dtype=np.int64)
         self.threshold2 = (0.5 * nl.skin) ** 2
         self.builds_since_growth = QUIET_BUILDS + 1  # no growth seen yet (also after a restore)
@@ -75,7 +93,11 @@ class NeighborSearch:
     def rebuild(self, state: State) -> None:
         box, p, nl = state.box, state.particles, state.neighbors
         cell_index(p.pos, box.lower, self.cell_size, self.ncell, self.cell_of)
-        counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
+        if self.dense:
+            counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
+            used = -1
+        else:
+            used = sort_occupied(self.cell_of, self.order, self.cell_key, self.cell_start)
         while True:
             build_lists(
                 p.pos,
@@ -85,6 +107,8 @@ class NeighborSearch:
                 self.ncell,
                 self.cell_of,
                 self.cell_start,
+                self.cell_key,
+                used,
                 self.order,
                 nl.skin,
                 self.spare_nbr,
