@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import io
-import warnings
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -82,9 +82,24 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
     return out
 
 
-def read_particle_file(placement: FilePlacement, base_dir: Path):
-    """Returns (position (N,3), radius (N,) or None, velocity (N,3) or None, angular velocity
-    (N,3) or None)."""
+@dataclass
+class ParticleFile:
+    """What a placement file gives: positions, and each of the optional columns or None."""
+
+    pos: np.ndarray  # (N,3) [m]
+    radius: np.ndarray | None = None  # (N,) [m]
+    velocity: np.ndarray | None = None  # (N,3) [m/s]
+    angular_velocity: np.ndarray | None = None  # (N,3) [rad/s]
+    material: np.ndarray | None = None  # (N,) str: names from particles.material
+    group: np.ndarray | None = None  # (N,) str: names of particles.groups, "" for none
+    fixed: np.ndarray | None = None  # (N,) bool
+
+
+VECTORS = {"velocity": ("vx", "vy", "vz"), "angular_velocity": ("wx", "wy", "wz")}
+FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
+
+
+def read_particle_file(placement: FilePlacement, base_dir: Path) -> ParticleFile:
     path = Path(placement.path)
     if not path.is_absolute():
         path = base_dir / path
@@ -93,101 +108,118 @@ def read_particle_file(placement: FilePlacement, base_dir: Path):
             placement, ("particles", "placement", "path"), f"file not found ({path})", MissingInputError
         )
     if path.suffix.lower() in (".h5", ".hdf5"):
-        return _read_hdf5(path)
-    return _read_csv(path)
+        return _checked(path, _read_hdf5(path))
+    return _checked(path, _read_csv(path))
 
 
-def _read_csv(path: Path):
+def _read_csv(path: Path) -> ParticleFile:
+    """Comma-separated, a header of column names first; blank lines and text after # are skipped.
+    A field that is not what its column needs is refused by its line and column."""
     try:
         text = path.read_text(encoding="utf-8")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # numpy warns about blank input; it is reported below
-            data = (
-                np.genfromtxt(io.StringIO(text), delimiter=",", names=True, dtype=np.float64)
-                if text.strip()
-                else np.zeros(0)
-            )
-    except (ValueError, OSError, IndexError) as exc:  # UnicodeDecodeError is a ValueError
-        detail = " ".join(str(exc).replace("Some errors were detected !", "").split())
-        raise CaseError(f"{path}: not a readable CSV particle file ({detail})") from None
-    names = data.dtype.names or ()
+    except (ValueError, OSError) as exc:  # UnicodeDecodeError is a ValueError
+        raise CaseError(f"{path}: not a readable CSV particle file ({exc})") from None
+    rows = [
+        (number, [field.strip() for field in line.split("#")[0].split(",")])
+        for number, line in enumerate(text.splitlines(), start=1)
+        if line.split("#")[0].strip()
+    ]
+    names = rows[0][1] if rows else []
+    for name in names:
+        if names.count(name) > 1 or name == "":
+            raise CaseError(f"{path}:{rows[0][0]}: the header names {name!r} more than once or not at all")
     if not {"x", "y", "z"} <= set(names):
         raise CaseError(
-            f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz, wx, wy, wz); "
-            f"got {names}"
+            f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz, wx, wy, wz, "
+            f"material, group, fixed); got {tuple(names)}"
         )
-    data = np.atleast_1d(data)
-    _refuse_unparsed(path, text, data, names)
-    pos = np.stack([data["x"], data["y"], data["z"]], axis=1)
-    radius = np.asarray(data["r"], dtype=np.float64) if "r" in names else None
-    vel, angvel = (_vector(data, names, columns) for columns in (("vx", "vy", "vz"), ("wx", "wy", "wz")))
-    return _checked(path, pos, radius, vel, angvel)
-
-
-def _vector(data, names, columns) -> np.ndarray | None:
-    """The (N,3) vector of these three columns, or None if the file has not all three."""
-    return np.stack([data[c] for c in columns], axis=1) if set(columns) <= set(names) else None
-
-
-def _refuse_unparsed(path: Path, text: str, data, names) -> None:
-    """A field numpy could not read as a number (it reads it as NaN), or one that is not finite,
-    named by its line, column and text."""
-    bad = []  # (row, column) of the first bad field of each column
+    rows = rows[1:]
+    for number, fields in rows:
+        if len(fields) != len(names):
+            raise CaseError(f"{path}:{number}: {len(fields)} fields, but the header names {len(names)}")
+    columns = {}
     for c, name in enumerate(names):
-        rows = np.flatnonzero(~np.isfinite(data[name]))
-        if rows.size:
-            bad.append((int(rows[0]), c))
-    if not bad:
-        return
-    row, column = min(bad)
-    # the rows numpy read: the lines after the header that are neither blank nor comments
-    lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.split("#")[0].strip()]
-    number, line = lines[row + 1]
-    fields = line.split("#")[0].split(",")
-    field = fields[column].strip() if column < len(fields) else ""
-    raise CaseError(
-        f"{path}:{number}: column {names[column]} (column {column + 1}) = {field!r}: "
-        + ("not a finite number" if field and _is_float(field) else "not a number")
+        if name in ("material", "group"):
+            columns[name] = np.array([f[c] for _, f in rows], dtype=str)
+        else:
+            values = [_field(path, number, c, name, f[c]) for number, f in rows]
+            columns[name] = np.array(values, dtype=bool if name == "fixed" else float)
+    return ParticleFile(
+        pos=np.stack([columns[a] for a in "xyz"], axis=1).reshape(-1, 3),
+        radius=columns.get("r"),
+        **{key: _vector(columns, triple) for key, triple in VECTORS.items()},
+        material=columns.get("material"),
+        group=columns.get("group"),
+        fixed=columns.get("fixed"),
     )
 
 
-def _is_float(text: str) -> bool:
+def _vector(columns: dict, triple) -> np.ndarray | None:
+    """The (N,3) vector of these three columns, or None if the file has not all three."""
+    return np.stack([columns[c] for c in triple], axis=1) if set(triple) <= set(columns) else None
+
+
+def _field(path: Path, line: int, column: int, name: str, field: str):
+    """The field as its column needs it: a flag for `fixed`, a finite number for the others."""
+    where = f"{path}:{line}: column {name} (column {column + 1}) = {field!r}"
+    if name == "fixed":
+        if field.lower() not in FLAGS:
+            raise CaseError(f"{where}: expected 1 or 0 (true or false)")
+        return FLAGS[field.lower()]
     try:
-        float(text)
+        value = float(field)
     except ValueError:
-        return False
-    return True
+        raise CaseError(f"{where}: not a number") from None
+    if not math.isfinite(value):
+        raise CaseError(f"{where}: not a finite number")
+    return value
 
 
-def _read_hdf5(path: Path):
+def _read_hdf5(path: Path) -> ParticleFile:
     import h5py
 
     try:
         with h5py.File(path, "r") as f:
             if "position" not in f:
                 raise CaseError(f"{path}: the HDF5 particle file needs a dataset 'position' (N,3)")
-            pos = np.asarray(f["position"], dtype=np.float64)
-            radius = np.asarray(f["radius"], dtype=np.float64) if "radius" in f else None
-            vel = np.asarray(f["velocity"], dtype=np.float64) if "velocity" in f else None
-            angvel = np.asarray(f["angular_velocity"], dtype=np.float64) if "angular_velocity" in f else None
+
+            def numbers(name):
+                return np.asarray(f[name], dtype=np.float64) if name in f else None
+
+            def names(name):
+                return np.array(f[name].asstr()[()], dtype=str) if name in f else None
+
+            return ParticleFile(
+                pos=numbers("position"),
+                radius=numbers("radius"),
+                velocity=numbers("velocity"),
+                angular_velocity=numbers("angular_velocity"),
+                material=names("material"),
+                group=names("group"),
+                fixed=np.asarray(f["fixed"], dtype=bool) if "fixed" in f else None,
+            )
     except (OSError, ValueError, TypeError) as exc:
         raise CaseError(f"{path}: not a readable HDF5 particle file ({exc})") from None
-    return _checked(path, pos, radius, vel, angvel)
 
 
-def _checked(path, pos, radius, vel, angvel):
+def _checked(path: Path, data: ParticleFile) -> ParticleFile:
+    pos, radius = data.pos, data.radius
     if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] == 0:
         raise CaseError(f"{path}: positions must be an (N,3) array with N >= 1, got shape {pos.shape}")
-    for name, arr in (("position", pos), ("radius", radius), ("velocity", vel), ("angular_velocity", angvel)):
+    for name in ("pos", "radius", "velocity", "angular_velocity"):
+        arr = getattr(data, name)
         if arr is not None and not np.all(np.isfinite(arr)):
-            raise CaseError(f"{path}: {name} holds non-finite values")
+            raise CaseError(f"{path}: {'position' if name == 'pos' else name} holds non-finite values")
     if radius is not None:
-        if radius.shape != (pos.shape[0],):
-            raise CaseError(f"{path}: radius must have one value per particle")
         bad = np.flatnonzero(radius <= 0)
         if bad.size:
             raise CaseError(f"{path}: radius of particle {bad[0]} is {radius[bad[0]]}; radii must be > 0")
-    for name, arr in (("velocity", vel), ("angular_velocity", angvel)):
+    for name in ("radius", "material", "group", "fixed"):
+        arr = getattr(data, name)
+        if arr is not None and arr.shape != (pos.shape[0],):
+            raise CaseError(f"{path}: {name} must have one value per particle")
+    for name in VECTORS:
+        arr = getattr(data, name)
         if arr is not None and arr.shape != pos.shape:
             raise CaseError(f"{path}: {name} must be an (N,3) array like position")
-    return pos, radius, vel, angvel
+    return data

@@ -126,8 +126,10 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     tables = contact_tables(case)
     n_placed = None
     if restart is None:
-        pos, radius, vel, angvel = _initial_particles(loaded, rng)
-        material = assign_materials(tables.fractions, radius.size, rng)
+        pos, radius, vel, angvel, placement_file = _initial_particles(loaded, rng)
+        material = _file_materials(loaded, tables, placement_file)
+        if material is None:
+            material = assign_materials(tables.fractions, radius.size, rng)
         n_placed = radius.size
         rough_pos, rough_radius, rough_wall = rough_layers(case, case.domain.lower, case.domain.upper)
         if rough_radius.size:
@@ -181,6 +183,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
             angvel[placed],
             particles.inv_mass[placed],
             particles.inv_inertia[placed],
+            *_file_groups(loaded, placement_file),
         )
         particles.inv_mass[n_placed:] = 0.0
         particles.inv_inertia[n_placed:] = 0.0
@@ -317,10 +320,12 @@ def check_placement(loaded: LoadedCase) -> None:
 
 
 def _initial_particles(loaded: LoadedCase, rng):
+    """(pos, radius, velocity, angular velocity, the placement file or None)."""
     spec = loaded.case.particles
-    velocity = angular_velocity = None
+    velocity = angular_velocity = file = None
     if isinstance(spec.placement, FilePlacement):
-        pos, radius, velocity, angular_velocity = read_particle_file(spec.placement, loaded.base_dir)
+        file = read_particle_file(spec.placement, loaded.base_dir)
+        pos, radius, velocity, angular_velocity = file.pos, file.radius, file.velocity, file.angular_velocity
         if radius is None:
             radius = draw_radii(spec.radius, pos.shape[0], rng)
         # only now are the particles known: the case alone was checked without them
@@ -346,7 +351,58 @@ def _initial_particles(loaded: LoadedCase, rng):
         np.ascontiguousarray(radius, dtype=np.float64),
         np.ascontiguousarray(velocity, dtype=np.float64),
         np.ascontiguousarray(angular_velocity, dtype=np.float64),
+        file,
     )
+
+
+def _file_materials(loaded: LoadedCase, tables: ContactTables, file) -> np.ndarray | None:
+    """Material ids from the placement file's material column (None without one: the fractions
+    of particles.material deal them)."""
+    spec = loaded.case.particles
+    column = None if file is None else file.material
+    if column is None:
+        if isinstance(spec.material, list):
+            raise loaded.error(
+                ("particles", "material"),
+                f"a list of names needs a material column in {spec.placement.path} saying which particle "
+                "is made of which; the file has none",
+            )
+        return None
+    if spec.material is None:
+        raise loaded.error(
+            ("particles", "placement", "path"),
+            f"the file's material column names materials ({', '.join(sorted(set(column)))}); list them "
+            'in particles.material (material = ["name", ...])',
+        )
+    ids = {name: k for k, name in enumerate(tables.names)}
+    unknown = np.flatnonzero([name not in ids for name in column])
+    if unknown.size:
+        i = int(unknown[0])
+        raise loaded.error(
+            ("particles", "placement", "path"),
+            f"material column: particle {i} is made of {str(column[i])!r}, which particles.material does not "
+            f"name (it names {', '.join(tables.names)}); {unknown.size} particle(s) in all",
+        )
+    return np.array([ids[name] for name in column], dtype=np.int32)
+
+
+def _file_groups(loaded: LoadedCase, file) -> tuple:
+    """(group names, fixed flags) of the placement file's group and fixed columns, each None
+    where the file has none."""
+    if file is None:
+        return None, None
+    if file.group is not None:
+        known = {g.name for g in loaded.case.particles.groups if g.name is not None}
+        unknown = np.flatnonzero([name != "" and name not in known for name in file.group])
+        if unknown.size:
+            i = int(unknown[0])
+            raise loaded.error(
+                ("particles", "placement", "path"),
+                f"group column: particle {i} is in group {str(file.group[i])!r}, which no "
+                f"particles.groups entry names ({', '.join(sorted(known)) or 'none has a name'}); "
+                f"{unknown.size} particle(s) in all",
+            )
+    return file.group, file.fixed
 
 
 def _check_inside(loaded: LoadedCase, box: Box, pos: np.ndarray, radius: np.ndarray) -> None:

@@ -244,6 +244,8 @@ def particle_materials(case: Case) -> dict[str, float]:
         return {}
     if isinstance(spec, str):
         return {spec: 1.0}
+    if isinstance(spec, list):  # a placement file's column says which: no fractions
+        return dict.fromkeys(spec, 1.0 / len(spec)) if spec else {}
     return dict(spec)
 
 
@@ -294,7 +296,18 @@ def _material_problems(case: Case) -> list[tuple[tuple, str]]:
                 problems.append(
                     (("materials", names[name], "density"), "required: particles are made of this material")
                 )
-        if not isinstance(spec, str) and not math.isclose(sum(fractions.values()), 1.0, abs_tol=1e-9):
+        if isinstance(spec, list):
+            if len(set(spec)) != len(spec) or not spec:
+                problems.append((("particles", "material"), "expected a list of distinct material names"))
+            if not isinstance(case.particles.placement, FilePlacement):
+                problems.append(
+                    (
+                        ("particles", "material"),
+                        "a list of names needs a placement file whose material column says which particle "
+                        "is made of which; give a name or a table of number fractions",
+                    )
+                )
+        elif not isinstance(spec, str) and not math.isclose(sum(fractions.values()), 1.0, abs_tol=1e-9):
             problems.append(
                 (("particles", "material"), f"the number fractions sum to {sum(fractions.values())!r}, not 1")
             )
@@ -475,6 +488,23 @@ def _group_problems(case: Case) -> list[tuple[tuple, str]]:
             problems.append(((*loc, "velocity"), 'required key is missing (motion = "velocity" needs it)'))
         if group.motion != "velocity" and group.velocity is not None:
             problems.append(((*loc, "velocity"), f'only for motion = "velocity", not "{group.motion}"'))
-        if any(hi <= lo for lo, hi in zip(group.region_lower, group.region_upper, strict=True)):
+        if (group.region_lower is None) != (group.region_upper is None):
+            key = "region_upper" if group.region_upper is None else "region_lower"
+            problems.append(((*loc, key), "required key is missing (a region needs both corners)"))
+        elif group.region_lower is None and group.name is None:
+            problems.append(
+                (
+                    loc,
+                    "give a region (region_lower, region_upper), a name for a placement file's "
+                    "group column, or both",
+                )
+            )
+        elif group.region_lower is not None and any(
+            hi <= lo for lo, hi in zip(group.region_lower, group.region_upper, strict=True)
+        ):
             problems.append(((*loc, "region_upper"), "must exceed region_lower along every axis"))
+        if group.name is not None:
+            first = next(h for h, other in enumerate(case.particles.groups) if other.name == group.name)
+            if first != g:
+                problems.append(((*loc, "name"), f"particles.groups[{first}] already has this name"))
     return problems

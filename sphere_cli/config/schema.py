@@ -281,10 +281,18 @@ class Stage(Strict):
 
 
 class ParticleGroup(Strict):
-    """Particles whose centre starts inside a box-shaped region, given a prescribed motion."""
+    """Particles given a prescribed motion: those whose centre starts inside a box-shaped region,
+    and those a placement file's `group` column names it for."""
 
-    region_lower: Vec3 = Field(description="Lower corner of the region [m].")
-    region_upper: Vec3 = Field(description="Upper corner of the region [m].")
+    name: str | None = Field(
+        None,
+        min_length=1,
+        description="Name by which the `group` column of a placement file puts particles in this group.",
+    )
+    region_lower: Vec3 | None = Field(
+        None, description="Lower corner of the region [m] (with region_upper; unset: no region)."
+    )
+    region_upper: Vec3 | None = Field(None, description="Upper corner of the region [m].")
     motion: Literal["fixed", "velocity"] = Field(
         description=(
             '"fixed": never moves; "velocity": moves at `velocity` without rotating. Such particles '
@@ -411,8 +419,12 @@ class FilePlacement(Strict):
     method: Literal["file"]
     path: str = Field(
         description=(
-            "CSV (header x,y,z,r and optionally vx,vy,vz) or HDF5 (datasets position (N,3), "
-            "radius (N,), optional velocity (N,3)); relative paths are relative to the case file."
+            "CSV with a header of column names: x, y, z and optionally r, vx, vy, vz, wx, wy, wz "
+            "(angular velocity), material (names from particles.material), group (names of "
+            "particles.groups entries, empty for none) and fixed (1 or 0); or HDF5 with datasets "
+            "position (N,3) and optionally radius (N,), velocity (N,3), angular_velocity (N,3), "
+            "material and group (N,) strings and fixed (N,). Relative paths are relative to the "
+            "case file."
         )
     )
 
@@ -434,14 +446,16 @@ class Particles(Strict):
             "which then give the density [kg/m^3]."
         ),
     )
-    material: str | dict[str, Real] | None = Field(
+    material: str | dict[str, Real] | list[str] | None = Field(
         None,
         description=(
             'What the particles are made of: the name of one of `materials` ("glass"), or a '
             "table of names and number fractions summing to 1 ({ glass = 0.7, steel = 0.3 }), "
-            "assigned at random (seeded by particles.seed) in exact proportions; material id k "
-            "is the k-th name. Unset: one material, of density particles.density and with the "
-            "properties of the contact table."
+            "assigned at random (seeded by particles.seed) in exact proportions, or a list of names "
+            '(["glass", "steel"]) when the `material` column of a placement file says which '
+            "particle is made of which (that column wins over fractions); material id k is the k-th "
+            "name. Unset: one material, of density particles.density and with the properties of the "
+            "contact table."
         ),
     )
     radius: RadiusDistribution = Field(

@@ -378,7 +378,7 @@ def test_missing_placement_file(tmp_path):
 @pytest.mark.parametrize(
     ("csv", "fragment"),
     [
-        ("x,y,z,r\n0.005,0.005,0.005,0.001\n0.002,0.002\n", "not a readable CSV"),  # ragged row
+        ("x,y,z,r\n0.005,0.005,0.005,0.001\n0.002,0.002\n", "spheres.csv:3: 2 fields, but"),
         ("a,b,c\n1,2,3\n", "must name columns x, y, z"),
         ("x,y,z,r\n", "N >= 1"),  # header only
         ("x,y,z,r\n0.005,0.005,abc,0.001\n", "spheres.csv:2: column z (column 3) = 'abc': not a number"),
