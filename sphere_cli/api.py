@@ -145,6 +145,7 @@ def _drive(
         scene.state.particles.count,
     )
     log.info("time step limit %.6g s: %s", scene.dt_limit, scene.dt_limit_reason)
+    log.info("stability bound %.6g s: %s", scene.dt_bound, scene.dt_bound_reason)
     if scene.fluid is not None:
         log.info("fluid: %s", ", ".join(f"{k} {v}" for k, v in scene.fluid.summary().items()))
     try:

@@ -17,7 +17,7 @@ from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
-from ..physics.contact import PairContactForces, stability_limit
+from ..physics.contact import PairContactForces, one_contact_limit, stability_limit
 from ..physics.energy_budget import EnergyBudget
 from ..physics.fluid import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
@@ -41,6 +41,8 @@ from .radii import draw_radii
 # dt = "auto" set by a fluid limit this many times below that of the particles alone is more
 # likely a wrong unit (a viscosity in cP, say) than the physics meant: warned of
 FLUID_LIMIT_RATIO = 1e3
+# dt = "auto" never takes more than this share of the stability bound
+AUTO_SHARE = 0.9
 
 
 @dataclass
@@ -51,8 +53,10 @@ class Scene:
     neighbors: NeighborSearch
     contact: PairContactForces
     walls: PlaneWallForces | None
-    dt_limit: float  # smallest stability limit of any possible contact or fluid process [s]
+    dt_limit: float  # smallest stability limit of one contact alone or a fluid process [s]
     dt_limit_reason: str = ""  # what sets it
+    dt_bound: float = math.inf  # stability bound with many contacts at a sphere (physics/contact.py) [s]
+    dt_bound_reason: str = ""
     fluid: FluidModule | None = None
     wall_motion: WallMotion | None = None  # only if some wall moves in some stage
     stages: Stages | None = None  # only if the case has [[stages]]
@@ -213,17 +217,20 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         walls=walls_state,
     )
     fluid = build_fluid(loaded, state)
-    dt_limit, dt_reason = stability_limit(
-        tables, radius, mass, material, case.particles.overlap_tolerance, [w.face for w in case.walls]
-    )
+    # the limit of one contact alone (a given dt above it is refused; dt = "auto" takes dt_safety
+    # of it) and the stability bound for spheres held by many contacts (dt = "auto" stays below
+    # it; a given dt above it is warned of), each lowered by the driven walls and the fluid
+    faces = [w.face for w in case.walls]
+    contacts = (tables, radius, mass, material, case.particles.overlap_tolerance, faces)
+    limits = [one_contact_limit(*contacts), stability_limit(*contacts)]
     if walls_state is not None:
-        dt_limit, dt_reason = _driven_wall_limit(case, walls_state, scales, box, dt_limit, dt_reason)
-    solid_limit = dt_limit
+        limits = [_driven_wall_limit(case, walls_state, scales, box, *limit) for limit in limits]
+    solid_limit = limits[0][0]
     if fluid is not None:
-        fluid_limit, fluid_reason = fluid.dt_limit()
-        if fluid_limit < dt_limit:
-            dt_limit, dt_reason = fluid_limit, fluid_reason
-    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit)
+        fluid_limit = fluid.dt_limit()
+        limits = [min(limit, fluid_limit, key=lambda item: item[0]) for limit in limits]
+    (dt_limit, dt_reason), bound = limits
+    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit, bound)
     if case.stages:
         stages = Stages(case, walls_state, scales, contact)
     elif walls_state is not None:
@@ -238,6 +245,8 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         walls=walls,
         dt_limit=dt_limit,
         dt_limit_reason=dt_reason,
+        dt_bound=bound[0],
+        dt_bound_reason=bound[1],
         fluid=fluid,
         wall_motion=wall_motion,
         stages=stages,
@@ -446,9 +455,12 @@ def _check_overlaps(loaded: LoadedCase, state: State) -> None:
         )
 
 
-def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: float) -> float:
-    """dt of the case, given the smallest stability limit (and what sets it) and the smallest of
-    the particles and walls alone [s]."""
+def _resolve_dt(
+    loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: float, bound: tuple[float, str]
+) -> float:
+    """dt of the case, given the stability limit of one contact or a fluid process (and what
+    sets it), that of the particles and walls alone, and the stability bound with many contacts
+    at a sphere (and what sets it) [s]."""
     sim = loaded.case.simulation
     if sim.dt == "auto":
         if not math.isfinite(dt_limit):
@@ -458,6 +470,8 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: f
                 'so "auto" has no limit; give dt in seconds',
             )
         dt = sim.dt_safety * dt_limit
+        if dt > AUTO_SHARE * bound[0]:
+            dt, reason = AUTO_SHARE * bound[0], f"{AUTO_SHARE:g} x the bound for {bound[1]}"
         _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({reason}): ')
         steps = sim.duration / dt
         if math.isfinite(solid_limit) and dt_limit * FLUID_LIMIT_RATIO < solid_limit:
@@ -484,6 +498,15 @@ def _resolve_dt(loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: f
             ("simulation", "dt"),
             f"above the stability limit {dt_limit:.4g} s ({reason}); "
             f'use dt <= {dt_limit:.4g} s or dt = "auto"',
+        )
+    if sim.dt > bound[0]:
+        warn(
+            loaded.describe(
+                ("simulation", "dt"),
+                f"above the stability bound {bound[0]:.4g} s for spheres held by many contacts at once "
+                f"({bound[1]}): a dense packing may grow unstable (the run then stops with exit 70); "
+                'dt = "auto" stays below it',
+            )
         )
     _check_steps(loaded, sim.dt)  # the case was checked, but --until may have changed duration
     return float(sim.dt)

@@ -92,6 +92,7 @@ def _read_trajectory(path: Path) -> dict:
                 "last_time": float(times[-1]) if times.size else None,
                 "dt": float(params["dt"]),
                 "dt_limit": float(params["dt_limit"]),
+                "dt_bound": float(params.get("dt_bound", float("nan"))),  # written since 2026-12
                 "contact_model": resolved["contact"]["model"],
                 "walls": [w["face"] for w in resolved.get("walls", [])],
                 "periodic": resolved["domain"]["periodic"],

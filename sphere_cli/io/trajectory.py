@@ -155,6 +155,7 @@ class Trajectory:
                 params.attrs["physics_hash"] = physics_hash
                 params.attrs["dt"] = state.clock.dt
                 params.attrs["dt_limit"] = scene.dt_limit
+                params.attrs["dt_bound"] = scene.dt_bound
                 prov = f.create_group("sphere/provenance")
                 for key, value in provenance.items():
                     prov.attrs[key] = value

@@ -86,29 +86,75 @@ COLUMNS = 6
 
 
 @njit(cache=True, inline="always")
-def normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un):
+def contact_window(delta, vn, un, step):
+    """(travel [m], grow, end) of a contact of overlap delta [m] whose surfaces moved apart at
+    vn over the last half step and move at un at the predicted full step [m/s] (v.n, positive
+    apart), for velocity Verlet, which applies each force for one step around its instant,
+    across the touch and the parting, which fall anywhere inside a step:
+    - the first step of a contact (the overlap before, delta + vn step, was <= 0): travel =
+      -vn step, and the spring grows by the fraction grow = delta/travel of the step's slip
+      that the contact has lasted;
+    - the last one (the overlap next, delta - un step, will be <= 0; un estimates the speed
+      between now and the parting, to first order, which makes the estimate second order):
+      travel = un step, and the tangential force, which unlike the normal one does not vanish
+      at the parting, is weighted by end = (delta/un + step/2)/step, the time it acts within the
+      step's window [t - step/2, parting];
+    elsewhere (0, 1, 1). normal_law takes the normal force's part."""
+    closing = -vn * step
+    if closing > delta:
+        return closing, delta / closing, 1.0
+    opening = un * step
+    if opening > delta:
+        return opening, 1.0, (delta + 0.5 * opening) / opening
+    return 0.0, 1.0, 1.0
+
+
+@njit(cache=True, inline="always")
+def normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un, travel, grow):
     """(F_n clamped at 0 [N], k_t [N/m], c_t [kg/s]) of one contact; kn, kt, dn, dt: the columns
-    K_N, K_T, D_N, D_T of its table row."""
+    K_N, K_T, D_N, D_T of its table row; un: the normal velocity the dashpot acts on [m/s].
+
+    travel, grow: those of contact_window; with travel = 0 this is the law at the instant.
+    Otherwise the surfaces touched within the last step (grow < 1) or part within the next,
+    and F_n is the mean force over the step's window [t - dt/2, t + dt/2] instead, so that the
+    steps give the impulse of the continuous contact: the overlap moves linearly between the
+    touch (or parting) and the window's far edge, where it is x = delta + travel/2, so the
+    elastic impulse is W(x)/speed, W the elastic energy (k x^2/2; Hertz (2/5) K_N sqrt(R*)
+    x^5/2), and a dashpot switched on at the touch acts for (delta/speed + dt/2). Without this
+    every rebound has an error of order (omega dt)^2 (e = 1 rebounds at 1 +- 5e-3 at 16 steps
+    per contact)."""
     if hertz:
         s = math.sqrt(r_eff * delta)
         root_s = math.sqrt(s)
-        fn = kn * s * delta - dn * root_s * root_m * un
+        elastic = kn * s * delta
+        damper = dn * root_s * root_m * un
         kt = kt * s
         ct = dt * root_s * root_m
     else:
-        fn = kn * delta - dn * root_m * un
+        elastic = kn * delta
+        damper = dn * root_m * un
         ct = dt * root_m
+    if travel > 0.0:
+        x = delta + 0.5 * travel
+        if hertz:
+            elastic = 0.4 * kn * math.sqrt(r_eff) * x * x * math.sqrt(x) / travel
+        else:
+            elastic = 0.5 * kn * x * x / travel
+        if grow < 1.0:
+            damper *= x / travel
+    fn = elastic - damper
     if fn < 0.0:
         fn = 0.0
     return fn, kt, ct
 
 
 @njit(cache=True, inline="always")
-def tangential_spring(x0, x1, x2, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
+def tangential_spring(x0, x1, x2, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2, end):
     """(F_t (3 values) [N], the new spring (3 values) [m]) of a contact whose spring was x.
 
     vt: tangential slip velocity at the half step (grows the spring: exact midpoint rule);
-    ut: the same at the predicted full step (the dashpot acts at the time of the force).
+    ut: the same at the predicted full step (the dashpot acts at the time of the force);
+    end: the weight of a sticking force at the parting (contact_window; 1 elsewhere).
     Arithmetic only (no memory), so that a loop over contacts vectorises."""
     # rotate the spring into the current tangent plane, keeping its length
     old2 = x0 * x0 + x1 * x1 + x2 * x2
@@ -139,11 +185,26 @@ def tangential_spring(x0, x1, x2, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt,
         x0 = -f0 / kt
         x1 = -f1 / kt
         x2 = -f2 / kt
+    else:
+        weight = parting_weight(ft2, cap, end)
+        f0 *= weight
+        f1 *= weight
+        f2 *= weight
     return f0, f1, f2, x0, x1, x2
 
 
 @njit(cache=True, inline="always")
-def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2):
+def parting_weight(ft2, cap, end):
+    """The weight `end` (contact_window) of a sticking tangential force of squared size ft2 [N^2]
+    at the parting, no more than keeps it within the Coulomb cap [N] (a sliding force, mu F_n,
+    vanishes at the parting with F_n and needs none)."""
+    if ft2 * end * end > cap * cap:
+        return cap / math.sqrt(ft2)
+    return end
+
+
+@njit(cache=True, inline="always")
+def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2, end):
     """tangential_spring on the spring hist[i, k] (3,), updated in place; returns F_t [N]."""
     f0, f1, f2, x0, x1, x2 = tangential_spring(
         hist[i, k, 0],
@@ -163,6 +224,7 @@ def tangential_force(hist, i, k, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, 
         ut0,
         ut1,
         ut2,
+        end,
     )
     hist[i, k, 0] = x0
     hist[i, k, 1] = x1
@@ -266,7 +328,8 @@ def _law(
     u1 = buf[B_P1 * BLOCK + c] - (q2 * n0 - q0 * n2)
     u2 = buf[B_P2 * BLOCK + c] - (q0 * n1 - q1 * n0)
     un = u0 * n0 + u1 * n1 + u2 * n2
-    fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
+    travel, grow, end = contact_window(delta, vn, un, step_dt)
+    fn, kt_now, ct = normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un, travel, grow)
     g0, g1, g2, x0, x1, x2 = tangential_spring(
         buf[B_H0 * BLOCK + c],
         buf[B_H1 * BLOCK + c],
@@ -281,10 +344,11 @@ def _law(
         ct,
         mu,
         fn,
-        spring_dt,
+        spring_dt * grow,
         u0 - un * n0,
         u1 - un * n1,
         u2 - un * n2,
+        end,
     )
     buf[B_H0 * BLOCK + c] = x0
     buf[B_H1 * BLOCK + c] = x1

@@ -46,7 +46,20 @@ import math
 
 from numba import njit, prange
 
-from .contact import D_N, D_T, K_N, K_T, MU, MU_R, normal_law, reduced, rolling_torque, tangential_force
+from .contact import (
+    D_N,
+    D_T,
+    K_N,
+    K_T,
+    MU,
+    MU_R,
+    contact_window,
+    normal_law,
+    parting_weight,
+    reduced,
+    rolling_torque,
+    tangential_force,
+)
 from .contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
 
 GRAVITY = 0
@@ -58,16 +71,25 @@ TERMS = 5
 
 
 @njit(cache=True, inline="always")
-def _tangential(scratch, i, spring, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2, w0, w1, w2):
+def _tangential(
+    scratch, i, spring, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, grow, end, ut0, ut1, ut2, w0, w1, w2
+):
     """(F_t (3 values) [N], damping [J], friction [J]) of one contact over the step; the spring
     (3,) is copied into scratch[i] and the law applied there twice: uncapped, then capped.
-    w: the full-step relative velocity of the contact point [m/s]."""
+    w: the full-step relative velocity of the contact point [m/s]; grow, end: the factors of
+    contact_window (the force's part beyond the spring's is booked nowhere: it is the
+    quadrature of the spring's work at the parting, not a loss)."""
     for a in range(3):
         scratch[i, 0, a] = spring[a]
         scratch[i, 1, a] = spring[a]
     # mu = inf never caps (inf * F_n is inf, or nan for F_n = 0, and no |F_t|^2 exceeds either)
-    tangential_force(scratch, i, 0, vt0, vt1, vt2, n0, n1, n2, kt, ct, math.inf, fn, dt, ut0, ut1, ut2)
-    g0, g1, g2 = tangential_force(scratch, i, 1, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, dt, ut0, ut1, ut2)
+    growth = dt * grow
+    tangential_force(
+        scratch, i, 0, vt0, vt1, vt2, n0, n1, n2, kt, ct, math.inf, fn, growth, ut0, ut1, ut2, 1.0
+    )
+    g0, g1, g2 = tangential_force(
+        scratch, i, 1, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, growth, ut0, ut1, ut2, 1.0
+    )
     x0 = scratch[i, 1, 0]
     x1 = scratch[i, 1, 1]
     x2 = scratch[i, 1, 2]
@@ -76,13 +98,15 @@ def _tangential(scratch, i, spring, vt0, vt1, vt2, n0, n1, n2, kt, ct, mu, fn, d
     s2 = scratch[i, 0, 2] - x2
     if s0 != 0.0 or s1 != 0.0 or s2 != 0.0:
         # previous spring, rotated: the uncapped spring less the step's growth
-        p0 = scratch[i, 0, 0] - vt0 * dt
-        p1 = scratch[i, 0, 1] - vt1 * dt
-        p2 = scratch[i, 0, 2] - vt2 * dt
-        return g0, g1, g2, 0.0, 0.5 * kt * ((x0 + p0) * s0 + (x1 + p1) * s1 + (x2 + p2) * s2)
+        p0 = scratch[i, 0, 0] - vt0 * growth
+        p1 = scratch[i, 0, 1] - vt1 * growth
+        p2 = scratch[i, 0, 2] - vt2 * growth
+        friction = 0.5 * kt * ((x0 + p0) * s0 + (x1 + p1) * s1 + (x2 + p2) * s2)
+        return g0, g1, g2, 0.0, friction
     # dashpot force F_t + k_t xi against the full-step slip
     damping = -((g0 + kt * x0) * w0 + (g1 + kt * x1) * w1 + (g2 + kt * x2) * w2) * dt
-    return g0, g1, g2, damping, 0.0
+    weight = parting_weight(g0 * g0 + g1 * g1 + g2 * g2, mu * fn, end)
+    return weight * g0, weight * g1, weight * g2, damping, 0.0
 
 
 @njit(cache=True, parallel=True)
@@ -170,11 +194,13 @@ def accumulate_budget(
             wn = w0 * n0 + w1 * n1 + w2 * n2
             root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
             r_eff = ri * rj / (ri + rj)
-            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
-            fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, 0.0)[0]
+            travel, grow, end = contact_window(delta, vn, un, dt)
+            kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+            fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, r_eff, root_m, un, travel, grow)
+            fe = normal_law(kn, row[K_T], dn, dtan, hertz, delta, r_eff, root_m, 0.0, travel, grow)[0]
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, hist[start[i] + k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
-                row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+                row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             damping += -(fn - fe) * wn * dt + d_t
             friction += f_t
@@ -240,11 +266,13 @@ def accumulate_budget(
             w0, w1, w2 = wall_slip(vel, angvel, i, ri, n0, n1, n2, wv0, wv1, wv2)
             wn = w0 * n0 + w1 * n1 + w2 * n2
             root_m = math.sqrt(mi)
-            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, un)
-            fe = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, root_m, 0.0)[0]
+            travel, grow, end = contact_window(delta, vn, un, dt)
+            kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+            fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, ri, root_m, un, travel, grow)
+            fe = normal_law(kn, row[K_T], dn, dtan, hertz, delta, ri, root_m, 0.0, travel, grow)[0]
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, wall_hist[i, w], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
-                ct, row[MU], fn, dt, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+                ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             walls += ((fn * n0 + g0) * wv0 + (fn * n1 + g1) * wv1 + (fn * n2 + g2) * wv2) * dt
             damping += -(fn - fe) * wn * dt + d_t

@@ -89,12 +89,14 @@ def contact_moments(
             un = u0 * n0 + u1 * n1 + u2 * n2
             root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
             r_eff = ri * rj / (ri + rj)
-            fn, kt, ct = normal_law(row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un)
+            fn, kt, ct = normal_law(
+                row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un, 0.0, 1.0
+            )
             for a in range(3):
                 scratch[i, 0, a] = hist[start[i] + k, a]
             g0, g1, g2 = tangential_force(
                 scratch, i, 0, 0.0, 0.0, 0.0, n0, n1, n2, kt, ct, row[MU], fn, 0.0,
-                u0 - un * n0, u1 - un * n1, u2 - un * n2,
+                u0 - un * n0, u1 - un * n1, u2 - un * n2, 1.0,
             )  # fmt: skip
             _add_moment(moment, i, ri, n0, n1, n2, fn * n0 + g0, fn * n1 + g1, fn * n2 + g2)
             # on j: the opposite force at x_j + r_j n, i.e. (-r_j)(-n) (x) (-f)
@@ -111,13 +113,13 @@ def contact_moments(
             )
             un = u0 * n0 + u1 * n1 + u2 * n2
             fn, kt, ct = normal_law(
-                row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, math.sqrt(mi), un
+                row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, math.sqrt(mi), un, 0.0, 1.0
             )
             for a in range(3):
                 scratch[i, 0, a] = wall_hist[i, w, a]
             g0, g1, g2 = tangential_force(
                 scratch, i, 0, 0.0, 0.0, 0.0, n0, n1, n2, kt, ct, row[MU], fn, 0.0,
-                u0 - un * n0, u1 - un * n1, u2 - un * n2,
+                u0 - un * n0, u1 - un * n1, u2 - un * n2, 1.0,
             )  # fmt: skip
             _add_moment(moment, i, ri, n0, n1, n2, fn * n0 + g0, fn * n1 + g1, fn * n2 + g2)
 

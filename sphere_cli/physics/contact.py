@@ -1,32 +1,23 @@
 """Particle-particle contacts (forces phase): the linear or Hertz-Mindlin law of kernels/contact.py
 with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
 
-Time-step limit (shared/validation E). The dashpots act at the predicted velocity
-v_n + dt a_n (kernels/motion.py): on a damped linear mode (omega, zeta) that velocity Verlet is
-stable while omega dt <= 2 (sqrt(1 + 4 zeta^2) - 2 zeta), the central-difference limit with zeta
-doubled (its amplification matrix of (x, v, a) has det(M + I) = 4 - h^2 - 8 zeta h, h = omega dt;
-found by the verification suite, sphere_cli/verify/stability.py). A contact has two modes: normal,
-omega^2 = k_n/m*, and tangential coupled to the rotation of the spheres, omega^2 = 3.5 k_t/m*
-(1/m* + r_i^2/I_i + r_j^2/I_j = 3.5/m*), whose damping ratio is sqrt(3.5) zeta since
-c_t = 2 zeta sqrt(k_t m*). So
-    dt_contact = min(f(zeta)/sqrt(k_n/m*), f(sqrt(3.5) zeta)/sqrt(3.5 k_t/m*)),
-    f(z) = 2 (sqrt(1 + 4 z^2) - 2 z),
-taken over every pair of materials that can meet (two particles of a material only if it has
-two) with the lightest particles of each, and over every wall and material (m* = m).
-Hertz-Mindlin has no constant stiffness: its limit is the smaller of
-  - the Rayleigh time T_R = pi r sqrt(rho/G)/(0.1631 nu + 0.8766) of the smallest particle of
-    each material (Li, Xu & Thornton 2005, Powder Technol. 160:219; the usual Hertz criterion,
-    independent of impact speed), and
-  - dt_contact with the tangent stiffnesses k_n = dF_n/d delta = 2 E* sqrt(R* delta),
-    k_t = 8 G* sqrt(R* delta) and zeta = c_h/sqrt6 at delta = overlap_tolerance x the smaller
-    radius, the largest overlap a case may start with. This one matters: the tangential mode is
-    stiffer than the normal one (3.5 k_t ~ 3 k_n) and walls double E*, so at the default 5 %
-    overlap it is about half the Rayleigh time; with no initial overlap allowed it is infinite.
-The Rayleigh time covers impacts up to overlaps of ~ 5-15 % of the radius (where the normal
-tangent stiffness reaches 4 m*/T_R^2), i.e. relative speeds of tens to hundreds of m/s for
-engineering materials; dt_safety (default 0.1) leaves the margin beyond.
-A particle with several contacts has faster modes than any single pair (a chain of three:
-sqrt(3/2) times faster), which the safety factor also covers.
+Time-step limits (shared/validation E; user guide section 2). The dashpots act at the
+predicted velocity v_n + dt a_n (kernels/motion.py): on a damped linear mode (omega, zeta) that
+velocity Verlet is stable while omega dt <= 2 (sqrt(1 + 4 zeta^2) - 2 zeta), the central-difference
+limit with zeta doubled (its amplification matrix of (x, v, a) has det(M + I) = 4 - h^2 - 8 zeta h,
+h = omega dt; found by the verification suite, sphere_cli/verify/stability.py), i.e.
+omega^2 dt^2 + 4 gamma dt <= 4 with gamma = 2 zeta omega (damped_limit).
+- one_contact_limit: one contact alone has two modes, normal, omega^2 = k_n/m*, and tangential
+  coupled to the rotation of the spheres, omega^2 = 3.5 k_t/m* (1/m* + r_i^2/I_i + r_j^2/I_j =
+  3.5/m*), whose damping ratio is sqrt(3.5) zeta; taken over every pair of materials that can
+  meet (lightest particles) and every wall. It sets the scale a collision is resolved on:
+  dt = "auto" takes dt_safety of it. For Hertz-Mindlin the tangent stiffnesses at
+  overlap_tolerance x the smaller radius, and the Rayleigh time.
+  A given dt above it is refused. The Rayleigh time pi r sqrt(rho/G)/(0.1631 nu + 0.8766)
+  (Li, Xu & Thornton 2005, Powder Technol. 160:219) caps it for Hertz.
+- stability_limit: a bound for every packing the scene can reach, from the sum of a sphere's
+  contact stiffnesses and dampings at the most contacts it can have (derivation in its
+  docstring). dt = "auto" stays below 0.9 of it; a given dt above it is warned of.
 """
 
 from __future__ import annotations
@@ -36,7 +27,7 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import BLOCK, D_N, FIELDS, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
+from ..kernels.contact import BLOCK, D_N, D_T, FIELDS, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
@@ -210,6 +201,42 @@ def _label(tables: ContactTables, a: int) -> str:
     return "the particles" if tables.names[a] == "" else f"material {tables.names[a]!r}"
 
 
+def coordination_bound(radius: float, smallest: float, others: int) -> int:
+    """The most bodies that can touch a sphere of `radius` at once, when no sphere is smaller
+    than `smallest` (a plane wall counts as a sphere of infinite radius) and `others` bodies
+    exist: 12, the kissing number, if none is smaller than it; else the spherical caps of
+    half-angle asin(smallest/(radius + smallest)) that its touching neighbours hide of it, which
+    cannot overlap, cover at most the whole sphere: 2/(1 - cos theta)."""
+    if radius <= smallest:
+        most = 12
+    else:
+        sin_theta = smallest / (radius + smallest)
+        most = math.floor(2.0 / (1.0 - math.sqrt(1.0 - sin_theta * sin_theta)))
+    return max(1, min(most, others))
+
+
+def contact_coefficients(row: np.ndarray, hertz: bool, r_eff: float, delta: float) -> tuple[float, float]:
+    """(kappa [N/m], d [kg^1/2/s]) of one table row: the largest stiffness a contact offers a
+    sphere that it holds, max(k_n, 3.5 k_t) (the tangential spring also turns the sphere,
+    1 + m r^2/I = 3.5), and likewise its damping max(c_n, 3.5 c_t) = d sqrt(m*); for Hertz the
+    tangent stiffnesses at overlap delta [m] and effective radius r_eff [m]."""
+    s = math.sqrt(r_eff * delta) if hertz else 1.0
+    k_n = (1.5 if hertz else 1.0) * row[K_N] * s
+    kappa = max(k_n, 3.5 * row[K_T] * s)
+    return kappa, max(row[D_N], 3.5 * row[D_T]) * math.sqrt(s)
+
+
+def damped_limit(omega2: float, gamma: float) -> float:
+    """Largest dt [s] with omega2 dt^2 + 4 gamma dt <= 4: velocity Verlet with the dashpot at the
+    predicted velocity on a mode of omega^2 = omega2 [1/s^2] and c/m = 2 zeta omega = gamma [1/s]
+    (the limit omega dt <= 2 (sqrt(1 + 4 zeta^2) - 2 zeta) written for omega and gamma)."""
+    if omega2 <= 0.0:
+        return math.inf
+    if not (omega2 < math.inf and gamma < math.inf):  # overflowed (a mass of 1e-308 kg): no step
+        return 0.0
+    return 2.0 * (math.sqrt(gamma * gamma + omega2) - gamma) / omega2
+
+
 def stability_limit(
     tables: ContactTables,
     radius: np.ndarray,
@@ -218,8 +245,77 @@ def stability_limit(
     overlap: float,
     wall_faces: list[str],
 ) -> tuple[float, str]:
-    """(smallest stability limit of any possible contact [s], what sets it); inf if no contact
-    can occur. overlap: the largest initial overlap as a fraction of the smaller radius."""
+    """(stability bound of the contacts [s], what sets it); inf if no contact can occur.
+    overlap: the largest initial overlap as a fraction of the smaller radius.
+
+    A bound for every packing the scene can reach (user guide, section 2). With M the masses
+    and inertias and K, C the stiffness and damping matrices of all contacts, contact c adds
+    B_c^T S_c B_c to K (B_c: the velocity of its contact point, S_c = diag(k_n, k_t, k_t)).
+    With y = M^1/2 x and Young's inequality |a + b|^2 <= (1 + t)|a|^2 + (1 + 1/t)|b|^2 at
+    t = m_i/m_j,
+        x^T K x = sum_c |S_c^1/2 (B_ci x_i + B_cj x_j)|^2 <= sum_c kappa_c/m*_c (|y_i|^2 + |y_j|^2),
+    since |S_c^1/2 B_ci M_i^-1/2|^2 = kappa_c/m_i; so the fastest mode has
+        omega^2 <= max_i sum_{c at i} kappa_c/m*_c        (m*_c = m_i against a wall),
+    and the damping rate gamma <= max_i sum_c d_c/sqrt(m*_c) likewise (c = d sqrt(m*)). A
+    sphere of material a touches at most coordination_bound bodies, each contact at most the
+    largest kappa/m* (and d/sqrt(m*)) of a pair with the lightest sphere of any material or of
+    a wall; the lightest sphere of a is the worst (the count grows as r^2, the mass as r^3).
+    For two equal spheres this is the limit of their one contact; for a chain it is reached.
+    For Hertz the stiffnesses are the tangent ones at the overlap `overlap` x the radius (the
+    Rayleigh time, an impact criterion, is in one_contact_limit)."""
+    hertz = tables.hertz
+    law = "Hertz-Mindlin" if hertz else "linear"
+    limits: list[tuple[float, str]] = []
+    present = [a for a in range(len(tables.names)) if np.any(material == a)]
+    smallest = float(radius.min()) if radius.size else 0.0
+    others = radius.size - 1 + len(wall_faces)
+    for a in present:
+        members = np.flatnonzero(material == a)
+        i = int(members[np.argmin(mass[members])])
+        r, m = float(radius[i]), float(mass[i])
+        omega2 = gamma = 0.0  # the largest kappa/m* and d/sqrt(m*) of a contact at it
+        for b in present:
+            of_b = np.flatnonzero(material == b)
+            if of_b.size < (2 if b == a else 1):  # no partner of that material
+                continue
+            m_b = float(mass[of_b].min())  # the lightest partner: the smallest m*
+            r_b = float(radius[of_b].max())  # the largest: the stiffest Hertz contact
+            k, d = contact_coefficients(tables.table[a, b], hertz, r * r_b / (r + r_b), overlap * r)
+            m_eff = m * m_b / (m + m_b)
+            omega2, gamma = max(omega2, k / m_eff), max(gamma, d / math.sqrt(m_eff))
+        for w in range(len(wall_faces)):
+            k, d = contact_coefficients(tables.wall_table[w, a], hertz, r, overlap * r)
+            omega2, gamma = max(omega2, k / m), max(gamma, d / math.sqrt(m))
+        contacts = coordination_bound(r, smallest, others)
+        value = damped_limit(contacts * omega2, contacts * gamma)
+        if value < math.inf:
+            limits.append(
+                (
+                    value,
+                    f"{law} contacts of the lightest particle of {_label(tables, a)} (r = {r:.4g} m), "
+                    f"held by up to {contacts} bodies at once: omega^2 dt^2 + 4 gamma dt <= 4 with "
+                    f"omega^2 = {contacts} x {omega2:.4g} s^-2, gamma = {contacts} x {gamma:.4g} s^-1"
+                    + (f" (tangent stiffness at {overlap:g} of the radius)" if hertz else ""),
+                )
+            )
+    if not limits:
+        return math.inf, "no contact can occur"
+    value, what = min(limits, key=lambda item: item[0])
+    return float(value), what
+
+
+def one_contact_limit(
+    tables: ContactTables,
+    radius: np.ndarray,
+    mass: np.ndarray,
+    material: np.ndarray,
+    overlap: float,
+    wall_faces: list[str],
+) -> tuple[float, str]:
+    """(smallest stability limit of one contact alone, of any pair of materials or wall [s], what
+    sets it): the scale a collision is resolved on (dt = "auto" takes dt_safety of it), not a
+    bound for spheres held by several contacts (stability_limit). inf if no contact can occur.
+    overlap: the largest initial overlap as a fraction of the smaller radius."""
     hertz = tables.hertz
     law = "Hertz-Mindlin" if hertz else "linear"
     limits: list[tuple[float, str]] = []

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from ..config.schema import Simulation
 from ..physics.contact import verlet_limit
 from ..physics.energy import observables
 from ..physics.restitution import linear_contact_time, linear_damping_ratio
@@ -206,9 +207,13 @@ def linear_impact_any_phase(spc: float, e: float) -> Outcome:
     )
 
 
-def steps_per_contact_at_auto(e: float, m_eff: float, safety: float = 0.1) -> float:
-    """t_c/dt of dt = "auto" for the linear contact (k_n, k_t = 2/7 k_n) at this e: the limit the
-    builder takes for the contact (physics/contact.verlet_limit) times the default dt_safety."""
+DEFAULT_SAFETY = Simulation.model_fields["dt_safety"].default
+
+
+def steps_per_contact_at_auto(e: float, m_eff: float, safety: float = DEFAULT_SAFETY) -> float:
+    """t_c/dt of dt = "auto" for the linear contact (k_n, k_t = 2/7 k_n) of two spheres at this e:
+    the limit of the one contact (physics/contact.verlet_limit) times the default dt_safety (their
+    bound, a pair's own, is no tighter)."""
     zeta = linear_damping_ratio(e)
     limit = verlet_limit(KN, 2.0 / 7.0 * KN, zeta, m_eff)
     return linear_contact_time(KN, m_eff, zeta, clamped=True) / (safety * limit)
@@ -225,7 +230,8 @@ register(
         description=(
             "the pair impact of a1-linear-pair run 8 times, the touch at 0, 1/8, ..., 7/8 of a step; "
             "the worst error over the phases is reported (steps are the sum over the 8 runs); "
-            f'{AUTO_SPC:g} steps per contact is what dt = "auto" (0.1 x the builder\'s limit) gives here'
+            f'{AUTO_SPC:g} steps per contact is what dt = "auto" ({DEFAULT_SAFETY:g} x the limit of the '
+            "contact) gives here"
         ),
         run=lambda spc: linear_impact_any_phase(spc, 0.5),
         ladder=(AUTO_SPC, 25, 50, 100, 200, 400, 800),

@@ -68,7 +68,7 @@ def case_text(
     upper=(0.1, 0.1, 0.1),
     periodic=(False, False, False),
     dt: float | str = "auto",
-    dt_safety: float = 0.1,
+    dt_safety: float | None = None,
     skin: float = 0.4,
     overlap_tolerance: float = 0.05,
     duration: float = 1.0,
@@ -104,7 +104,7 @@ def case_text(
                 {
                     "duration": float(duration),
                     "dt": dt if dt == "auto" else float(dt),
-                    "dt_safety": float(dt_safety),
+                    "dt_safety": None if dt_safety is None else float(dt_safety),
                     "neighbor_skin": float(skin),
                     "blowup_check_every": int(blowup_check_every),
                 },

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-# 20 spheres on a lattice falling onto a floor: 1423 steps with dt = "auto", about a second
+# 20 spheres on a lattice falling onto a floor: 1779 steps with dt = "auto", about a second
 # once the kernels are compiled (and cached).
 TINY = """\
 title = "tiny"
@@ -44,7 +44,7 @@ every_steps = 50
 every_steps = 50
 keep = 3
 """
-TINY_END_STEP = 1423  # ceil(duration / dt) for the case above (checked against status.json)
+TINY_END_STEP = 1779  # ceil(duration / dt) for the case above (checked against status.json)
 
 # Two spheres read from `spheres.csv` next to the case file.
 FROM_FILE = """\

@@ -470,7 +470,7 @@ def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory) -> Path:
-    """A completed tiny run (checkpoints at steps 1350, 1400 and 1423); copy it before changing it."""
+    """A completed tiny run (checkpoints at steps 1700, 1750 and 1779); copy it before changing it."""
     root = tmp_path_factory.mktemp("finished")
     (root / "case.toml").write_text(TINY)
     result = sphere("run", "case.toml", "-o", "run", "-q", cwd=root)
@@ -510,9 +510,9 @@ def test_resume_of_a_directory_that_is_not_a_run(tmp_path):
 def test_resume_with_every_checkpoint_truncated(run_copy):
     checkpoints = _checkpoints(run_copy)
     assert [p.name for p in checkpoints] == [
-        "ckpt-000000001350.h5",
-        "ckpt-000000001400.h5",
-        "ckpt-000000001423.h5",
+        "ckpt-000000001700.h5",
+        "ckpt-000000001750.h5",
+        f"ckpt-{TINY_END_STEP:012d}.h5",
     ]
     for path in checkpoints:
         with open(path, "r+b") as f:
@@ -539,7 +539,7 @@ def test_resume_falls_back_past_a_corrupt_newest_checkpoint(run_copy, damage):
     assert_clean_error(result, 0)
     log = (run_copy / "run.log").read_text()
     assert f"skipping {newest.name}" in log
-    assert "resuming from ckpt-000000001400.h5 (step 1400)" in log
+    assert "resuming from ckpt-000000001750.h5 (step 1750)" in log
     assert f"done at step {TINY_END_STEP}" in log.splitlines()[-1]
     assert_clean_error(sphere("inspect", newest), 0)  # rewritten by the resumed run
 
@@ -548,8 +548,8 @@ def test_resume_refused_after_a_physics_edit(run_copy):
     case = run_copy / "case.toml"
     case.write_text(edit(case.read_text(), "normal_stiffness = 1.0e4", "normal_stiffness = 2.0e4"))
     result = sphere("resume", run_copy, "-q")
-    assert_clean_error(result, 78, str(case), "contact.normal_stiffness", "ckpt-000000001423.h5")
-    assert _checkpoints(run_copy)[-1].name == "ckpt-000000001423.h5"
+    assert_clean_error(result, 78, str(case), "contact.normal_stiffness", f"ckpt-{TINY_END_STEP:012d}.h5")
+    assert _checkpoints(run_copy)[-1].name == f"ckpt-{TINY_END_STEP:012d}.h5"
 
 
 def test_resume_refused_names_every_changed_key(run_copy):

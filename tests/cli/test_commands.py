@@ -37,7 +37,7 @@ def test_validate_prints_the_resolved_case_as_toml(tmp_path):
     assert_clean_error(result, 0)
     assert result.stdout.startswith(f"# {case}: valid")
     assert "\n[simulation]\n" in result.stdout
-    assert re.search(r"^dt_safety = 0\.1$", result.stdout, re.M)  # a default, filled in
+    assert re.search(r"^dt_safety = 0\.08$", result.stdout, re.M)  # a default, filled in
     assert re.search(r"^\[particles\.radius\]\ndistribution = \"uniform\"$", result.stdout, re.M)
     assert re.search(r"^\[\[walls\]\]\nface = \"z-\"$", result.stdout, re.M)
 
@@ -61,7 +61,7 @@ def test_validate_json_fills_in_defaults(tmp_path):
     case.write_text(TINY)
     resolved = json.loads(sphere_inproc("validate", case, "--json").stdout)
     assert resolved["simulation"]["dt"] == "auto"
-    assert resolved["simulation"]["dt_safety"] == 0.1
+    assert resolved["simulation"]["dt_safety"] == 0.08
     assert resolved["particles"]["overlap_tolerance"] == 0.05
     assert resolved["particles"]["placement"] == {
         "method": "lattice",
@@ -164,13 +164,14 @@ def test_run_writes_the_run_directory(tiny_run):
     assert status["state"] == "done"
     assert status["step"] == status["end_step"] == TINY_END_STEP
     checkpoints = sorted(p.name for p in (run / "checkpoints").iterdir())
-    assert checkpoints == ["ckpt-000000001350.h5", "ckpt-000000001400.h5", "ckpt-000000001423.h5"]  # keep = 3
+    last = f"ckpt-{TINY_END_STEP:012d}.h5"
+    assert checkpoints == ["ckpt-000000001700.h5", "ckpt-000000001750.h5", last]  # keep = 3
     assert (
         "trajectory.h5:/sphere/xdmf/particles/trajectory/position/00000000"
         in (run / "trajectory.xmf").read_text()
     )
     log = (run / "run.log").read_text()
-    assert "running from step 0 to 1423" in log and "done at step 1423" in log
+    assert f"running from step 0 to {TINY_END_STEP}" in log and f"done at step {TINY_END_STEP}" in log
 
 
 def test_run_without_output_uses_runs_case_name(tmp_path):
@@ -201,7 +202,7 @@ def test_inspect_run_directory(tiny_run):
     result = sphere("inspect", run)
     assert_clean_error(result, 0)
     assert "kind: run directory" in result.stdout and "state: done" in result.stdout
-    assert "file=ckpt-000000001423.h5, step=1423" in result.stdout
+    assert f"file=ckpt-{TINY_END_STEP:012d}.h5, step={TINY_END_STEP}" in result.stdout
     summary = json.loads(sphere_inproc("inspect", run, "--json").stdout)
     assert summary["kind"] == "run directory"
     assert summary["status"]["state"] == "done"
@@ -227,14 +228,14 @@ def test_inspect_trajectory(tiny_run):
 
 def test_inspect_checkpoint(tiny_run):
     run, _ = tiny_run
-    path = run / "checkpoints" / "ckpt-000000001400.h5"
+    path = run / "checkpoints" / "ckpt-000000001750.h5"
     text = sphere_inproc("inspect", path)
     assert_clean_error(text, 0)
-    assert "kind: checkpoint" in text.stdout and "step: 1400" in text.stdout
+    assert "kind: checkpoint" in text.stdout and "step: 1750" in text.stdout
     summary = json.loads(sphere_inproc("inspect", path, "--json").stdout)
     assert summary["kind"] == "checkpoint"
     assert summary["valid"] is True
-    assert summary["step"] == 1400
+    assert summary["step"] == 1750
     assert summary["particles"] == 20
     assert summary["modules"] == ["neighbors", "particles", "walls"]
 

@@ -8,7 +8,7 @@ import sys
 import h5py
 import numpy as np
 import pytest
-from cli_test_support import TINY, assert_clean_error, edit, line_of, sphere_inproc
+from cli_test_support import TINY, TINY_END_STEP, assert_clean_error, edit, line_of, sphere_inproc
 
 from sphere_cli import api
 
@@ -38,9 +38,9 @@ def test_observables_on_their_own_schedule(observed_run):
         frames = f["particles/trajectory/position/step"][...]
         obs = f["observables"]
         steps = obs["pressure/step"][...]
-        # every 200 steps from 0, plus the end (1423); frames every 50
-        assert steps.tolist() == [*range(0, 1423, 200), 1423]
-        assert frames.size == 1423 // 50 + 2
+        # every 200 steps from 0, plus the end; frames every 50
+        assert steps.tolist() == [*range(0, TINY_END_STEP, 200), TINY_END_STEP]
+        assert frames.size == TINY_END_STEP // 50 + 2
         assert obs["stress/value"].shape == (steps.size, 3, 3)
         assert obs["stress/value"].attrs["unit"] == "Pa"
         assert obs["stress_profile/value"].shape == (steps.size, 4, 3, 3)

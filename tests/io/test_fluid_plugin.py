@@ -207,7 +207,8 @@ def test_fluid_limit_sets_auto_dt_and_refuses_a_larger_one(write_case, toy):
     toy.options = {"limit": 1.0e-6}
     text = CASE.format(duration=1.0)
     scene = scene_module.build_scene(parse_case(text.replace("dt = 1.0e-5", 'dt = "auto"')))
-    assert scene.state.clock.dt == pytest.approx(0.1e-6)
+    safety = scene.case.simulation.dt_safety  # the default: of the fluid's limit, which is lower
+    assert scene.state.clock.dt == pytest.approx(safety * 1.0e-6)
     assert "toy fluid" in scene.dt_limit_reason
     with pytest.raises(CaseError, match="toy fluid's made-up limit"):
         scene_module.build_scene(parse_case(text))

@@ -77,7 +77,7 @@ def make_scene(
     upper=(0.1, 0.1, 0.1),
     periodic=(False, False, False),
     dt: float | str = "auto",
-    dt_safety: float = 0.1,
+    dt_safety: float | None = None,
     skin: float = 0.4,
     overlap_tolerance: float = 0.05,
     name: str = "particles.csv",

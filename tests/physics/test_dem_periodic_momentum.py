@@ -9,6 +9,8 @@ same collision as one in the middle of the box.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from dem_physics_cases import advance, clamped_contact_time, make_scene, sphere_mass
 
@@ -119,7 +121,7 @@ def test_collision_across_periodic_faces_equals_one_at_rest_inside(tmp_path):
 
 def test_single_sphere_crosses_periodic_faces_unchanged(tmp_path):
     """A sphere that crosses periodic faces (x up, y down, z up) keeps its velocity bitwise and
-    sits at x0 + v t wrapped into the box (round-off: N eps L with N = 1000 steps, 1e-12 L)."""
+    sits at x0 + v t wrapped into the box (round-off: N eps L with N ~ 1000 steps, 1e-12 L)."""
     box = 10.0 * R
     pos = np.array([[0.9, 0.1, 0.5], [0.3, 0.6, 0.2]]) * box  # the second one crosses z only
     vel = np.array([[2.0, -1.5, 1.0], [0.0, 0.0, 3.0]])
@@ -134,7 +136,7 @@ def test_single_sphere_crosses_periodic_faces_unchanged(tmp_path):
         gravity=(0.0, 0.0, 0.0),
     )
     p = scene.state.particles
-    steps = 1000
+    steps = math.ceil(0.6 * box / scene.state.clock.dt)  # the slowest crossing: 0.5 box at 1 m/s
     advance(scene, steps)
     t = scene.state.clock.time
     crossings = np.floor((pos + vel * t) / box)  # faces crossed along each axis (signed)

@@ -10,7 +10,9 @@ Protocol (one per test, SEEDS seeds each): N = 1000 spheres, radii uniform in 0.
 (5 % spread, against crystallisation on the flat floor), from a jittered lattice of spacing
 1.1 d poured under gravity onto a floor, periodic in x and y (8 mean diameters); linear contacts
 stiff against the weight (m g/(k_n d) = 2.6e-5, so overlaps stay below ~ 1e-4 d in the
-interior and compression adds < 0.1 to Z), e = 0.3, dt = 0.3 x the stability limit. Frictional:
+interior and compression adds < 0.1 to Z), e = 0.3, dt = 0.3 x the stability limit of one contact
+(above the bound for spheres held by 12 contacts, which dt = "auto" would keep below: a
+warning; the pour is stable at it, and 4x the steps would cost minutes). Frictional:
 POUR_STEPS of free settling (kinetic energy < 1e-5 m g d per particle). Frictionless spheres
 settle into mechanical equilibrium slowly (floppy, low-pressure top), so after the pour the
 velocities are zeroed every QUENCH_EVERY steps for QUENCH_STEPS steps (a quench to a nearby
@@ -39,7 +41,7 @@ QUENCH_STEPS = 30000
 CASE = """
 [simulation]
 duration = 10.0
-dt_safety = 0.3
+dt = {dt}
 
 [domain]
 upper = [0.016, 0.016, 0.08]
@@ -68,7 +70,8 @@ interior_margin = 3.0
 
 
 def _packing(friction: float, seed: int) -> dict:
-    scene = run_in_memory(CASE.format(friction=friction, seed=seed), POUR_STEPS)
+    limit = run_in_memory(CASE.format(friction=friction, seed=seed, dt='"auto"'), 0).dt_limit
+    scene = run_in_memory(CASE.format(friction=friction, seed=seed, dt=repr(0.3 * limit)), POUR_STEPS)
     p = scene.state.particles
     if friction == 0.0:
         for _ in range(QUENCH_STEPS // QUENCH_EVERY):

@@ -19,6 +19,8 @@ import pytest
 from restart_support import CASE, assert_same_state, final_state, frames, step_dt
 
 from sphere_cli import api
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import load_case
 from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 
@@ -66,6 +68,8 @@ def publish(tmp, final):
 checkpoint.write_file = write_file
 checkpoint.publish = publish
 from sphere_cli import api
+from sphere_cli.build.scene import build_scene
+from sphere_cli.config.load import load_case
 api.run(sys.argv[1], sys.argv[2])
 """
 
@@ -124,6 +128,7 @@ def test_changed_skin_on_resume_is_still_bitwise(tmp_path: Path):
 HERTZ_CASE = """
     [simulation]
     duration = {duration}
+    dt = {dt}
     [domain]
     upper = [0.008, 0.008, 0.02]
     [particles]
@@ -165,10 +170,12 @@ def test_hertz_mixture_with_contacts_resumes_bitwise(tmp_path: Path):
     again), a pair table, a wall material and rolling resistance, stopped while many contacts
     carry tangential springs: the resumed run ends bitwise equal to the uninterrupted one."""
     probe = tmp_path / "probe.toml"
-    probe.write_text(textwrap.dedent(HERTZ_CASE.format(duration=1.0)))
-    dt = step_dt(probe)
+    probe.write_text(textwrap.dedent(HERTZ_CASE.format(duration=1.0, dt='"auto"')))
+    # a tenth of the limit of one contact: contacts form within the 4500 steps (dt = "auto",
+    # below the bound for many contacts at once, would need ~4 times as many)
+    dt = 0.1 * build_scene(load_case(probe)).dt_limit
     case = tmp_path / "case.toml"
-    case.write_text(textwrap.dedent(HERTZ_CASE.format(duration=repr(6000 * dt))))
+    case.write_text(textwrap.dedent(HERTZ_CASE.format(duration=repr(6000 * dt), dt=repr(dt))))
     api.run(case, tmp_path / "whole")
     api.run(case, tmp_path / "split", until=4500 * dt)
     middle = final_state(tmp_path / "split")

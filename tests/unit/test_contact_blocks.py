@@ -169,10 +169,11 @@ def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_
             un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
             root_m = math.sqrt(law.reduced(p.inv_mass[i], p.inv_mass[j]))
             r_eff = ri * rj / (ri + rj) if hertz or rolling else 0.0
-            fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un)
+            travel, grow, end = law.contact_window(delta, vn, un, step_dt)
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un, travel, grow)
             g0, g1, g2, x0, x1, x2 = law.tangential_spring(
-                *hist[i, k], *(v[a] - vn * n[a] for a in range(3)), *n, kt_now, ct, mu, fn, spring_dt,
-                *(u[a] - un * n[a] for a in range(3)),
+                *hist[i, k], *(v[a] - vn * n[a] for a in range(3)), *n, kt_now, ct, mu, fn, spring_dt * grow,
+                *(u[a] - un * n[a] for a in range(3)), end,
             )  # fmt: skip
             hist[i, k] = (x0, x1, x2)
             e = (fn * n[0] + g0, fn * n[1] + g1, fn * n[2] + g2)
@@ -352,10 +353,12 @@ def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
             vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
             u = slip(p.vel_pred, p.angvel_pred, w.vel_pred[k])
             un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
-            fn, kt_now, ct = law.normal_law(kn, kt, dn, dtt, hertz, ri - gap, ri, math.sqrt(p.mass[i]), un)
+            travel, grow, end = law.contact_window(ri - gap, vn, un, dt)
+            root_m = math.sqrt(p.mass[i])
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dtt, hertz, ri - gap, ri, root_m, un, travel, grow)
             g0, g1, g2, x0, x1, x2 = law.tangential_spring(
-                *expected_h[i, k], *(v[b] - vn * n[b] for b in range(3)), *n, kt_now, ct, mu, fn, dt,
-                *(u[b] - un * n[b] for b in range(3)),
+                *expected_h[i, k], *(v[b] - vn * n[b] for b in range(3)), *n, kt_now, ct, mu, fn, dt * grow,
+                *(u[b] - un * n[b] for b in range(3)), end,
             )  # fmt: skip
             expected_h[i, k] = (x0, x1, x2)
             g = (g0, g1, g2)

@@ -28,6 +28,7 @@ WALLED = textwrap.dedent(
     seed = 5
     radius = { distribution = "uniform", min = 0.0004, max = 0.0007 }
     placement = { method = "random" }
+    velocity = [0.2, 0.1, 0.0]
     [contact]
     model = "linear"
     normal_stiffness = 1.0e3
