@@ -2,9 +2,9 @@
 
 Canonical scene (contact-physics issue): N monodisperse spheres, R = 1 mm, rho = 2500 kg/m^3,
 linear contact k_n = 1e5 N/m, k_t = 2/7 k_n, e = 0.5, mu = 0.5, six fixed walls, gravity,
-dt = 4e-6 s (0.65 x the stability limit of one contact; 6.5 x the bound for spheres held by 12
-contacts at once, physics/contact.py, which sphere warns of); once from a loose lattice (spacing
-1.2 d) and once from the settled bed.
+dt = 4e-6 s (0.65 x the stability limit of one contact, 6.5 x the bound for spheres held by 12
+contacts at once: physics/contact.py; the bed settles at coordination ~6, so the case says
+stability = "contact"); once from a loose lattice (spacing 1.2 d) and once from the settled bed.
 The settled bed is made once by letting the same particles, placed on a denser lattice
 (SETTLE_SPACING), fall for SETTLE_TIME of simulated time with the canonical contact law and dt;
 it is cached under the user cache directory, keyed by the text of that case (an interrupted
@@ -79,6 +79,7 @@ title = "canonical benchmark scene, N = {n}"
 [simulation]
 duration = {duration!r}
 dt = 4.0e-6
+stability = "contact"
 [domain]
 upper = [{width!r}, {width!r}, {height!r}]
 [particles]

@@ -40,6 +40,7 @@ def scene_text(cells: int, particles: int, spacing: float, jitter: float) -> str
 [simulation]
 duration = 1.0
 dt = 4.0e-6
+stability = "contact"
 [domain]
 upper = [{width!r}, {width!r}, {width!r}]
 periodic = [true, true, false]

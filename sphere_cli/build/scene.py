@@ -499,14 +499,12 @@ def _resolve_dt(
             f"above the stability limit {dt_limit:.4g} s ({reason}); "
             f'use dt <= {dt_limit:.4g} s or dt = "auto"',
         )
-    if sim.dt > bound[0]:
-        warn(
-            loaded.describe(
-                ("simulation", "dt"),
-                f"above the stability bound {bound[0]:.4g} s for spheres held by many contacts at once "
-                f"({bound[1]}): a dense packing may grow unstable (the run then stops with exit 70); "
-                'dt = "auto" stays below it',
-            )
+    if sim.dt > bound[0] and sim.stability == "packing":
+        raise loaded.error(
+            ("simulation", "dt"),
+            f"above the stability bound {bound[0]:.4g} s for spheres held by many contacts at once "
+            f'({bound[1]}); use dt <= {bound[0]:.4g} s or dt = "auto", or, for a scene that never '
+            f'packs densely, simulation.stability = "contact" (up to {dt_limit:.4g} s)',
         )
     _check_steps(loaded, sim.dt)  # the case was checked, but --until may have changed duration
     return float(sim.dt)

@@ -32,7 +32,7 @@ class Simulation(Strict):
             'Time step [s], or "auto": dt_safety times the stability limit of one contact alone '
             "(each collision resolved by ~25 steps or more), but at most 0.9 times the stability "
             "bound of the scene (spheres held by many contacts at once, driven walls, the fluid). "
-            "A number above that bound is refused."
+            "A number above that bound is refused (see `stability`)."
         ),
     )
     dt_safety: Real = Field(
@@ -40,6 +40,15 @@ class Simulation(Strict):
         gt=0,
         le=1,
         description='Fraction of the stability limit of one contact alone that dt = "auto" takes [-].',
+    )
+    stability: Literal["packing", "contact"] = Field(
+        "packing",
+        description=(
+            'Which stability limit a given dt must respect: "packing", the bound for spheres held '
+            'by as many contacts as any packing allows (a true bound); or "contact", the limit of '
+            "one contact alone, for a scene that never packs densely (a dense packing may then "
+            'grow unstable, which stops the run with exit 70). dt = "auto" respects both.'
+        ),
     )
     threads: Count | None = Field(
         None, ge=1, description="Numba threads (default: all cores). Results do not depend on it."

@@ -774,6 +774,7 @@ def nan_guard(quick: bool) -> dict:
             walls=["x-", "x+", "y-", "y+", "z-", "z+"],
             gravity=(0.0, 0.0, -G),
             dt=1.0e-5,
+            stability="contact",  # ten spheres thrown about: never a packing
             duration=0.01,
             blowup_check_every=every,
         )

@@ -83,8 +83,9 @@ def test_dt_three_times_the_limit_is_refused(tmp_path, law):
     assert shown == pytest.approx(limit, rel=1e-3)
     assert "material 'hard'" in result.stderr  # the stiff material sets it
     assert not (tmp_path / "out").exists()
-    # the limit itself is accepted
-    (tmp_path / "ok.toml").write_text(text.format(dt=repr(limit)))
+    # the limit itself is accepted, for a scene declared never to pack densely (it is above the
+    # bound for spheres held by many contacts, tests/physics/test_dt_bound.py)
+    (tmp_path / "ok.toml").write_text(text.format(dt=repr(limit) + '\nstability = "contact"'))
     assert build_scene(load_case(tmp_path / "ok.toml")).state.clock.dt == limit
 
 
@@ -96,6 +97,7 @@ SQUEEZED = """\
 [simulation]
 duration = 0.01
 dt = {dt}
+stability = "contact"
 blowup_check_every = 100
 
 [domain]
@@ -130,8 +132,8 @@ def test_blow_up_exits_70_and_the_last_checkpoint_resumes(tmp_path: Path):
     wall-sphere-sphere-wall whose fastest mode, omega^2 = 3 k/m, is sqrt(3/2) faster than any
     single pair or wall contact the limit is computed from (omega^2 = 2 k/m for the pair), so
     dt = 0.95 x dt_limit puts omega dt at 2.3 > 2 and velocity Verlet diverges (the stability
-    bound for spheres held by several contacts is below it, and sphere warns that dt exceeds
-    it; dt = "auto" stays below it). Within a few steps a sphere
+    bound for spheres held by several contacts is below it: the case has to say stability =
+    "contact" to run at all; dt = "auto" stays below it). Within a few steps a sphere
     moves more than half its radius per step: the check that runs before every checkpoint (here
     every 5 steps) stops the run with exit 70 naming the step, time and particle; status.json
     says failed. The newest checkpoint predates the failure and verifies; `sphere resume` from it

@@ -129,7 +129,7 @@ def test_runaway_drag_is_caught_and_named(tmp_path):
     dt = 1.5e-5 s (under the contact limit); the stability guard stops the run (exit 70) naming
     the particle and the cause."""
     text = edit(
-        edit(CASE, 'dt = "auto"', "dt = 1.5e-5\nblowup_check_every = 1"),
+        edit(CASE, 'dt = "auto"', 'dt = 1.5e-5\nstability = "contact"\nblowup_check_every = 1'),
         'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
         'flow = { kind = "profile", z = [0.0, 0.008], u = [2000.0, 2000.0] }',
     )

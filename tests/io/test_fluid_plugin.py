@@ -28,6 +28,7 @@ CASE = """
 [simulation]
 duration = {duration}
 dt = 1.0e-5
+stability = "contact"
 [domain]
 upper = [0.01, 0.01, 0.02]
 [particles]

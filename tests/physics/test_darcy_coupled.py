@@ -35,6 +35,7 @@ BED = """
 [simulation]
 duration = {duration}
 dt = 4.0e-6
+stability = "contact"
 [domain]
 upper = [0.005, 0.005, 0.025]
 periodic = [true, true, false]
@@ -184,6 +185,7 @@ OEDOMETER = """
 [simulation]
 duration = 1.0
 dt = 3.0e-6
+stability = "contact"
 [domain]
 upper = [0.004, 0.004, 0.008]
 periodic = [true, true, false]

@@ -45,6 +45,7 @@ def coupled_scene(tmp_path, pos, radius, *, upper, fluid, density=2500.0, vel=No
 [simulation]
 duration = 1.0
 dt = {dt!r}
+stability = "contact"
 [domain]
 upper = {_toml(tuple(upper))}
 periodic = [true, true, false]

@@ -179,6 +179,7 @@ def _random_bed(tmp_path, n=120, seed=3):
         periodic=(True, True, True),
         gravity=(0.0, 0.0, -G),
         dt=1e-6,
+        stability="contact",
         overlap_tolerance=0.5,
     )
     fs = fluid_state((5, 4, 6), (1e-3, 1e-3, 1e-3))

@@ -11,8 +11,9 @@ Protocol (one per test, SEEDS seeds each): N = 1000 spheres, radii uniform in 0.
 1.1 d poured under gravity onto a floor, periodic in x and y (8 mean diameters); linear contacts
 stiff against the weight (m g/(k_n d) = 2.6e-5, so overlaps stay below ~ 1e-4 d in the
 interior and compression adds < 0.1 to Z), e = 0.3, dt = 0.3 x the stability limit of one contact
-(above the bound for spheres held by 12 contacts, which dt = "auto" would keep below: a
-warning; the pour is stable at it, and 4x the steps would cost minutes). Frictional:
+(above the bound for spheres held by 12 contacts, so stability = "contact": the pour, at
+coordination ~6, is stable at it, and the 4x the steps of dt = "auto" would cost minutes).
+Frictional:
 POUR_STEPS of free settling (kinetic energy < 1e-5 m g d per particle). Frictionless spheres
 settle into mechanical equilibrium slowly (floppy, low-pressure top), so after the pour the
 velocities are zeroed every QUENCH_EVERY steps for QUENCH_STEPS steps (a quench to a nearby
@@ -42,6 +43,7 @@ CASE = """
 [simulation]
 duration = 10.0
 dt = {dt}
+stability = "contact"
 
 [domain]
 upper = [0.016, 0.016, 0.08]

@@ -76,6 +76,7 @@ ONE_WAY = """
 [simulation]
 duration = 1.0
 dt = 1.0e-5
+stability = "contact"
 [domain]
 upper = [0.006, 0.006, 0.02]
 periodic = [true, true, false]

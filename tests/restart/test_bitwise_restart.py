@@ -129,6 +129,7 @@ HERTZ_CASE = """
     [simulation]
     duration = {duration}
     dt = {dt}
+    stability = "contact"
     [domain]
     upper = [0.008, 0.008, 0.02]
     [particles]

@@ -18,6 +18,7 @@ CASE = """
 [simulation]
 duration = 1.0
 dt = 4.0e-6
+stability = "contact"
 threads = 1
 [domain]
 upper = [0.01, 0.01, 0.02]

@@ -115,6 +115,7 @@ def _case(path, hertz: bool) -> str:
         [simulation]
         duration = 1.0
         dt = 2.0e-6
+        stability = "contact"
         [domain]
         upper = [{BOX}, {BOX}, {BOX}]
         periodic = [true, true, true]
@@ -298,6 +299,7 @@ def _walled_case(folder) -> str:
         [simulation]
         duration = 1.0
         dt = 2.0e-6
+        stability = "contact"
         [domain]
         upper = [{side}, {side}, {side}]
         gravity = [0.0, 0.0, -9.81]
