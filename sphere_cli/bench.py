@@ -1,6 +1,6 @@
 """`sphere bench`: particle-steps per second on the canonical scene (never part of the tests).
 
-Canonical scene (contact-physics issue): N monodisperse spheres, R = 1 mm, rho = 2500 kg/m^3,
+Canonical scene: N monodisperse spheres, R = 1 mm, rho = 2500 kg/m^3,
 linear contact k_n = 1e5 N/m, k_t = 2/7 k_n, e = 0.5, mu = 0.5, six fixed walls, gravity,
 dt = 4e-6 s (0.65 x the stability limit of one contact, 6.5 x the bound for spheres held by 12
 contacts at once: physics/contact.py; the bed settles at coordination ~6, so the case says
@@ -9,7 +9,7 @@ The settled bed is made once by letting the same particles, placed on a denser l
 (SETTLE_SPACING), fall for SETTLE_TIME of simulated time with the canonical contact law and dt;
 it is cached under the user cache directory, keyed by the text of that case (an interrupted
 settling resumes from its last checkpoint).
-A last row times the sparse scene of the neighbour-search issue: one sphere of 0.5 mm in a
+A last row times a sparse scene: one sphere of 0.5 mm in a
 1 m cube falling onto its floor, SPARSE_STEPS steps (the search's memory and time follow the
 particle count, not the box volume over the particle size: physics/neighbors.py).
 Compile (or cache-load) time is measured apart from run time; each row reports the median of

@@ -1,4 +1,4 @@
-"""`sphere bench --fluid`: the porous Navier-Stokes fluid coupled to a DEM bed (issue 3's
+"""`sphere bench --fluid`: the porous Navier-Stokes fluid coupled to a DEM bed (the fluid's
 benchmark; never part of the tests' timings).
 
 The scene: a cube of `cells`^3 fluid cells of 2 mm (periodic in x and y), a bed of `particles`

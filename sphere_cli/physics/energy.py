@@ -7,14 +7,17 @@ from __future__ import annotations
 
 from ..kernels.energy import kinetic_energy, potential_energy
 
-UNITS = {
-    "kinetic_energy": "J",
-    "potential_energy": "J",
-    "elastic_energy": "J",
-    "total_energy": "J",
-    "contacts": "",
-    "wall_contacts": "",
+# name -> (unit, the group of output.observables.quantities that asks for it)
+QUANTITIES = {
+    "kinetic_energy": ("J", "energy"),
+    "potential_energy": ("J", "energy"),
+    "elastic_energy": ("J", "energy"),
+    "total_energy": ("J", "energy"),
+    "contacts": ("", "contacts"),
+    "wall_contacts": ("", "contacts"),
 }
+UNITS = {name: unit for name, (unit, _) in QUANTITIES.items()}
+GROUPS = {name: group for name, (_, group) in QUANTITIES.items()}
 
 
 def observables(scene) -> dict[str, float]:

@@ -191,7 +191,6 @@ class NeighborSearch:
         nl = state.neighbors
         for name in NeighborList.PROGNOSTIC:
             setattr(nl, name, np.array(arrays[name]))
-        _keep_upper_half(nl)
         _pack_springs(nl)
         self._spare_like(nl)
         self._reverse(nl)
@@ -219,21 +218,3 @@ def _pack_springs(nl: NeighborList) -> None:
     hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
     hist[:pairs] = nl.hist[listed_slots(nl.nbr, nl.nbr_count)]
     nl.hist = hist
-
-
-def _keep_upper_half(nl: NeighborList) -> None:
-    """A checkpoint written before the half list holds full rows (each pair twice, its two
-    springs exact negatives): keep each row's j > i, which is the half list of the same build."""
-    n, cap = nl.nbr.shape
-    listed = listed_slots(nl.nbr, nl.nbr_count)
-    keep = listed & (nl.nbr > np.arange(n)[:, None])
-    if np.array_equal(keep, listed):
-        return
-    slot = np.cumsum(keep, axis=1) - 1
-    rows, cols = np.nonzero(keep)
-    nbr = np.zeros_like(nl.nbr)
-    hist = np.zeros_like(nl.hist)
-    nbr[rows, slot[rows, cols]] = nl.nbr[rows, cols]
-    hist[rows, slot[rows, cols]] = nl.hist[rows, cols]
-    nl.nbr, nl.hist = nbr, hist
-    nl.nbr_count = keep.sum(axis=1).astype(np.int32)

@@ -55,7 +55,7 @@ class Observer:
         for name, value in energy.observables(scene).items():
             if name not in energy.UNITS:  # walls and stages: always
                 out[name] = (value, WALL_UNITS.get(name, ""))
-            elif ("energy" if energy.UNITS[name] == "J" else "contacts") in groups:
+            elif energy.GROUPS[name] in groups:
                 out[name] = (value, energy.UNITS[name])
         sample = structure.sample_region(state)
         interior = sample.shrunk(self.margin)
@@ -105,13 +105,10 @@ class Observer:
 def shear_strain(walls, axis: int, height: float) -> float:
     """Displacement of the upper z wall relative to the lower one along the shear axis since
     the start of the run, over the sample height at the first sample [-] (0 without them)."""
-    shift = getattr(walls, "shift", None)
-    if shift is None:
-        return 0.0
     top = bottom = 0.0
     for w, face in enumerate(walls.faces):
         if face == "z+":
-            top = float(shift[w, axis])
+            top = float(walls.shift[w, axis])
         elif face == "z-":
-            bottom = float(shift[w, axis])
+            bottom = float(walls.shift[w, axis])
     return (top - bottom) / height
