@@ -197,6 +197,17 @@ def rayleigh_time(radius: float, density: float, shear_modulus: float, poisson_r
     return math.pi * radius * math.sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
 
 
+def _lightest(material: np.ndarray, mass: np.ndarray, materials: int) -> dict[int, np.ndarray]:
+    """Material id -> the indices of its two lightest particles (one if it has one), for the
+    materials particles are made of."""
+    lightest = {}
+    for a in range(materials):
+        members = np.flatnonzero(material == a)
+        if members.size:
+            lightest[a] = members[np.argsort(mass[members], kind="stable")[:2]]
+    return lightest
+
+
 def _label(tables: ContactTables, a: int) -> str:
     return "the particles" if tables.names[a] == "" else f"material {tables.names[a]!r}"
 
@@ -266,20 +277,18 @@ def stability_limit(
     hertz = tables.hertz
     law = "Hertz-Mindlin" if hertz else "linear"
     limits: list[tuple[float, str]] = []
-    present = [a for a in range(len(tables.names)) if np.any(material == a)]
+    lightest = _lightest(material, mass, len(tables.names))
     smallest = float(radius.min()) if radius.size else 0.0
     others = radius.size - 1 + len(wall_faces)
-    for a in present:
-        members = np.flatnonzero(material == a)
-        i = int(members[np.argmin(mass[members])])
+    for a, first in lightest.items():
+        i = int(first[0])
         r, m = float(radius[i]), float(mass[i])
         omega2 = gamma = 0.0  # the largest kappa/m* and d/sqrt(m*) of a contact at it
-        for b in present:
-            of_b = np.flatnonzero(material == b)
-            if of_b.size < (2 if b == a else 1):  # no partner of that material
+        for b, second in lightest.items():
+            if b == a and first.size < 2:  # no partner of its own material
                 continue
-            m_b = float(mass[of_b].min())  # the lightest partner: the smallest m*
-            r_b = float(radius[of_b].max())  # the largest: the stiffest Hertz contact
+            m_b = float(mass[second[0]])  # the lightest partner: the smallest m*
+            r_b = float(radius[material == b].max())  # the largest: the stiffest Hertz contact
             k, d = contact_coefficients(tables.table[a, b], hertz, r * r_b / (r + r_b), overlap * r)
             m_eff = m * m_b / (m + m_b)
             omega2, gamma = max(omega2, k / m_eff), max(gamma, d / math.sqrt(m_eff))
@@ -319,11 +328,7 @@ def one_contact_limit(
     hertz = tables.hertz
     law = "Hertz-Mindlin" if hertz else "linear"
     limits: list[tuple[float, str]] = []
-    lightest = {}  # material -> indices of its two lightest particles
-    for a in range(len(tables.names)):
-        members = np.flatnonzero(material == a)
-        if members.size:
-            lightest[a] = members[np.argsort(mass[members], kind="stable")[:2]]
+    lightest = _lightest(material, mass, len(tables.names))
     for a, first in lightest.items():
         if hertz:
             mat = tables.materials[a]
