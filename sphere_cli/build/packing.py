@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from ..config.load import case_error
+from ..config.memory import CELLS_PER_PARTICLE
 from ..config.schema import FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import CaseError, MissingInputError
 from ..kernels.packing import insert_random
-from ..physics.neighbors import CELLS_PER_PARTICLE
 
 
 def _region(placement, case):

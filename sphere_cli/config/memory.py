@@ -15,7 +15,6 @@ import os
 from dataclasses import dataclass
 
 from ..errors import UsageError
-from ..physics.neighbors import CELLS_PER_PARTICLE, DENSE_FLOOR
 from .fluid_grid import grid_cells
 from .schema import Case, RandomPlacement
 
@@ -27,6 +26,12 @@ LIMIT_VARIABLE = "SPHERE_MEMORY_GIB"
 PARTICLE_BYTES = 1024
 # the cells of the neighbour search and of random insertion: one int64 per cell
 GRID_CELL_BYTES = 8
+# The neighbour search gives every cell its entry while the cells number at most this many per
+# particle (plus DENSE_FLOOR); beyond, it lists only the occupied ones (physics/neighbors.py), and
+# random insertion coarsens its cells to this many per particle (build/packing.py): a settled bed
+# fills ~1 cell per 10 particles, so only a box mostly empty goes the sparse way.
+CELLS_PER_PARTICLE = 8
+DENSE_FLOOR = 4096
 # random placement draws every candidate position at once: 3 float64, held twice while sorted
 CANDIDATE_BYTES = 48
 # fluid state, scratch and pressure solver per cell: 336 B measured for Navier-Stokes and 296 B

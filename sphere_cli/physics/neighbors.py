@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..config.memory import CELLS_PER_PARTICLE, DENSE_FLOOR
 from ..errors import NumericalError
 from ..kernels.neighbors import (
     build_lists,
@@ -29,11 +30,6 @@ QUIET_BUILDS = 20
 # the packed springs are allocated for this many times the pairs listed (rebuilds add or drop a
 # few pairs; more than that reallocates them)
 SPRING_ROOM = 1.25
-# Every cell gets its entry (8 B) while the cells number at most this many per particle (plus
-# DENSE_FLOOR); beyond, only the occupied cells are listed and searched (kernels/neighbors.py):
-# a settled bed fills ~1 cell per 10 particles, so only a box mostly empty goes the sparse way.
-CELLS_PER_PARTICLE = 8
-DENSE_FLOOR = 4096
 # cells along one axis at most (2^60 cells in all fit the int64 cell numbers); more would be
 # cells wider than needed, which costs pairs checked, never pairs missed
 AXIS_CELLS = 2**20
