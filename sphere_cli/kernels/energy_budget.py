@@ -196,8 +196,8 @@ def accumulate_budget(
             r_eff = ri * rj / (ri + rj)
             travel, grow, end = contact_window(delta, vn, un, dt)
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+            fe = normal_law(kn, kt, dn, dtan, hertz, delta, r_eff, root_m, 0.0, travel, grow)[0]
             fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, r_eff, root_m, un, travel, grow)
-            fe = normal_law(kn, row[K_T], dn, dtan, hertz, delta, r_eff, root_m, 0.0, travel, grow)[0]
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, hist[start[i] + k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
@@ -268,8 +268,8 @@ def accumulate_budget(
             root_m = math.sqrt(mi)
             travel, grow, end = contact_window(delta, vn, un, dt)
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+            fe = normal_law(kn, kt, dn, dtan, hertz, delta, ri, root_m, 0.0, travel, grow)[0]
             fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, ri, root_m, un, travel, grow)
-            fe = normal_law(kn, row[K_T], dn, dtan, hertz, delta, ri, root_m, 0.0, travel, grow)[0]
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, wall_hist[i, w], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
                 ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
