@@ -22,7 +22,7 @@ from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .simulation import Loop, StopFlag, end_step_for
+from .simulation import Loop, StopFlag
 
 
 @dataclass
@@ -123,7 +123,7 @@ def _drive(
     show_progress: bool,
 ) -> RunResult:
     clock = scene.state.clock
-    end_step = end_step_for(scene.case.simulation.duration, clock.dt)
+    end_step = clock.steps_in(scene.case.simulation.duration)
     start_step = clock.step
     progress = Progress(
         rundir,

@@ -181,7 +181,7 @@ def run_fluid_benchmark(
         cells=list(fluid.grid().shape),
         cell_count=int(np.prod(fluid.grid().shape)),
         dt=scene.state.clock.dt,
-        ndem=fluid.ndem,
+        ndem=fluid.coupling_steps,
         pressure_solver=solver.poisson.describe(),
         tolerance=solver.poisson.tolerance,
         first_step_iterations=fs.iterations,

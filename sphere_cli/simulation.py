@@ -1,11 +1,8 @@
-"""The time loop: one step composes only the modules the scene holds, then the schedules run.
+"""The time loop: each step runs the hooks of the scene's modules (physics/module.py, where the
+step is listed), then the schedules run.
 
-Step (velocity Verlet):  kick-drift  ->  prepare (neighbour list)  ->  forces  ->  kick
-->  finish (modules that need the full-step velocities: the energy budget), then, with a fluid,
-the fluid's own step when it is due (physics/fluid.py). Moving walls are kicked and drifted
-just before the particles (their glued particles take the wall's velocity) and kicked after the
-forces. After the clock advances the stages test their end (physics/stages.py); the run is done
-when the last stage ends. Then: stability guard (every `blowup_check_every` steps and before
+The run is done when the last stage ends (physics/stages.py) or at its end step. Then:
+stability guard (every `blowup_check_every` steps and before
 every checkpoint), trajectory frames, observables, checkpoints and status, each on its own
 schedule (observables follow the frames unless output.observables sets a schedule of its own).
 A stop request (signal, wall-time budget) writes a checkpoint at the next step boundary.
@@ -13,7 +10,6 @@ A stop request (signal, wall-time budget) writes a checkpoint at the next step b
 
 from __future__ import annotations
 
-import math
 import time as wallclock
 from dataclasses import dataclass, field
 
@@ -41,10 +37,10 @@ class StepSchedule:
     last_wall: float = field(default_factory=wallclock.monotonic)
 
     @classmethod
-    def from_config(cls, schedule, dt: float) -> StepSchedule:
+    def from_config(cls, schedule, clock) -> StepSchedule:
         steps = schedule.every_steps
         if schedule.every_time is not None:
-            by_time = max(1, round(schedule.every_time / dt))
+            by_time = clock.steps_in(schedule.every_time)
             steps = by_time if steps is None else min(steps, by_time)
         wall = schedule.every_wall_minutes * 60.0 if schedule.every_wall_minutes else None
         return cls(every_steps=steps, wall_seconds=wall)
@@ -72,41 +68,32 @@ class StopFlag:
             self.reason = reason
 
 
-def end_step_for(duration: float, dt: float) -> int:
-    # the run reaches at least `duration`; the tiny tolerance absorbs round-off in duration/dt
-    return max(0, math.ceil(duration / dt - 1e-9))
-
-
 def advance(scene, steps: int) -> bool:
     """Advance the scene by `steps` steps with no output (library use and tests), or until the
     last stage ends. Returns True if a stage ended on the last step taken."""
     state = scene.state
-    motion, neighbors, kicker = scene.motion, scene.neighbors, scene.kicker
-    forces, after_step = scene.force_modules, scene.after_step_modules
-    walls = [] if scene.wall_motion is None else [scene.wall_motion]
-    stages = scene.stages
-    finishers = scene.finish_modules
+    step = scene.step
+    kick_drift, prepare, forces, kick = step.kick_drift, step.prepare, step.forces, step.kick
+    finish_step, after_step = step.finish_step, step.after_step
     clock = state.clock
-    ended = False
     for _ in range(steps):
         if scene.finished:
             break
-        for module in walls:
-            module.kick_drift(state)
-        motion.kick_drift(state)
-        neighbors.prepare(state)
-        for module in forces:
-            module.forces(state)
-        for module in walls:
-            module.kick(state)
-        kicker.kick(state)
-        for module in finishers:
-            module.finish_step(state)
+        for hook in kick_drift:
+            hook(state)
+        for hook in prepare:
+            hook(state)
+        for hook in forces:
+            hook(state)
+        for hook in kick:
+            hook(state)
+        for hook in finish_step:
+            hook(state)
         clock.step += 1
-        for module in after_step:
-            module.after_step(state)
-        ended = stages is not None and stages.after_step(state)
-    return ended
+        for every, hook in after_step:
+            if clock.step % every == 0:
+                hook(state)
+    return scene.stages is not None and scene.stages.ended
 
 
 def check_stable(scene) -> None:
@@ -143,12 +130,12 @@ class Loop:
         self.stop = stop
         self.max_wall_seconds = max_wall_seconds
         self.progress = progress
-        dt = scene.state.clock.dt
+        clock = scene.state.clock
         out_cfg = scene.case.output
-        self.frames = StepSchedule.from_config(out_cfg.frames, dt)
-        self.checkpoints = StepSchedule.from_config(out_cfg.checkpoints, dt)
+        self.frames = StepSchedule.from_config(out_cfg.frames, clock)
+        self.checkpoints = StepSchedule.from_config(out_cfg.checkpoints, clock)
         observed = out_cfg.observables
-        self.observations = None if observed.follows_frames else StepSchedule.from_config(observed, dt)
+        self.observations = None if observed.follows_frames else StepSchedule.from_config(observed, clock)
         self.status = StepSchedule(wall_seconds=progress.interval)
         self.check_every = scene.case.simulation.blowup_check_every
 
@@ -207,9 +194,8 @@ class Loop:
         log = getattr(self.output, "log", None)
         if log is not None:
             ended = stages.names[stages.index - 1]
-            log.info(
-                "stage %r ended at step %d (t = %.6g s); now: %s", ended, clock.step, clock.time, stages.name
-            )
+            now = stages.current
+            log.info("stage %r ended at step %d (t = %.6g s); now: %s", ended, clock.step, clock.time, now)
         check_stable(scene)
         self.output.frame(scene)
         self.output.checkpoint(scene)

@@ -23,6 +23,12 @@ class Clock:
         # computed, not accumulated: no drift, and bitwise equal after a restart
         return self.step * self.dt
 
+    def steps_in(self, span: float) -> int:
+        """The one rule for every span of simulated time a case gives (the run's duration, a
+        stage's, the output schedules, a fluid's coupling interval): the nearest whole number of
+        steps, at least one."""
+        return max(1, round(span / self.dt))
+
 
 @dataclass
 class Box:

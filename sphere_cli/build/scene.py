@@ -7,7 +7,7 @@ fluid model's module is not even imported).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from ..physics.contact import PairContactForces, one_contact_limit, stability_li
 from ..physics.energy_budget import EnergyBudget
 from ..physics.fluid import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
+from ..physics.module import Step, order_problems
 from ..physics.motion import Motion
 from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
 from ..physics.observables import Observer
@@ -62,8 +63,12 @@ class Scene:
     stages: Stages | None = None  # only if the case has [[stages]]
     budget: EnergyBudget | None = None  # only when the energy budget is observed
     observer: Observer | None = None
+    # every module in play, in the order their hooks run (physics/module.py), and their bound
+    # hooks: set by order_modules(), again whenever a module or a hook method is replaced
+    modules: tuple = ()
+    step: Step = field(default_factory=lambda: Step(()))
 
-    # optional modules whose state a checkpoint may lack (resume starts them afresh)
+    # modules whose state a checkpoint may hold or lack (a resume starts them afresh)
     OPTIONAL_STATE = ("energy_budget", "observables")
 
     @property
@@ -71,51 +76,25 @@ class Scene:
         return self.contact.tables
 
     @property
-    def force_modules(self) -> list:
-        # the budget reads the springs of the step before the contacts update them
-        return [m for m in (self.budget, self.contact, self.walls, self.fluid) if m is not None]
-
-    @property
-    def finish_modules(self) -> list:
-        """Modules run after the second half kick of each step."""
-        return [] if self.budget is None else [self.budget]
-
-    @property
-    def after_step_modules(self) -> list:
-        """Modules with their own schedule after the clock advances (the fluid's step)."""
-        return [m for m in (self.fluid,) if m is not None]
-
-    @property
-    def kicker(self):
-        """What applies the second half kick: the fluid when it treats drag implicitly."""
-        return self.fluid if self.fluid is not None and self.fluid.replaces_kick else self.motion
-
-    @property
-    def stateful_modules(self) -> dict:
-        """name -> module with prognostic_state()/restore(), only those in play."""
-        modules = {"particles": self.motion, "neighbors": self.neighbors}
-        if self.walls is not None:
-            modules["walls"] = self.walls
-        if self.fluid is not None:
-            modules[self.fluid.name] = self.fluid
-        if self.stages is not None:
-            modules["stages"] = self.stages
-        if self.budget is not None:
-            modules["energy_budget"] = self.budget
-        if self.observer is not None and self.observer.stateful:
-            modules["observables"] = self.observer
-        return modules
-
-    @property
     def finished(self) -> bool:
         """True once the last stage has ended (never without stages)."""
         return self.stages is not None and self.stages.finished
 
+    def order_modules(self) -> None:
+        """The scene's modules in the order of the step (physics/module.py ORDER) and their hooks."""
+        every = (
+            self.wall_motion, self.motion, self.neighbors, self.budget, self.contact, self.walls,
+            self.fluid, self.stages, self.observer,
+        )  # fmt: skip
+        self.modules = tuple(m for m in every if m is not None)
+        assert not order_problems(self.modules), order_problems(self.modules)
+        self.step = Step(self.modules)
+
     def compute_initial_forces(self) -> None:
         """Forces of the initial state, for the first half kick: no time has passed, so the
         tangential springs do not grow."""
-        for module in self.force_modules:
-            module.forces(self.state, spring_dt=0.0)
+        for forces in self.step.forces:
+            forces(self.state, spring_dt=0.0)
 
 
 # Extreme values (a density of 1e-308 kg/m^3, a stiffness of 1e308 N/m) overflow masses and limits
@@ -257,6 +236,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     scene.observer = Observer(scene, observed)
     if "energy_budget" in observed.quantities:
         scene.budget = EnergyBudget(scene)
+    scene.order_modules()
     if restart is None:
         if stages is not None:
             stages.begin(state, 0)
@@ -301,7 +281,7 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
             f"{restart.path}: was written with dt = {restart.dt!r} s but the case now gives "
             f"{scene.state.clock.dt!r} s"
         )
-    modules = scene.stateful_modules
+    modules = scene.step.stateful
     optional = set(Scene.OPTIONAL_STATE)
     if set(modules) - optional != set(restart.arrays) - optional:
         raise ResumeRefused(

@@ -90,9 +90,10 @@ class CouplingConfig(Strict):
         None,
         gt=0,
         description=(
-            "The fluid step instead, sub-stepped by the DEM: ndem = floor(fluid_dt / dt) DEM steps "
-            "(at least one) per fluid step of ndem dt. fluid_dt itself must satisfy the fluid's "
-            "limits, and dt may not exceed it [s]."
+            "The fluid step instead, sub-stepped by the DEM: ndem = round(fluid_dt / dt) DEM steps "
+            "(at least one, the rule of every span of time in a case) per fluid step of ndem dt. "
+            "fluid_dt and the fluid step ndem dt must satisfy the fluid's limits, and dt may not "
+            "exceed fluid_dt [s]."
         ),
     )
 

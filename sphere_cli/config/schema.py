@@ -25,7 +25,7 @@ __all__ = ["FACES", "Count", "Flag", "Real", "Strict", "Vec3"]
 class Simulation(Strict):
     """Time stepping and when to stop."""
 
-    duration: Real = Field(gt=0, description="Simulated time to reach [s].")
+    duration: Real = Field(gt=0, description="Simulated time to reach, to the nearest whole step [s].")
     dt: float | Literal["auto"] = Field(
         "auto",
         description=(

@@ -84,7 +84,7 @@ def _checkpoint_image(scene, case_text: str, resolved: dict, physics_hash: str) 
         f.attrs["case_toml"] = case_text
         f.attrs["resolved_case"] = json.dumps(resolved)
         root = f.create_group("sphere/state")
-        for module_name, module in scene.stateful_modules.items():
+        for module_name, module in scene.step.stateful.items():
             group = root.create_group(module_name)
             for name, array in module.prognostic_state(state).items():
                 array = np.asarray(array)

@@ -1,4 +1,4 @@
-"""Particle-particle contacts (forces phase): the linear or Hertz-Mindlin law of kernels/contact.py
+"""Particle-particle contacts (the forces hook): the linear or Hertz-Mindlin law of kernels/contact.py
 with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
 
 Time-step limits (shared/validation E; user guide section 2). The dashpots act at the
@@ -31,6 +31,7 @@ from ..kernels.contact import BLOCK, D_N, D_T, FIELDS, K_N, K_T, chunk_pair_forc
 from ..kernels.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
+from .module import Module
 from .neighbors import listed_slots
 
 
@@ -51,8 +52,8 @@ def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray,
     return rows, np.concatenate(([0], cuts, [crossing.size])).astype(np.int64)
 
 
-class PairContactForces:
-    phase = "forces"
+class PairContactForces(Module):
+    name = "contact"
 
     def __init__(self, tables: ContactTables):
         self.tables = tables

@@ -64,7 +64,7 @@ class Darcy(FluidModule):
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
-        self.update_every = config.update_every
+        self.coupling_steps = config.update_every
         self.fluid_dt = math.nan
         self.warned_clamp = False
         state.fluid = self.pore.state
@@ -86,16 +86,16 @@ class Darcy(FluidModule):
         else:
             k = self.pore.kc * phi**3 / (1.0 - phi) ** 2
         relaxation = self.lightest_density * k / config.viscosity
-        limit = COUPLING_FRACTION * relaxation / self.update_every
+        limit = COUPLING_FRACTION * relaxation / self.coupling_steps
         where = "" if self.pore.kc is None else f" at porosity {phi:g}"
         return limit, (
             f"explicit Darcy coupling: {COUPLING_FRACTION:g} rho_s k / mu / update_every with rho_s = "
             f"{self.lightest_density:.4g} kg/m^3, k = {k:.3g} m^2{where}, mu = {config.viscosity:g} Pa s, "
-            f"update_every = {self.update_every}"
+            f"update_every = {self.coupling_steps}"
         )
 
     def start(self, state) -> None:
-        self.fluid_dt = self.update_every * state.clock.dt
+        self.fluid_dt = self.coupling_steps * state.clock.dt
 
     def initialize(self, state) -> None:
         s = self.pore.state
@@ -107,8 +107,6 @@ class Darcy(FluidModule):
 
     def after_step(self, state) -> None:
         clock = state.clock
-        if clock.step % self.update_every:
-            return
         s = self.pore.state
         self._measure(state)
         np.subtract(s.porosity, self.porosity_previous, out=s.porosity_rate)
@@ -201,6 +199,6 @@ class Darcy(FluidModule):
             "grid": pore.grid.describe(),
             "permeability": law,
             "solver": pore.solver.describe(),
-            "fluid step": f"{self.fluid_dt:.4g} s (every {self.update_every} DEM steps); explicit limit "
+            "fluid step": f"{self.fluid_dt:.4g} s (every {self.coupling_steps} DEM steps); explicit limit "
             f"{pore.explicit_limit():.4g} s at the current porosity",
         }

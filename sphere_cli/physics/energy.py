@@ -1,7 +1,5 @@
-"""Observables of the particle system (diagnose phase, on the output schedule only):
-kinetic, gravitational and elastic energy, and contact counts (kernels/energy.py); with walls,
-their positions, velocities, forces and stresses, one row per wall (physics/walls.py); with
-stages, the index of the current one."""
+"""Observables of the particle system (on the output schedule only): kinetic, gravitational
+and elastic energy, and contact counts (kernels/energy.py)."""
 
 from __future__ import annotations
 
@@ -30,7 +28,7 @@ def observables(scene) -> dict[str, float]:
     if scene.walls is not None:
         wall_elastic, wall_contacts = scene.walls.elastic_energy(state)
         elastic += wall_elastic
-    values = {
+    return {
         "kinetic_energy": kinetic,
         "potential_energy": potential,
         "elastic_energy": elastic,
@@ -38,8 +36,3 @@ def observables(scene) -> dict[str, float]:
         "contacts": contacts,
         "wall_contacts": wall_contacts,
     }
-    if scene.walls is not None:
-        values.update(scene.walls.observables(state))
-    if scene.stages is not None:
-        values.update(scene.stages.observables())
-    return values

@@ -1,6 +1,7 @@
-"""Energy budget (forces phase, every step, only when `energy_budget` is among the observables):
-work of gravity and of moving walls, and the energy dissipated by damping, friction and rolling
-resistance, accumulated by kernels/energy_budget.py before the contact forces of each step.
+"""Energy budget (the forces and finish_step hooks, every step, only when `energy_budget` is
+among the observables): work of gravity and of moving walls, and the energy dissipated by
+damping, friction and rolling resistance, accumulated by kernels/energy_budget.py before the
+contact forces of each step.
 
 The balance reported with the observables, against the energies at the start of accounting
 (the start of the run, or the resume step if an older checkpoint had no budget):
@@ -14,6 +15,7 @@ import numpy as np
 from ..kernels.energy import kinetic_energy
 from ..kernels.energy_budget import DAMPING, FRICTION, GRAVITY, ROLLING, TERMS, WALLS, accumulate_budget
 from ..state import State
+from .module import Module
 
 UNITS = {
     "work_gravity": "J",
@@ -26,12 +28,12 @@ UNITS = {
 }
 
 
-class EnergyBudget:
-    """Two hooks per step: `forces` (first of the forces phase) keeps the springs of the previous
-    step and the half-step velocities; `finish_step` (after the second half kick) books the step
-    at the full-step velocities (see kernels/energy_budget.py)."""
+class EnergyBudget(Module):
+    """Two hooks per step: `forces` (before the contacts, physics/module.py ORDER) keeps the
+    springs of the previous step and the half-step velocities; `finish_step` (after the second
+    half kick) books the step at the full-step velocities (see kernels/energy_budget.py)."""
 
-    phase = "forces"
+    name = "energy_budget"
 
     def __init__(self, scene):
         self.scene = scene
@@ -145,7 +147,7 @@ class EnergyBudget:
             self.totals,
         )
 
-    def observables(self) -> dict[str, tuple[float, str]]:
+    def observables(self, state: State) -> dict[str, tuple[float, str]]:
         t = self.totals
         change = self._stored_energy() - float(self.reference[0])
         dissipated = t[DAMPING] + t[FRICTION] + t[ROLLING]

@@ -2,19 +2,18 @@
 
 A fluid model is one `FluidModule` subclass; the scene holds at most one. The builder imports
 the model's module only when the case has a `[fluid]` section, so a dry scene imports, allocates,
-compiles and writes nothing of any fluid. Where the module's hooks run in a step:
-
-    kick-drift -> neighbour list -> forces (contacts, walls, then fluid.forces)
-    -> kick (Motion.kick, or fluid.kick when the model treats drag semi-implicitly)
-    -> clock advances -> fluid.after_step (advance the fluid when its schedule says so)
+compiles and writes nothing of any fluid. A model is a module of the step (physics/module.py):
+it adds its forces after the contacts and walls, may take over the particles' second half kick
+(implicit drag), and advances the fluid in after_step every `coupling_steps` steps.
 """
 
 from __future__ import annotations
 
 import importlib
-import math
 
 import numpy as np
+
+from .module import Module
 
 # model tag -> "module:class", imported on demand
 MODELS = {
@@ -28,43 +27,23 @@ MODELS = {
 MOVING_GRID_SPACING = "grid_spacing"
 
 
-class FluidModule:
-    """Base class of the fluid models; each hook's default does nothing."""
+class FluidModule(Module):
+    """Base class of the fluid models: the hooks of the step (physics/module.py) and these."""
 
     model = ""  # the [fluid] model tag, written to the trajectory
     name = "fluid"  # the checkpoint group of its prognostic state
-    # True when the model defines kick(state): the second half kick of velocity Verlet with its
-    # implicit drag, called instead of Motion.kick
-    replaces_kick = False
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate
         its arrays into a container set as state.fluid."""
         self.loaded = loaded
 
-    def dt_limit(self) -> tuple[float, str]:
-        """The most restrictive limit on the DEM step [s] that this model imposes, and a phrase
-        naming it; math.inf when every stiff term is implicit."""
-        return math.inf, ""
-
     def start(self, state) -> None:
-        """Called once state.clock.dt is known, for a new run and a resumed one alike."""
+        """Called once state.clock.dt is known, for a new run and a resumed one alike: sets
+        coupling_steps, the DEM steps between two fluid steps."""
 
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
-
-    def forces(self, state, spring_dt: float | None = None) -> None:
-        """Add the fluid's forces and torques on the particles (spring_dt = 0: initial forces)."""
-
-    def after_step(self, state) -> None:
-        """After the clock advances: advance the fluid when it is due."""
-
-    def prognostic_state(self, state) -> dict[str, np.ndarray]:
-        """Everything a bitwise restart needs (scalars as 0-d arrays)."""
-        return {}
-
-    def restore(self, state, arrays: dict) -> None:
-        """Put back what prognostic_state() returned."""
 
     def first_unstable(self, state) -> str | None:
         """A message naming the cell (or level), the quantity and its value when the fluid state
@@ -81,10 +60,6 @@ class FluidModule:
         """The FluidGrid (physics/fluid_grid.py) of 3D fields, for the XDMF sidecar; None for
         a model without a 3D grid."""
         return None
-
-    def observables(self, state) -> dict[str, tuple[float, str]]:
-        """Scalar observables written with every frame: name -> (value, unit)."""
-        return {}
 
     def summary(self) -> dict[str, str]:
         """A few facts for run.log and `sphere inspect` (model, grid, solver)."""

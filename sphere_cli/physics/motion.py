@@ -1,13 +1,14 @@
-"""Time integration (integrate phase): velocity Verlet, see kernels/motion.py."""
+"""Time integration of the particles: velocity Verlet, see kernels/motion.py."""
 
 from __future__ import annotations
 
 from ..kernels.motion import first_unstable, kick, kick_drift
 from ..state import Particles, State
+from .module import Module
 
 
-class Motion:
-    phase = "integrate"
+class Motion(Module):
+    name = "particles"
 
     def kick_drift(self, state: State) -> None:
         """The drift also measures how far the particles have moved since the neighbour list
@@ -50,6 +51,4 @@ class Motion:
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Particles.PROGNOSTIC:
-            if name == "material" and name not in arrays:
-                continue  # a checkpoint from before materials: one material, id 0 (as built)
             getattr(state.particles, name)[...] = arrays[name]

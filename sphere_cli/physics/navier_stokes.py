@@ -295,7 +295,7 @@ class NavierStokes(FluidModule):
 
     model = "navier-stokes"
     name = "fluid"
-    replaces_kick = True
+    takes_over = {"kick": "particles"}  # the second half kick with the implicit drag
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
@@ -326,7 +326,7 @@ class NavierStokes(FluidModule):
         state.fluid = self.fs
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
-        self.ndem = cfg.coupling.ndem or 1
+        self.coupling_steps = cfg.coupling.ndem or 1
         self.fluid_dt = math.nan  # ndem dt, set by start()
         limit, reason = self._fluid_limit()
         fixed = cfg.coupling.fluid_dt
@@ -357,9 +357,9 @@ class NavierStokes(FluidModule):
             limit, reason = fixed, "the DEM sub-steps the fluid step fluid.coupling.fluid_dt"
         else:
             limit, reason = self._fluid_limit()
-            if self.ndem > 1:
-                limit /= self.ndem
-                reason += f", divided by fluid.coupling.ndem = {self.ndem}"
+            if self.coupling_steps > 1:
+                limit /= self.coupling_steps
+                reason += f", divided by fluid.coupling.ndem = {self.coupling_steps}"
         drag_limit, drag_reason = self.drag.dt_limit()
         if drag_limit < limit:
             return drag_limit, drag_reason
@@ -369,8 +369,16 @@ class NavierStokes(FluidModule):
         dt = state.clock.dt
         fixed = self.config.coupling.fluid_dt
         if fixed is not None:
-            self.ndem = max(1, math.floor(fixed / dt * (1.0 + 1e-12)))
-        self.fluid_dt = self.ndem * dt
+            self.coupling_steps = state.clock.steps_in(fixed)
+        self.fluid_dt = self.coupling_steps * dt
+        limit, reason = self._fluid_limit()
+        if fixed is not None and self.fluid_dt > limit:
+            raise self.loaded.error(
+                ("fluid", "coupling", "fluid_dt"),
+                f"is {self.coupling_steps} DEM steps of dt = {dt:.6g} s, a fluid step of "
+                f"{self.fluid_dt:.6g} s, above the fluid's stability limit {limit:.4g} s ({reason}); "
+                f"use fluid_dt <= {limit - dt:.4g} s or a dt that divides it",
+            )
 
     def initialize(self, state) -> None:
         """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
@@ -387,8 +395,6 @@ class NavierStokes(FluidModule):
 
     def after_step(self, state) -> None:
         clock = state.clock
-        if clock.step % self.ndem:
-            return
         fs = self.fs
         if self.top_wall is not None:
             self._follow_wall(state)
@@ -398,7 +404,7 @@ class NavierStokes(FluidModule):
         np.subtract(fs.phi, fs.dphi, out=fs.dphi)
         fs.dphi *= 1.0 / self.fluid_dt
         self.drag.fluid_forcing(state, fs, self.fluid_dt)
-        self.solver.step(fs, (clock.step - self.ndem) * clock.dt, self.fluid_dt)
+        self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
 
     def _wall_height(self, state) -> float:
         """Height of the top wall above the grid's bottom [m]."""
@@ -513,7 +519,8 @@ class NavierStokes(FluidModule):
 
     def summary(self) -> dict[str, str]:
         facts = self.solver.describe()
-        facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {self.ndem} DEM step(s)"
+        steps = self.coupling_steps
+        facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {steps} DEM step(s)"
         return facts
 
 

@@ -1,4 +1,4 @@
-"""Neighbour search (prepare phase): keep the half Verlet list and its reverse list valid,
+"""Neighbour search (the prepare hook): keep the half Verlet list and its reverse list valid,
 rebuilding them when some particle has moved half the skin, and growing their capacity when a
 row overflows."""
 
@@ -18,6 +18,7 @@ from ..kernels.neighbors import (
     sort_occupied,
 )
 from ..state import NeighborList, State
+from .module import Module
 
 INITIAL_CAPACITY = 8  # half rows: a settled monodisperse bed lists at most ~10 (the list grows on overflow)
 # Rows at least SHRINK_SLACK wider than the longest are narrowed to longest + HEADROOM (never
@@ -57,8 +58,8 @@ def search_cells(length: np.ndarray, largest: float, skin: float) -> np.ndarray:
     return np.clip(np.floor(np.asarray(length, dtype=float) / reach), 1, AXIS_CELLS).astype(np.int64)
 
 
-class NeighborSearch:
-    phase = "prepare"
+class NeighborSearch(Module):
+    name = "neighbors"
 
     def __init__(self, state: State):
         box, p, nl = state.box, state.particles, state.neighbors

@@ -1,11 +1,9 @@
-"""The observables of a run (diagnose phase): the groups the case lists in
+"""The observables of a run: the groups the case lists in
 `output.observables.quantities`, computed only when the observables schedule is due.
 
 Each sample is a dict name -> (value, unit); a value is a float or an array (the stress tensor
 (3,3), the profiles (layers,), (layers,3) or (layers,3,3)). Groups:
   energy, contacts         physics/energy.py
-  (always, with walls)     wall positions, velocities, forces and stresses, one row per wall
-                           (physics/walls.py), and the index of the current stage
   packing_fraction,
   coordination             physics/structure.py (interior region: see there)
   stress, profiles         physics/stress.py
@@ -14,8 +12,10 @@ Each sample is a dict name -> (value, unit); a value is a float or an array (the
                            of the current stage with [[stages]] [-];
                            with walls, the shear strain: the upper z wall's displacement along
                            the shear direction relative to the lower wall's, over H_0 [-]
-  energy_budget            physics/energy_budget.py (a forces-phase module, every step)
-and, with a fluid, the fluid model's own observables (physics/fluid.py), always.
+and, always, the observables hook of every module in the scene (physics/module.py): with walls
+their positions, velocities, forces and stresses, one row per wall (physics/walls.py); with
+stages the index of the current one; with `energy_budget` among the quantities, the budget
+(physics/energy_budget.py); with a fluid, the fluid model's own (physics/fluid.py).
 """
 
 from __future__ import annotations
@@ -24,14 +24,14 @@ import numpy as np
 
 from ..state import State
 from . import energy, structure
+from .module import Module
 from .stress import PROFILE_UNITS, StressProbe
 from .stress import UNITS as STRESS_UNITS
-from .walls import WALL_UNITS
 
 AXES = {"x": 0, "y": 1}
 
 
-class Observer:
+class Observer(Module):
     def __init__(self, scene, config):
         self.scene = scene
         self.config = config
@@ -46,16 +46,15 @@ class Observer:
         self.reference_height = np.array([np.nan, -1.0])
 
     @property
-    def stateful(self) -> bool:
-        return "deformation" in self.groups
+    def name(self) -> str:
+        """Stateful (a checkpoint group) only when it measures the deformation."""
+        return "observables" if "deformation" in self.groups else ""
 
     def sample(self) -> dict[str, tuple]:
         scene, state, groups = self.scene, self.scene.state, self.groups
         out: dict[str, tuple] = {}
         for name, value in energy.observables(scene).items():
-            if name not in energy.UNITS:  # walls and stages: always
-                out[name] = (value, WALL_UNITS.get(name, ""))
-            elif energy.GROUPS[name] in groups:
+            if energy.GROUPS[name] in groups:
                 out[name] = (value, energy.UNITS[name])
         sample = structure.sample_region(state)
         interior = sample.shrunk(self.margin)
@@ -85,10 +84,8 @@ class Observer:
             out["dilation"] = ((height - ref) / ref, "")
             if state.walls is not None:
                 out["shear_strain"] = (shear_strain(state.walls, self.shear_axis, ref), "")
-        if scene.budget is not None:
-            out.update(scene.budget.observables())
-        if scene.fluid is not None:
-            out.update(scene.fluid.observables(state))
+        for observed in scene.step.observed:
+            out.update(observed(state))
         return out
 
     def prognostic_state(self, state: State) -> dict:

@@ -17,6 +17,7 @@ import numpy as np
 from ..kernels.contact import MU
 from ..kernels.energy import kinetic_energy
 from ..state import State
+from .module import Module
 from .walls import apply_modes
 
 
@@ -39,11 +40,9 @@ def approach(state: State, w: int) -> None:
     p.pos[glued, a] += step
 
 
-def _steps(duration: float, dt: float) -> int:
-    return max(1, int(np.ceil(duration / dt - 1e-9)))
+class Stages(Module):
+    name = "stages"
 
-
-class Stages:
     def __init__(self, case, walls_state, scales, contact):
         self.stages = case.stages
         self.names = [s.name or f"stage {k}" for k, s in enumerate(self.stages)]
@@ -55,6 +54,7 @@ class Stages:
         self.wall_mu = None if walls_state is None else walls_state.table[..., MU].copy()
         nw = 0 if walls_state is None else len(walls_state.faces)
         self.index = 0
+        self.ended = False  # a stage ended at the step just taken
         self.start_step = 0
         self.start_coord = np.zeros(nw)
         self.start_shift = np.zeros((nw, 3))
@@ -64,7 +64,7 @@ class Stages:
         return self.index >= len(self.stages)
 
     @property
-    def name(self) -> str:
+    def current(self) -> str:
         return "finished" if self.finished else self.names[self.index]
 
     def modes(self, k: int) -> dict:
@@ -106,18 +106,19 @@ class Stages:
                 self.start_coord,
             )
 
-    def after_step(self, state: State) -> bool:
-        """Test the current stage's end; returns True if a stage ended at this step."""
+    def after_step(self, state: State) -> None:
+        """Test the current stage's end; `ended` tells whether a stage ended at this step."""
+        self.ended = False
         if self.finished:
-            return False
+            return
         stage = self.stages[self.index]
         elapsed = state.clock.step - self.start_step
-        done = stage.duration is not None and elapsed >= _steps(stage.duration, state.clock.dt)
+        done = stage.duration is not None and elapsed >= state.clock.steps_in(stage.duration)
         if not done and stage.stop_when is not None and elapsed % stage.check_every == 0:
             done = self._condition_met(state, stage.stop_when, elapsed)
         if done:
             self.begin(state, self.index + 1)
-        return done
+            self.ended = True
 
     def _condition_met(self, state: State, stop, elapsed: int) -> bool:
         if stop.kinetic_energy_below is not None and elapsed * state.clock.dt >= stop.min_time:
@@ -137,9 +138,9 @@ class Stages:
                 return True
         return False
 
-    def observables(self) -> dict:
+    def observables(self, state: State) -> dict:
         # after the last stage ends (the run's end frame) the state is still the last stage's
-        return {"stage": float(min(self.index, len(self.stages) - 1))}
+        return {"stage": (float(min(self.index, len(self.stages) - 1)), "")}
 
     def prognostic_state(self, state: State) -> dict:
         return {

@@ -198,7 +198,7 @@ class Vans1d(FluidModule):
 
     def start(self, state) -> None:
         dt = state.clock.dt
-        self.coupling_steps = max(1, round(self.cfg.coupling_interval / dt))
+        self.coupling_steps = state.clock.steps_in(self.cfg.coupling_interval)
         interval = self.coupling_steps * dt
         if self.solved:
             self.fluid_steps = max(1, math.ceil(interval / self.cfg.flow.dt - 1e-9))
@@ -222,8 +222,6 @@ class Vans1d(FluidModule):
         )  # fmt: skip
 
     def after_step(self, state) -> None:
-        if state.clock.step % self.coupling_steps:
-            return
         self._average(state)
         if self.solved:
             f = state.fluid

@@ -1,5 +1,5 @@
-"""Plane walls on the box faces: their contact with particles (forces phase) and their motion
-(integrate phase), with kernels/walls.py and the wall rows of the parameter tables
+"""Plane walls on the box faces: their contact with particles (the forces hook) and their motion
+(kick_drift and kick), with kernels/walls.py and the wall rows of the parameter tables
 (physics/materials.py).
 
 Modes, per wall and per stage (physics/stages.py): fixed; prescribed normal velocity; normal
@@ -60,6 +60,7 @@ from ..kernels.walls import (
 )
 from ..state import State, Walls
 from .contact import verlet_limit
+from .module import Module
 
 AXES = {"x": 0, "y": 1, "z": 2}
 MODES = {"fixed": FIXED, "velocity": VELOCITY, "stress": STRESS}
@@ -70,7 +71,6 @@ WALL_UNITS = {
     "wall_force": "N",
     "wall_normal_stress": "Pa",
     "wall_shear_stress": "Pa",
-    "stage": "",  # index of the current stage (physics/stages.py)
 }
 
 
@@ -254,8 +254,8 @@ def apply_modes(walls: Walls, specs: dict, scales: WallScales, box, start_time: 
         walls.record[w] = walls.mode[w, 0] != FIXED or walls.mode[w, 1] != FIXED
 
 
-class PlaneWallForces:
-    phase = "forces"
+class PlaneWallForces(Module):
+    name = "walls"
 
     def __init__(self, contact):
         self.contact = contact  # shares the law (linear or Hertz) and the rolling switch
@@ -439,13 +439,14 @@ class PlaneWallForces:
         inward = np.einsum("wb,wb->w", w.force, normal)
         traction = -w.force / w.area[:, None]
         shear = traction + (inward / w.area)[:, None] * normal
-        return {
+        values = {
             "wall_position": w.coord.copy(),
             "wall_velocity": w.vel.copy(),
             "wall_force": w.force.copy(),
             "wall_normal_stress": -inward / w.area,
             "wall_shear_stress": shear,
         }
+        return {name: (value, WALL_UNITS[name]) for name, value in values.items()}
 
     def elastic_energy(self, state: State) -> tuple[float, int]:
         p, w, c = state.particles, state.walls, self.contact
@@ -461,14 +462,13 @@ class PlaneWallForces:
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Walls.PROGNOSTIC:
-            if name in arrays:  # a checkpoint from before moving walls holds coord and hist only
-                setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
+            setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
 
 
-class WallMotion:
-    """Moves the walls (integrate phase): in the scene only if some wall moves in some stage."""
+class WallMotion(Module):
+    """Moves the walls: in the scene only if some wall moves in some stage."""
 
-    phase = "integrate"
+    name = "wall_motion"
 
     def kick_drift(self, state: State) -> None:
         w = state.walls

@@ -782,6 +782,7 @@ def nan_guard(quick: bool) -> dict:
         loaded = load_case(path)
         scene = build_scene(loaded)
         scene.contact = _PoisonedForces(scene.contact, poison_step, index)
+        scene.order_modules()
         rundir = RunDirectory(folder / "run")
         rundir.prepare_new(False, loaded.text)
         log = rundir.logger()

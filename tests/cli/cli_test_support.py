@@ -44,7 +44,7 @@ every_steps = 50
 every_steps = 50
 keep = 3
 """
-TINY_END_STEP = 1779  # ceil(duration / dt) for the case above (checked against status.json)
+TINY_END_STEP = 1779  # round(duration / dt) for the case above (checked against status.json)
 
 # Two spheres read from `spheres.csv` next to the case file.
 FROM_FILE = """\

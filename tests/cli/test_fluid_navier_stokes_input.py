@@ -124,3 +124,19 @@ def test_fluid_outrunning_the_advective_limit_stops_naming_the_cell(tmp_path):
     text = edit(text, 'dt = "auto"', 'dt = "auto"\nblowup_check_every = 5')
     result = _run(tmp_path, text)
     assert_clean_error(result, 70, "fluid cell (", "Courant number")
+
+
+def test_fluid_step_rounded_above_the_viscous_limit_is_refused(tmp_path):
+    # viscous limit dx^2/(8 nu) = 7.8125e-4 s; fluid_dt just below it is 1411.6 steps of dt,
+    # which the one rule for spans of time makes 1412: a fluid step of 7.8146e-4 s
+    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 1.0"), "ndem = 5", "fluid_dt = 7.8124e-4")
+    text = edit(text, 'dt = "auto"', f"dt = {7.8124e-4 / 1411.6!r}")
+    result = _run(tmp_path, text)
+    assert_clean_error(
+        result,
+        65,
+        "fluid.coupling.fluid_dt",
+        f"case.toml:{line_of(text, 'fluid_dt =')}:",
+        "is 1412 DEM steps",
+        "above the fluid's stability limit 0.0007813 s",
+    )

@@ -65,9 +65,12 @@ class ToyFluid(FluidModule):
     def forces(self, state, spring_dt=None):
         state.particles.force[:, 2] += self.push * self.counter[0, 0, 1]
 
+    def start(self, state):
+        self.coupling_steps = 3  # after_step every third step
+
     def after_step(self, state):
-        if state.clock.step % 3 == 0:
-            self.counter += np.arange(self.counter.size).reshape(SHAPE)
+        assert state.clock.step % 3 == 0
+        self.counter += np.arange(self.counter.size).reshape(SHAPE)
         if self.blow_up_at is not None and state.clock.step >= self.blow_up_at:
             self.counter[1, 2, 3] = np.nan
 

@@ -58,8 +58,8 @@ def coupled_advance(scene, drag, fs, steps):
     for _ in range(steps):
         scene.motion.kick_drift(state)
         scene.neighbors.prepare(state)
-        for module in scene.force_modules:
-            module.forces(state)
+        for forces in scene.step.forces:
+            forces(state)
         drag.forces(state, fs)
         drag.kick(state, fs)
         state.clock.step += 1

@@ -59,7 +59,7 @@ quantities = ["energy", "energy_budget"]
 
 
 def _budget(scene) -> dict[str, float]:
-    return {name: value for name, (value, _unit) in scene.budget.observables().items()}
+    return {name: value for name, (value, _unit) in scene.budget.observables(scene.state).items()}
 
 
 @pytest.mark.parametrize(
