@@ -56,7 +56,7 @@ bench-lean: $(STAMP)
 	$(BIN)/python benchmarks/lean_kernel/compare.py 100000 50 9
 
 docs: $(STAMP)
-	$(BIN)/python -m sphere_cli.docgen docs/case-reference.md
+	$(BIN)/python -m sphere_cli.config.reference docs/case-reference.md
 
 lint: $(STAMP)
 	$(BIN)/ruff check sphere_cli tests benchmarks

@@ -3,26 +3,24 @@
 from __future__ import annotations
 
 import json
-import signal
 import sys
 import time as wallclock
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .build.scene import build_scene
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict
 from .config.schema import NON_PHYSICS_KEYS, Case
-from .cores import shared_cores_note
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .simulation import Loop, StopFlag
+from .runtime import StopFlag, set_threads, shared_cores_warning, signal_handlers
+from .scene.builder import build_scene
+from .simulation import Loop
 
 
 @dataclass
@@ -38,7 +36,7 @@ class RunResult:
 def validate(path: str | Path) -> dict:
     """Validate a case file without building the scene (a lattice placement's capacity is
     checked, as `run` would); returns the resolved case."""
-    from .build.scene import check_placement
+    from .scene.builder import check_placement
 
     loaded = load_case(path)
     check_placement(loaded)
@@ -47,25 +45,6 @@ def validate(path: str | Path) -> dict:
 
 def schema() -> dict:
     return Case.model_json_schema()
-
-
-def _set_threads(case: Case) -> None:
-    if case.simulation.threads is not None:
-        import numba
-
-        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
-
-
-def _shared_cores_warning() -> str | None:
-    """Warn at once (stderr) when other busy processes share the run's cores
-    (sphere_cli/cores.py); returns the warning for the run's log. Called once the command is
-    known to go ahead and before any kernel runs, so that no thread of this run counts as busy."""
-    import numba
-
-    note = shared_cores_note(numba.get_num_threads())
-    if note is not None:
-        print(f"sphere: warning: {note}", file=sys.stderr)
-    return note
 
 
 def _log_note(log, note: str | None) -> None:
@@ -80,37 +59,6 @@ def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
     return LoadedCase(
         case=loaded.case.model_copy(update={"simulation": sim}), text=loaded.text, path=loaded.path
     )
-
-
-@contextmanager
-def _signal_handlers(stop: StopFlag, enabled: bool):
-    """SIGTERM/SIGUSR1 (what SLURM sends before a time limit) and a first SIGINT ask for a
-    checkpoint at the next step; a second SIGINT stops at once (KeyboardInterrupt)."""
-    if not enabled:
-        yield
-        return
-
-    def polite(signum, _frame):
-        name = signal.Signals(signum).name
-        if signum == signal.SIGINT and stop.reason is not None:
-            stop.interrupted = True
-            raise KeyboardInterrupt
-        stop.request(f"{name} received")
-
-    def drop_interrupt(unraisable):
-        # a KeyboardInterrupt raised inside a finalizer or weakref callback (h5py's, say) is
-        # dropped there by Python with a traceback; the loop raises it again at the next step
-        if not issubclass(unraisable.exc_type, KeyboardInterrupt):
-            previous_hook(unraisable)
-
-    previous = {s: signal.signal(s, polite) for s in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)}
-    previous_hook, sys.unraisablehook = sys.unraisablehook, drop_interrupt
-    try:
-        yield
-    finally:
-        sys.unraisablehook = previous_hook
-        for s, handler in previous.items():
-            signal.signal(s, handler)
 
 
 def _drive(
@@ -149,7 +97,7 @@ def _drive(
     if scene.fluid is not None:
         log.info("fluid: %s", ", ".join(f"{k} {v}" for k, v in scene.fluid.summary().items()))
     try:
-        with _signal_handlers(stop, handle_signals):
+        with signal_handlers(stop, handle_signals):
             outcome = loop.run()
         wall = wallclock.monotonic() - started
         # the first step's compilation left out
@@ -187,10 +135,10 @@ def run(
     until: float | None = None,
 ) -> RunResult:
     loaded = _with_duration(load_case(case_path), until)
-    _set_threads(loaded.case)
+    set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
-    note = _shared_cores_warning()
+    note = shared_cores_warning()
     try:
         # the directory and status.json exist from the start: a batch job's monitor sees the run
         # while its first scene compiles the kernels (a minute or more on a machine's first run)
@@ -260,7 +208,7 @@ def resume(
 
 def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, show_progress) -> RunResult:
     loaded = _with_duration(load_case(rundir.case), until)
-    _set_threads(loaded.case)
+    set_threads(loaded.case)
     if rundir.xdmf.exists() and not rundir.xdmf.is_file():
         raise OutputError(f"{rundir.xdmf}: is not a file; remove or rename it, then resume again")
     remove_stale_temporaries(rundir.checkpoints)
@@ -271,7 +219,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
         log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_duration(fresh, until)
-        note = _shared_cores_warning()
+        note = shared_cores_warning()
         _starting(rundir, show_progress)
         scene = build_scene(fresh)
         _log_note(log, note)
@@ -294,7 +242,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
             f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
-    note = _shared_cores_warning()
+    note = shared_cores_warning()
     _starting(rundir, show_progress)
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)
@@ -343,8 +291,8 @@ def inspect(path: str | Path) -> dict:
 
 
 def plot(run_dir: str | Path, out_dir: str | Path | None = None) -> list[Path]:
-    """PNG figures of a run's observables (sphere_cli/plot.py); returns the files written."""
-    from .plot import plot_run
+    """PNG figures of a run's observables (sphere_cli/io/plot.py); returns the files written."""
+    from .io.plot import plot_run
 
     return plot_run(run_dir, out_dir)
 

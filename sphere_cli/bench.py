@@ -30,10 +30,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .build.scene import build_scene
 from .config.load import parse_case
-from .cores import shared_cores_note
 from .io.checkpoint import newest_valid_checkpoint
+from .runtime import shared_cores_note
+from .scene.builder import build_scene
 from .simulation import advance
 
 RADIUS = 1e-3
@@ -237,7 +237,7 @@ def _sparse_row(log) -> dict:
 
 
 def _mean_contacts(scene) -> float:
-    from .physics.energy import observables
+    from .physics.observe.energy import observables
 
     obs = observables(scene)
     return 2.0 * obs["contacts"] / scene.state.particles.count

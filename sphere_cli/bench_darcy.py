@@ -22,8 +22,8 @@ import time
 
 import numba
 
-from .build.scene import build_scene
 from .config.load import parse_case
+from .scene.builder import build_scene
 from .simulation import advance
 
 DIAMETER = 1.0e-3  # [m]

@@ -1,6 +1,6 @@
 """Benchmarks of the shared fluid plumbing (never part of the tests): the Poisson solver
-(physics/poisson.py), iterations and time of "pcg" and "jacobi" at the same tolerance, and the
-porosity estimate (physics/porosity.py).
+(physics/fluid/poisson.py), iterations and time of "pcg" and "jacobi" at the same tolerance, and the
+porosity estimate (physics/fluid/porosity.py).
 
     python -m sphere_cli.bench_grid [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
     python -m sphere_cli.bench_grid --porosity [--threads 1,2]
@@ -25,10 +25,10 @@ import time
 import numba
 import numpy as np
 
-from .kernels.poisson import face_means
-from .physics.fluid_grid import FluidGrid
-from .physics.poisson import PoissonSolver
-from .physics.porosity import Porosity
+from .kernels.fluid.poisson import face_means
+from .physics.fluid.grid import FluidGrid
+from .physics.fluid.poisson import PoissonSolver
+from .physics.fluid.porosity import Porosity
 
 
 def problem(n: int, variable: bool):

@@ -36,9 +36,9 @@ import numpy as np
 
 from .bench import SPACING, _machine
 from .bench_darcy import CELL, DENSITY, DIAMETER, Stopwatch, scene_text, timed_steps
-from .build.scene import build_scene
 from .config.load import parse_case
-from .physics.poisson import PoissonSolver
+from .physics.fluid.poisson import PoissonSolver
+from .scene.builder import build_scene
 
 RADIUS = DIAMETER / 2.0  # [m]
 WATER = 1000.0  # [kg/m^3]

@@ -6,8 +6,8 @@ of configs/bedload.toml and the share of it spent on the fluid's parts.
 For each thread count the scene is built afresh (the steady initial profile included, not
 timed), advanced 200 steps to compile or load the kernels, then timed over `--time` simulated
 seconds. The fluid's methods are wrapped with timers: the particle forces of every step
-(kernels/profile_forces.py), the layer averaging of every coupling interval (drag coefficients
-and kernels/layer_averaging.py) and the fluid resolution (kernels/vans1d.py).
+(kernels/fluid/profile_forces.py), the layer averaging of every coupling interval (drag coefficients
+and kernels/fluid/layer_averaging.py) and the fluid resolution (kernels/fluid/vans1d.py).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numba
 
-from .build.scene import build_scene
 from .config.load import load_case
+from .scene.builder import build_scene
 from .simulation import advance
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import sys
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import typer
 
 from . import api
 from .errors import SphereError, StoppedEarly
+from .runtime import parse_wall_time
 
 app = typer.Typer(
     add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish
@@ -28,44 +28,17 @@ app = typer.Typer(
     help="sphere: discrete-element simulation of dry and fluid-saturated granular materials.",
 )
 
-SECONDS = re.compile(r"\d+(?:\.\d*)?")
-# SLURM's time forms (sbatch --time): MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS
-CLOCK = re.compile(
-    r"(?:(?P<days>\d+)-(?P<dh>\d+)(?::(?P<dm>\d+))?(?::(?P<ds>\d+))?|(?P<a>\d+):(?P<b>\d+)(?::(?P<c>\d+))?)"
-)
-# a sum of numbers with units: 90s, 45m, 2h30m, 1d12h, 1.5h
-COMPOUND = re.compile(r"(?:\d+(?:\.\d*)?[smhd])+")
-UNIT_SECONDS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+def _wall_time(text: str | None) -> float | None:
+    try:
+        return parse_wall_time(text)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
+
 WALL_TIME_HELP = (
     "Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00."
 )
-
-
-def parse_wall_time(text: str | None) -> float | None:
-    """'3600' (seconds), '45m', '2h30m', '1.5d', or SLURM's '30:00', '2:30:00', '1-12:00:00' ->
-    seconds."""
-    if text is None:
-        return None
-    s = text.strip().lower().replace(" ", "")
-    seconds = None
-    if SECONDS.fullmatch(s):
-        seconds = float(s)
-    elif match := CLOCK.fullmatch(s):
-        g = {k: int(v) if v is not None else 0 for k, v in match.groupdict().items()}
-        if match["days"] is not None:
-            seconds = g["days"] * 86400.0 + g["dh"] * 3600.0 + g["dm"] * 60.0 + g["ds"]
-        elif match["c"] is not None:  # HH:MM:SS
-            seconds = g["a"] * 3600.0 + g["b"] * 60.0 + g["c"]
-        else:  # MM:SS
-            seconds = g["a"] * 60.0 + g["b"]
-    elif COMPOUND.fullmatch(s):
-        seconds = sum(float(n) * UNIT_SECONDS[u] for n, u in re.findall(r"(\d+(?:\.\d*)?)([smhd])", s))
-    if seconds is None:
-        raise typer.BadParameter(
-            f"{text!r}: expected a duration: seconds (3600), with units (45m, 2h30m, 1.5d) "
-            "or as SLURM writes it (30:00, 2:30:00, 1-12:00:00)"
-        )
-    return seconds
 
 
 def check_end_time(value: float | None) -> float | None:
@@ -150,7 +123,7 @@ def run(
             case,
             output,
             overwrite=overwrite,
-            max_wall_time=parse_wall_time(max_wall_time),
+            max_wall_time=_wall_time(max_wall_time),
             handle_signals=True,
             show_progress=not quiet,
             until=until,
@@ -180,7 +153,7 @@ def resume(
         result = api.resume(
             run_dir,
             until=until,
-            max_wall_time=parse_wall_time(max_wall_time),
+            max_wall_time=_wall_time(max_wall_time),
             handle_signals=True,
             show_progress=not quiet,
         )

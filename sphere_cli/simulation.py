@@ -14,6 +14,7 @@ import time as wallclock
 from dataclasses import dataclass, field
 
 from .errors import NumericalError
+from .runtime import StopFlag
 
 REASONS = {
     1: ("a non-finite position or velocity", 'a smaller dt (or dt = "auto") or softer contacts may help'),
@@ -52,20 +53,6 @@ class StepSchedule:
 
     def done(self, now: float) -> None:
         self.last_wall = now
-
-
-class StopFlag:
-    """Set from a signal handler or the wall-time budget; read once per step."""
-
-    def __init__(self):
-        self.reason: str | None = None
-        # a second SIGINT: stop at once, with no final checkpoint (its KeyboardInterrupt is
-        # raised where it lands, and raised again at the next step if Python dropped it there)
-        self.interrupted = False
-
-    def request(self, reason: str) -> None:
-        if self.reason is None:
-            self.reason = reason
 
 
 def advance(scene, steps: int) -> bool:

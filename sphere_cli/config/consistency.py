@@ -24,7 +24,7 @@ DENSEST_PACKING = math.pi / math.sqrt(18.0)
 MAX_STEPS = 2**53
 # more steps than this are allowed but warned of: days of run time even for a few particles
 MANY_STEPS = 1e9
-# lognormal radii outside [min, max] are redrawn (build/radii.py): at most this many draws
+# lognormal radii outside [min, max] are redrawn (scene/radii.py): at most this many draws
 MAX_RADIUS_DRAWS = 1e9
 
 

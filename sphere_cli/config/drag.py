@@ -1,6 +1,6 @@
 """The `[fluid.drag]` table of a Navier-Stokes case: which drag law couples particles and fluid.
 
-The laws and their forms are in sphere_cli/kernels/drag.py; docs/user-guide.md ("Drag and
+The laws and their forms are in sphere_cli/kernels/fluid/drag.py; docs/user-guide.md ("Drag and
 coupling") explains the choices.
 """
 

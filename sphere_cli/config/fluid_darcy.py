@@ -1,5 +1,5 @@
 """`[fluid] model = "darcy"`: pore-pressure diffusion in a compressible pore fluid without inertia
-(slow seepage, consolidation, pressure forcing), coupled to the particles (physics/darcy.py).
+(slow seepage, consolidation, pressure forcing), coupled to the particles (physics/fluid/darcy.py).
 
 The unknown is the excess pore pressure p: the pressure above the hydrostatic one of a fluid of
 `density` under `domain.gravity`. Every pressure of this table (boundaries, fixed cells,
@@ -84,7 +84,7 @@ class FixedPressureRegion(Strict):
 
 
 class DarcySolver(Strict):
-    """The implicit solve of each fluid step (the shared symmetric solver, physics/poisson.py)."""
+    """The implicit solve of each fluid step (the shared symmetric solver, physics/fluid/poisson.py)."""
 
     method: Literal["pcg", "jacobi"] = Field(
         "pcg",

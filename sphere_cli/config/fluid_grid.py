@@ -4,8 +4,8 @@
 The grid spans the whole box: cell edge along an axis = box length / cells along it; with
 `follow_top_wall` its top is instead the "z+" wall wherever that wall is, and its nz cells
 stretch uniformly between the box bottom and the wall (Navier-Stokes only). What the
-porosity estimate needs (physics/porosity.py) is checked when the scene is built, against the
-particles actually made (physics/fluid_grid.py): the smallest cell edge must be at least the
+porosity estimate needs (physics/fluid/porosity.py) is checked when the scene is built, against the
+particles actually made (physics/fluid/grid.py): the smallest cell edge must be at least the
 largest particle diameter, so that the spherical sampling volume of a cell (diameter = the
 smallest cell edge) is never smaller than a particle.
 """

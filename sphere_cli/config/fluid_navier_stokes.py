@@ -2,7 +2,7 @@
 regular fluid grid, coupled to the particles (sphere-fluid-particle-interaction.md).
 
 The equations, the discretisation and the choices behind the defaults are in
-sphere_cli/kernels/navier_stokes.py and docs/user-guide.md ("Fluid flow (porous Navier-Stokes)").
+sphere_cli/kernels/fluid/navier_stokes.py and docs/user-guide.md ("Fluid flow (porous Navier-Stokes)").
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class PressureSolverConfig(Strict):
         "pcg",
         description=(
             '"pcg": conjugate gradient preconditioned with a multigrid V-cycle (the diagonal on a '
-            'grid that does not halve; physics/poisson.py), fast; "jacobi": the reference\'s '
+            'grid that does not halve; physics/fluid/poisson.py), fast; "jacobi": the reference\'s '
             "Jacobi iteration, kept to compare (needs far more iterations) [-]."
         ),
     )

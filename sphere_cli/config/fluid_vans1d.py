@@ -1,6 +1,6 @@
 """Case-file schema of `[fluid] model = "vans1d"`: a vertical profile of a streamwise (x) flow
 over a granular bed in a laterally periodic cell (YADE HydroForceEngine-like, see
-physics/vans1d.py). The flow is either solved (two-way coupling) or prescribed (one way).
+physics/fluid/vans1d.py). The flow is either solved (two-way coupling) or prescribed (one way).
 """
 
 from __future__ import annotations

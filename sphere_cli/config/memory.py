@@ -1,6 +1,6 @@
 """The memory a scene will take, estimated from the case before anything is allocated, against the
 memory there is: a scene that cannot fit is refused naming the key that makes it big (checked
-with the case by consistency.py, and by build/scene.py once a placement file gives the
+with the case by consistency.py, and by scene/builder.py once a placement file gives the
 particles) instead of failing part-way through allocating it.
 
 Only the arrays that grow with the scene are counted; Python, Numba and the compiled kernels take
@@ -28,7 +28,7 @@ PARTICLE_BYTES = 1024
 GRID_CELL_BYTES = 8
 # The neighbour search gives every cell its entry while the cells number at most this many per
 # particle (plus DENSE_FLOOR); beyond, it lists only the occupied ones (physics/neighbors.py), and
-# random insertion coarsens its cells to this many per particle (build/packing.py): a settled bed
+# random insertion coarsens its cells to this many per particle (scene/packing.py): a settled bed
 # fills ~1 cell per 10 particles, so only a box mostly empty goes the sparse way.
 CELLS_PER_PARTICLE = 8
 DENSE_FLOOR = 4096
@@ -109,7 +109,7 @@ def _parts(case: Case, count: int, largest: float, count_loc: tuple) -> list[_Pa
         _Part(count * PARTICLE_BYTES, count_loc, f"{count:.3g} particles at ~1 KiB each", particles=count)
     )
     for w, wall in enumerate(case.walls):
-        if wall.rough is not None:  # a square lattice on the wall (physics/walls.py rough_layers)
+        if wall.rough is not None:  # a square lattice on the wall (scene/walls.py rough_layers)
             pitch = wall.rough.spacing * 2.0 * (wall.rough.radius or largest)
             axis = "xyz".index(wall.face[0])
             glued = math.prod(length[b] / pitch + 1.0 for b in range(3) if b != axis)

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 
 from ..errors import MissingInputError, OutputError
-from ..physics.fluid import MOVING_GRID_SPACING
+from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
 

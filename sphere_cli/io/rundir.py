@@ -29,7 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import OutputError, RunBusy, UsageError
-from ..physics.fluid import MOVING_GRID_SPACING
+from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint

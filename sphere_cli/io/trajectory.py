@@ -6,7 +6,7 @@
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
 /observables/<name>            {step, time, value}: the observables on their own schedule
-                               (physics/observables.py); value (samples, ...) holds a scalar,
+                               (physics/observe/observables.py); value (samples, ...) holds a scalar,
                                a tensor (3,3) or a profile (layers, ...) per sample
                                (wall series one row per wall, @wall_faces names them)
 /fluid/<name>                  {step, time, value}: fluid fields (only when the case has a fluid);

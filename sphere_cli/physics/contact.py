@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from ..kernels.contact import BLOCK, D_N, D_T, FIELDS, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
-from ..kernels.energy import pair_elastic_energy
+from ..kernels.observe.energy import pair_elastic_energy
 from ..state import State
 from .materials import ContactTables
 from .module import Module

@@ -1,6 +1,6 @@
 """The module protocol: every part of a scene's step is a `Module`, and the step is built once.
 
-The builder (build/scene.py) returns the scene's modules as one ordered tuple; `Step` takes,
+The builder (scene/builder.py) returns the scene's modules as one ordered tuple; `Step` takes,
 for each hook, the bound methods of the modules whose class defines it, in that order, and the
 loop (simulation.py) runs those flat tuples. A module that does not define a hook is not
 called for it; a process the case does not have is not in the tuple at all.

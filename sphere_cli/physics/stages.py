@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.contact import MU
-from ..kernels.energy import kinetic_energy
+from ..kernels.observe.energy import kinetic_energy
 from ..state import State
 from .module import Module
 from .walls import apply_modes

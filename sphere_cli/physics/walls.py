@@ -35,7 +35,7 @@ import numba
 import numpy as np
 
 from ..kernels.contact import BLOCK, FIELDS, K_N
-from ..kernels.energy import wall_elastic_energy
+from ..kernels.observe.energy import wall_elastic_energy
 from ..kernels.walls import (
     C_AMPLITUDE,
     C_DAMPING,
@@ -48,7 +48,6 @@ from ..kernels.walls import (
     C_STRESS,
     C_VELOCITY,
     FIXED,
-    NC,
     STRESS,
     VELOCITY,
     near_walls,
@@ -72,110 +71,6 @@ WALL_UNITS = {
     "wall_normal_stress": "Pa",
     "wall_shear_stress": "Pa",
 }
-
-
-def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray, moving: bool) -> Walls:
-    """Walls at the box faces, every one fixed (modes are set by `apply_modes`). `moving`: some
-    wall moves in some stage, so steps record the particles' forces on the moving walls."""
-    faces = [w.face for w in wall_specs]
-    nw = len(faces)
-    axis = np.array([AXES[f[0]] for f in faces], dtype=np.int64)
-    sign = np.array([1.0 if f[1] == "-" else -1.0 for f in faces])
-    coord = np.array([lower[a] if s > 0 else upper[a] for a, s in zip(axis, sign, strict=True)])
-    control = np.zeros((nw, NC))
-    control[:, C_SHEAR_AXIS] = (axis + 1) % 3
-    control[:, C_MASS] = 1.0
-    return Walls(
-        faces=faces,
-        axis=axis,
-        sign=sign,
-        coord=coord,
-        table=np.ascontiguousarray(wall_table),
-        hist=np.zeros((n_particles, nw, 3)),
-        vel=np.zeros((nw, 3)),
-        acc=np.zeros((nw, 3)),
-        shift=np.zeros((nw, 3)),
-        force=np.zeros((nw, 3)),
-        area=np.zeros(nw),
-        mode=np.zeros((nw, 2), dtype=np.int64),
-        control=control,
-        attached=np.zeros(0, dtype=np.int64),
-        attached_wall=np.zeros(0, dtype=np.int64),
-        vel_pred=np.zeros((nw, 3)),
-        pforce=np.zeros((n_particles if moving else 0, nw, 3)),
-        record=np.zeros(nw, dtype=np.uint8),
-    )
-
-
-def rough_layers(case, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions (K,3), radii (K,) and wall index (K,) of the spheres glued to the rough walls:
-    a square lattice on each wall's plane, spacing stretched so a whole number fits each side
-    (the period on a periodic axis, else the face less a radius at each end)."""
-    largest = case.particles.radius.largest
-    pos, radius, wall = [], [], []
-    for w, spec in enumerate(case.walls):
-        if spec.rough is None:
-            continue
-        a = AXES[spec.face[0]]
-        r = spec.rough.radius or largest
-        pitch = spec.rough.spacing * 2.0 * r
-        lines = []
-        for b in range(3):
-            if b == a:
-                lines.append(np.array([lower[a] if spec.face[1] == "-" else upper[a]]))
-                continue
-            length = upper[b] - lower[b]
-            if case.domain.periodic[b]:
-                n = max(1, math.floor(length / pitch + 1e-9))
-                lines.append(lower[b] + (np.arange(n) + 0.5) * (length / n))
-            else:
-                n = max(1, math.floor((length - 2.0 * r) / pitch + 1e-9) + 1)
-                lines.append(
-                    np.linspace(lower[b] + r, upper[b] - r, n)
-                    if n > 1
-                    else np.array([0.5 * (lower[b] + upper[b])])
-                )
-        grid = np.stack(np.meshgrid(*lines, indexing="ij"), axis=-1).reshape(-1, 3)
-        pos.append(grid)
-        radius.append(np.full(grid.shape[0], r))
-        wall.append(np.full(grid.shape[0], w, dtype=np.int64))
-    if not pos:
-        return np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int64)
-    return np.concatenate(pos), np.concatenate(radius), np.concatenate(wall)
-
-
-def apply_groups(
-    case,
-    pos: np.ndarray,
-    vel: np.ndarray,
-    angvel: np.ndarray,
-    inv_mass: np.ndarray,
-    inv_inertia: np.ndarray,
-    names: np.ndarray | None = None,
-    fixed: np.ndarray | None = None,
-) -> None:
-    """Give the particles of each [[particles.groups]] entry (inside its region, or of its name
-    in the placement file's group column `names`) their prescribed motion: no response to forces
-    (inv_mass = inv_inertia = 0), no spin, a fixed velocity (zero if fixed); a later group wins,
-    and a particle the file's `fixed` column marks never moves."""
-    for group in case.particles.groups:
-        inside = np.zeros(pos.shape[0], dtype=bool)
-        if group.region_lower is not None:
-            lower, upper = np.array(group.region_lower), np.array(group.region_upper)
-            inside |= np.all((pos >= lower) & (pos <= upper), axis=1)
-        if group.name is not None and names is not None:
-            inside |= names == group.name
-        velocity = 0.0 if group.motion == "fixed" else group.velocity
-        _prescribe(inside, vel, angvel, inv_mass, inv_inertia, velocity)
-    if fixed is not None:
-        _prescribe(fixed, vel, angvel, inv_mass, inv_inertia, 0.0)
-
-
-def _prescribe(inside, vel, angvel, inv_mass, inv_inertia, velocity) -> None:
-    inv_mass[inside] = 0.0
-    inv_inertia[inside] = 0.0
-    vel[inside] = np.asarray(velocity, dtype=float)
-    angvel[inside] = 0.0
 
 
 class WallScales:

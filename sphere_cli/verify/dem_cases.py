@@ -17,7 +17,7 @@ import numpy as np
 
 from ..config.schema import Simulation
 from ..physics.contact import verlet_limit
-from ..physics.energy import observables
+from ..physics.observe.energy import observables
 from ..physics.restitution import linear_contact_time, linear_damping_ratio
 from .analytic import DampedImpact, bounce_apexes
 from .registry import Outcome, Stepper, Tolerance, VerificationCase, register

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..physics.energy import observables
+from ..physics.observe.energy import observables
 from ..physics.restitution import hertz_contact_time, hertz_damping_coefficient, hertz_stiffness
 from .analytic import HertzElasticImpact
 from .registry import Outcome, Stepper, Tolerance, VerificationCase, register

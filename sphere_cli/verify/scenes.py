@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..build.scene import build_scene
 from ..config.load import parse_case
+from ..scene.builder import build_scene
 
 
 def sphere_mass(radius: float, density: float) -> float:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CaseError, NumericalError, SphereError
-from ..physics.energy import observables
+from ..physics.observe.energy import observables
 from ..physics.restitution import linear_damping_ratio
 from ..simulation import advance, check_stable
 from .scenes import case_text, linear_contact, particle_csv, particle_scene, sphere_mass, toml_table
@@ -756,9 +756,9 @@ def nan_guard(quick: bool) -> dict:
     caught by the stability guard within blowup_check_every steps, reported with step, time and
     particle, and never reach a checkpoint."""
     from .. import api
-    from ..build.scene import build_scene
     from ..config.load import load_case
     from ..io.rundir import RunDirectory
+    from ..scene.builder import build_scene
 
     poison_step, index, every = 237, 3, 100
     rng = np.random.default_rng(1)

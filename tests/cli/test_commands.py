@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 
 import pytest
-import typer
 from cli_test_support import (
     FROM_FILE,
     TINY,
@@ -23,7 +22,7 @@ from cli_test_support import (
 )
 
 from sphere_cli import api
-from sphere_cli.cli import parse_wall_time
+from sphere_cli.runtime import parse_wall_time
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 
@@ -298,7 +297,7 @@ def test_parse_wall_time(text, seconds):
 
 @pytest.mark.parametrize("text", ["banana", "-1h", "2 hours", "1e3", "h", "", "1:2:3:4", "2h30", "1-", "::"])
 def test_parse_wall_time_rejects(text):
-    with pytest.raises(typer.BadParameter):
+    with pytest.raises(ValueError, match="expected a duration"):
         parse_wall_time(text)
 
 
@@ -364,7 +363,7 @@ def test_shell_completion_can_be_shown_and_installed():
 def test_status_exists_while_the_scene_is_built(tmp_path, monkeypatch):
     """The run directory and status.json ("starting") exist before the scene is built and the
     kernels compiled, and the terminal says what is going on."""
-    from sphere_cli.build import scene as scene_module
+    from sphere_cli.scene import builder as scene_module
 
     seen = {}
     real = scene_module.build_scene

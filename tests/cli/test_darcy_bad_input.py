@@ -1,5 +1,5 @@
 """Bad `[fluid] model = "darcy"` input: a short message naming the key and its line, exit 65,
-no traceback (the checks of config/fluid_darcy.py and physics/darcy.py)."""
+no traceback (the checks of config/fluid_darcy.py and physics/fluid/darcy.py)."""
 
 from __future__ import annotations
 

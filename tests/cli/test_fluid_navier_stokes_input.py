@@ -83,7 +83,7 @@ def test_dt_above_the_viscous_limit_names_it(tmp_path):
 
 def test_dt_above_the_advective_limit_of_max_speed_names_it(tmp_path):
     """fluid.max_speed = 50 m/s on 2.5 mm cells: the advective limit sum |u| dt_f/dx <= 1/2 (the
-    bound of the limited advection, kernels/navier_stokes.py) gives dt_f <= 0.5/(50 * 3/2.5e-3)
+    bound of the limited advection, kernels/fluid/navier_stokes.py) gives dt_f <= 0.5/(50 * 3/2.5e-3)
     = 8.33 us, 1.67 us per DEM step with ndem = 5, below the contact limit (6.9 us): a given
     dt = 5e-6 s is refused naming it (with the factor 1 of first-order upwind it would be 3.3 us)."""
     text = edit(FLUID, "viscosity = 0.001", "viscosity = 0.001\nmax_speed = 50.0")

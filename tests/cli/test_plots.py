@@ -16,7 +16,8 @@ from pathlib import Path
 import numba
 import pytest
 
-from sphere_cli import api, plot
+from sphere_cli import api
+from sphere_cli.io import plot
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 EXPERIMENTS = {"consolidation", "uniaxial-strain", "triaxial", "direct-shear"}

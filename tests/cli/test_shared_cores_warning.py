@@ -1,5 +1,5 @@
 """`sphere run` warns when its OpenMP threads would share their cores with other busy processes
-(sphere_cli/cores.py; the rules themselves: tests/unit/test_shared_cores.py)."""
+(sphere_cli/runtime.py; the rules themselves: tests/unit/test_shared_cores.py)."""
 
 from __future__ import annotations
 

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from cli_test_support import assert_clean_error, line_of, sphere
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.scene.builder import build_scene
 
 
 def _errors(stderr: str) -> list[str]:

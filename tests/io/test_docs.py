@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from sphere_cli import api, docgen
+from sphere_cli import api
+from sphere_cli.config import reference as docgen
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT / "docs" / "case-reference.md"

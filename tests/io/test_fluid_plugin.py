@@ -1,4 +1,4 @@
-"""The fluid plug-in (physics/fluid.py): a dry scene carries nothing of a fluid, and every hook a
+"""The fluid plug-in (physics/fluid_plugin.py): a dry scene carries nothing of a fluid, and every hook a
 fluid model has is wired into the step, the stability guard, the time-step limit, the
 trajectory, the XDMF sidecar, `inspect` and a bitwise resume.
 
@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from sphere_cli import api
-from sphere_cli.build import scene as scene_module
 from sphere_cli.errors import NumericalError
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
-from sphere_cli.physics.fluid import FluidModule
+from sphere_cli.physics.fluid_plugin import FluidModule
+from sphere_cli.scene import builder as scene_module
 
 CASE = """
 [simulation]
@@ -113,19 +113,13 @@ def _case(write_case, steps: int) -> Path:
     return write_case(CASE.format(duration=steps * 1.0e-5))
 
 
-# the modules of the fluid models and of their shared plumbing (grid, porosity, solver, drag)
+# anything under a fluid folder: the models and their shared plumbing (grid, porosity, solver, drag)
 DRY_RUN = """
 import sys
 from sphere_cli import api
 api.run({case!r}, {run!r})
-fluid_words = (
-    "navier_stokes", "darcy", "vans1d", "porosity", "poisson", "drag", "fluid_grid", "layer_averaging",
-    "profile_forces",
-)
-loaded = sorted(
-    m for m in sys.modules
-    if m.startswith(("sphere_cli.physics.", "sphere_cli.kernels.")) and m.rsplit(".", 1)[1] in fluid_words
-)
+fluid = ("sphere_cli.physics.fluid", "sphere_cli.kernels.fluid")
+loaded = sorted(m for m in sys.modules if m in fluid or m.startswith(tuple(f + "." for f in fluid)))
 print("LOADED", loaded)
 """
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from sphere_cli.config.fluid_darcy import DarcyFluid
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.pore_pressure import PorePressure
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.pore_pressure import PorePressure
 
 # shared: water, a fine sand [SI]
 VISCOSITY = 1.0e-3

@@ -1,8 +1,8 @@
-"""The Darcy fluid coupled to particles (physics/darcy.py): a bed under an upward seepage
+"""The Darcy fluid coupled to particles (physics/fluid/darcy.py): a bed under an upward seepage
 gradient, bitwise resume, and scenes without it left alone.
 
 Critical gradient of this model: the fluid force on a particle of volume V is -V grad p plus
-the buoyancy -rho_f V g (the original sphere's Darcy coupling, kernels/darcy.py), so a bed
+the buoyancy -rho_f V g (the original sphere's Darcy coupling, kernels/fluid/darcy.py), so a bed
 whose particles see on average an upward excess-pressure gradient -dp/dz = (rho_s - rho_f)|g|
 carries its whole buoyant weight: i_c = (rho_s - rho_f)|g|. The bed here is a simple cubic stack
 of 200 touching spheres (d = 1 mm) on a floor, at rest; the gradient the particles see is the
@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
-from sphere_cli.kernels.darcy import add_pressure_forces
+from sphere_cli.kernels.fluid.darcy import add_pressure_forces
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
 RHO_S, RHO_F, G = 2650.0, 1000.0, 9.81
@@ -116,7 +116,7 @@ def test_bed_under_upward_gradient(ratio, pressure_per_gradient):
 def test_coupling_is_stable_at_its_time_step_limit():
     """The coupling is explicit (forces from the pressure of the last fluid step): a compacting
     bed pressurises its pore water, which pushes back one step later, like a drag of relaxation
-    time rho_s k / mu. The model's limit is 0.2 of that time (physics/darcy.py). A loose lattice
+    time rho_s k / mu. The model's limit is 0.2 of that time (physics/fluid/darcy.py). A loose lattice
     settling in a medium of constant k chosen so that dt = 4e-6 s is exactly that limit stays
     finite and slow for 1000 steps and compacts. (Measured with this scene: stable at a fluid
     step of 0.3 rho_s k / mu, blown up within 100 steps at 0.5.)"""
@@ -167,7 +167,7 @@ def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
     script = textwrap.dedent(
         f"""
         import sys
-        from sphere_cli.build.scene import build_scene
+        from sphere_cli.scene.builder import build_scene
         from sphere_cli.config.load import load_case
         from sphere_cli.simulation import advance
         for path, model in zip({cases!r}, (None, "vans1d", "navier-stokes")):

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from dem_physics_cases import advance, hertz_contact, hertz_reference, make_scene, sphere_mass
 
-from sphere_cli.physics.energy import observables
+from sphere_cli.physics.observe.energy import observables
 
 LEAD_STEPS = 3
 

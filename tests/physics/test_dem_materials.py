@@ -19,7 +19,7 @@ from dem_physics_cases import advance, hertz_contact, hertz_reference, make_scen
 from sphere_cli.config.schema import Simulation
 from sphere_cli.kernels.contact import D_N, D_T, K_N, K_T, MU, MU_R
 from sphere_cli.physics.contact import rayleigh_time, row_limit
-from sphere_cli.physics.energy import observables
+from sphere_cli.physics.observe.energy import observables
 from sphere_cli.physics.restitution import hertz_damping_coefficient, linear_damping_ratio
 from sphere_cli.simulation import check_stable
 

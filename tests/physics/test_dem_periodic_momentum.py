@@ -14,8 +14,8 @@ import math
 import numpy as np
 from dem_physics_cases import advance, clamped_contact_time, make_scene, sphere_mass
 
-from sphere_cli.physics.energy import observables
 from sphere_cli.physics.neighbors import spring_rows
+from sphere_cli.physics.observe.energy import observables
 
 R = 1.0e-3  # m
 DENSITY = 2500.0  # kg/m^3

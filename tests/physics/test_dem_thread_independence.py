@@ -118,7 +118,7 @@ def test_settling_is_bitwise_independent_of_thread_count(law):
     p1, p2 = one.state.particles, two.state.particles
     assert one.state.clock.step == two.state.clock.step == STEPS[law]
     # the scene is a real test: many contacts, some sticking with loaded springs, several rebuilds
-    from sphere_cli.physics.energy import observables
+    from sphere_cli.physics.observe.energy import observables
 
     obs = observables(one)
     if law == "linear":

@@ -1,4 +1,4 @@
-"""Particles and the Navier-Stokes fluid coupled both ways through the drag of physics/drag.py,
+"""Particles and the Navier-Stokes fluid coupled both ways through the drag of physics/fluid/drag.py,
 run through the case file and the real loop (shared/validation/README.md D).
 """
 

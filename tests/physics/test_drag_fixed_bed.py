@@ -1,5 +1,5 @@
 """Ergun pressure drop through a fixed bed of imposed uniform porosity (shared/validation D):
-the Navier-Stokes solver with the cell-averaged drag of kernels/drag.py (cell_drag).
+the Navier-Stokes solver with the cell-averaged drag of kernels/fluid/drag.py (cell_drag).
 
 Ergun (1952): dP/L = 150 mu (1-eps)^2 U/(eps^3 d^2) + 1.75 rho (1-eps) U^2/(eps^3 d), U the
 superficial velocity, eps the porosity, d the particle diameter.
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
-from sphere_cli.kernels.drag import GIDASPOW, cell_drag
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.navier_stokes import NavierStokesSolver
+from sphere_cli.kernels.fluid.drag import GIDASPOW, cell_drag
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
 
 RHO, MU, D = 1000.0, 1e-3, 1e-3  # water, 1 mm spheres
 

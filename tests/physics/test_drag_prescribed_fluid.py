@@ -1,4 +1,4 @@
-"""Particles in a prescribed fluid state (one-way coupling): the drag module of physics/drag.py
+"""Particles in a prescribed fluid state (one-way coupling): the drag module of physics/fluid/drag.py
 driven by the real DEM loop (velocity Verlet with its second half kick replaced), and its
 momentum exchange with the fluid (shared/validation/README.md D and E).
 """
@@ -14,7 +14,7 @@ import pytest
 from dem_physics_cases import make_scene
 
 from sphere_cli.config.drag import DragConfig
-from sphere_cli.physics.drag import FluidParticleDrag
+from sphere_cli.physics.fluid.drag import FluidParticleDrag
 
 G = 9.81
 STEEL, GLYCERIN, MU = 7800.0, 1260.0, 1.41

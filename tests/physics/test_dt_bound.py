@@ -14,7 +14,7 @@ from dem_physics_cases import advance, make_scene
 
 from sphere_cli.errors import CaseError
 from sphere_cli.physics.contact import coordination_bound, damped_limit, stability_limit
-from sphere_cli.physics.energy import observables
+from sphere_cli.physics.observe.energy import observables
 
 R = 1e-3
 G = (0.0, 0.0, -9.81)

@@ -2,7 +2,7 @@
 dissipated by damping, friction and rolling resistance (issue 7, acceptance: within 1 %).
 
 Energy conservation of the equations of motion (work-energy theorem, summed over particles and
-contacts): every term is accumulated independently by kernels/energy_budget.py from the contact
+contacts): every term is accumulated independently by kernels/observe/energy_budget.py from the contact
 law, and the kinetic and elastic energies are state functions, so the residual measures only the
 time quadrature of the dissipated power (O(dt) relative, ~1e-3 at dt = auto) and any term
 missing or mis-booked (a missing friction or rolling term is 10-30 % of the total here).
@@ -95,7 +95,7 @@ def test_gravity_work_matches_potential_energy():
     """Gravity's accumulated work m g . v_{n+1/2} dt equals minus the change of potential energy
     (the drift is x_{n+1} - x_n = v_{n+1/2} dt exactly), to round-off."""
     scene = run_in_memory(POUR.format(friction=0.5, rolling=0.0, restitution=0.5), 0)
-    from sphere_cli.physics.energy import observables
+    from sphere_cli.physics.observe.energy import observables
 
     before = observables(scene)["potential_energy"]
     advance(scene, 2000)

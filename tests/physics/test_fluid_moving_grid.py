@@ -1,6 +1,6 @@
 """The Navier-Stokes fluid on a grid whose top follows a moving wall (`[fluid.grid]
 follow_top_wall`), driven through physics/navier_stokes.NavierStokesSolver without particles:
-the arbitrary Lagrangian-Eulerian terms of kernels/navier_stokes.py (geometric conservation law,
+the arbitrary Lagrangian-Eulerian terms of kernels/fluid/navier_stokes.py (geometric conservation law,
 Thomas & Lombard 1979).
 
 - zero forcing stays zero: a column at rest under gravity, closed at the bottom, open at the
@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.navier_stokes import NavierStokesSolver
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
 
 RHO = 1000.0  # kg/m^3
 G = 9.81  # m/s^2

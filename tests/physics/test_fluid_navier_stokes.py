@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.navier_stokes import NavierStokesSolver
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
 
 RHO = 1000.0  # kg/m^3
 G = 9.81  # m/s^2
@@ -237,7 +237,7 @@ def _advected_sine_errors(cells: int) -> tuple[float, float]:
 
 
 def test_advected_sine_converges_with_order_two():
-    """The limited advection (van Leer's MUSCL, kernels/navier_stokes.py) is second order: a sine
+    """The limited advection (van Leer's MUSCL, kernels/fluid/navier_stokes.py) is second order: a sine
     carried one wavelength by a uniform flow converges with observed order >= 1.8 in L1 and L2
     from 32, 64 and 128 cells per wavelength (measured 2.05, 1.94 in L1; 2.01, 1.99 in L2; the
     first-order upwind it replaced fails: 0.69, 0.83, and 25 % at 32 cells). Not exactly 2: the
@@ -282,7 +282,7 @@ def test_advected_step_stays_bounded_up_to_the_courant_limit():
     (physics/navier_stokes.COURANT_LIMIT): max <= 2 and min >= -1 to round-off over 200 steps,
     diagonally across a 2D grid. Beyond it the bound is lost: at 0.6 the block overshoots by
     more than 10 % of its range (measured 65 %), so the limit is the scheme's, not a margin."""
-    from sphere_cli.physics.navier_stokes import COURANT_LIMIT
+    from sphere_cli.physics.fluid.navier_stokes import COURANT_LIMIT
 
     worst, scale = _advected_block_overshoot(COURANT_LIMIT)
     assert worst <= 1e-12 * scale

@@ -1,4 +1,4 @@
-"""Layer averaging of the vans1d model (kernels/layer_averaging.py) against exact values.
+"""Layer averaging of the vans1d model (kernels/fluid/layer_averaging.py) against exact values.
 
 A simple cubic lattice of spheres (radius r, spacing a) has, per horizontal area a^2, the circle
 pi (r^2 - (z - z_c)^2) at height z of a plane of centres z_c: its layer-averaged solid fraction is
@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.layer_averaging import slice_volume
-from sphere_cli.physics.layer_averaging import LayerProfiles, layer_faces
+from sphere_cli.kernels.fluid.layer_averaging import slice_volume
+from sphere_cli.physics.fluid.layer_averaging import LayerProfiles, layer_faces
 
 A = 1.0e-3  # lattice spacing [m]
 R = 0.45e-3  # sphere radius [m]

@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
 STILL_BED = """

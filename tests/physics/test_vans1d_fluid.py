@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import vans1d_exact as exact
 
-from sphere_cli.physics.vans1d import FluidColumn
+from sphere_cli.physics.fluid.vans1d import FluidColumn
 
 RHO = 1000.0
 

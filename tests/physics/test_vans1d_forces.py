@@ -1,4 +1,4 @@
-"""Fluid forces of the vans1d model on single spheres (kernels/profile_forces.py), against the
+"""Fluid forces of the vans1d model on single spheres (kernels/fluid/profile_forces.py), against the
 closed forms of YADE's HydroForceEngine (Maurin et al. 2015): drag 1/2 C_d A rho |u_r| u_r with
 C_d = (0.44 + 24/Re_p)(1 - phi)^-n, buoyancy -rho V g (or its z part), lift
 1/2 rho C_L A (u_top^2 - u_bottom^2) (Wiberg & Smith 1985).
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.profile_forces import fluid_velocity_at, profile_forces
-from sphere_cli.physics.layer_averaging import layer_faces
+from sphere_cli.kernels.fluid.profile_forces import fluid_velocity_at, profile_forces
+from sphere_cli.physics.fluid.layer_averaging import layer_faces
 
 RHO, NU, R = 1000.0, 1.0e-6, 0.5e-3
 GRAVITY = np.array([0.5, 0.0, -9.8])

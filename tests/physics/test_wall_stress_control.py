@@ -29,10 +29,10 @@ import numpy as np
 import pytest
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.kernels.walls import C_DAMPING, C_MASS
+from sphere_cli.scene.builder import build_scene
 
 SIGMA = 2000.0
 AMPLITUDE = 500.0

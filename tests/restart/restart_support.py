@@ -7,9 +7,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.scene.builder import build_scene
 
 # 40 spheres falling onto a floor; frames every 50 steps, checkpoints every 100 (format with
 # duration = a number of seconds)

@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
 from sphere_cli.io.checkpoint import list_checkpoints
+from sphere_cli.scene.builder import build_scene
 
 CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
 REFERENCE = Path(__file__).parents[1] / "data" / "bitwise_reference.json"

@@ -19,10 +19,10 @@ import pytest
 from restart_support import CASE, assert_same_state, final_state, frames, step_dt
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
 from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.scene.builder import build_scene
 
 CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
 STEPS = 240
@@ -68,7 +68,7 @@ def publish(tmp, final):
 checkpoint.write_file = write_file
 checkpoint.publish = publish
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.config.load import load_case
 api.run(sys.argv[1], sys.argv[2])
 """

@@ -16,8 +16,8 @@ from test_fluid_navier_stokes_restart import CASE as FIXED_GRID_CASE
 from test_fluid_navier_stokes_restart import SPLIT, STEPS, _final_state
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
+from sphere_cli.scene.builder import build_scene
 
 WALL_SPEED = 1.0  # m/s downwards: 0.8 mm over the run, the cells from 2.5 to 2.4 mm high
 

@@ -10,9 +10,9 @@ import h5py
 import numpy as np
 
 from sphere_cli import api
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.scene.builder import build_scene
 
 CASE = """
 [simulation]

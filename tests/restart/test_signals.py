@@ -15,10 +15,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from sphere_cli import api
-from sphere_cli.build.scene import build_scene
+from sphere_cli import api, runtime
 from sphere_cli.config.load import parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import Loop, StopFlag
 
 CASE = """
@@ -123,7 +123,7 @@ def test_second_interrupt_inside_a_finalizer_still_stops(capfd):
     class Body:
         pass
 
-    with api._signal_handlers(stop, enabled=True):
+    with runtime.signal_handlers(stop, enabled=True):
         signal.raise_signal(signal.SIGINT)  # the first: a checkpoint at the next step
         assert stop.reason == "SIGINT received" and not stop.interrupted
         body = Body()

@@ -21,12 +21,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
 from sphere_cli.kernels import contact as law
 from sphere_cli.kernels.neighbors import minimum_image
 from sphere_cli.physics.contact import rows_across_chunks
 from sphere_cli.physics.neighbors import spring_rows
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
 BIG = 2.0e-3

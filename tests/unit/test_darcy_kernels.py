@@ -1,4 +1,4 @@
-"""Kernels of the Darcy model (kernels/pore_pressure.py, kernels/darcy.py) on small arrays:
+"""Kernels of the Darcy model (kernels/fluid/pore_pressure.py, kernels/fluid/darcy.py) on small arrays:
 Kozeny-Carman and its clamps, the sign of the skeleton source term, the gradient's boundary
 ghosts, and the force on a particle in a linear pressure field (exact: the trilinear
 interpolation of an exact gradient). Also run as plain Python (NUMBA_DISABLE_JIT=1)."""
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sphere_cli.kernels.darcy import add_pressure_forces
-from sphere_cli.kernels.pore_pressure import (
+from sphere_cli.kernels.fluid.darcy import add_pressure_forces
+from sphere_cli.kernels.fluid.pore_pressure import (
     backward_euler_system,
     clamp_porosity,
     kozeny_carman,

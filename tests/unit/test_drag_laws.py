@@ -1,4 +1,4 @@
-"""Drag laws of kernels/drag.py: limits, branch switches, dimensions (shared/validation D, E).
+"""Drag laws of kernels/fluid/drag.py: limits, branch switches, dimensions (shared/validation D, E).
 
 References: Ergun (1952) and Wen & Yu (1966) in the form of Gidaspow (1994, "Multiphase flow and
 fluidization", eqs. 9.4-9.5): beta = 150 mu (1-phi)^2/(phi d^2) + 1.75 rho (1-phi) w/d for
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.drag import DI_FELICE, GIDASPOW, drag_rate, phi1
+from sphere_cli.kernels.fluid.drag import DI_FELICE, GIDASPOW, drag_rate, phi1
 
 ROOT = Path(__file__).resolve().parents[2]
 MU, RHO, D = 1.41, 1260.0, 2.0e-3  # glycerol, 2 mm sphere
@@ -143,7 +143,7 @@ def test_drag_rate_without_jit_agrees():
     """The kernel run as plain Python (NUMBA_DISABLE_JIT=1) gives the compiled values."""
     cases = [(law, phi, w) for law in LAWS for phi in (0.05, 0.5, 0.9, 1.0) for w in (0.0, 0.01, 30.0)]
     code = (
-        "from sphere_cli.kernels.drag import drag_rate;"
+        "from sphere_cli.kernels.fluid.drag import drag_rate;"
         f"print(repr([drag_rate(l, p, {D!r}, w, {RHO!r}, {MU!r}, {FLOOR!r}) for l, p, w in {cases!r}]))"
     )
     env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(ROOT))

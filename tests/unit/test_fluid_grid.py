@@ -1,4 +1,4 @@
-"""The fluid grid over the domain box (config/fluid_grid.py, physics/fluid_grid.py): cell counts
+"""The fluid grid over the domain box (config/fluid_grid.py, physics/fluid/grid.py): cell counts
 from `cells` or `cell_size`, and the refusal of cells smaller than the largest particle, which
 the porosity estimate needs (its sampling sphere has the diameter of the smallest cell edge)."""
 
@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from sphere_cli.config.fluid_grid import FluidGridConfig
 from sphere_cli.config.load import LoadedCase
 from sphere_cli.errors import CaseError
-from sphere_cli.physics.fluid_grid import fluid_grid
+from sphere_cli.physics.fluid.grid import fluid_grid
 
 BOX = SimpleNamespace(
     lower=np.array([0.0, -0.01, 0.0]),

@@ -7,9 +7,9 @@ import textwrap
 
 import numpy as np
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
 from sphere_cli.physics import neighbors as neighbors_module
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
 CASE = textwrap.dedent(

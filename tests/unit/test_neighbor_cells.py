@@ -10,9 +10,9 @@ import tracemalloc
 import numpy as np
 from test_neighbor_capacity import CASE as PERIODIC_BIMODAL
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import parse_case
 from sphere_cli.physics import neighbors as neighbors_module
+from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
 WALLED = textwrap.dedent(

@@ -1,5 +1,5 @@
-"""The shared cell-centred Poisson/Helmholtz solver c x - div(a grad x) = b (physics/poisson.py,
-kernels/poisson.py).
+"""The shared cell-centred Poisson/Helmholtz solver c x - div(a grad x) = b (physics/fluid/poisson.py,
+kernels/fluid/poisson.py).
 
 Manufactured solutions: pick a smooth x(x, y, z) and a(x, y, z), compute b analytically, solve,
 and compare with x at the cell centres. The scheme is the second-order finite-volume 7-point
@@ -22,9 +22,9 @@ import numba
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.poisson import apply_operator, face_means, prepare_system
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.poisson import PoissonSolver
+from sphere_cli.kernels.fluid.poisson import apply_operator, face_means, prepare_system
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.poisson import PoissonSolver
 
 ROOT = Path(__file__).resolve().parents[2]
 TWO_PI = 2.0 * math.pi
@@ -323,8 +323,8 @@ def test_kernels_without_jit_agree():
     """The same small solve with NUMBA_DISABLE_JIT=1 (plain Python) as compiled."""
     code = (
         "import numpy as np\n"
-        "from sphere_cli.physics.fluid_grid import FluidGrid\n"
-        "from sphere_cli.physics.poisson import PoissonSolver\n"
+        "from sphere_cli.physics.fluid.grid import FluidGrid\n"
+        "from sphere_cli.physics.fluid.poisson import PoissonSolver\n"
         "g = FluidGrid(np.zeros(3), np.array([0.5, 0.5, 0.25]), (2, 3, 4), np.array([True, False, False]))\n"
         "s = PoissonSolver(g, 'dirichlet', 'no-flux', tolerance=1e-12)\n"
         "ax, ay, az = s.face_arrays(); ax[:] = 1.0; ay[:] = 2.0; az[:] = 0.5\n"

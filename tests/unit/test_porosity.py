@@ -1,4 +1,4 @@
-"""Porosity of the fluid cells from the particles (physics/porosity.py, kernels/porosity.py):
+"""Porosity of the fluid cells from the particles (physics/fluid/porosity.py, kernels/fluid/porosity.py):
 exact lens volumes with a cell-centred sampling sphere of radius R = half the smallest cell edge
 (shared/reference/sphere-fluid-particle-interaction.md, "Porosity estimation")."""
 
@@ -17,9 +17,9 @@ import numba
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.porosity import lens_volume
-from sphere_cli.physics.fluid_grid import FluidGrid
-from sphere_cli.physics.porosity import Porosity, particle_cells
+from sphere_cli.kernels.fluid.porosity import lens_volume
+from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.porosity import Porosity, particle_cells
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -250,8 +250,8 @@ def test_kernels_without_jit_agree():
     code = (
         "import numpy as np\n"
         "from types import SimpleNamespace\n"
-        "from sphere_cli.physics.fluid_grid import FluidGrid\n"
-        "from sphere_cli.physics.porosity import Porosity\n"
+        "from sphere_cli.physics.fluid.grid import FluidGrid\n"
+        "from sphere_cli.physics.fluid.porosity import Porosity\n"
         "g = FluidGrid(np.zeros(3), np.full(3, 0.01), (2, 2, 3), np.array([True, True, False]))\n"
         "rng = np.random.default_rng(3)\n"
         "p = SimpleNamespace(pos=rng.uniform(0, 0.02, (6, 3)), vel=rng.standard_normal((6, 3)),\n"

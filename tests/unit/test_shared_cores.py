@@ -1,5 +1,5 @@
 """The warning before a run whose OpenMP threads would share their cores with other busy
-processes (sphere_cli/cores.py): when it is given, how the busy cores are counted, and that a
+processes (sphere_cli/runtime.py): when it is given, how the busy cores are counted, and that a
 real busy process is seen."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from sphere_cli.cores import busy_cores, measure_busy_cores, shared_cores_note
+from sphere_cli.runtime import busy_cores, measure_busy_cores, shared_cores_note
 
 # first lines of /proc/stat: user nice system idle iowait irq softirq steal guest guest_nice
 LINE = "cpu  {user} 0 {system} {idle} {iowait} 0 {softirq} {steal} 0 0\nintr 1 2 3\n"

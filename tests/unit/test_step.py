@@ -9,19 +9,19 @@ from pathlib import Path
 
 import pytest
 
-from sphere_cli.build.scene import build_scene
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.physics import module as protocol
 from sphere_cli.physics.contact import PairContactForces
-from sphere_cli.physics.darcy import Darcy
-from sphere_cli.physics.energy_budget import EnergyBudget
+from sphere_cli.physics.fluid.darcy import Darcy
+from sphere_cli.physics.fluid.navier_stokes import NavierStokes
+from sphere_cli.physics.fluid.vans1d import Vans1d
 from sphere_cli.physics.motion import Motion
-from sphere_cli.physics.navier_stokes import NavierStokes
 from sphere_cli.physics.neighbors import NeighborSearch
-from sphere_cli.physics.observables import Observer
+from sphere_cli.physics.observe.energy_budget import EnergyBudget
+from sphere_cli.physics.observe.observables import Observer
 from sphere_cli.physics.stages import Stages
-from sphere_cli.physics.vans1d import Vans1d
 from sphere_cli.physics.walls import PlaneWallForces, WallMotion
+from sphere_cli.scene.builder import build_scene
 
 ROOT = Path(__file__).parents[2]
 CONFIGS = sorted((ROOT / "configs").glob("*.toml"))

@@ -1,0 +1,178 @@
+"""Fluid-particle interaction of the Navier-Stokes model: drag and pressure-gradient force on each
+particle, the particles' semi-implicit velocity update, and the equal and opposite force density
+on the fluid (laws and scheme in kernels/fluid/drag.py).
+
+Called by the fluid module (physics/fluid/navier_stokes.py) in its phases, with its fluid state `fs`
+(cell-centred fs.v (nx,ny,nz,3) [m/s], fs.phi (nx,ny,nz) [-], fs.grad_p (nx,ny,nz,3) [Pa/m] of the
+last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] written here):
+- forces():        every DEM step, after contacts and walls: adds -V grad(p) and the drag to each
+                   particle's force;
+- kick():          replaces Motion.kick: the second half kick, exact for the drag relaxation;
+- fluid_forcing(): before each fluid step, after the kick: f_i, the force density of the fluid on
+                   the particles of each cell over the last fluid interval (the drag impulses the
+                   particles received, less what the last fluid step took ahead), and k_drag =
+                   d f_i/d v averaged over the fluid step, so the fluid momentum update takes the
+                   drag semi-implicitly as -(f_i + k_drag (v_new - v)) (fs.f_exchange).
+Formulation A (pressure in both phases: fluid momentum -phi grad p - f_i) exchanges the drag
+alone, its -phi grad p already holding the reaction of the pressure-gradient force; formulation
+B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradient force.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from ...config.drag import DragConfig
+from ...kernels.fluid.drag import DI_FELICE, GIDASPOW, drag_kick, exchange, particle_drag
+from ...kernels.fluid.porosity import bin_particles
+from ...kernels.neighbors import counting_sort
+from ...state import State
+
+LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
+
+
+class FluidParticleDrag:
+    def __init__(
+        self,
+        config: DragConfig,
+        density: float,
+        viscosity: float,
+        grid,
+        n_particles: int,
+        pressure_in_fluid_only: bool,
+    ):
+        """density [kg/m^3], viscosity [Pa s] of the fluid; grid: the FluidGrid (origin (3,) [m]
+        lower corner, spacing (3,) [m], shape (nx, ny, nz), periodic (3,)); pressure_in_fluid_only:
+        formulation B."""
+        self.config = config
+        self.law = LAWS[config.law]
+        self.density = float(density)
+        self.viscosity = float(viscosity)
+        self.floor = float(config.porosity_floor)
+        self.pressure_force = bool(config.pressure_force)
+        self.pressure_exchanged = self.pressure_force and pressure_in_fluid_only
+        self.origin = np.asarray(grid.origin, dtype=np.float64)
+        self.spacing = np.asarray(grid.spacing, dtype=np.float64)
+        self.shape = tuple(int(n) for n in grid.shape)
+        self.cells = np.asarray(self.shape, dtype=np.int64)
+        self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
+        cells = self.shape[0] * self.shape[1] * self.shape[2]
+        n = n_particles
+        self.cell_of = np.zeros(n, dtype=np.int64)  # cell of each particle centre (flat index)
+        self.wrapped = np.zeros((n, 3))  # centres wrapped into the periodic box (scratch) [m]
+        self.coef = np.zeros(n)  # K [kg/s]
+        self.f_other = np.zeros((n, 3))  # every force but the drag [N]
+        self.f_drag = np.zeros((n, 3))  # drag for the next first half kick [N]
+        self.impulse = np.zeros((n, 3))  # drag impulse since the last fluid step [N s]
+        self.start = np.zeros(cells + 1, dtype=np.int64)
+        self.order = np.zeros(n, dtype=np.int64)
+        self.warned = False
+
+    @property
+    def inv_cell_volume(self) -> float:
+        """1 / the volume of the grid's current cells [1/m^3] (they change when the grid follows
+        the top wall: self.spacing is the grid's own array)."""
+        return 1.0 / float(np.prod(self.spacing))
+
+    def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
+        """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
+        p = state.particles
+        bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
+        phi = fs.phi.reshape(-1)
+        below = particle_drag(
+            self.law,
+            self.density,
+            self.viscosity,
+            self.floor,
+            self.pressure_force,
+            self.cell_of,
+            p.vel,
+            p.radius,
+            p.inv_mass,
+            fs.v.reshape(-1, 3),
+            phi,
+            fs.grad_p.reshape(-1, 3),
+            state.clock.dt,
+            spring_dt == 0.0,
+            p.force,
+            self.f_other,
+            self.coef,
+            self.f_drag,
+        )
+        if below and not self.warned:
+            self.warned = True
+            cell = int(self.cell_of[np.flatnonzero(phi[self.cell_of] < self.floor)[0]])
+            warnings.warn(
+                f"step {state.clock.step}: porosity {phi[cell]:.3g} in fluid cell "
+                f"{np.unravel_index(cell, self.shape)} is below fluid.drag.porosity_floor = "
+                f"{self.floor}; the drag uses the floor there ({below} particle(s) this step, "
+                "not repeated)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+
+    def kick(self, state: State, fs) -> None:
+        """Second half kick of the particles with the drag of the last forces() call."""
+        p = state.particles
+        drag_kick(
+            p.vel,
+            p.angvel,
+            p.torque,
+            p.inv_mass,
+            p.inv_inertia,
+            self.cell_of,
+            fs.v.reshape(-1, 3),
+            self.coef,
+            self.f_other,
+            state.clock.dt,
+            p.force,
+            self.f_drag,
+            self.impulse,
+        )
+
+    def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
+        """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (the time since the last
+        call): the drag impulses since then, less the part of fs.f_exchange the last fluid step
+        took ahead; the impulses restart from zero."""
+        p = state.particles
+        counting_sort(self.cell_of, self.start.size - 1, self.start, self.order)
+        exchange(
+            self.start,
+            self.order,
+            self.impulse,
+            self.coef,
+            p.radius,
+            p.inv_mass,
+            fs.grad_p.reshape(-1, 3),
+            self.pressure_exchanged,
+            fluid_dt,
+            self.inv_cell_volume,
+            fs.f_i.reshape(-1, 3),
+            fs.k_drag.reshape(-1),
+            fs.f_exchange.reshape(-1, 3),
+        )
+
+    def fluid_force(self, state: State, fs) -> np.ndarray:
+        """Total force of the fluid on all particles (drag and pressure-gradient force) [N]."""
+        total = self.f_drag.sum(axis=0)
+        if self.pressure_force:
+            volume = math.pi / 6.0 * (2.0 * state.particles.radius) ** 3
+            total = total - volume @ fs.grad_p.reshape(-1, 3)[self.cell_of]
+        return total
+
+    def prognostic_state(self) -> dict[str, np.ndarray]:
+        """What a bitwise restart needs: the drag of the next first half kick and the impulses
+        not yet handed to the fluid."""
+        return {"force": self.f_drag, "impulse": self.impulse}
+
+    def restore(self, arrays: dict) -> None:
+        self.f_drag[...] = arrays["force"]
+        self.impulse[...] = arrays["impulse"]
+
+    @staticmethod
+    def dt_limit() -> tuple[float, str]:
+        """The drag puts no limit on dt: exact relaxation on the particles, implicit in the fluid."""
+        return math.inf, "none from the drag (exponential on the particles, implicit in the fluid)"

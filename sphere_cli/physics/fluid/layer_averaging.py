@@ -1,0 +1,53 @@
+"""Horizontal layers of a laterally periodic cell, and the particles averaged over them
+(kernels/fluid/layer_averaging.py): solid fraction, mean streamwise velocity, momentum exchange
+coefficient and drag per unit volume, one value per layer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...kernels.fluid.layer_averaging import layer_average
+
+
+def layer_faces(bottom: float, top: float, cells: int, stretching: float = 1.0) -> np.ndarray:
+    """Faces of `cells` layers from bottom to top whose thicknesses grow geometrically so that
+    the top one is `stretching` times the bottom one (a smooth mapping: refining keeps the
+    shape, which keeps the scheme second order)."""
+    if cells < 1 or not top > bottom or stretching < 1.0:
+        raise ValueError(
+            f"need cells >= 1, top > bottom, stretching >= 1; got {cells}, {bottom}, {top}, {stretching}"
+        )
+    if stretching == 1.0 or cells == 1:
+        widths = np.ones(cells)
+    else:
+        widths = stretching ** (np.arange(cells) / (cells - 1))
+    faces = np.empty(cells + 1)
+    faces[0] = 0.0
+    np.cumsum(widths, out=faces[1:])
+    faces = bottom + (top - bottom) * faces / faces[-1]
+    faces[-1] = top
+    return faces
+
+
+@dataclass
+class LayerProfiles:
+    """Layer averages of the particles; arrays of one value per layer."""
+
+    phi: np.ndarray  # solid fraction [-]
+    vel: np.ndarray  # mean streamwise particle velocity [m/s]
+    beta: np.ndarray  # momentum exchange coefficient [kg/(m^3 s)]
+    drag: np.ndarray  # streamwise drag on the particles per unit volume [N/m^3]
+    volume: np.ndarray  # scratch: solid volume of each layer [m^3]
+
+    @classmethod
+    def zeros(cls, cells: int) -> LayerProfiles:
+        return cls(*(np.zeros(cells) for _ in range(5)))
+
+    def average(self, pos, vel, radius, selected, drag_coef, drag_x, faces, area) -> None:
+        layer_average(
+            pos, vel, radius, selected, drag_coef, drag_x, faces, area,
+            self.phi, self.vel, self.beta, self.drag, self.volume,
+        )  # fmt: skip

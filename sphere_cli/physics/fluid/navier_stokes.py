@@ -1,0 +1,543 @@
+"""Porous Navier-Stokes fluid (`[fluid] model = "navier-stokes"`): the fluid state, one fluid
+step (predictor, pressure equation through the shared Poisson solver, correction; equations in
+kernels/fluid/navier_stokes.py), its stability limits, and the plug-in that couples it to the DEM loop.
+
+NavierStokesSolver advances a NavierStokesState and knows nothing of particles, so the fluid-alone
+checks (tests/physics/test_fluid_navier_stokes.py) drive it directly. NavierStokes (FluidModule)
+adds the particles: porosity from the grid engineer's physics/fluid/porosity.py, the interaction force
+from physics/fluid/drag.py (the contract: /work/wt/NS-CONTRACT.md), and the coupling schedule.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...config.fluid_navier_stokes import NavierStokesFluid, NoFlowBoundary, PressureBoundary
+from ...errors import NumericalError
+from ...kernels.fluid.navier_stokes import (
+    add_grid_motion,
+    add_grid_source,
+    correct,
+    first_unstable,
+    max_courant,
+    predict,
+    pressure_gradient,
+    pressure_rhs,
+    top_outflow,
+)
+from ...kernels.fluid.poisson import face_means
+from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
+from .drag import FluidParticleDrag
+from .grid import FluidGrid, fluid_grid
+from .poisson import PoissonResult, PoissonSolver
+from .porosity import Porosity
+
+
+@dataclass
+class NavierStokesState:
+    """Fluid fields on the grid (cell-centred, C order); see NS-CONTRACT.md for who writes what."""
+
+    v: np.ndarray  # (nx,ny,nz,3) [m/s] interstitial fluid velocity
+    p: np.ndarray  # (nx,ny,nz) [Pa] pressure
+    grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p (central differences)
+    phi: np.ndarray  # (nx,ny,nz) [-] porosity
+    dphi: np.ndarray  # (nx,ny,nz) [1/s] d phi/dt
+    f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles at the old fluid v
+    k_drag: np.ndarray  # (nx,ny,nz) [kg/(m^3 s)] its derivative with respect to the fluid v
+    f_exchange: np.ndarray  # (nx,ny,nz,3) [N/m^3] f_i + k_drag (v_new - v_old) of the last step
+    # scratch of the fluid step (not state)
+    v_star: np.ndarray
+    rhs: np.ndarray
+    eps: np.ndarray
+    mobility: np.ndarray
+    zero: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    az: np.ndarray
+    steps: int = 0  # fluid steps taken
+    iterations: int = 0  # of the last pressure solve
+    residual: float = 0.0  # relative residual of the last pressure solve
+    # a grid following the top wall: its height at the last step [m], and the fluid volume that
+    # has left through its top face (relative to the moving face) since the start [m^3]
+    height: float = 0.0
+    outflow: float = 0.0
+
+    PROGNOSTIC = ("v", "p", "grad_p", "phi", "dphi", "f_i", "k_drag", "f_exchange")
+    SCALARS = ("steps", "iterations", "residual")
+    MOVING_GRID = ("height", "outflow")
+
+
+# Largest advective Courant number sum |u_a| dt/dx_a of a fluid step: the limited (TVD) advection
+# with forward Euler stays bounded up to 1/2 (kernels/fluid/navier_stokes.py, module docstring).
+COURANT_LIMIT = 0.5
+
+
+class NavierStokesSolver:
+    """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
+    under the body acceleration `gravity` (3,) [m/s^2].
+
+    With config.grid.follow_top_wall the grid's height may change between steps: resize(H) to
+    the new height first (then measure the porosity on the new cells), and step() takes the
+    moving grid's terms (kernels/fluid/navier_stokes.py) from the height of the last step, fs.height,
+    to H."""
+
+    def __init__(self, config: NavierStokesFluid, grid: FluidGrid, gravity):
+        self.config = config
+        self.grid = grid
+        self.follows = bool(config.grid.follow_top_wall)
+        self.height = grid.height  # of the grid now [m]
+        self.spacing = np.ascontiguousarray(grid.spacing, dtype=np.float64)
+        self.gravity = np.asarray(gravity, dtype=np.float64).copy()
+        self.rho = float(config.density)
+        self.mu = float(config.viscosity)
+        self.beta = float(config.beta)
+        self.pressure_in_solid = config.formulation == "A"
+        self.boundaries = (config.bottom, config.top)
+        self.bc_sign = np.ones((2, 3))
+        for row, b in enumerate(self.boundaries):
+            if isinstance(b, NoFlowBoundary):
+                self.bc_sign[row, 2] = -1.0
+            if b.no_slip:
+                self.bc_sign[row, :2] = -1.0
+        self.p_kind = np.array([isinstance(b, PressureBoundary) for b in self.boundaries], dtype=np.int64)
+        if self.follows and not self.p_kind[1]:
+            raise ValueError("a grid that follows the top wall needs a prescribed-pressure top boundary")
+        kinds = ["dirichlet" if k else "no-flux" for k in self.p_kind]
+        solver = config.solver
+        self.poisson = PoissonSolver(
+            grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations
+        )
+        self.p_bound = np.zeros(2)  # boundary pressures at the new time [Pa]
+        self.p_old = np.zeros(2)  # and at the old time [Pa]
+        self.eps_bound = np.zeros(2)  # and of eps = p_new - beta p_old [Pa]
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def allocate(self) -> NavierStokesState:
+        """Fluid at rest, porosity 1, no particles, pressure 0 (initial_pressure() sets it)."""
+        shape = tuple(self.grid.shape)
+        vec = (*shape, 3)
+        ax, ay, az = self.poisson.face_arrays()
+        return NavierStokesState(
+            v=np.zeros(vec),
+            p=np.zeros(shape),
+            grad_p=np.zeros(vec),
+            phi=np.ones(shape),
+            dphi=np.zeros(shape),
+            f_i=np.zeros(vec),
+            k_drag=np.zeros(shape),
+            f_exchange=np.zeros(vec),
+            v_star=np.zeros(vec),
+            rhs=np.zeros(shape),
+            eps=np.zeros(shape),
+            mobility=np.zeros(shape),
+            zero=np.zeros(shape),
+            ax=ax,
+            ay=ay,
+            az=az,
+            height=self.height,
+        )
+
+    def resize(self, height: float) -> None:
+        """Stretch the grid along z to `height` [m] (a grid following the top wall)."""
+        self.height = float(height)
+        self.grid.set_height(self.height)
+        self.poisson.update_spacing()
+
+    def boundary_pressure(self, time: float, out: np.ndarray) -> np.ndarray:
+        """Pressures of the bottom and top boundaries at `time` (0 where no-flow) [Pa]."""
+        for row, b in enumerate(self.boundaries):
+            out[row] = b.value(time) if isinstance(b, PressureBoundary) else 0.0
+        return out
+
+    def initial_pressure(self, fs: NavierStokesState, time: float) -> None:
+        """Hydrostatic pressure p = p_ref + rho g_z (z - z_ref), referred to the top boundary if it
+        has a prescribed pressure, else the bottom one, else zero at mid-height; its gradient."""
+        g = self.grid
+        z = g.centres(2)
+        bottom_z, top_z = g.origin[2], g.origin[2] + g.shape[2] * g.spacing[2]
+        self.boundary_pressure(time, self.p_bound)
+        if self.p_kind[1]:
+            z_ref, p_ref = top_z, self.p_bound[1]
+        elif self.p_kind[0]:
+            z_ref, p_ref = bottom_z, self.p_bound[0]
+        else:
+            z_ref, p_ref = 0.5 * (bottom_z + top_z), 0.0
+        fs.p[...] = (p_ref + self.rho * self.gravity[2] * (z - z_ref))[None, None, :]
+        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
+
+    # -- the fluid step ------------------------------------------------------------------------
+
+    def step(self, fs: NavierStokesState, time: float, dt: float) -> PoissonResult:
+        """Advance the fluid from `time` to `time + dt` [s] with the porosity, its rate and the
+        interaction force already in fs."""
+        rho, beta, solid = self.rho, self.beta, self.pressure_in_solid
+        old = self.boundary_pressure(time, self.p_old)
+        stretch = 0.0
+        if self.follows:
+            # (V_new - V_old) / (V_new dt) of every cell; the old pressure's gradient on the new cells
+            stretch = (self.height - fs.height) / (self.height * dt)
+            if beta != 0.0 and stretch != 0.0:
+                pressure_gradient(fs.p, self.spacing, self.p_kind, old, fs.grad_p)
+        predict(
+            fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
+            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
+        )  # fmt: skip
+        if stretch != 0.0:
+            add_grid_motion(fs.v, fs.phi, fs.k_drag, self.bc_sign, rho, dt, stretch, fs.v_star)
+        pressure_rhs(
+            fs.v_star, fs.phi, fs.dphi, fs.mobility, fs.grad_p, fs.p, self.spacing, self.bc_sign, self.p_kind,
+            old, beta, rho, dt, fs.rhs,
+        )  # fmt: skip
+        if stretch != 0.0:
+            add_grid_source(fs.phi, fs.dphi, rho, dt, stretch, fs.rhs)
+        face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
+        self.boundary_pressure(time + dt, self.p_bound)
+        np.multiply(old, -beta, out=self.eps_bound)
+        self.eps_bound += self.p_bound
+        # first guess: eps = p_new - beta p_old with p_new ~ p_old
+        np.multiply(fs.p, 1.0 - beta, out=fs.eps)
+        result = self.poisson.solve(
+            fs.eps, fs.rhs, fs.zero, fs.ax, fs.ay, fs.az, self.eps_bound[0], self.eps_bound[1]
+        )
+        fs.iterations, fs.residual = result.iterations, result.residual
+        if not result.converged:
+            raise NumericalError(
+                f"the fluid pressure solve ({self.poisson.describe()}) did not converge in "
+                f"{result.iterations} iterations (relative residual {result.residual:.3g}) at "
+                f"t = {time + dt:.6g} s; raise fluid.solver.max_iterations or the tolerance, or "
+                'use method = "pcg"'
+            )
+        if self.follows:
+            fs.outflow += dt * top_outflow(
+                fs.v_star, fs.phi, fs.mobility, fs.grad_p, fs.p, fs.eps, fs.az, self.spacing, self.bc_sign,
+                self.p_kind, old, self.eps_bound, beta, rho, dt, stretch,
+            )  # fmt: skip
+            fs.height = self.height
+        correct(
+            fs.v_star, fs.eps, fs.phi, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
+            self.eps_bound, rho, beta, dt, fs.v, fs.p, fs.f_exchange,
+        )  # fmt: skip
+        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
+        fs.steps += 1
+        return result
+
+    # -- limits and checks ---------------------------------------------------------------------
+
+    def viscous_limit(self) -> float:
+        """Largest stable explicit fluid step for the viscous stress [s]: 1/(2 nu (sum 1/dx_a^2 +
+        max 1/dx_a^2)), dx^2/(8 nu) on cubic cells (the normal stress d_c(2 mu d_c v_c) doubles
+        one direction's share of dx^2/(6 nu))."""
+        inv2 = 1.0 / self.spacing**2
+        nu = self.mu / self.rho
+        return 1.0 / (2.0 * nu * (inv2.sum() + inv2.max()))
+
+    def advective_limit(self, speed: float) -> float:
+        """Largest fluid step with sum |u_a| dt/dx_a <= COURANT_LIMIT at the speed `speed` in the
+        worst direction [m/s] -> [s]."""
+        return COURANT_LIMIT / (speed * float(np.sum(1.0 / self.spacing))) if speed > 0 else math.inf
+
+    def courant(self, fs: NavierStokesState, dt: float) -> float:
+        return float(max_courant(fs.v, self.spacing, dt))
+
+    def first_unstable(self, fs: NavierStokesState, dt: float) -> str | None:
+        """A message naming the first bad cell (non-finite, or Courant number above COURANT_LIMIT),
+        or None."""
+        cell, reason, courant = first_unstable(fs.v, fs.p, self.spacing, dt, COURANT_LIMIT)
+        if cell < 0:
+            return None
+        i, j, k = np.unravel_index(int(cell), self.grid.shape)
+        centre = self.grid.origin + (np.array([i, j, k]) + 0.5) * self.spacing
+        where = f"fluid cell ({i}, {j}, {k}) at {tuple(round(float(c), 9) for c in centre)} m"
+        values = f"v = {tuple(float(c) for c in fs.v[i, j, k])} m/s, p = {float(fs.p[i, j, k]):.6g} Pa"
+        if reason == 1:
+            return f"{where} has a non-finite fluid state ({values})"
+        return (
+            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > "
+            f"{COURANT_LIMIT:g} ({values}); use a smaller dt or fluid.coupling.ndem, or set fluid.max_speed"
+        )
+
+    def describe(self) -> dict[str, str]:
+        c = self.config
+        bounds = []
+        for name, b in zip(("bottom", "top"), self.boundaries, strict=True):
+            text = "no flow" if isinstance(b, NoFlowBoundary) else f"pressure {b.pressure:g} Pa"
+            if isinstance(b, PressureBoundary) and b.amplitude > 0:
+                text += f" + {b.amplitude:g} Pa sin(2 pi {b.frequency:g} Hz t + {b.phase:g})"
+            if b.no_slip:
+                text += ", no slip"
+            bounds.append(f"{name}: {text}")
+        return {
+            "fluid": (
+                f"porous Navier-Stokes, formulation {c.formulation}, rho = {c.density:g} kg/m^3, "
+                f"mu = {c.viscosity:g} Pa s, beta = {c.beta:g}"
+            ),
+            "fluid grid": self.grid.describe()
+            + ", periodic in x and y"
+            + (", top following the z+ wall" if self.follows else ""),
+            "fluid boundaries": "; ".join(bounds),
+            "pressure solver": self.poisson.describe(),
+        }
+
+
+class NavierStokes(FluidModule):
+    """The porous Navier-Stokes fluid in the DEM loop: x/y periodic box, the grid of
+    [fluid.grid], porosity from the particles, drag both ways (physics/fluid/drag.py).
+
+    Schedule: the DEM takes ndem steps in the fluid field of the last fluid step (forces() and
+    kick() hand the drag to physics/fluid/drag.py), then after_step() measures the porosity where the
+    particles are now, has the drag module gather the force density the fluid receives, and
+    advances the fluid by ndem dt."""
+
+    model = "navier-stokes"
+    name = "fluid"
+    takes_over = {"kick": "particles"}  # the second half kick with the implicit drag
+
+    def __init__(self, loaded, state):
+        super().__init__(loaded, state)
+        cfg = loaded.case.fluid
+        box = state.box
+        if not (box.periodic[0] and box.periodic[1]) or box.periodic[2]:
+            raise loaded.error(
+                ("domain", "periodic"),
+                "the Navier-Stokes fluid needs x and y periodic and z not periodic (its bottom and "
+                "top boundaries are the box's z faces): periodic = [true, true, false]",
+            )
+        self.config = cfg
+        self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
+        if self._grid.shape[2] < 2:
+            raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
+        self.top_wall = None  # index of the wall the grid's top follows
+        if cfg.grid.follow_top_wall:
+            self.top_wall = _top_wall(loaded, state)
+        self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
+        self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
+        if self.top_wall is not None:
+            self.solver.resize(self._wall_height(state))
+        self.porosity = Porosity(self._grid, state.particles.count)
+        self.drag = FluidParticleDrag(
+            cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
+        )
+        self.fs = self.solver.allocate()
+        state.fluid = self.fs
+        self.floor = float(cfg.drag.porosity_floor)
+        self.warned = False
+        self.coupling_steps = cfg.coupling.ndem or 1
+        self.fluid_dt = math.nan  # ndem dt, set by start()
+        limit, reason = self._fluid_limit()
+        fixed = cfg.coupling.fluid_dt
+        if fixed is not None and fixed > limit:
+            raise loaded.error(
+                ("fluid", "coupling", "fluid_dt"),
+                f"above the fluid's stability limit {limit:.4g} s ({reason}); use fluid_dt <= {limit:.4g} s",
+            )
+
+    def _fluid_limit(self) -> tuple[float, str]:
+        """The fluid step's own limit [s] and what sets it."""
+        nu = self.config.viscosity / self.config.density
+        limit = self.solver.viscous_limit()
+        reason = f"viscous diffusion dx^2/(8 nu) of the fluid step, nu = {nu:.4g} m^2/s"
+        if self.config.max_speed is not None:
+            advective = self.solver.advective_limit(self.config.max_speed)
+            if advective < limit:
+                limit = advective
+                reason = (
+                    f"advective limit sum |u| dt/dx <= {COURANT_LIMIT:g} of the fluid step at "
+                    f"fluid.max_speed = {self.config.max_speed:g} m/s"
+                )
+        return limit, reason
+
+    def dt_limit(self) -> tuple[float, str]:
+        fixed = self.config.coupling.fluid_dt
+        if fixed is not None:
+            limit, reason = fixed, "the DEM sub-steps the fluid step fluid.coupling.fluid_dt"
+        else:
+            limit, reason = self._fluid_limit()
+            if self.coupling_steps > 1:
+                limit /= self.coupling_steps
+                reason += f", divided by fluid.coupling.ndem = {self.coupling_steps}"
+        drag_limit, drag_reason = self.drag.dt_limit()
+        if drag_limit < limit:
+            return drag_limit, drag_reason
+        return limit, reason
+
+    def start(self, state) -> None:
+        dt = state.clock.dt
+        fixed = self.config.coupling.fluid_dt
+        if fixed is not None:
+            self.coupling_steps = state.clock.steps_in(fixed)
+        self.fluid_dt = self.coupling_steps * dt
+        limit, reason = self._fluid_limit()
+        if fixed is not None and self.fluid_dt > limit:
+            raise self.loaded.error(
+                ("fluid", "coupling", "fluid_dt"),
+                f"is {self.coupling_steps} DEM steps of dt = {dt:.6g} s, a fluid step of "
+                f"{self.fluid_dt:.6g} s, above the fluid's stability limit {limit:.4g} s ({reason}); "
+                f"use fluid_dt <= {limit - dt:.4g} s or a dt that divides it",
+            )
+
+    def initialize(self, state) -> None:
+        """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
+        fs = self.fs
+        self._measure_porosity(state)
+        fs.dphi[...] = 0.0
+        self.solver.initial_pressure(fs, state.clock.time)
+
+    def forces(self, state, spring_dt: float | None = None) -> None:
+        self.drag.forces(state, self.fs, spring_dt)
+
+    def kick(self, state) -> None:
+        self.drag.kick(state, self.fs)
+
+    def after_step(self, state) -> None:
+        clock = state.clock
+        fs = self.fs
+        if self.top_wall is not None:
+            self._follow_wall(state)
+        # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
+        np.copyto(fs.dphi, fs.phi)
+        self._measure_porosity(state)
+        np.subtract(fs.phi, fs.dphi, out=fs.dphi)
+        fs.dphi *= 1.0 / self.fluid_dt
+        self.drag.fluid_forcing(state, fs, self.fluid_dt)
+        self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
+
+    def _wall_height(self, state) -> float:
+        """Height of the top wall above the grid's bottom [m]."""
+        return float(state.walls.coord[self.top_wall]) - float(self._grid.origin[2])
+
+    def _follow_wall(self, state) -> None:
+        """Stretch the grid to the top wall, or stop (exit 70) where its cells would no longer
+        hold what the porosity estimate (dz at least the largest particle diameter), the moving
+        grid's advection (the top moves at most half a cell per fluid step, the fluid's own
+        advective limit) or the viscous limit need."""
+        clock, nz = state.clock, self._grid.shape[2]
+        height = self._wall_height(state)
+        dz_old, dz = self.fs.height / nz, height / nz
+        where = (
+            f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
+            f"{float(state.walls.coord[self.top_wall]):.7g} m makes the fluid cells (fluid.grid."
+            f"follow_top_wall, {nz} along z) {dz:.6g} m high"
+        )
+        if not dz >= self.diameter:
+            raise NumericalError(
+                f"{where}, less than the largest particle diameter {self.diameter:.4g} m that the porosity "
+                "estimate needs; use fewer cells along z or stop the wall higher"
+            )
+        if not abs(height - self.fs.height) <= 0.5 * dz_old:
+            raise NumericalError(
+                f"{where}; the wall moved {abs(height - self.fs.height):.4g} m in one fluid step of "
+                f"{self.fluid_dt:.4g} s, more than half a cell ({dz_old:.4g} m), the advective limit of "
+                "the moving grid's explicit flux; use a smaller dt or fluid.coupling.ndem"
+            )
+        self.solver.resize(height)
+        limit = self.solver.viscous_limit()
+        if self.fluid_dt > limit:
+            raise NumericalError(
+                f"{where}, where the fluid step {self.fluid_dt:.4g} s exceeds the viscous limit "
+                f"dx^2/(8 nu) {limit:.4g} s; use a smaller dt or fluid.coupling.ndem"
+            )
+
+    def _measure_porosity(self, state) -> None:
+        """fs.phi from the particles where they are now, floored at fluid.drag.porosity_floor:
+        the fluid divides by phi, and the drag correlations take the same floor."""
+        fs = self.fs
+        self.porosity.measure(state.particles, fs.phi)
+        if fs.phi.min() >= self.floor:
+            return
+        if not self.warned:
+            self.warned = True
+            i, j, k = np.unravel_index(int(np.argmin(fs.phi)), fs.phi.shape)
+            warnings.warn(
+                f"step {state.clock.step}: porosity {fs.phi[i, j, k]:.3g} in fluid cell ({i}, {j}, {k}) "
+                f"is below fluid.drag.porosity_floor = {self.floor}; the fluid and the drag use the floor "
+                f"there ({int(np.count_nonzero(fs.phi < self.floor))} cell(s) now, not repeated)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        np.maximum(fs.phi, self.floor, out=fs.phi)
+
+    def prognostic_state(self, state) -> dict[str, np.ndarray]:
+        fs = self.fs
+        arrays = {name: getattr(fs, name) for name in NavierStokesState.PROGNOSTIC}
+        names = NavierStokesState.SCALARS
+        if self.top_wall is not None:
+            names += NavierStokesState.MOVING_GRID
+        for name in names:
+            arrays[name] = np.array(getattr(fs, name))
+        for name, value in self.drag.prognostic_state().items():
+            arrays["drag_" + name] = value
+        return arrays
+
+    def restore(self, state, arrays: dict) -> None:
+        fs = self.fs
+        for name in NavierStokesState.PROGNOSTIC:
+            getattr(fs, name)[...] = arrays[name]
+        fs.steps = int(arrays["steps"])
+        fs.iterations = int(arrays["iterations"])
+        fs.residual = float(arrays["residual"])
+        if self.top_wall is not None:
+            fs.height = float(arrays["height"])
+            fs.outflow = float(arrays["outflow"])
+            self.solver.resize(fs.height)
+        self.drag.restore({name[5:]: value for name, value in arrays.items() if name.startswith("drag_")})
+
+    def first_unstable(self, state) -> str | None:
+        return self.solver.first_unstable(self.fs, self.fluid_dt)
+
+    def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
+        fs = self.fs
+        fields = {
+            "pressure": (fs.p, "Pa"),
+            "velocity": (fs.v, "m s-1"),
+            "porosity": (fs.phi, "1"),
+            "interaction_force": (fs.f_exchange, "N m-3"),
+        }
+        if self.top_wall is not None:
+            fields[MOVING_GRID_SPACING] = (self._grid.spacing, "m")
+        return fields
+
+    def grid(self) -> FluidGrid:
+        return self._grid
+
+    def observables(self, state) -> dict[str, tuple[float, str]]:
+        fs = self.fs
+        values = {
+            "fluid_max_courant": (self.solver.courant(fs, self.fluid_dt), "1"),
+            "pressure_iterations": (float(fs.iterations), "1"),
+            "pressure_residual": (float(fs.residual), "1"),
+        }
+        if self.top_wall is not None:
+            values["fluid_grid_height"] = (fs.height, "m")
+            values["fluid_pore_volume"] = (float(fs.phi.sum()) * self._grid.cell_volume, "m3")
+            values["fluid_top_outflow_volume"] = (fs.outflow, "m3")
+        return values
+
+    def summary(self) -> dict[str, str]:
+        facts = self.solver.describe()
+        steps = self.coupling_steps
+        facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {steps} DEM step(s)"
+        return facts
+
+
+def _top_wall(loaded, state) -> int:
+    """Index of the "z+" wall that the grid's top follows; refuses a case where it cannot."""
+    cfg = loaded.case.fluid
+    faces = state.walls.faces if state.walls is not None else []
+    if "z+" not in faces:
+        raise loaded.error(
+            ("fluid", "grid", "follow_top_wall"),
+            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+            f"{', '.join(faces) or 'none'})",
+        )
+    if not isinstance(cfg.top, PressureBoundary):
+        raise loaded.error(
+            ("fluid", "top", "type"),
+            '"no-flow" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be able to '
+            'leave or enter through the moving top; use type = "pressure"',
+        )
+    return faces.index("z+")

@@ -1,0 +1,223 @@
+"""The pore-pressure equation of the Darcy model on a fluid grid, with the porosity given
+(kernels/fluid/pore_pressure.py has the equation and its references):
+
+    beta_f phi mu dp/dt = div(k grad p) - mu (dphi/dt + v_p . grad phi) / (1 - phi).
+
+One `advance` clamps the porosity, makes the permeability per cell (Kozeny-Carman or constant)
+and its harmonic means on the faces, and solves one backward-Euler step with the shared
+symmetric solver (physics/fluid/poisson.py), then the cell-centred gradient and Darcy velocity.
+Backward Euler is L-stable: the step is not bound by the explicit diffusion limit
+1 / (2 D sum(1/h^2)), D = k / (beta_f phi mu), which is nanoseconds for water in sand, and the
+stiff high-frequency modes are damped rather than left ringing (as Crank-Nicolson would at such
+steps). Its O(dt) error is what the tests measure.
+
+physics/fluid/darcy.py couples it to the particles (porosity from them, forces on them); the
+analytic tests drive it alone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...config.fluid_darcy import ConstantPermeability, DarcyFluid, PressureBoundary
+from ...kernels.fluid.poisson import face_means
+from ...kernels.fluid.pore_pressure import (
+    backward_euler_system,
+    clamp_porosity,
+    cut_fixed_faces,
+    darcy_velocity,
+    eliminate_fixed_cells,
+    first_bad_cell,
+    kozeny_carman,
+    pressure_gradient,
+)
+from .grid import FluidGrid
+from .poisson import PoissonResult, PoissonSolver
+
+
+def boundary_pressure(boundary, time: float) -> float:
+    """Excess pressure held on a "pressure" face at `time` [Pa]: pressure + amplitude
+    sin(2 pi t / period + phase); 0 for a no-flow face (unused there)."""
+    if not isinstance(boundary, PressureBoundary):
+        return 0.0
+    value = boundary.pressure
+    if boundary.amplitude > 0.0:
+        value += boundary.amplitude * math.sin(2.0 * math.pi * time / boundary.period + boundary.phase)
+    return value
+
+
+def fixed_pressure_cells(config: DarcyFluid, grid: FluidGrid) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """(mask uint8, value [Pa]) of the cells held at a prescribed pressure (centre inside a
+    region; a later region wins), and the indices of the regions that hold no cell centre."""
+    fixed = np.zeros(grid.shape, dtype=np.uint8)
+    value = np.zeros(grid.shape)
+    empty = []
+    centres = [grid.centres(a) for a in range(3)]
+    for r, region in enumerate(config.fixed_pressure):
+        bounds = zip(centres, region.lower, region.upper, strict=True)
+        inside = [(c >= lo) & (c <= hi) for c, lo, hi in bounds]
+        mask = inside[0][:, None, None] & inside[1][None, :, None] & inside[2][None, None, :]
+        if not mask.any():
+            empty.append(r)
+        fixed[mask] = 1
+        value[mask] = region.pressure
+    return fixed, value, empty
+
+
+@dataclass
+class DarcyState:
+    """The fluid arrays of a Darcy scene (cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3))."""
+
+    pressure: np.ndarray  # excess pore pressure p [Pa] (prognostic)
+    porosity: np.ndarray  # phi from the particles (or prescribed) [-]
+    porosity_rate: np.ndarray  # dphi/dt at fixed cell [1/s]
+    particle_velocity: np.ndarray  # mean particle velocity per cell [m/s]
+    porosity_used: np.ndarray  # phi clamped to [porosity_min, porosity_max] [-]
+    permeability: np.ndarray  # k [m^2]
+    gradient: np.ndarray  # grad p [Pa/m]
+    velocity: np.ndarray  # Darcy velocity q / phi, q from the face fluxes [m/s]
+    fixed: np.ndarray  # uint8, 1 = cell held at fixed_value
+    fixed_value: np.ndarray  # [Pa]
+    # scratch of the implicit step
+    storage: np.ndarray = field(repr=False, default=None)
+    rhs: np.ndarray = field(repr=False, default=None)
+    faces: tuple = field(repr=False, default=())
+    # diagnostics of the last fluid step
+    iterations: int = 0
+    residual: float = 0.0
+    clamped_cells: int = 0
+
+
+class PorePressure:
+    """The pore-pressure equation on a grid: porosity, its rate and the particle velocity are
+    inputs (state.porosity, .porosity_rate, .particle_velocity); `advance` takes one implicit
+    step and updates pressure, gradient and Darcy velocity."""
+
+    def __init__(self, config: DarcyFluid, grid: FluidGrid, kozeny_carman_coefficient: float | None = None):
+        if grid.periodic[2]:
+            raise ValueError("the Darcy grid cannot be periodic along z")
+        self.config = config
+        self.grid = grid
+        perm = config.permeability
+        if isinstance(perm, ConstantPermeability):
+            self.kc = None
+        else:
+            self.kc = perm.coefficient if perm.coefficient is not None else kozeny_carman_coefficient
+            if self.kc is None or not self.kc > 0:
+                raise ValueError("the Kozeny-Carman coefficient is needed (no particles to take d from)")
+        self.bottom_dirichlet = isinstance(config.bottom, PressureBoundary)
+        self.top_dirichlet = isinstance(config.top, PressureBoundary)
+        solver = config.solver
+        self.solver = PoissonSolver(
+            grid,
+            bottom="dirichlet" if self.bottom_dirichlet else "no-flux",
+            top="dirichlet" if self.top_dirichlet else "no-flux",
+            method=solver.method,
+            tolerance=solver.tolerance,
+            max_iterations=solver.max_iterations,
+        )
+        self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
+        self.ih = 1.0 / np.asarray(grid.spacing, dtype=np.float64)
+        self.ih2 = self.ih**2
+        fixed, fixed_value, _ = fixed_pressure_cells(config, grid)
+        shape = tuple(grid.shape)
+        self.state = DarcyState(
+            pressure=np.full(shape, float(config.initial_pressure)),
+            porosity=np.full(shape, 0.5 * (config.porosity_min + config.porosity_max)),
+            porosity_rate=np.zeros(shape),
+            particle_velocity=np.zeros(shape + (3,)),
+            porosity_used=np.zeros(shape),
+            permeability=np.zeros(shape),
+            gradient=np.zeros(shape + (3,)),
+            velocity=np.zeros(shape + (3,)),
+            fixed=fixed,
+            fixed_value=fixed_value,
+            storage=np.zeros(shape),
+            rhs=np.zeros(shape),
+            faces=self.solver.face_arrays(),
+        )
+        self.state.pressure[fixed == 1] = fixed_value[fixed == 1]
+        self.has_fixed = bool(fixed.any())
+
+    # -- the steps -------------------------------------------------------------------------------
+
+    def update_permeability(self) -> None:
+        """porosity -> clamped porosity -> k per cell."""
+        s, c = self.state, self.config
+        s.clamped_cells = int(clamp_porosity(s.porosity, c.porosity_min, c.porosity_max, s.porosity_used))
+        if self.kc is None:
+            s.permeability[...] = c.permeability.value
+        else:
+            kozeny_carman(s.porosity_used, self.kc, s.permeability)
+
+    def advance(self, dt: float, time: float) -> PoissonResult:
+        """One backward-Euler step of length dt [s] ending at `time` [s] (boundary values taken
+        there), from the current inputs. Raises ArithmeticError if the solve did not converge."""
+        s, c = self.state, self.config
+        self.update_permeability()
+        ax, ay, az = s.faces
+        face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        backward_euler_system(
+            s.pressure, s.porosity_used, s.porosity, s.porosity_rate, s.particle_velocity, self.ih,
+            self.periodic, c.compressibility, c.viscosity, dt, s.storage, s.rhs,
+        )  # fmt: skip
+        if self.has_fixed:
+            eliminate_fixed_cells(
+                s.fixed, s.fixed_value, ax, ay, az, self.ih2, self.periodic, s.storage, s.rhs
+            )
+            cut_fixed_faces(s.fixed, ax, ay, az, self.periodic)
+        bottom, top = self.boundary_values(time)
+        result = self.solver.solve(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
+        s.iterations, s.residual = result.iterations, result.residual
+        if not result.converged:
+            raise ArithmeticError(
+                f"the pore-pressure solve did not converge: residual {result.residual:.3g} after "
+                f"{result.iterations} iterations (fluid.solver.tolerance = {c.solver.tolerance:g}, "
+                f"max_iterations = {c.solver.max_iterations})"
+            )
+        self.update_gradient(time)
+        return result
+
+    def boundary_values(self, time: float) -> tuple[float, float]:
+        return boundary_pressure(self.config.bottom, time), boundary_pressure(self.config.top, time)
+
+    def update_gradient(self, time: float) -> None:
+        """grad p and the Darcy velocity from the current pressure and permeability (boundary
+        values at `time`)."""
+        s = self.state
+        bottom, top = self.boundary_values(time)
+        pressure_gradient(
+            s.pressure, self.ih, self.periodic, np.uint8(self.bottom_dirichlet), np.uint8(self.top_dirichlet),
+            bottom, top, s.gradient,
+        )  # fmt: skip
+        ax, ay, az = s.faces
+        # the faces again, uncut: a fixed cell exchanges fluid with its neighbours
+        face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        darcy_velocity(
+            s.pressure, ax, ay, az, self.ih, self.periodic, np.uint8(self.bottom_dirichlet),
+            np.uint8(self.top_dirichlet), bottom, top, s.porosity_used, self.config.viscosity, s.velocity,
+        )  # fmt: skip
+
+    # -- facts -----------------------------------------------------------------------------------
+
+    def explicit_limit(self) -> float:
+        """The explicit (forward Euler) diffusion limit 1 / (2 D_max sum(1/h^2)) of this grid with
+        the current permeability [s], D = k / (beta_f phi mu), the sum over the axes with more
+        than one cell (a single cell has no neighbour along its axis): what an explicit scheme
+        would need and backward Euler does not."""
+        s, c = self.state, self.config
+        self.update_permeability()
+        diffusivity = float(np.max(s.permeability / (c.compressibility * s.porosity_used * c.viscosity)))
+        stencil = sum(float(self.ih2[a]) for a in range(3) if self.grid.shape[a] > 1)
+        return 1.0 / (2.0 * diffusivity * stencil) if stencil > 0 else math.inf
+
+    def first_bad_cell(self) -> str | None:
+        m = int(first_bad_cell(self.state.pressure))
+        if m < 0:
+            return None
+        cell = np.unravel_index(m, self.grid.shape)
+        value = self.state.pressure[cell]
+        return f"pore pressure {value} Pa in fluid cell {tuple(int(i) for i in cell)}"

@@ -1,0 +1,108 @@
+"""Porosity of the fluid cells, and the per-cell mean particle velocity and diameter, from the
+particles (kernels/fluid/porosity.py has the method: exact lens volumes of each particle with a
+cell-centred sampling sphere of radius half the smallest cell edge).
+
+    porosity = Porosity(grid, particles.count)      # once, when the scene is built
+    porosity.measure(particles, phi)                 # each fluid step: fills phi (nx, ny, nz)
+    porosity.measure(particles, phi, vbar, dbar)     # also the means (nx, ny, nz, 3) and (nx, ny, nz)
+    porosity.cell_of                                 # (N,) flat cell of each particle centre, as
+                                                     # of the last measure ((i*ny + j)*nz + k)
+
+phi is clamped to [0, 1]: below 0 only where overlapping particles put more solid in a sampling
+sphere than it holds; the first clamp is logged as a warning, and measure() returns the number
+of cells clamped. The rate dphi/dt is the backward difference (phi - phi_previous) / dt_fluid,
+which each model takes over its own fluid step. No array is allocated after construction except
+the counting sort's small cursor array.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ...kernels.fluid.porosity import bin_particles, sample_cells
+from ...kernels.neighbors import counting_sort
+from .grid import FluidGrid
+
+log = logging.getLogger("sphere.fluid.porosity")
+
+
+class Porosity:
+    def __init__(self, grid: FluidGrid, count: int):
+        self.grid = grid
+        self.origin = np.asarray(grid.origin, dtype=np.float64)
+        self.spacing = np.asarray(grid.spacing, dtype=np.float64)
+        self.shape = np.asarray(grid.shape, dtype=np.int64)
+        self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
+        self.cell_of = np.zeros(count, dtype=np.int64)
+        self.wrapped = np.zeros((count, 3))
+        self.cell_start = np.zeros(grid.cell_count + 1, dtype=np.int64)
+        self.order = np.zeros(count, dtype=np.int64)
+        self.reach = np.zeros(3, dtype=np.int64)
+        self._reach = np.zeros(3)
+        self._no_velocity = np.zeros((1, 1, 1, 3))
+        self._no_diameter = np.zeros((1, 1, 1))
+        self._spare: dict[str, np.ndarray] = {}
+        self.clamped_cells = 0
+        self._warned = False
+
+    @property
+    def sampling_radius(self) -> float:
+        """[m], of the grid's current cells (a grid following the top wall changes them)."""
+        return self.grid.sampling_radius
+
+    def measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> int:
+        """Fill porosity (nx, ny, nz) [-] from particles.pos/.radius; with mean_velocity
+        (nx, ny, nz, 3) [m/s] and/or mean_diameter (nx, ny, nz) [m] also the lens-volume-weighted
+        means over the particles reaching each sampling sphere (0 where none does). Returns the
+        number of cells whose porosity was clamped at 0."""
+        pos, radius = particles.pos, particles.radius
+        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, self.cell_of, self.wrapped)
+        counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
+        # bins on either side of a cell that a particle touching its sampling sphere can lie in
+        largest = float(radius.max()) if radius.size else 0.0
+        np.floor(0.5 + (self.sampling_radius + largest) / self.spacing, out=self._reach)
+        self.reach[:] = self._reach
+        want = mean_velocity is not None or mean_diameter is not None
+        vbar, dbar = mean_velocity, mean_diameter
+        if vbar is None:
+            vbar = self._scratch("velocity", tuple(self.grid.shape) + (3,)) if want else self._no_velocity
+        if dbar is None:
+            dbar = self._scratch("diameter", tuple(self.grid.shape)) if want else self._no_diameter
+        clamped = sample_cells(
+            self.wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
+            self.sampling_radius, self.reach, self.cell_start, self.order, want, porosity, vbar, dbar,
+        )  # fmt: skip
+        self.clamped_cells = int(clamped)
+        if clamped and not self._warned:
+            self._warned = True
+            log.warning(
+                "porosity below 0 (overlapping particles fill a sampling sphere) clamped to 0 in %d of %d "
+                "fluid cells; further clamps are not logged",
+                clamped,
+                self.grid.cell_count,
+            )
+        return self.clamped_cells
+
+    def _scratch(self, name: str, shape: tuple) -> np.ndarray:
+        """A full-size array for the mean the caller did not ask for (made on first need)."""
+        array = self._spare.get(name)
+        if array is None:
+            array = self._spare[name] = np.zeros(shape)
+        return array
+
+
+def particle_cells(grid: FluidGrid, pos: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out (N,) int64: the flat cell index (i*ny + j)*nz + k of each particle centre (periodic
+    axes wrapped, others clamped to the grid); the same cells Porosity.cell_of holds."""
+    bin_particles(
+        pos,
+        np.asarray(grid.origin, dtype=np.float64),
+        np.asarray(grid.spacing, dtype=np.float64),
+        np.asarray(grid.shape, dtype=np.int64),
+        np.asarray(grid.periodic, dtype=np.uint8),
+        out,
+        np.empty_like(pos),
+    )
+    return out

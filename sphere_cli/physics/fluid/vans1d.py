@@ -1,0 +1,374 @@
+"""`[fluid] model = "vans1d"`: a vertical profile of streamwise (x) fluid velocity coupled to the
+particles of a laterally periodic cell, for bedload transport (after YADE's HydroForceEngine,
+Maurin et al. 2015, 2016, 2018).
+
+Every DEM step the particles feel drag, buoyancy and optional lift from the frozen profile
+(kernels/fluid/profile_forces.py). Every coupling interval the particles are averaged over the layers
+(kernels/fluid/layer_averaging.py) and the fluid profile is advanced over that same interval with its
+own implicit steps (kernels/fluid/vans1d.py), or, for a prescribed flow, left as given.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...config.consistency import particle_materials
+from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
+from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces
+from ...kernels.fluid.vans1d import (
+    MIXING_KINDS,
+    advance_fluid,
+    damp_mixing_length,
+    mixing_length,
+    shear_stress,
+)
+from ..fluid_plugin import FluidModule
+from .layer_averaging import LayerProfiles, layer_faces
+
+
+class FluidColumn:
+    """Velocity profile u at the centres of the layers `faces`, advanced with fixed solid
+    profiles (phi, vel_p, beta); every array is allocated here, once."""
+
+    def __init__(
+        self,
+        faces: np.ndarray,
+        rho: float,
+        nu: float,
+        mixing: str = "none",
+        kappa: float = 0.41,
+        phi_max: float = 0.61,
+        top_no_slip: bool = False,
+        van_driest: float = 0.0,
+    ):
+        self.faces = np.ascontiguousarray(faces, dtype=np.float64)
+        self.centres = 0.5 * (self.faces[1:] + self.faces[:-1])
+        n = self.centres.size
+        self.rho, self.nu = float(rho), float(nu)
+        self.kind = MIXING_KINDS[mixing]
+        self.kappa, self.phi_max = float(kappa), float(phi_max)
+        self.top_no_slip = bool(top_no_slip)
+        self.van_driest = float(van_driest)
+        self.u = np.zeros(n)
+        self.mixing = np.zeros(n + 1)  # mixing length at the faces [m]
+        self.damped = np.zeros(n + 1)  # the same, damped near the wall (van Driest) [m]
+        self.u_star = np.zeros(1)  # friction velocity of the damping [m/s]
+        self._coef = np.zeros(n + 1)
+        self._scratch = tuple(np.zeros(n) for _ in range(5))
+
+    @classmethod
+    def regular(cls, bottom, top, cells, stretching=1.0, **kwargs) -> FluidColumn:
+        return cls(layer_faces(bottom, top, cells, stretching), **kwargs)
+
+    @property
+    def cells(self) -> int:
+        return self.centres.size
+
+    def update_mixing_length(self, phi: np.ndarray) -> None:
+        mixing_length(self.faces, phi, self.kind, self.kappa, self.phi_max, self.mixing)
+        damp_mixing_length(self.mixing, self.kappa, self.van_driest, self.u_star[0], self.nu, self.damped)
+
+    def advance(self, phi, vel_p, beta, source: float, dt: float, steps: int) -> None:
+        """`steps` implicit steps of dt [s] with the solid profiles fixed; source = rho g_x - dp/dx
+        [N/m^3]. The mixing length must be up to date with phi."""
+        advance_fluid(
+            self.faces, self.centres, self.u, phi, vel_p, beta, self.mixing, self.damped, self.kappa,
+            self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip, float(dt),
+            int(steps), self._coef, *self._scratch,
+        )  # fmt: skip
+
+    def shear_stress(self, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Fluid shear stress at the n+1 faces [Pa] into `out`."""
+        shear_stress(
+            self.faces, self.centres, self.u, phi, self.damped, self.rho, self.nu, self.top_no_slip, out
+        )
+        return out
+
+
+@dataclass
+class Vans1dState:
+    """state.fluid of a vans1d scene."""
+
+    column: FluidColumn
+    profiles: LayerProfiles  # solid profiles of the last coupling
+    stress: np.ndarray  # (n+1,) fluid shear stress at the faces [Pa] (diagnostic)
+    selected: np.ndarray  # (N,) uint8: 1 = feels the fluid
+    drag_coef: np.ndarray  # (N,) K_p of the last force evaluation [kg/s]
+    drag_x: np.ndarray  # (N,) streamwise drag of the last force evaluation [N]
+
+
+class Vans1d(FluidModule):
+    model = "vans1d"
+
+    def __init__(self, loaded, state):
+        super().__init__(loaded, state)
+        cfg = loaded.case.fluid
+        self.cfg = cfg
+        box = state.box
+        self._check(loaded, box)
+        p = state.particles
+        selected = np.ones(p.count, dtype=np.uint8)
+        if cfg.materials:
+            names = list(particle_materials(loaded.case))  # material id k is the k-th name
+            selected[:] = np.isin(p.material, [names.index(name) for name in cfg.materials])
+        selected &= (p.inv_mass > 0).astype(np.uint8)
+        flow = cfg.flow
+        solved = isinstance(flow, SolvedFlow)
+        column = FluidColumn.regular(
+            float(box.lower[2]),
+            cfg.surface,
+            cfg.cells,
+            cfg.stretching,
+            rho=cfg.density,
+            nu=cfg.viscosity,
+            mixing=flow.mixing_length if solved else "none",
+            kappa=flow.kappa if solved else 0.41,
+            phi_max=cfg.phi_max,
+            top_no_slip=solved and flow.top == "no-slip",
+            van_driest=flow.van_driest if solved else 0.0,
+        )
+        self.solved = solved
+        self.area = float(box.length[0] * box.length[1])
+        self.source = cfg.density * float(box.body_acc[0]) - (flow.pressure_gradient if solved else 0.0)
+        self.gravity = np.ascontiguousarray(box.body_acc, dtype=np.float64)
+        state.fluid = Vans1dState(
+            column=column,
+            profiles=LayerProfiles.zeros(cfg.cells),
+            stress=np.zeros(cfg.cells + 1),
+            selected=selected,
+            drag_coef=np.zeros(p.count),
+            drag_x=np.zeros(p.count),
+        )
+        if not solved:
+            column.u[:] = prescribed_profile(flow, column.centres)
+        density = p.mass[selected == 1] / (4.0 / 3.0 * np.pi * p.radius[selected == 1] ** 3)
+        self.diameter = 2.0 * float(p.radius[selected == 1].mean()) if selected.any() else 0.0
+        self.particle_density = float(density.mean()) if density.size else 0.0
+        self._dt_limit = self._drag_relaxation_limit(p, selected)
+        self.coupling_steps = 1
+        self.fluid_steps = 1
+        self.fluid_dt = 0.0
+
+    # ---------------------------------------------------------------- checks and schedule
+
+    def _check(self, loaded, box) -> None:
+        cfg = self.cfg
+        if not (box.periodic[0] and box.periodic[1]) or box.periodic[2]:
+            raise loaded.error(
+                ("domain", "periodic"),
+                "the vans1d fluid is a vertical profile of a laterally periodic cell: it needs "
+                "periodic = [true, true, false]",
+            )
+        if abs(box.body_acc[1]) > 0.0:
+            raise loaded.error(
+                ("domain", "gravity"),
+                "the vans1d fluid flows along x: gravity must have no y component (tilt it in x-z)",
+            )
+        bottom, top = float(box.lower[2]), float(box.upper[2])
+        if not bottom < cfg.surface <= top:
+            raise loaded.error(
+                ("fluid", "surface"),
+                f"the fluid surface must lie inside the box, above its bottom z = {bottom:g} m and at "
+                f"most at its top z = {top:g} m",
+            )
+        names = list(particle_materials(loaded.case))
+        unknown = [name for name in cfg.materials if name not in names]
+        if unknown:
+            raise loaded.error(
+                ("fluid", "materials"),
+                f"{unknown}: no particle is made of it (particles.material names {names or 'none'})",
+            )
+
+    def dt_limit(self) -> tuple[float, str]:
+        return self._dt_limit
+
+    def _drag_relaxation_limit(self, p, selected) -> tuple[float, str]:
+        """The explicit drag needs dt below the relaxation time m/K of every particle; K is at
+        least its viscous part 3 pi rho nu d (1 - phi)^-n, largest at phi_max. (Faster slip
+        raises K further: first_unstable checks m/K of each particle as the run goes.)"""
+        sel = selected == 1
+        if not sel.any():
+            return math.inf, ""
+        cfg = self.cfg
+        hindrance = (1.0 - cfg.phi_max) ** (-cfg.drag_exponent)
+        k_viscous = 6.0 * math.pi * cfg.density * cfg.viscosity * p.radius[sel] * hindrance
+        relax = p.mass[sel] / k_viscous
+        i = int(np.argmin(relax))
+        return float(relax[i]), (
+            f"explicit drag: relaxation time m/K of the particle of radius {p.radius[sel][i]:.4g} m in the "
+            f"viscous limit at phi_max = {cfg.phi_max:g}"
+        )
+
+    def start(self, state) -> None:
+        dt = state.clock.dt
+        self.coupling_steps = state.clock.steps_in(self.cfg.coupling_interval)
+        interval = self.coupling_steps * dt
+        if self.solved:
+            self.fluid_steps = max(1, math.ceil(interval / self.cfg.flow.dt - 1e-9))
+            self.fluid_dt = interval / self.fluid_steps
+
+    def initialize(self, state) -> None:
+        self._average(state)
+        if self.solved and self.cfg.flow.initial == "steady":
+            self._steady_start(state)
+
+    # ---------------------------------------------------------------- every step
+
+    def forces(self, state, spring_dt=None) -> None:
+        p, f = state.particles, state.fluid
+        col = f.column
+        cfg = self.cfg
+        profile_forces(
+            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
+            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.phi_max, self.gravity,
+            cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
+        )  # fmt: skip
+
+    def after_step(self, state) -> None:
+        self._average(state)
+        if self.solved:
+            f = state.fluid
+            f.column.advance(
+                f.profiles.phi, f.profiles.vel, f.profiles.beta, self.source, self.fluid_dt, self.fluid_steps
+            )
+
+    def _average(self, state) -> None:
+        """Solid profiles of the current particles, the drag evaluated with the current fluid."""
+        p, f = state.particles, state.fluid
+        col, cfg = f.column, self.cfg
+        drag_coefficients(
+            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
+            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.phi_max, f.drag_coef, f.drag_x,
+        )  # fmt: skip
+        f.profiles.average(p.pos, p.vel, p.radius, f.selected, f.drag_coef, f.drag_x, col.faces, self.area)
+        col.update_mixing_length(f.profiles.phi)
+
+    def _steady_start(self, state, tol: float = 1e-9, max_rounds: int = 20000) -> None:
+        """Advance the fluid over the fixed initial particles until its profile stops changing:
+        implicit steps 100 x fluid.flow.dt long, in rounds of 100, until a round changes u by less
+        than tol relative to its largest value."""
+        f = state.fluid
+        col = f.column
+        dt = 100.0 * self.cfg.flow.dt
+        for _ in range(max_rounds):
+            before = col.u.copy()
+            col.advance(f.profiles.phi, f.profiles.vel, f.profiles.beta, self.source, dt, 100)
+            self._average(state)
+            change = float(np.abs(col.u - before).max())
+            if change <= tol * max(float(np.abs(col.u).max()), 1e-30):
+                return
+            if not math.isfinite(change):
+                break
+        raise self.loaded.error(
+            ("fluid", "flow", "initial"),
+            f"no steady fluid profile over the initial particles after {max_rounds * 100 * dt:g} s of "
+            'fluid time; start from initial = "rest"',
+        )
+
+    # ---------------------------------------------------------------- restart
+
+    def prognostic_state(self, state) -> dict:
+        f = state.fluid
+        prof = f.profiles
+        return {
+            "u": f.column.u,
+            "u_star": f.column.u_star,
+            "phi": prof.phi,
+            "vel": prof.vel,
+            "beta": prof.beta,
+            "drag": prof.drag,
+        }
+
+    def restore(self, state, arrays) -> None:
+        f = state.fluid
+        f.column.u[...] = arrays["u"]
+        f.column.u_star[...] = arrays["u_star"]
+        for name in ("phi", "vel", "beta", "drag"):
+            getattr(f.profiles, name)[...] = arrays[name]
+        f.column.update_mixing_length(f.profiles.phi)
+
+    # ---------------------------------------------------------------- diagnostics
+
+    def first_unstable(self, state) -> str | None:
+        f = state.fluid
+        u = f.column.u
+        bad = np.flatnonzero(~np.isfinite(u))
+        if bad.size:
+            k = int(bad[0])
+            return (
+                f"the vans1d fluid velocity is {u[k]} m/s in layer {k} (z = {f.column.centres[k]:.6g} m); "
+                "a smaller fluid.flow.dt or fluid.coupling_interval may help"
+            )
+        p = state.particles
+        ratio = f.drag_coef * p.inv_mass * state.clock.dt
+        i = int(np.argmax(ratio)) if ratio.size else 0
+        if ratio.size and ratio[i] > 1.0:
+            relax = 1.0 / (f.drag_coef[i] * p.inv_mass[i])
+            return (
+                f"particle {i}: its drag relaxation time m/K = {relax:.3g} s "
+                f"is below dt = {state.clock.dt:.3g} s, so the explicit drag is unstable; use a smaller dt"
+            )
+        return None
+
+    def bed_shear_stress(self, state) -> float:
+        f = state.fluid
+        return float(f.column.shear_stress(f.profiles.phi, f.stress).max())
+
+    def observables(self, state) -> dict:
+        p, f = state.particles, state.fluid
+        tau = self.bed_shear_stress(state)
+        g = float(np.linalg.norm(self.gravity))
+        rho = self.cfg.density
+        sel = f.selected == 1
+        volume = 4.0 / 3.0 * np.pi * p.radius[sel] ** 3
+        flux = float(np.sum(volume * p.vel[sel, 0])) / self.area
+        d = self.diameter
+        scale = math.sqrt(max(self.particle_density / rho - 1.0, 0.0) * g * d**3)
+        shields = tau / ((self.particle_density - rho) * g * d) if self.particle_density > rho else math.nan
+        return {
+            "bed_shear_stress": (tau, "Pa"),
+            "shields_number": (shields, "1"),
+            "sediment_flux": (flux, "m2 s-1"),
+            "q_star": (flux / scale if scale > 0 else math.nan, "1"),
+        }
+
+    def output_fields(self, state) -> dict:
+        f = state.fluid
+        prof = f.profiles
+        return {
+            "layer_height": (f.column.centres, "m"),
+            "fluid_velocity": (f.column.u, "m s-1"),
+            "solid_fraction": (prof.phi, "1"),
+            "particle_velocity": (prof.vel, "m s-1"),
+            "drag": (prof.drag, "N m-3"),
+        }
+
+    def summary(self) -> dict:
+        cfg = self.cfg
+        flow = cfg.flow
+        mesh = "regular" if cfg.stretching == 1.0 else f"stretched x{cfg.stretching:g}"
+        if self.solved:
+            how = (
+                f"solved, mixing length {flow.mixing_length}, top {flow.top}, fluid dt {self.fluid_dt:.3g} s"
+            )
+        else:
+            how = f"prescribed ({flow.kind})"
+        return {
+            "model": "vans1d (1D vertical profile, laterally periodic cell)",
+            "layers": f"{cfg.cells} ({mesh}) up to z = {cfg.surface:g} m",
+            "flow": how,
+            "coupling": f"every {self.coupling_steps} DEM steps",
+        }
+
+
+def prescribed_profile(flow, z: np.ndarray) -> np.ndarray:
+    """u at heights z of a log-law or tabulated flow [m/s]."""
+    if isinstance(flow, LogLawFlow):
+        height = np.maximum(z - flow.bed_level, flow.roughness_length)
+        return flow.friction_velocity / flow.kappa * np.log(height / flow.roughness_length)
+    if isinstance(flow, ProfileFlow):
+        return np.interp(z, flow.z, flow.u)
+    raise TypeError(f"not a prescribed flow: {flow!r}")

@@ -1,0 +1,83 @@
+"""The fluid of a scene, whichever model the case picks, seen by the rest of the program.
+
+A fluid model is one `FluidModule` subclass; the scene holds at most one. The builder imports
+the model's module only when the case has a `[fluid]` section, so a dry scene imports, allocates,
+compiles and writes nothing of any fluid. A model is a module of the step (physics/module.py):
+it adds its forces after the contacts and walls, may take over the particles' second half kick
+(implicit drag), and advances the fluid in after_step every `coupling_steps` steps.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from .module import Module
+
+# model tag -> "module:class", imported on demand
+MODELS = {
+    "navier-stokes": "sphere_cli.physics.fluid.navier_stokes:NavierStokes",
+    "darcy": "sphere_cli.physics.fluid.darcy:Darcy",
+    "vans1d": "sphere_cli.physics.fluid.vans1d:Vans1d",
+}
+
+# output field of a grid whose spacing changes in time (one that follows the top wall): the
+# spacing (3,) [m] of each frame, which the XDMF sidecar and `inspect` read back
+MOVING_GRID_SPACING = "grid_spacing"
+
+
+class FluidModule(Module):
+    """Base class of the fluid models: the hooks of the step (physics/module.py) and these."""
+
+    model = ""  # the [fluid] model tag, written to the trajectory
+    name = "fluid"  # the checkpoint group of its prognostic state
+
+    def __init__(self, loaded, state):
+        """Check the model against the rest of the case (raise loaded.error(...)) and allocate
+        its arrays into a container set as state.fluid."""
+        self.loaded = loaded
+
+    def start(self, state) -> None:
+        """Called once state.clock.dt is known, for a new run and a resumed one alike: sets
+        coupling_steps, the DEM steps between two fluid steps."""
+
+    def initialize(self, state) -> None:
+        """New runs only, after start(): the initial fluid state."""
+
+    def first_unstable(self, state) -> str | None:
+        """A message naming the cell (or level), the quantity and its value when the fluid state
+        has gone bad; None when it is fine."""
+        return None
+
+    def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
+        """name -> (array, unit) written with every frame under /fluid/<name>. Fields on a 3D
+        grid are cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3). A grid that moves adds
+        its spacing (3,) [m] as MOVING_GRID_SPACING."""
+        return {}
+
+    def grid(self):
+        """The FluidGrid (physics/fluid/grid.py) of 3D fields, for the XDMF sidecar; None for
+        a model without a 3D grid."""
+        return None
+
+    def summary(self) -> dict[str, str]:
+        """A few facts for run.log and `sphere inspect` (model, grid, solver)."""
+        return {}
+
+
+def build_fluid(loaded, state) -> FluidModule | None:
+    """The fluid module of the case, or None for a dry scene (nothing fluid is imported)."""
+    spec = loaded.case.fluid
+    if spec is None:
+        return None
+    module_name, class_name = MODELS[spec.model].split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name != module_name:
+            raise
+        raise loaded.error(
+            ("fluid", "model"), f'the fluid model "{spec.model}" is not available in this version'
+        ) from None
+    return getattr(module, class_name)(loaded, state)

@@ -1,0 +1,184 @@
+"""Energy budget (the forces and finish_step hooks, every step, only when `energy_budget` is
+among the observables): work of gravity and of moving walls, and the energy dissipated by
+damping, friction and rolling resistance, accumulated by kernels/observe/energy_budget.py before the
+contact forces of each step.
+
+The balance reported with the observables, against the energies at the start of accounting
+(the start of the run, or the resume step if an older checkpoint had no budget):
+    residual = W_gravity + W_walls - Delta(kinetic + elastic) - (damping + friction + rolling).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...kernels.observe.energy import kinetic_energy
+from ...kernels.observe.energy_budget import (
+    DAMPING,
+    FRICTION,
+    GRAVITY,
+    ROLLING,
+    TERMS,
+    WALLS,
+    accumulate_budget,
+)
+from ...state import State
+from ..module import Module
+
+UNITS = {
+    "work_gravity": "J",
+    "work_walls": "J",
+    "dissipated_damping": "J",
+    "dissipated_friction": "J",
+    "dissipated_rolling": "J",
+    "energy_change": "J",
+    "energy_balance_residual": "J",
+}
+
+
+class EnergyBudget(Module):
+    """Two hooks per step: `forces` (before the contacts, physics/module.py ORDER) keeps the
+    springs of the previous step and the half-step velocities; `finish_step` (after the second
+    half kick) books the step at the full-step velocities (see kernels/observe/energy_budget.py)."""
+
+    name = "energy_budget"
+
+    def __init__(self, scene):
+        self.scene = scene
+        state = scene.state
+        n = state.particles.count
+        self.totals = np.zeros(TERMS)
+        # kinetic + elastic energy when accounting began [J]
+        self.reference = np.zeros(1)
+        self.scratch = np.zeros((n, 2, 3))
+        self.parts = np.zeros((n, TERMS))
+        self.vel_half = np.zeros((n, 3))
+        self.angvel_half = np.zeros((n, 3))
+        self.hist = np.zeros_like(state.neighbors.hist)
+        walls = state.walls
+        self.still = np.zeros((0 if walls is None else walls.axis.shape[0], 3))
+        self.wall_hist = np.zeros((n, 0, 3)) if walls is None else np.zeros_like(walls.hist)
+        self.wall_vel_half = np.zeros_like(self.still)
+        self.no_walls = (
+            np.zeros(0, dtype=np.int64),
+            np.zeros(0),
+            np.zeros(0),
+            self.still,
+            self.still,
+            self.still,
+            np.zeros((0, 1, 6)),
+        )
+        self.pending = False
+
+    def _stored_energy(self) -> float:
+        """Kinetic energy of the particles moved by forces plus the elastic energy [J]."""
+        state = self.scene.state
+        p = state.particles
+        elastic, _ = self.scene.contact.elastic_energy(state)
+        if self.scene.walls is not None:
+            elastic += self.scene.walls.elastic_energy(state)[0]
+        free = p.inv_mass > 0.0
+        if free.all():
+            kinetic = kinetic_energy(p.vel, p.angvel, p.mass, p.inertia)
+        else:
+            kinetic = kinetic_energy(p.vel[free], p.angvel[free], p.mass[free], p.inertia[free])
+        return float(kinetic) + elastic
+
+    def start(self) -> None:
+        """Begin accounting at the current state."""
+        self.totals[:] = 0.0
+        self.reference[0] = self._stored_energy()
+
+    def forces(self, state: State, spring_dt: float | None = None) -> None:
+        if spring_dt == 0.0:
+            return  # the initial forces: no time passes
+        p, nl = state.particles, state.neighbors
+        if self.hist.shape != nl.hist.shape:  # the neighbour list grew
+            self.hist = np.zeros_like(nl.hist)
+        self.hist[...] = nl.hist
+        if state.walls is not None:
+            self.wall_hist[...] = state.walls.hist
+            self.wall_vel_half[...] = wall_velocity(state.walls, self.still)
+        self.vel_half[...] = p.vel
+        self.angvel_half[...] = p.angvel
+        self.pending = True
+
+    def finish_step(self, state: State) -> None:
+        if not self.pending:
+            return
+        self.pending = False
+        p, box, nl, w = state.particles, state.box, state.neighbors, state.walls
+        contact = self.scene.contact
+        if w is None:
+            walls = self.no_walls
+        else:
+            predicted = getattr(w, "vel_pred", None)
+            full = wall_velocity(w, self.still)
+            walls = (
+                w.axis,
+                w.sign,
+                w.coord,
+                self.wall_vel_half,
+                full if predicted is None else predicted,
+                full,
+                w.table,
+            )
+        accumulate_budget(
+            p.pos,
+            self.vel_half,
+            self.angvel_half,
+            p.vel_pred,
+            p.angvel_pred,
+            p.vel,
+            p.angvel,
+            p.radius,
+            p.mass,
+            p.inertia,
+            p.inv_mass,
+            p.inv_inertia,
+            p.material,
+            nl.nbr,
+            nl.nbr_count,
+            nl.start,
+            self.hist,
+            contact.table,
+            contact.hertz,
+            contact.rolling,
+            box.body_acc,
+            box.length,
+            box.periodic,
+            *walls,
+            self.wall_hist,
+            state.clock.dt,
+            self.scratch,
+            self.parts,
+            self.totals,
+        )
+
+    def observables(self, state: State) -> dict[str, tuple[float, str]]:
+        t = self.totals
+        change = self._stored_energy() - float(self.reference[0])
+        dissipated = t[DAMPING] + t[FRICTION] + t[ROLLING]
+        values = {
+            "work_gravity": t[GRAVITY],
+            "work_walls": t[WALLS],
+            "dissipated_damping": t[DAMPING],
+            "dissipated_friction": t[FRICTION],
+            "dissipated_rolling": t[ROLLING],
+            "energy_change": change,
+            "energy_balance_residual": t[GRAVITY] + t[WALLS] - change - dissipated,
+        }
+        return {name: (float(v), UNITS[name]) for name, v in values.items()}
+
+    def prognostic_state(self, state: State) -> dict:
+        return {"totals": self.totals, "reference": self.reference}
+
+    def restore(self, state: State, arrays: dict) -> None:
+        self.totals[:] = arrays["totals"]
+        self.reference[:] = arrays["reference"]
+
+
+def wall_velocity(walls, still: np.ndarray) -> np.ndarray:
+    """(W,3) velocity of each wall [m/s]: `still` (zeros) while walls carry no velocity."""
+    vel = getattr(walls, "vel", None)
+    return still if vel is None else vel

@@ -1,0 +1,189 @@
+"""What a run needs of the process it runs in: its threads, the signals that ask it to stop, the
+wall-time budget, and a warning when its OpenMP threads would share their cores with other
+busy processes.
+
+Numba's OpenMP threads spin while they wait for each other. On cores of their own that is the
+fastest way to wait; when another busy process holds one of those cores, every parallel region
+waits for a thread that is not running, and a run on 2 threads measured 25-30 x slower than on
+one (docs/performance.md). OMP_WAIT_POLICY=PASSIVE makes the threads sleep instead."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import sys
+import time
+from contextlib import contextmanager
+
+# how long the other processes' use of the cores is sampled [s]; /proc/stat counts in 1/100 s
+SAMPLE_SECONDS = 0.1
+# a busy process sharing our cores holds most of one; half of one is the margin for noise
+MARGIN_CORES = 0.5
+
+
+def busy_cores(stat_before: str, stat_after: str) -> float:
+    """Cores kept busy between two readings of /proc/stat (user, nice, system, irq and softirq
+    time; idle, iowait and a hypervisor's steal are not busy here), from its first line."""
+    before = [int(v) for v in stat_before.split("\n", 1)[0].split()[1:]]
+    after = [int(v) for v in stat_after.split("\n", 1)[0].split()[1:]]
+    delta = [a - b for a, b in zip(after, before, strict=False)]
+    total = sum(delta[:8])  # user nice system idle iowait irq softirq steal (guest is in user)
+    if total <= 0:
+        return 0.0
+    busy = delta[0] + delta[1] + delta[2] + delta[5] + delta[6]
+    cores = os.cpu_count() or 1
+    return cores * busy / total
+
+
+def measure_busy_cores(seconds: float = SAMPLE_SECONDS) -> float | None:
+    """Cores that other processes keep busy now (this one sleeps while it samples); None where
+    /proc/stat cannot be read (not Linux)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            before = f.read()
+        time.sleep(seconds)
+        with open("/proc/stat", encoding="ascii") as f:
+            after = f.read()
+    except OSError:
+        return None
+    return busy_cores(before, after)
+
+
+def shared_cores_note(
+    threads: int,
+    cores: int | None = None,
+    busy: float | None = None,
+    wait_policy: str | None = None,
+    layer: str | None = None,
+) -> str | None:
+    """The warning to give before a run on `threads` threads, or None. The arguments after
+    `threads` default to this machine's: its core count, the cores other processes keep busy
+    now (measured only when needed), OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
+    if threads < 2:
+        return None
+    if wait_policy is None:
+        wait_policy = os.environ.get("OMP_WAIT_POLICY", "")
+    if wait_policy.strip().lower() == "passive":
+        return None
+    if layer is None:
+        layer = os.environ.get("NUMBA_THREADING_LAYER", "default")
+    if layer.strip().lower() in ("workqueue", "tbb"):
+        return None  # threads that do not spin (TBB yields after a short spin)
+    if cores is None:
+        cores = os.cpu_count() or 1
+    if busy is None:
+        busy = measure_busy_cores()
+        if busy is None:
+            return None
+    free = cores - busy
+    if threads <= free + MARGIN_CORES:
+        return None
+    return (
+        f"other processes keep {busy:.1f} of this machine's {cores} cores busy, which leaves fewer "
+        f"than the {threads} threads of this run; OpenMP threads spin while they wait, so sharing "
+        "cores can slow the run many times over: set OMP_WAIT_POLICY=PASSIVE, or fewer threads "
+        "(simulation.threads, NUMBA_NUM_THREADS)"
+    )
+
+
+class StopFlag:
+    """Set from a signal handler or the wall-time budget; read once per step."""
+
+    def __init__(self):
+        self.reason: str | None = None
+        # a second SIGINT: stop at once, with no final checkpoint (its KeyboardInterrupt is
+        # raised where it lands, and raised again at the next step if Python dropped it there)
+        self.interrupted = False
+
+    def request(self, reason: str) -> None:
+        if self.reason is None:
+            self.reason = reason
+
+
+def set_threads(case) -> None:
+    """The Numba threads of `simulation.threads`, never more than NUMBA_NUM_THREADS allows."""
+    if case.simulation.threads is not None:
+        import numba
+
+        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
+
+
+def shared_cores_warning() -> str | None:
+    """Warn at once (stderr) when other busy processes share the run's cores
+    (below); returns the warning for the run's log. Called once the command is
+    known to go ahead and before any kernel runs, so that no thread of this run counts as busy."""
+    import numba
+
+    note = shared_cores_note(numba.get_num_threads())
+    if note is not None:
+        print(f"sphere: warning: {note}", file=sys.stderr)
+    return note
+
+
+@contextmanager
+def signal_handlers(stop: StopFlag, enabled: bool):
+    """SIGTERM/SIGUSR1 (what SLURM sends before a time limit) and a first SIGINT ask for a
+    checkpoint at the next step; a second SIGINT stops at once (KeyboardInterrupt)."""
+    if not enabled:
+        yield
+        return
+
+    def polite(signum, _frame):
+        name = signal.Signals(signum).name
+        if signum == signal.SIGINT and stop.reason is not None:
+            stop.interrupted = True
+            raise KeyboardInterrupt
+        stop.request(f"{name} received")
+
+    def drop_interrupt(unraisable):
+        # a KeyboardInterrupt raised inside a finalizer or weakref callback (h5py's, say) is
+        # dropped there by Python with a traceback; the loop raises it again at the next step
+        if not issubclass(unraisable.exc_type, KeyboardInterrupt):
+            previous_hook(unraisable)
+
+    previous = {s: signal.signal(s, polite) for s in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, drop_interrupt
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous_hook
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+SECONDS = re.compile(r"\d+(?:\.\d*)?")
+# SLURM's time forms (sbatch --time): MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS
+CLOCK = re.compile(
+    r"(?:(?P<days>\d+)-(?P<dh>\d+)(?::(?P<dm>\d+))?(?::(?P<ds>\d+))?|(?P<a>\d+):(?P<b>\d+)(?::(?P<c>\d+))?)"
+)
+# a sum of numbers with units: 90s, 45m, 2h30m, 1d12h, 1.5h
+COMPOUND = re.compile(r"(?:\d+(?:\.\d*)?[smhd])+")
+UNIT_SECONDS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_wall_time(text: str | None) -> float | None:
+    """'3600' (seconds), '45m', '2h30m', '1.5d', or SLURM's '30:00', '2:30:00', '1-12:00:00' ->
+    seconds."""
+    if text is None:
+        return None
+    s = text.strip().lower().replace(" ", "")
+    seconds = None
+    if SECONDS.fullmatch(s):
+        seconds = float(s)
+    elif match := CLOCK.fullmatch(s):
+        g = {k: int(v) if v is not None else 0 for k, v in match.groupdict().items()}
+        if match["days"] is not None:
+            seconds = g["days"] * 86400.0 + g["dh"] * 3600.0 + g["dm"] * 60.0 + g["ds"]
+        elif match["c"] is not None:  # HH:MM:SS
+            seconds = g["a"] * 3600.0 + g["b"] * 60.0 + g["c"]
+        else:  # MM:SS
+            seconds = g["a"] * 60.0 + g["b"]
+    elif COMPOUND.fullmatch(s):
+        seconds = sum(float(n) * UNIT_SECONDS[u] for n, u in re.findall(r"(\d+(?:\.\d*)?)([smhd])", s))
+    if seconds is None:
+        raise ValueError(
+            f"{text!r}: expected a duration: seconds (3600), with units (45m, 2h30m, 1.5d) "
+            "or as SLURM writes it (30:00, 2:30:00, 1-12:00:00)"
+        )
+    return seconds

@@ -1,0 +1,490 @@
+"""Case -> scene: radii, positions, walls, the physics modules in play, and the time step.
+
+Only what the case asks for is allocated: no walls, no wall arrays; a dry case, no fluid (the
+fluid model's module is not even imported).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config.consistency import MANY_STEPS, box_problems, step_problem
+from ..config.load import LoadedCase, warn
+from ..config.memory import memory_problems
+from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
+from ..errors import ResumeRefused
+from ..kernels.neighbors import worst_overlap
+from ..physics.contact import PairContactForces, one_contact_limit, stability_limit
+from ..physics.fluid_plugin import FluidModule, build_fluid
+from ..physics.materials import ContactTables, assign_materials, contact_tables
+from ..physics.module import Step, order_problems
+from ..physics.motion import Motion
+from ..physics.neighbors import NeighborSearch, allocate_neighbor_list
+from ..physics.observe.energy_budget import EnergyBudget
+from ..physics.observe.observables import Observer
+from ..physics.stages import Stages
+from ..physics.walls import PlaneWallForces, WallMotion, WallScales, apply_modes
+from ..state import Box, Clock, Particles, State
+from .groups import apply_groups
+from .packing import lattice_positions, lattice_sites, random_positions, read_particle_file
+from .radii import draw_radii
+from .walls import allocate_walls, rough_layers
+
+# dt = "auto" set by a fluid limit this many times below that of the particles alone is more
+# likely a wrong unit (a viscosity in cP, say) than the physics meant: warned of
+FLUID_LIMIT_RATIO = 1e3
+# dt = "auto" never takes more than this share of the stability bound
+AUTO_SHARE = 0.9
+
+
+@dataclass
+class Scene:
+    case: Case
+    state: State
+    motion: Motion
+    neighbors: NeighborSearch
+    contact: PairContactForces
+    walls: PlaneWallForces | None
+    dt_limit: float  # smallest stability limit of one contact alone or a fluid process [s]
+    dt_limit_reason: str = ""  # what sets it
+    dt_bound: float = math.inf  # stability bound with many contacts at a sphere (physics/contact.py) [s]
+    dt_bound_reason: str = ""
+    fluid: FluidModule | None = None
+    wall_motion: WallMotion | None = None  # only if some wall moves in some stage
+    stages: Stages | None = None  # only if the case has [[stages]]
+    budget: EnergyBudget | None = None  # only when the energy budget is observed
+    observer: Observer | None = None
+    # every module in play, in the order their hooks run (physics/module.py), and their bound
+    # hooks: set by order_modules(), again whenever a module or a hook method is replaced
+    modules: tuple = ()
+    step: Step = field(default_factory=lambda: Step(()))
+
+    # modules whose state a checkpoint may hold or lack (a resume starts them afresh)
+    OPTIONAL_STATE = ("energy_budget", "observables")
+
+    @property
+    def tables(self) -> ContactTables:
+        return self.contact.tables
+
+    @property
+    def finished(self) -> bool:
+        """True once the last stage has ended (never without stages)."""
+        return self.stages is not None and self.stages.finished
+
+    def order_modules(self) -> None:
+        """The scene's modules in the order of the step (physics/module.py ORDER) and their hooks."""
+        every = (
+            self.wall_motion, self.motion, self.neighbors, self.budget, self.contact, self.walls,
+            self.fluid, self.stages, self.observer,
+        )  # fmt: skip
+        self.modules = tuple(m for m in every if m is not None)
+        assert not order_problems(self.modules), order_problems(self.modules)
+        self.step = Step(self.modules)
+
+    def compute_initial_forces(self) -> None:
+        """Forces of the initial state, for the first half kick: no time has passed, so the
+        tangential springs do not grow."""
+        for forces in self.step.forces:
+            forces(self.state, spring_dt=0.0)
+
+
+# Extreme values (a density of 1e-308 kg/m^3, a stiffness of 1e308 N/m) overflow masses and limits
+# to 0 or inf; the dt they give is refused by name (_resolve_dt), so numpy's warnings would only
+# print source lines to the user before that message.
+@np.errstate(all="ignore")
+def build_scene(loaded: LoadedCase, restart=None) -> Scene:
+    """Build the scene of a case; with `restart` (a CheckpointData), the particles come from the
+    checkpoint (placement files are not needed again) and every module's state is restored."""
+    case = loaded.case
+    rng = np.random.default_rng(case.particles.seed)
+    tables = contact_tables(case)
+    n_placed = None
+    if restart is None:
+        pos, radius, vel, angvel, placement_file = _initial_particles(loaded, rng)
+        material = _file_materials(loaded, tables, placement_file)
+        if material is None:
+            material = assign_materials(tables.fractions, radius.size, rng)
+        n_placed = radius.size
+        rough_pos, rough_radius, rough_wall = rough_layers(case, case.domain.lower, case.domain.upper)
+        if rough_radius.size:
+            pos = np.concatenate([pos, rough_pos])
+            radius = np.concatenate([radius, rough_radius])
+            vel = np.concatenate([vel, np.zeros_like(rough_pos)])
+            angvel = np.concatenate([angvel, np.zeros_like(rough_pos)])
+            material = np.concatenate([material, np.zeros(rough_radius.size, dtype=np.int32)])
+    else:
+        saved = restart.arrays["particles"]
+        pos, radius, vel, angvel = saved["pos"], saved["radius"], saved["vel"], saved["angvel"]
+        material = np.zeros(radius.size, dtype=np.int32)  # restored with the particles
+        if "material" in saved:
+            material[:] = saved["material"]
+    n = radius.size
+    density = np.array([m.density for m in tables.materials])[material]
+    mass = density * 4.0 / 3.0 * np.pi * radius**3
+    inertia = 0.4 * mass * radius**2
+    particles = Particles(
+        pos=pos,
+        vel=vel,
+        angvel=angvel,
+        force=np.zeros((n, 3)),
+        torque=np.zeros((n, 3)),
+        radius=radius,
+        mass=mass,
+        inertia=inertia,
+        inv_mass=1.0 / mass,
+        inv_inertia=1.0 / inertia,
+        material=material,
+        vel_pred=vel.copy(),
+        angvel_pred=angvel.copy(),
+    )
+    dom = case.domain
+    box = Box(
+        lower=np.array(dom.lower, dtype=np.float64),
+        upper=np.array(dom.upper, dtype=np.float64),
+        periodic=np.array(dom.periodic, dtype=np.uint8),
+        body_acc=np.array(dom.gravity, dtype=np.float64),
+    )
+    if restart is not None:
+        # which particles are free decides the walls' default masses (and so dt): take it now
+        particles.inv_mass[:] = restart.arrays["particles"]["inv_mass"]
+    if restart is None:
+        _check_inside(loaded, box, pos[:n_placed], radius[:n_placed])
+        placed = slice(0, n_placed)
+        apply_groups(
+            case,
+            pos[placed],
+            vel[placed],
+            angvel[placed],
+            particles.inv_mass[placed],
+            particles.inv_inertia[placed],
+            *_file_groups(loaded, placement_file),
+        )
+        particles.inv_mass[n_placed:] = 0.0
+        particles.inv_inertia[n_placed:] = 0.0
+        particles.vel_pred[:] = vel
+
+    contact = PairContactForces(tables)
+    walls_state = None
+    walls = None
+    wall_motion = None
+    stages = None
+    scales = None
+    if case.walls:
+        moving = any(w.moves for w in case.walls) or any(w.moves for s in case.stages for w in s.walls)
+        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table, moving)
+        if restart is None and n > n_placed:
+            walls_state.attached = np.arange(n_placed, n, dtype=np.int64)
+            walls_state.attached_wall = rough_wall
+        walls = PlaneWallForces(contact)
+        wall_motion = WallMotion() if moving else None
+        scales = WallScales(case, tables, radius, mass, particles.inv_mass)
+    skin = case.simulation.neighbor_skin * float(radius.max())
+    state = State(
+        clock=Clock(dt=math.nan),  # set below, once every module has stated its limit
+        box=box,
+        particles=particles,
+        neighbors=allocate_neighbor_list(n, skin),
+        walls=walls_state,
+    )
+    fluid = build_fluid(loaded, state)
+    # the limit of one contact alone (a given dt above it is refused; dt = "auto" takes dt_safety
+    # of it) and the stability bound for spheres held by many contacts (dt = "auto" stays below
+    # it; a given dt above it is warned of), each lowered by the driven walls and the fluid
+    faces = [w.face for w in case.walls]
+    contacts = (tables, radius, mass, material, case.particles.overlap_tolerance, faces)
+    limits = [one_contact_limit(*contacts), stability_limit(*contacts)]
+    if walls_state is not None:
+        limits = [_driven_wall_limit(case, walls_state, scales, box, *limit) for limit in limits]
+    solid_limit = limits[0][0]
+    if fluid is not None:
+        fluid_limit = fluid.dt_limit()
+        limits = [min(limit, fluid_limit, key=lambda item: item[0]) for limit in limits]
+    (dt_limit, dt_reason), bound = limits
+    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit, bound)
+    if case.stages:
+        stages = Stages(case, walls_state, scales, contact)
+    elif walls_state is not None:
+        apply_modes(walls_state, dict(enumerate(case.walls)), scales, box, 0.0, walls_state.coord)
+    neighbors = NeighborSearch(state)
+    scene = Scene(
+        case=case,
+        state=state,
+        motion=Motion(),
+        neighbors=neighbors,
+        contact=contact,
+        walls=walls,
+        dt_limit=dt_limit,
+        dt_limit_reason=dt_reason,
+        dt_bound=bound[0],
+        dt_bound_reason=bound[1],
+        fluid=fluid,
+        wall_motion=wall_motion,
+        stages=stages,
+    )
+    if fluid is not None:
+        fluid.start(state)
+    observed = case.output.observables
+    scene.observer = Observer(scene, observed)
+    if "energy_budget" in observed.quantities:
+        scene.budget = EnergyBudget(scene)
+    scene.order_modules()
+    if restart is None:
+        if stages is not None:
+            stages.begin(state, 0)
+        neighbors.rebuild(state)
+        _check_overlaps(loaded, state)
+        if fluid is not None:
+            fluid.initialize(state)
+        scene.compute_initial_forces()
+        if scene.budget is not None:
+            scene.budget.start()
+    else:
+        _restore(loaded, scene, restart)
+    return scene
+
+
+def _driven_wall_limit(case: Case, walls, scales: WallScales, box: Box, limit: float, reason: str):
+    """The smaller of `limit` and the stability limit of every stress-driven wall mode of the
+    case (against one layer of contacts, physics/walls.py), with what sets it."""
+    from ..kernels.walls import wall_areas
+
+    area = np.zeros(len(walls.faces))
+    wall_areas(walls.axis, walls.sign, walls.coord, box.lower, box.upper, area)
+    index = {w.face: k for k, w in enumerate(case.walls)}
+    specs = [(w, "walls") for w in case.walls] + [(w, "stages") for s in case.stages for w in s.walls]
+    for spec, where in specs:
+        if not spec.driven:
+            continue
+        k = index[spec.face]
+        value = scales.dt_limit(spec, k, float(area[k]))
+        if value < limit:
+            limit = value
+            reason = (
+                f"stress-driven {spec.face} wall ({where}): mass {scales.mass(spec, float(area[k])):.4g} kg "
+                "against one layer of contacts, 2/omega (its damping is implicit)"
+            )
+    return limit, reason
+
+
+def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
+    if restart.dt != scene.state.clock.dt:
+        raise ResumeRefused(
+            f"{restart.path}: was written with dt = {restart.dt!r} s but the case now gives "
+            f"{scene.state.clock.dt!r} s"
+        )
+    modules = scene.step.stateful
+    optional = set(Scene.OPTIONAL_STATE)
+    if set(modules) - optional != set(restart.arrays) - optional:
+        raise ResumeRefused(
+            f"{restart.path}: holds state for {sorted(restart.arrays)} but the case needs {sorted(modules)}"
+        )
+    fresh = []
+    for name, module in modules.items():
+        if name in restart.arrays:
+            module.restore(scene.state, restart.arrays[name])
+        else:
+            fresh.append(module)
+    scene.state.clock.step = restart.step
+    for module in fresh:  # observed from the resume step on
+        module.start()
+
+
+def check_placement(loaded: LoadedCase) -> None:
+    """What `sphere validate` can check of the placement without building the scene: a lattice
+    that cannot hold the particles (their radii drawn as the build draws them, from the seed).
+    Random insertion is only known by doing it, and placement files are read by `run`."""
+    spec = loaded.case.particles
+    if isinstance(spec.placement, LatticePlacement):
+        radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
+        lattice_sites(spec.placement, loaded.case, radius)
+
+
+def _initial_particles(loaded: LoadedCase, rng):
+    """(pos, radius, velocity, angular velocity, the placement file or None)."""
+    spec = loaded.case.particles
+    velocity = angular_velocity = file = None
+    if isinstance(spec.placement, FilePlacement):
+        file = read_particle_file(spec.placement, loaded.base_dir)
+        pos, radius, velocity, angular_velocity = file.pos, file.radius, file.velocity, file.angular_velocity
+        if radius is None:
+            radius = draw_radii(spec.radius, pos.shape[0], rng)
+        # only now are the particles known: the case alone was checked without them
+        loc = ("particles", "placement", "path")
+        problems = box_problems(loaded.case, 2.0 * float(radius.max()))
+        problems += memory_problems(loaded.case, radius.size, float(radius.max()), loc)
+        if problems:
+            raise loaded.error(*problems[0])
+    else:
+        radius = draw_radii(spec.radius, spec.count, rng)
+        if isinstance(spec.placement, LatticePlacement):
+            pos = lattice_positions(spec.placement, loaded.case, radius, rng)
+        elif isinstance(spec.placement, RandomPlacement):
+            pos = random_positions(spec.placement, loaded.case, radius, rng)
+        else:
+            raise TypeError(f"unknown placement {spec.placement!r}")
+    if velocity is None:
+        velocity = np.tile(np.array(spec.velocity, dtype=np.float64), (radius.size, 1))
+    if angular_velocity is None:
+        angular_velocity = np.tile(np.array(spec.angular_velocity, dtype=np.float64), (radius.size, 1))
+    return (
+        np.ascontiguousarray(pos, dtype=np.float64),
+        np.ascontiguousarray(radius, dtype=np.float64),
+        np.ascontiguousarray(velocity, dtype=np.float64),
+        np.ascontiguousarray(angular_velocity, dtype=np.float64),
+        file,
+    )
+
+
+def _file_materials(loaded: LoadedCase, tables: ContactTables, file) -> np.ndarray | None:
+    """Material ids from the placement file's material column (None without one: the fractions
+    of particles.material deal them)."""
+    spec = loaded.case.particles
+    column = None if file is None else file.material
+    if column is None:
+        if isinstance(spec.material, list):
+            raise loaded.error(
+                ("particles", "material"),
+                f"a list of names needs a material column in {spec.placement.path} saying which particle "
+                "is made of which; the file has none",
+            )
+        return None
+    if spec.material is None:
+        raise loaded.error(
+            ("particles", "placement", "path"),
+            f"the file's material column names materials ({', '.join(sorted(set(column)))}); list them "
+            'in particles.material (material = ["name", ...])',
+        )
+    ids = {name: k for k, name in enumerate(tables.names)}
+    unknown = np.flatnonzero([name not in ids for name in column])
+    if unknown.size:
+        i = int(unknown[0])
+        raise loaded.error(
+            ("particles", "placement", "path"),
+            f"material column: particle {i} is made of {str(column[i])!r}, which particles.material does not "
+            f"name (it names {', '.join(tables.names)}); {unknown.size} particle(s) in all",
+        )
+    return np.array([ids[name] for name in column], dtype=np.int32)
+
+
+def _file_groups(loaded: LoadedCase, file) -> tuple:
+    """(group names, fixed flags) of the placement file's group and fixed columns, each None
+    where the file has none."""
+    if file is None:
+        return None, None
+    if file.group is not None:
+        known = {g.name for g in loaded.case.particles.groups if g.name is not None}
+        unknown = np.flatnonzero([name != "" and name not in known for name in file.group])
+        if unknown.size:
+            i = int(unknown[0])
+            raise loaded.error(
+                ("particles", "placement", "path"),
+                f"group column: particle {i} is in group {str(file.group[i])!r}, which no "
+                f"particles.groups entry names ({', '.join(sorted(known)) or 'none has a name'}); "
+                f"{unknown.size} particle(s) in all",
+            )
+    return file.group, file.fixed
+
+
+def _check_inside(loaded: LoadedCase, box: Box, pos: np.ndarray, radius: np.ndarray) -> None:
+    """The placed particles (not the glued layers of rough walls, which follow) lie in the box."""
+    for a in range(3):
+        if box.periodic[a]:
+            continue
+        outside = np.flatnonzero((pos[:, a] < box.lower[a]) | (pos[:, a] > box.upper[a]))
+        if outside.size:
+            i = int(outside[0])
+            raise loaded.error(
+                ("particles", "placement"),
+                f"particle {i} starts outside the box along {'xyz'[a]} (at {pos[i, a]:g} m, box "
+                f"{box.lower[a]:g} .. {box.upper[a]:g} m); {outside.size} particle(s) in all",
+            )
+    tol = loaded.case.particles.overlap_tolerance
+    for w in loaded.case.walls:
+        a = "xyz".index(w.face[0])
+        gap = pos[:, a] - box.lower[a] if w.face[1] == "-" else box.upper[a] - pos[:, a]
+        deep = np.flatnonzero(radius - gap > tol * radius)
+        if deep.size:
+            i = int(deep[0])
+            raise loaded.error(
+                ("particles", "placement"),
+                f"particle {i} overlaps the {w.face} wall by {(radius[i] - gap[i]) / radius[i]:.3g} of "
+                f"its radius, more than particles.overlap_tolerance = {tol}",
+            )
+
+
+def _check_overlaps(loaded: LoadedCase, state: State) -> None:
+    p, box, nl = state.particles, state.box, state.neighbors
+    i, j, overlap = worst_overlap(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic)
+    tol = loaded.case.particles.overlap_tolerance
+    if overlap > tol:
+        placement = loaded.case.particles.placement
+        source = f" (from {placement.path})" if isinstance(placement, FilePlacement) else ""
+        raise loaded.error(
+            ("particles", "overlap_tolerance"),
+            f"particles {i} and {j}{source} start overlapping by {overlap:.3g} of the smaller radius; "
+            "move them apart or raise the tolerance",
+        )
+
+
+def _resolve_dt(
+    loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: float, bound: tuple[float, str]
+) -> float:
+    """dt of the case, given the stability limit of one contact or a fluid process (and what
+    sets it), that of the particles and walls alone, and the stability bound with many contacts
+    at a sphere (and what sets it) [s]."""
+    sim = loaded.case.simulation
+    if sim.dt == "auto":
+        if not math.isfinite(dt_limit):
+            raise loaded.error(
+                ("simulation", "dt"),
+                "no contact can occur (one particle, no walls) and nothing else limits the step, "
+                'so "auto" has no limit; give dt in seconds',
+            )
+        dt = sim.dt_safety * dt_limit
+        if dt > AUTO_SHARE * bound[0]:
+            dt, reason = AUTO_SHARE * bound[0], f"{AUTO_SHARE:g} x the bound for {bound[1]}"
+        _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({reason}): ')
+        steps = sim.duration / dt
+        if math.isfinite(solid_limit) and dt_limit * FLUID_LIMIT_RATIO < solid_limit:
+            viscosity = getattr(loaded.case.fluid, "viscosity", None)
+            hint = "" if viscosity is None else f" (fluid.viscosity = {viscosity:g} Pa s)"
+            warn(
+                loaded.describe(
+                    ("simulation", "dt"),
+                    f"gives {dt:.3g} s, set by {reason}, {solid_limit / dt_limit:.3g} times below the "
+                    f"limit of the particles alone ({solid_limit:.3g} s): {steps:.3g} steps to reach "
+                    f"t = {sim.duration:g} s; check the fluid's parameters{hint}",
+                )
+            )
+        elif steps > MANY_STEPS:
+            warn(
+                loaded.describe(
+                    ("simulation", "dt"),
+                    f"gives {dt:.3g} s ({reason}): {steps:.3g} steps to reach t = {sim.duration:g} s",
+                )
+            )
+        return dt
+    if sim.dt > dt_limit:
+        raise loaded.error(
+            ("simulation", "dt"),
+            f"above the stability limit {dt_limit:.4g} s ({reason}); "
+            f'use dt <= {dt_limit:.4g} s or dt = "auto"',
+        )
+    if sim.dt > bound[0] and sim.stability == "packing":
+        raise loaded.error(
+            ("simulation", "dt"),
+            f"above the stability bound {bound[0]:.4g} s for spheres held by many contacts at once "
+            f'({bound[1]}); use dt <= {bound[0]:.4g} s or dt = "auto", or, for a scene that never '
+            f'packs densely, simulation.stability = "contact" (up to {dt_limit:.4g} s)',
+        )
+    _check_steps(loaded, sim.dt)  # the case was checked, but --until may have changed duration
+    return float(sim.dt)
+
+
+def _check_steps(loaded: LoadedCase, dt: float, prefix: str = "") -> None:
+    problem = step_problem(loaded.case.simulation.duration, dt)
+    if problem is not None:
+        raise loaded.error(("simulation", "dt"), prefix + problem)
