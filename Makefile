@@ -48,7 +48,7 @@ test: $(STAMP) $(PARAVIEW_STAMP)
 	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q --durations=10 -n auto --maxprocesses=4 --dist=loadfile
 
 bench: $(STAMP)
-	$(BIN)/sphere bench
+	$(BIN)/sphere bench dem
 
 # sphere against a lean hand-written C kernel of the same scene, side by side (needs gcc)
 bench-lean: $(STAMP)

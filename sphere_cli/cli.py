@@ -196,65 +196,134 @@ def plot(
         typer.echo(str(path))
 
 
-@app.command()
-def bench(
+bench_app = typer.Typer(
+    no_args_is_help=True,
+    rich_markup_mode=None,
+    help="Benchmarks (never part of the tests): dem, fluid, darcy, vans1d, grid.",
+)
+app.add_typer(bench_app, name="bench")
+
+THREADS_OPTION = typer.Option("1,2", "--threads", help="Thread counts, comma-separated.")
+CELLS_OPTION = typer.Option(64, "--cells", min=4, help="Fluid cells along each axis.")
+PARTICLES_OPTION = typer.Option(20_000, "--particles", min=1, help="Particles in the scene.")
+COUPLED_STEPS_OPTION = typer.Option(20, "--steps", min=1, help="Coupled steps per timing.")
+OUTPUT_OPTION = typer.Option(
+    Path("bench-results"),
+    "-o",
+    "--output",
+    help="Folder for the results (the settled beds are cached in the user cache directory).",
+)
+
+
+def _numbers(text: str, option: str = "--threads") -> tuple[int, ...]:
+    try:
+        return tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise typer.BadParameter(f"{option} {text!r}: expected comma-separated integers") from None
+
+
+def _bench(run) -> None:
+    try:
+        run()
+    except SphereError as exc:
+        _fail(exc)
+
+
+@bench_app.command("dem")
+def bench_dem(
     sizes: str = typer.Option("10000,100000", "--sizes", help="Particle counts, comma-separated."),
-    threads: str = typer.Option("1,2", "--threads", help="Thread counts, comma-separated."),
-    steps: int | None = typer.Option(
-        None, "--steps", help="Steps per timing (default 200; 20 coupled steps with --fluid)."
-    ),
-    repeats: int = typer.Option(3, "--repeats", help="Timings per row (the median is reported)."),
+    threads: str = THREADS_OPTION,
+    steps: int = typer.Option(200, "--steps", min=1, help="Steps per timing."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
-    output: Path = typer.Option(
-        Path("bench-results"),
-        "-o",
-        "--output",
-        help="Folder for the results (the settled beds are cached in the user cache directory).",
-    ),
-    fluid: bool = typer.Option(
-        False,
-        "--fluid",
-        help="Benchmark the Navier-Stokes fluid coupled to a DEM bed instead (--sizes, --repeats and "
-        "--states do not apply).",
-    ),
-    cells: int = typer.Option(64, "--cells", min=4, help="With --fluid: fluid cells along each axis."),
-    particles: int = typer.Option(20_000, "--particles", min=1, help="With --fluid: particles in the bed."),
-    jacobi_max_iterations: int = typer.Option(
-        100_000, "--jacobi-max-iterations", min=1, help="With --fluid: Jacobi stops after this many."
-    ),
-    jacobi_seconds: float = typer.Option(
-        60.0, "--jacobi-seconds", min=0.0, help="With --fluid: Jacobi stops after this many seconds."
-    ),
+    output: Path = OUTPUT_OPTION,
 ) -> None:
-    """Benchmark the canonical scene: particle-steps per second for each size, state and thread count;
-    with --fluid, the Navier-Stokes fluid coupled to a DEM bed: cell-updates per second of the fluid
-    step, time per coupled step, pressure-solve time of the fast solver and of Jacobi."""
-
-    def numbers(text: str) -> tuple[int, ...]:
-        try:
-            return tuple(int(x) for x in text.split(",") if x.strip())
-        except ValueError:
-            raise typer.BadParameter(f"{text!r}: expected comma-separated integers") from None
-
-    if fluid:
-        from .bench_navier_stokes import run_fluid_benchmark
-
-        try:
-            run_fluid_benchmark(
-                cells, particles, numbers(threads), steps or 20, jacobi_max_iterations, jacobi_seconds, output
-            )
-        except SphereError as exc:
-            _fail(exc)
-        return
-    from .bench import run_benchmark
+    """Particle-steps per second on the canonical DEM scene, for each size, state and thread count."""
+    from .bench.dem import run_benchmark
 
     chosen = tuple(s.strip() for s in states.split(",") if s.strip())
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
-    try:
-        run_benchmark(numbers(sizes), numbers(threads), steps or 200, repeats, chosen, output)
-    except SphereError as exc:
-        _fail(exc)
+    counts = _numbers(sizes, "--sizes"), _numbers(threads)
+    _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output))
+
+
+@bench_app.command("fluid")
+def bench_fluid(
+    cells: int = CELLS_OPTION,
+    particles: int = PARTICLES_OPTION,
+    threads: str = THREADS_OPTION,
+    steps: int = COUPLED_STEPS_OPTION,
+    jacobi_max_iterations: int = typer.Option(
+        100_000, "--jacobi-max-iterations", min=1, help="Jacobi stops after this many."
+    ),
+    jacobi_seconds: float = typer.Option(
+        60.0, "--jacobi-seconds", min=0.0, help="Jacobi stops after this many seconds."
+    ),
+    output: Path = OUTPUT_OPTION,
+) -> None:
+    """The Navier-Stokes fluid coupled to a DEM bed: cell-updates per second of the fluid step,
+    time per coupled step, pressure-solve time of the fast solver and of Jacobi."""
+    from .bench.fluid import run_fluid_benchmark
+
+    counts = _numbers(threads)
+    _bench(
+        lambda: run_fluid_benchmark(
+            cells, particles, counts, steps, jacobi_max_iterations, jacobi_seconds, output
+        )
+    )
+
+
+@bench_app.command("darcy")
+def bench_darcy(
+    cells: int = CELLS_OPTION,
+    particles: int = PARTICLES_OPTION,
+    threads: str = THREADS_OPTION,
+    steps: int = COUPLED_STEPS_OPTION,
+    tolerance: float = typer.Option(1e-8, "--tolerance", min=0.0, help="fluid.solver.tolerance."),
+) -> None:
+    """The Darcy model coupled to the DEM: one coupled step and its parts, with the solve's iterations."""
+    from .bench.darcy import run_darcy_benchmark
+
+    counts = _numbers(threads)
+    _bench(lambda: run_darcy_benchmark(cells, particles, counts, steps, tolerance))
+
+
+@bench_app.command("vans1d")
+def bench_vans1d(
+    case: Path = typer.Option(Path("configs/bedload.toml"), "--case", help="The vans1d case timed."),
+    threads: str = THREADS_OPTION,
+    simulated: float = typer.Option(0.05, "--time", min=0.0, help="Simulated seconds timed [s]."),
+) -> None:
+    """The 1D VANS bedload case: wall time per simulated second and the fluid's share of it."""
+    from .bench.vans1d import run_vans1d_benchmark
+
+    counts = _numbers(threads)
+    _bench(lambda: run_vans1d_benchmark(case, counts, simulated))
+
+
+@bench_app.command("grid")
+def bench_grid(
+    sizes: str = typer.Option("32,64", "--sizes", help="Cells along each axis, comma-separated."),
+    threads: str = THREADS_OPTION,
+    tolerance: float = typer.Option(1e-8, "--tolerance", min=0.0, help="Relative residual to reach."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Solves per row (the best is reported)."),
+    methods: str = typer.Option(
+        "pcg-multigrid,pcg-jacobi,jacobi", "--methods", help="Solvers, comma-separated."
+    ),
+    porosity: bool = typer.Option(False, "--porosity", help="Time the porosity estimate instead."),
+) -> None:
+    """The fluids' shared plumbing: the pressure solvers (iterations, time) or the porosity estimate."""
+    from .bench.grid import METHODS, porosity_benchmark, solver_benchmark
+
+    counts = _numbers(threads)
+    if porosity:
+        _bench(lambda: porosity_benchmark(counts))
+        return
+    chosen = tuple(m.strip() for m in methods.split(",") if m.strip())
+    if not set(chosen) <= set(METHODS):
+        raise typer.BadParameter(f"--methods {methods!r}: expected some of {', '.join(METHODS)}")
+    _bench(lambda: solver_benchmark(_numbers(sizes, "--sizes"), counts, tolerance, repeats, chosen))
 
 
 @app.command()

@@ -1,4 +1,4 @@
-"""`sphere bench` (the DEM canonical scene of issue 8) at a tiny size: every row of the report
+"""`sphere bench dem` (the canonical DEM scene) at a tiny size: every row of the report
 holds the figures docs/performance.md quotes, with consistent values. No timing is asserted
 (a shared machine makes any bound loose or flaky); the settled state is left out (it settles a
 bed for 0.15 s of simulated time)."""
@@ -12,7 +12,7 @@ from cli_test_support import sphere_inproc
 
 def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
     result = sphere_inproc(
-        "bench", "--sizes", "216", "--states", "loose", "--threads", "1,2", "--steps", "3",
+        "bench", "dem", "--sizes", "216", "--states", "loose", "--threads", "1,2", "--steps", "3",
         "--repeats", "2", "-o", tmp_path / "out",
     )  # fmt: skip
     assert result.code == 0, result.stdout + result.stderr

@@ -1,4 +1,4 @@
-"""`sphere bench --fluid` (sphere_cli/bench_navier_stokes.py) at a tiny size: the report holds
+"""`sphere bench fluid` (sphere_cli/bench/fluid.py) at a tiny size: the report holds
 every figure issue 3 asks for, with consistent values. No timing is asserted (a shared machine
 makes any bound either loose or flaky); only that times are positive and parts fit in wholes."""
 
@@ -14,7 +14,7 @@ def test_fluid_bench_reports_cells_particles_steps_and_both_pressure_solvers(tmp
     """8^3 cells, 200 particles, 2 coupled steps on one thread; Jacobi capped at 50 iterations
     (it needs ~600 at 8^3 from the warm start), so the report must say it did not converge."""
     result = sphere_inproc(
-        "bench", "--fluid", "--cells", "8", "--particles", "200", "--steps", "2", "--threads", "1",
+        "bench", "fluid", "--cells", "8", "--particles", "200", "--steps", "2", "--threads", "1",
         "--jacobi-max-iterations", "50", "-o", tmp_path / "out",
     )  # fmt: skip
     assert result.code == 0, result.stdout + result.stderr

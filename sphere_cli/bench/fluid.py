@@ -1,10 +1,10 @@
-"""`sphere bench --fluid`: the porous Navier-Stokes fluid coupled to a DEM bed (the fluid's
+"""`sphere bench fluid`: the porous Navier-Stokes fluid coupled to a DEM bed (the fluid's
 benchmark; never part of the tests' timings).
 
 The scene: a cube of `cells`^3 fluid cells of 2 mm (periodic in x and y), a bed of `particles`
-quartz spheres of 1 mm diameter (bench_darcy.py's particles, cells, contact law and dt: two
+quartz spheres of 1 mm diameter (darcy.py's particles, cells, contact law and dt: two
 diameters a cell, so that a particle fills at most 1/8 of a cell's sampling sphere; k_n = 1e3 N/m,
-dt = 4e-6 s) on the canonical scene's loose jittered lattice (bench.py: spacing 1.2 diameters)
+dt = 4e-6 s) on the canonical scene's loose jittered lattice (dem.py: spacing 1.2 diameters)
 filled from the floor: 11 236 a layer at 64^3, so 20 000 make a bed 2 layers (about 1 cell)
 deep under 63 cells of water. Water, Gidaspow drag, an upward seepage of half the bed's buoyant
 weight per area forced by the bottom pressure (top open at 0 Pa), one fluid step per DEM step
@@ -34,11 +34,12 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .bench import SPACING, _machine
-from .bench_darcy import CELL, DENSITY, DIAMETER, Stopwatch, scene_text, timed_steps
-from .config.load import parse_case
-from .physics.fluid.poisson import PoissonSolver
-from .scene.builder import build_scene
+from ..config.load import parse_case
+from ..physics.fluid.poisson import PoissonSolver
+from ..scene.builder import build_scene
+from . import Stopwatch, machine, timed_steps
+from .darcy import CELL, DENSITY, DIAMETER, scene_text
+from .dem import SPACING
 
 RADIUS = DIAMETER / 2.0  # [m]
 WATER = 1000.0  # [kg/m^3]
@@ -156,7 +157,7 @@ def run_fluid_benchmark(
     """Run the fluid benchmark (module docstring); write out_dir/bench-fluid.json and return it."""
     out_dir.mkdir(parents=True, exist_ok=True)
     max_threads = numba.config.NUMBA_NUM_THREADS
-    results = {"case": "fluid", "machine": _machine(), "load_average_before": list(os.getloadavg())}
+    results = {"case": "fluid", "machine": machine(), "load_average_before": list(os.getloadavg())}
     start = time.perf_counter()
     warm = build_scene(parse_case(case_text(8, 200)))  # 8^3: the multigrid's kernels too
     timed_steps(warm, 2)

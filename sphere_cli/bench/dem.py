@@ -1,4 +1,4 @@
-"""`sphere bench`: particle-steps per second on the canonical scene (never part of the tests).
+"""`sphere bench dem`: particle-steps per second on the canonical scene (never part of the tests).
 
 Canonical scene: N monodisperse spheres, R = 1 mm, rho = 2500 kg/m^3,
 linear contact k_n = 1e5 N/m, k_t = 2/7 k_n, e = 0.5, mu = 0.5, six fixed walls, gravity,
@@ -28,13 +28,13 @@ import time
 from pathlib import Path
 
 import numba
-import numpy as np
 
-from .config.load import parse_case
-from .io.checkpoint import newest_valid_checkpoint
-from .runtime import shared_cores_note
-from .scene.builder import build_scene
-from .simulation import advance
+from ..config.load import parse_case
+from ..io.checkpoint import newest_valid_checkpoint
+from ..runtime import shared_cores_note
+from ..scene.builder import build_scene
+from ..simulation import advance
+from . import machine
 
 RADIUS = 1e-3
 SPACING = 1.2
@@ -168,7 +168,7 @@ def run_benchmark(
 ) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     max_threads = numba.config.NUMBA_NUM_THREADS
-    results = {"machine": _machine(), "steps": steps, "repeats": repeats, "rows": []}
+    results = {"machine": machine(), "steps": steps, "repeats": repeats, "rows": []}
     # sampled before any kernel runs, so that no thread of the benchmark counts as busy
     note = shared_cores_note(min(max(threads, default=1), max_threads))
     results["shared_cores_note"] = note
@@ -237,7 +237,7 @@ def _sparse_row(log) -> dict:
 
 
 def _mean_contacts(scene) -> float:
-    from .physics.observe.energy import observables
+    from ..physics.observe.energy import observables
 
     obs = observables(scene)
     return 2.0 * obs["contacts"] / scene.state.particles.count
@@ -255,16 +255,3 @@ def _speedups(results: dict, log) -> None:
                 f"N = {row['n']:>7} {row['state']:>7}  {row['threads']} threads: "
                 f"{row['speedup']:.2f} x one thread"
             )
-
-
-def _machine() -> dict:
-    import os
-    import platform
-
-    return {
-        "cpu_count": os.cpu_count(),
-        "platform": platform.platform(),
-        "numba": numba.__version__,
-        "numpy": np.__version__,
-        "threading_layer_requested": numba.config.THREADING_LAYER,
-    }

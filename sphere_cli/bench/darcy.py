@@ -2,7 +2,7 @@
 coupled step on a 64^3 fluid grid with 20 000 particles, and of its parts, with the implicit
 solve's iterations.
 
-    python -m sphere_cli.bench_darcy [--cells 64] [--particles 20000] [--threads 1,2] [--steps 20]
+    sphere bench darcy [--cells 64] [--particles 20000] [--threads 1,2] [--steps 20]
 
 The scene: a box of 64 x 64 x 64 cells of 2 mm (periodic in x and y), 20 000 spheres of 1 mm
 diameter on a jittered lattice filling it (a suspension: every cell's sampling sphere sees
@@ -15,16 +15,15 @@ the rows are medians over `steps` steps.
 
 from __future__ import annotations
 
-import argparse
 import math
 import statistics
 import time
 
 import numba
 
-from .config.load import parse_case
-from .scene.builder import build_scene
-from .simulation import advance
+from ..config.load import parse_case
+from ..scene.builder import build_scene
+from . import Stopwatch, timed_steps
 
 DIAMETER = 1.0e-3  # [m]
 CELL = 2.0e-3  # [m]: two diameters
@@ -74,89 +73,56 @@ solver = {{ tolerance = {tolerance!r} }}
     )
 
 
-class Stopwatch:
-    """Wraps a bound method of the fluid so each call inside the coupled step is timed."""
-
-    def __init__(self, owner, name: str):
-        self.owner, self.name = owner, name
-        self.method = getattr(owner, name)
-        self.seconds: list[float] = []
-        self.cpu: list[float] = []
-        setattr(owner, name, self)
-
-    def __call__(self, *args, **kwargs):
-        start, cpu = time.perf_counter(), time.process_time()
-        result = self.method(*args, **kwargs)
-        self.seconds.append(time.perf_counter() - start)
-        self.cpu.append(time.process_time() - cpu)
-        return result
-
-    def restore(self) -> None:
-        setattr(self.owner, self.name, self.method)
-
-
-def timed_steps(scene, steps: int) -> tuple[list[float], list[float]]:
-    """Wall and process CPU time of each of `steps` steps [s]."""
-    wall, cpu = [], []
-    for _ in range(steps):
-        start, start_cpu = time.perf_counter(), time.process_time()
-        advance(scene, 1)
-        wall.append(time.perf_counter() - start)
-        cpu.append(time.process_time() - start_cpu)
-    return wall, cpu
-
-
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cells", type=int, default=64)
-    parser.add_argument("--particles", type=int, default=20000)
-    parser.add_argument("--threads", default="1,2")
-    parser.add_argument("--steps", type=int, default=20)
-    parser.add_argument("--tolerance", type=float, default=1e-8, help="fluid.solver.tolerance")
-    args = parser.parse_args(argv)
+def run_darcy_benchmark(
+    cells: int = 64,
+    particles: int = 20_000,
+    threads=(1, 2),
+    steps: int = 20,
+    tolerance: float = 1e-8,
+    log=print,
+) -> None:
+    """Log the timings of the module docstring, one row per thread count."""
     start = time.perf_counter()
-    scene = build_scene(parse_case(case_text(args.cells, args.particles, args.tolerance)))
+    scene = build_scene(parse_case(case_text(cells, particles, tolerance)))
     build = time.perf_counter() - start
     fluid, state = scene.fluid, scene.state
     first = timed_steps(scene, 1)[0][0]
     cold = fluid.pore.state.iterations
-    print(f"numba {numba.__version__} ({numba.threading_layer()} threading layer)")
-    print(
-        f"{args.cells}^3 cells, {state.particles.count} particles; build {build:.2f} s; first coupled step "
+    log(f"numba {numba.__version__} ({numba.threading_layer()} threading layer)")
+    log(
+        f"{cells}^3 cells, {state.particles.count} particles; build {build:.2f} s; first coupled step "
         f"{first:.2f} s (compile or cache load, and the cold solve from p = 0: {cold} iterations)"
     )
-    print(
+    log(
         "threads | coupled step [ms] wall (CPU) | porosity [ms] wall (CPU) | pressure step [ms] wall (CPU) | "
         "solve iterations | forces [ms] wall (CPU) | DEM alone [ms] wall"
     )
     med = statistics.median
-    for threads in (int(t) for t in args.threads.split(",")):
-        numba.set_num_threads(threads)
+    for count in threads:
+        numba.set_num_threads(count)
         timed_steps(scene, 2)
-        watches = [Stopwatch(fluid, "_measure"), Stopwatch(fluid.pore, "advance"), Stopwatch(fluid, "forces")]
-        scene.order_modules()  # the step's hooks taken anew: the timed forces
-        iterations, steps, steps_cpu = [], [], []
-        for _ in range(args.steps):
+        watches = [
+            Stopwatch(fluid, "_measure"),
+            Stopwatch(fluid.pore, "advance"),
+            Stopwatch(fluid, "forces", scene),
+        ]
+        iterations, step_wall, step_cpu = [], [], []
+        for _ in range(steps):
             wall, cpu = timed_steps(scene, 1)
-            steps += wall
-            steps_cpu += cpu
+            step_wall += wall
+            step_cpu += cpu
             iterations.append(fluid.pore.state.iterations)
         for watch in watches:
             watch.restore()
         scene.fluid = None  # the same steps without the fluid: contacts, walls, integration
         scene.order_modules()
-        dem = timed_steps(scene, args.steps)[0]
+        dem = timed_steps(scene, steps)[0]
         scene.fluid = fluid
         scene.order_modules()
         porosity, solve, forces = (med(w.seconds) for w in watches)
         porosity_cpu, solve_cpu, forces_cpu = (med(w.cpu) for w in watches)
-        print(
-            f"{threads} | {1e3 * med(steps):.1f} ({1e3 * med(steps_cpu):.1f}) | {1e3 * porosity:.1f} "
+        log(
+            f"{count} | {1e3 * med(step_wall):.1f} ({1e3 * med(step_cpu):.1f}) | {1e3 * porosity:.1f} "
             f"({1e3 * porosity_cpu:.1f}) | {1e3 * solve:.1f} ({1e3 * solve_cpu:.1f}) | "
-            f"{med(iterations):.0f} | {1e3 * forces:.2f} ({1e3 * forces_cpu:.2f}) | {1e3 * med(dem):.1f}",
-            flush=True,
+            f"{med(iterations):.0f} | {1e3 * forces:.2f} ({1e3 * forces_cpu:.2f}) | {1e3 * med(dem):.1f}"
         )
-
-
-if __name__ == "__main__":
-    main()

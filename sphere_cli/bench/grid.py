@@ -2,8 +2,8 @@
 (physics/fluid/poisson.py), iterations and time of "pcg" and "jacobi" at the same tolerance, and the
 porosity estimate (physics/fluid/porosity.py).
 
-    python -m sphere_cli.bench_grid [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
-    python -m sphere_cli.bench_grid --porosity [--threads 1,2]
+    sphere bench grid [--sizes 32,64] [--threads 1,2] [--tolerance 1e-8]
+    sphere bench grid --porosity [--threads 1,2]
 
 The problem is the pressure equation of the Navier-Stokes model: -div(a grad x) = b on the unit
 cube, periodic in x and y, Dirichlet (x = 0) at the bottom face, no-flux at the top, c = 0, from
@@ -19,16 +19,15 @@ periodic in x and y; time of one measure() with the mean velocity and diameter, 
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numba
 import numpy as np
 
-from .kernels.fluid.poisson import face_means
-from .physics.fluid.grid import FluidGrid
-from .physics.fluid.poisson import PoissonSolver
-from .physics.fluid.porosity import Porosity
+from ..kernels.fluid.poisson import face_means
+from ..physics.fluid.grid import FluidGrid
+from ..physics.fluid.poisson import PoissonSolver
+from ..physics.fluid.porosity import Porosity
 
 
 def problem(n: int, variable: bool):
@@ -61,7 +60,7 @@ def time_solve(grid, b, cell, method, preconditioner, tolerance, repeats):
     return result, best, best_cpu
 
 
-def porosity_benchmark(threads: list[int], repeats: int = 5) -> None:
+def porosity_benchmark(threads=(1, 2), repeats: int = 5, log=print) -> None:
     from types import SimpleNamespace
 
     n, edge, count = 64, 2e-3, 20_000
@@ -71,7 +70,7 @@ def porosity_benchmark(threads: list[int], repeats: int = 5) -> None:
     particles = SimpleNamespace(pos=pos, vel=rng.standard_normal((count, 3)), radius=np.full(count, 1e-3))
     porosity = Porosity(grid, count)
     phi, vbar, dbar = np.zeros(grid.shape), np.zeros(grid.shape + (3,)), np.zeros(grid.shape)
-    print("porosity: 64^3 cells, 20 000 particles | threads | wall ms | CPU ms per measure")
+    log("porosity: 64^3 cells, 20 000 particles | threads | wall ms | CPU ms per measure")
     for t in threads:
         numba.set_num_threads(t)
         porosity.measure(particles, phi, vbar, dbar)
@@ -81,44 +80,35 @@ def porosity_benchmark(threads: list[int], repeats: int = 5) -> None:
             porosity.measure(particles, phi, vbar, dbar)
             best = min(best, time.perf_counter() - start)
             best_cpu = min(best_cpu, time.process_time() - start_cpu)
-        print(f"porosity | {t} | {1e3 * best:.1f} | {1e3 * best_cpu:.1f}", flush=True)
+        log(f"porosity | {t} | {1e3 * best:.1f} | {1e3 * best_cpu:.1f}")
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", default="32,64")
-    parser.add_argument("--threads", default="1,2")
-    parser.add_argument("--tolerance", type=float, default=1e-8)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--methods", default="pcg-multigrid,pcg-jacobi,jacobi")
-    parser.add_argument("--porosity", action="store_true", help="time the porosity estimate instead")
-    args = parser.parse_args(argv)
-    if args.porosity:
-        porosity_benchmark([int(t) for t in args.threads.split(",")])
-        return
-    print(f"numba {numba.__version__}, threading layer after first use; tolerance {args.tolerance:g}")
-    print(
+METHODS = ("pcg-multigrid", "pcg-jacobi", "jacobi")
+
+
+def solver_benchmark(
+    sizes=(32, 64), threads=(1, 2), tolerance: float = 1e-8, repeats: int = 3, methods=METHODS, log=print
+) -> None:
+    """Log, for each size, coefficient field, method and thread count, the solve of the module
+    docstring: iterations, wall and CPU time, CPU time per iteration and cell-updates per CPU s."""
+    log(f"numba {numba.__version__}, threading layer after first use; tolerance {tolerance:g}")
+    log(
         "n^3 | coefficient | method | threads | iterations | wall [s] | CPU [s] | CPU ms/iteration"
         " | M cell-updates/CPU s"
     )
-    for n in (int(s) for s in args.sizes.split(",")):
+    for n in sizes:
         for variable in (False, True):
             grid, b, cell = problem(n, variable)
-            for method in args.methods.split(","):
-                for threads in (int(t) for t in args.threads.split(",")):
-                    numba.set_num_threads(threads)
+            for method in methods:
+                for count in threads:
+                    numba.set_num_threads(count)
                     name, _, preconditioner = method.partition("-")
                     result, wall, cpu = time_solve(
-                        grid, b, cell, name, preconditioner or "jacobi", args.tolerance, args.repeats
+                        grid, b, cell, name, preconditioner or "jacobi", tolerance, repeats
                     )
                     its = max(result.iterations, 1)
-                    print(
-                        f"{n}^3 | {'porosity' if variable else 'a = 1'} | {method} | {threads} | "
+                    log(
+                        f"{n}^3 | {'porosity' if variable else 'a = 1'} | {method} | {count} | "
                         f"{result.iterations} | {wall:.3f} | {cpu:.3f} | {1e3 * cpu / its:.2f} | "
-                        f"{n**3 * its / cpu / 1e6:.1f}",
-                        flush=True,
+                        f"{n**3 * its / cpu / 1e6:.1f}"
                     )
-
-
-if __name__ == "__main__":
-    main()

@@ -1,0 +1,58 @@
+"""`sphere bench darcy|vans1d|grid` at tiny sizes: each runs through the command line and
+reports its rows; no timing is asserted (a shared machine makes any bound loose or flaky)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from cli_test_support import assert_clean_error, sphere_inproc
+
+BEDLOAD = Path(__file__).parents[2] / "configs" / "bedload.toml"
+
+
+def rows(stdout: str, first: str) -> list[list[str]]:
+    """The table rows of the report that begin with `first`, split at the bars."""
+    return [[c.strip() for c in line.split("|")] for line in stdout.splitlines() if line.startswith(first)]
+
+
+def test_darcy_bench_times_the_coupled_step_and_its_parts():
+    result = sphere_inproc(
+        "bench", "darcy", "--cells", "8", "--particles", "200", "--steps", "2", "--threads", "1"
+    )
+    assert result.code == 0, result.stdout + result.stderr
+    assert "8^3 cells, 200 particles" in result.stdout
+    (row,) = rows(result.stdout, "1 |")
+    assert len(row) == 7  # threads, step, porosity, pressure step, iterations, forces, DEM alone
+    assert all(re.fullmatch(r"[0-9.]+( \([0-9.]+\))?", cell) for cell in row)
+
+
+def test_grid_bench_times_each_solver_on_both_coefficient_fields():
+    result = sphere_inproc(
+        "bench", "grid", "--sizes", "8", "--threads", "1", "--methods", "pcg-jacobi,jacobi", "--repeats", "1"
+    )
+    assert result.code == 0, result.stdout + result.stderr
+    found = rows(result.stdout, "8^3 |")
+    assert [(r[1], r[2]) for r in found] == [
+        ("a = 1", "pcg-jacobi"), ("a = 1", "jacobi"), ("porosity", "pcg-jacobi"), ("porosity", "jacobi"),
+    ]  # fmt: skip
+    assert all(int(r[4]) >= 1 for r in found)  # iterations
+
+
+def test_grid_bench_refuses_an_unknown_solver():
+    result = sphere_inproc("bench", "grid", "--methods", "multigrid")
+    assert_clean_error(result, 2, "--methods", "pcg-multigrid, pcg-jacobi, jacobi")
+
+
+def test_vans1d_bench_reports_time_per_simulated_second_and_shares():
+    result = sphere_inproc("bench", "vans1d", "--case", BEDLOAD, "--threads", "1", "--time", "0.002")
+    assert result.code == 0, result.stdout + result.stderr
+    assert re.search(r"threads 1: [0-9.]+ s per simulated second", result.stdout)
+    for part in ("fluid forces", "averaging", "fluid resolution"):
+        assert re.search(rf"{part} [0-9.]+ %", result.stdout), part
+
+
+def test_help_of_every_benchmark():
+    for name in ("dem", "fluid", "darcy", "vans1d", "grid"):
+        result = sphere_inproc("bench", name, "--help")
+        assert result.code == 0 and "Usage" in result.stdout, name
