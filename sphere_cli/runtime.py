@@ -36,14 +36,14 @@ def busy_cores(stat_before: str, stat_after: str) -> float:
     return cores * busy / total
 
 
-def measure_busy_cores(seconds: float = SAMPLE_SECONDS) -> float | None:
+def measure_busy_cores(seconds: float = SAMPLE_SECONDS, stat: str = "/proc/stat") -> float | None:
     """Cores that other processes keep busy now (this one sleeps while it samples); None where
     /proc/stat cannot be read (not Linux)."""
     try:
-        with open("/proc/stat", encoding="ascii") as f:
+        with open(stat, encoding="ascii") as f:
             before = f.read()
         time.sleep(seconds)
-        with open("/proc/stat", encoding="ascii") as f:
+        with open(stat, encoding="ascii") as f:
             after = f.read()
     except OSError:
         return None

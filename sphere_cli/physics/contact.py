@@ -1,7 +1,7 @@
 """Particle-particle contacts (the forces hook): the linear or Hertz-Mindlin law of kernels/contact.py
 with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
 
-Time-step limits (shared/validation E; user guide section 2). The dashpots act at the
+Time-step limits (verification group E; user guide section 2). The dashpots act at the
 predicted velocity v_n + dt a_n (kernels/motion.py): on a damped linear mode (omega, zeta) that
 velocity Verlet is stable while omega dt <= 2 (sqrt(1 + 4 zeta^2) - 2 zeta), the central-difference
 limit with zeta doubled (its amplification matrix of (x, v, a) has det(M + I) = 4 - h^2 - 8 zeta h,

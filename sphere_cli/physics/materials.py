@@ -8,7 +8,7 @@ unless [[contact.pairs]] (or walls[].friction) gives a value explicitly:
 
 - Hertz-Mindlin: 1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b and
   1/G* = (2 - nu_a)/G_a + (2 - nu_b)/G_b with G = E/(2 (1 + nu)) (Hertz 1882; Mindlin 1949;
-  shared/validation A2). A rigid wall (no material) adds nothing: 1/E* = (1 - nu_a^2)/E_a.
+  verification group A2). A rigid wall (no material) adds nothing: 1/E* = (1 - nu_a^2)/E_a.
 - Linear: k = 2 k_a k_b/(k_a + k_b) for k_n and k_t, two half-contacts in series (like pairs
   keep the material's k). A wall without a material uses the particle material's own k.
 - Restitution, friction and rolling friction: the arithmetic mean (e_a + e_b)/2; against a

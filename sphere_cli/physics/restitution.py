@@ -3,7 +3,7 @@
 Both normal laws are clamped, F_n = max(0, elastic + damping) (never attractive), so the
 contact ends when the force reaches zero, which happens before the overlap returns to zero.
 
-Linear spring-dashpot (Schwager & Poeschel 2007, Granular Matter 9:465; shared/validation A1):
+Linear spring-dashpot (Schwager & Poeschel 2007, Granular Matter 9:465; verification group A1):
     m* delta'' = -(k delta + c delta'),  omega0 = sqrt(k/m*),  zeta = c/(2 sqrt(k m*)).
 For zeta < 1, delta = (v/omega) exp(-zeta omega0 t) sin(omega t), omega = omega0 sqrt(1-zeta^2).
 The force vanishes at omega t_end = atan2(2 zeta s, 2 zeta^2 - 1), s = sqrt(1-zeta^2), i.e.
@@ -17,7 +17,7 @@ every e in (0, 1] is reachable (e < exp(-2) only overdamped, e ~ 1/(4 zeta^2) as
 Without the clamp (force allowed to pull): e = exp(-pi zeta/s), zeta = -ln e/sqrt(pi^2 + ln^2 e).
 
 Hertz with the speed-independent Tsuji dashpot (Tsuji, Tanaka & Ishida 1992, Powder Technol.
-71:239; Antypov & Elliott 2011, EPL 94:50004; shared/validation A2, A3):
+71:239; Antypov & Elliott 2011, EPL 94:50004; verification group A2, A3):
     m* delta'' = -F,  F = k_h delta^{3/2} + c_h sqrt(m* k_h) delta^{1/4} delta',
     k_h = (4/3) E* sqrt(R*).
 Scaling delta = delta* x, t = t* tau with delta* = (m* v^2/k_h)^{2/5}, t* = delta*/v gives

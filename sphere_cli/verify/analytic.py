@@ -1,4 +1,4 @@
-"""Analytic solutions the verification cases compare with (shared/validation/README.md, A1, A4).
+"""Analytic solutions the verification cases compare with (verification group A1, A4).
 
 Linear spring-dashpot impact with the force clamped at zero (never attractive), overlap delta
 (positive in contact), approach speed v, m* delta'' = -(k delta + c delta') + m* g_n:
@@ -101,7 +101,7 @@ def bounce_apexes(h0: float, k: float, m: float, zeta: float, g: float, bounces:
 
 class HertzElasticImpact:
     """Elastic Hertz impact m* delta'' = -k_h delta^{3/2} at approach speed v (Hertz 1882;
-    shared/validation A2): delta = delta* x(t v/delta*), delta* = (m* v^2/k_h)^{2/5}, with
+    verification group A2): delta = delta* x(t v/delta*), delta* = (m* v^2/k_h)^{2/5}, with
     x'' = -x^{3/2}, x(0) = 0, x'(0) = 1 integrated once by RK4 at a dimensionless step of 1e-3
     (error ~1e-13) and interpolated by cubic Hermite; delta_max = (5/4)^{2/5} delta*,
     t_c = 2.9433 delta_max/v."""

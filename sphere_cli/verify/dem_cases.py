@@ -1,5 +1,5 @@
-"""DEM verification cases with the linear spring-dashpot contact (shared/validation/README.md,
-sections A1 and A4). Resolution: time steps per contact duration (the clamped closed-form t_c
+"""DEM verification cases with the linear spring-dashpot contact (verification
+groups A1 and A4). Resolution: time steps per contact duration (the clamped closed-form t_c
 of physics/restitution.py), for free fall: steps per fall.
 
 Every scene is built through the case-file path (scenes.py). Where the dashpot force jumps
@@ -32,8 +32,8 @@ SPEED = 0.1  # m/s, each sphere of a pair, or the sphere on a wall
 LEAD_STEPS = 3  # whole steps of free flight before the touch
 WINDOW = 1.5  # the trajectory is compared up to t_touch + WINDOW t_c
 
-A1_SOURCE = "shared/validation/README.md A1: 0.5 % on e and t_c with >= 50 steps per contact"
-A4_SOURCE = "shared/validation/README.md A4: 1 %"
+A1_SOURCE = "verification group A1: 0.5 % on e and t_c with >= 50 steps per contact"
+A4_SOURCE = "verification group A4: 1 %"
 
 
 # ------------------------------------------------------------------------ A1: one impact
@@ -143,7 +143,7 @@ register(
         reference=(
             "clamped linear spring-dashpot: e as requested, t_c = 2 acos(zeta)/(omega0 sqrt(1 - zeta^2)), "
             "delta(t) = (v/omega) exp(-zeta omega0 t) sin(omega t) (Schwager & Poeschel 2007, Granular "
-            "Matter 9:465; shared/validation A1)"
+            "Matter 9:465; verification group A1)"
         ),
         description=(
             f"R = {R} m, rho = {DENSITY} kg/m^3, k_n = {KN} N/m, e = 0.5, approach speed {2 * SPEED} m/s, "
@@ -270,7 +270,7 @@ register(
         reference=(
             "an elastic collision conserves energy; velocity Verlet is symplectic, its energy error "
             "is O(dt^2) (Hairer, Lubich & Wanner, Geometric Numerical Integration, 2006, IX.8); "
-            "shared/validation A4: order >= 1.8"
+            "verification group A4: order >= 1.8"
         ),
         description=(
             f"two equal spheres head-on, R = {R} m, k_n = {KN} N/m, e = 1, approach speed "
@@ -292,7 +292,7 @@ register(
             "cancels further (observed ~4 with the touch at mid-step)"
         ),
         tolerances=(
-            Tolerance("e", 1e-3, 50, source="e = 1 must rebound at 1 +- 1e-3 (shared/validation A3)"),
+            Tolerance("e", 1e-3, 50, source="e = 1 must rebound at 1 +- 1e-3 (verification group A3)"),
             Tolerance("energy", 2e-3, 50, source="e = 1 +- 1e-3 (A3) means energy within 2e-3"),
         ),
         drift_bounds={"momentum": 1e-14},
@@ -339,7 +339,7 @@ register(
         name="a4-free-fall",
         title="A4 free fall: exact to round-off",
         model="linear",
-        reference="z = z0 + w0 t - g t^2/2, v = v0 - g t (shared/validation A4: to round-off)",
+        reference="z = z0 + w0 t - g t^2/2, v = v0 - g t (verification group A4: to round-off)",
         description=(
             f"two spheres in free flight for {FALL_TIME} s under g = {G} m/s^2 (one thrown up); every "
             "step compared; position error relative to the box (0.1 m), velocity error to g T"
@@ -425,7 +425,7 @@ register(
         title=f"A4 bouncing ball: apex heights h_n = e^(2n) h0 (e = {BOUNCE_E})",
         model="linear",
         reference=(
-            "h_n = e^{2n} h0 (shared/validation A4, 1 %); the order is measured against the exact "
+            "h_n = e^{2n} h0 (verification group A4, 1 %); the order is measured against the exact "
             "solution of the clamped linear model with gravity during the contact (analytic.py), "
             "which differs from e^{2n} h0 by -0.07 %, -0.14 %, -0.22 % for n = 1, 2, 3"
         ),
@@ -533,7 +533,7 @@ register(
         title="A4 sliding sphere starts rolling: t* = 2 v0/(7 mu g), final speed 5 v0/7",
         model="linear",
         reference=(
-            "t* = 2 v0/(7 mu g), v = 5 v0/7 (rigid sphere, Coulomb friction; shared/validation A4, 1 %)"
+            "t* = 2 v0/(7 mu g), v = 5 v0/7 (rigid sphere, Coulomb friction; verification group A4, 1 %)"
         ),
         description=(
             f"R = {R} m, k_n = {KN} N/m, e = 0.5, mu = {SLIDE_MU}, v0 = {SLIDE_V0} m/s, no spin, on a "
@@ -625,7 +625,7 @@ register(
         model="linear",
         reference=(
             "dv_t = -mu (1+e) v_n, d omega = (5/2) mu (1+e) v_n/R (rigid sphere, Coulomb friction "
-            "throughout; shared/validation A4, 1 %)"
+            "throughout; verification group A4, 1 %)"
         ),
         description=(
             f"R = {R} m, k_n = {KN} N/m, e = 0.5, mu = {OBLIQUE_MU}, v_n = {OBLIQUE_VN} m/s, "

@@ -22,6 +22,19 @@ EXIT_CODES = (
 )
 
 
+# the groups of reference checks that the code and tests cite as "verification group X"
+GROUPS = {
+    "A1": "linear spring-dashpot collision: restitution and contact time (Schwager & Poeschel 2007)",
+    "A2": "Hertz elastic impact: the closed forms of maximum overlap, force and contact time",
+    "A3": "Hertz-Mindlin benchmark tests of Chung & Ooi (2011), Granular Matter 13:643",
+    "A4": "single-particle mechanics: free fall, bouncing, sliding to rolling, oblique impact, energy",
+    "B": "packings: frictionless random close packing and poured packings with friction",
+    "C": "each fluid model alone against analytic solutions of its equations",
+    "D": "fluid-particle drag: settling, the Ergun pressure drop of a fixed bed, momentum exchange",
+    "E": "stability on stiff and extreme input: time-step limits, refusals, blow-up detection",
+}
+
+
 def _summary_row(record: dict) -> str:
     rows = record["rows"]
     metrics = record["order_metrics"] or [t["metric"] for t in record["tolerances"]]
@@ -82,6 +95,12 @@ def render(report: dict, plot_dir: str = "verification") -> str:
         "cases that measure the scheme's order place the touch at mid-step; `a1-touch-phase` shows "
         "the worst phase, first order.",
         f"- {EXIT_CODES}",
+        "",
+        "## Verification groups",
+        "",
+        "The code, its tests and the cases below name the reference each check belongs to by group:",
+        "",
+        *(f"- {group}: {what}" for group, what in GROUPS.items()),
         "",
         "## Summary",
         "",

@@ -1,4 +1,4 @@
-"""DEM verification cases with the Hertz-Mindlin contact (shared/validation/README.md, A2, A3 and
+"""DEM verification cases with the Hertz-Mindlin contact (verification group A2, A3 and
 the Hertz energy order of A4). Resolution: time steps per contact duration.
 
 A2: F = (4/3) E* sqrt(R*) delta^{3/2}; delta_max = (15 m* v^2/(16 E* sqrt(R*)))^{2/5},
@@ -21,7 +21,7 @@ from .scenes import particle_scene, sphere_mass
 
 LEAD_STEPS = 3
 WINDOW = 1.5
-A3_SOURCE = "shared/validation A3 (Chung & Ooi 2011): 1 % with >= 100 steps per contact"
+A3_SOURCE = "verification group A3 (Chung & Ooi 2011): 1 % with >= 100 steps per contact"
 
 
 def hertz_contact(youngs: float, poisson: float, e: float, mu: float = 0.5) -> dict:
@@ -206,7 +206,7 @@ def _register_chung_ooi(material: str, test: int, title: str) -> None:
             reference=(
                 f"Chung & Ooi (2011), Granular Matter 13:643, test {test}: F_max = {f_pub / 1e3:g} kN, "
                 f"delta_max = {d_pub * 1e6:g} um, t_c = {t_pub * 1e6:g} us; the order is measured "
-                "against the closed forms of A2 (shared/validation A2, A3)"
+                "against the closed forms of A2 (verification group A2, A3)"
             ),
             description=(
                 f"E = {youngs:g} Pa, nu = {poisson}, rho = {density:g} kg/m^3, R = {radius} m, "
@@ -274,7 +274,7 @@ register(
         model="hertz",
         reference=(
             "the measured e equals the requested e +- 0.02, e = 1 rebounds at 1 +- 1e-3 (Chung & Ooi "
-            "2011 test 3; shared/validation A3); contact time from the dimensionless Tsuji-damped "
+            "2011 test 3; verification group A3); contact time from the dimensionless Tsuji-damped "
             "Hertz equation (physics/restitution.py)"
         ),
         description=(
@@ -322,8 +322,8 @@ register(
         title="A4 elastic Hertz collision: energy error (glass spheres of A3 test 1)",
         model="hertz",
         reference=(
-            "an elastic collision conserves energy; kinetic + (2/5) k_h delta^{5/2}; shared/validation "
-            "A4: the energy error converges with order >= 1.8 in dt for Hertz (velocity Verlet)"
+            "an elastic collision conserves energy; kinetic + (2/5) k_h delta^{5/2}; verification "
+            "group A4: the energy error converges with order >= 1.8 in dt for Hertz (velocity Verlet)"
         ),
         description="two glass spheres (A3 test 1) at +-10 m/s, e = 1, energy measured every step",
         run=hertz_energy,

@@ -1,4 +1,4 @@
-"""Stability suite: stiff and extreme DEM input (shared/validation/README.md, section E).
+"""Stability suite: stiff and extreme DEM input (verification group E).
 
 For each case: what the program did (refused before the run, ran stably, reported a numerical
 failure with step, time and particle), and, where a persistent contact makes the question

@@ -1,4 +1,4 @@
-"""Stability through the command line (shared/validation E; design guide section 1, promise 2):
+"""Stability through the command line (verification group E; design guide section 1, promise 2):
 a dt above the contact limit is refused before anything runs (exit 65, the limit named with its
 value), and a run that does blow up stops with exit 70 naming step, time and particle, while the
 newest checkpoint before the failure still verifies and resumes."""
@@ -69,7 +69,7 @@ model = "linear"
 
 @pytest.mark.parametrize("law", ["hertz-mindlin", "linear"])
 def test_dt_three_times_the_limit_is_refused(tmp_path, law):
-    """shared/validation E: with two materials 1e4 apart in stiffness, dt = 3 x the stability
+    """verification group E: with two materials 1e4 apart in stiffness, dt = 3 x the stability
     limit is refused with exit 65, naming simulation.dt, its line, the limit and its value (the
     value the scene computes for dt = "auto", printed to 4 digits), and what sets it; no run
     directory is created."""

@@ -1,5 +1,5 @@
 """The Darcy pore-pressure equation alone (no particles) against analytic solutions
-(../shared/validation/README.md, section C; darcy_reference.py cites each solution).
+(verification group C; darcy_reference.py cites each solution).
 
 Measured (1 Numba thread): steady seepage flux and the two-layer series flux to ~1e-12
 relative; spatial order of the steady variable-permeability profile 1.93, 1.97 (32 -> 64 -> 128

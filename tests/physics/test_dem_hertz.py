@@ -1,4 +1,4 @@
-"""A2, A3 and the Hertz part of A4: Hertz-Mindlin impacts (shared/validation/README.md).
+"""A2, A3 and the Hertz part of A4: Hertz-Mindlin impacts (verification groups).
 
 A2: the elastic Hertz impact, delta_max = (15 m* v^2/(16 E* sqrt(R*)))^{2/5},
 F_max = (4/3) E* sqrt(R*) delta_max^{3/2}, t_c = 2.9433 delta_max/v (Hertz 1882; Johnson,

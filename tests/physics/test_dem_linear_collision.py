@@ -1,6 +1,6 @@
 """A1: linear spring-dashpot impact, two equal spheres head-on and a sphere on a fixed wall.
 
-Source: shared/validation/README.md, A1. The code clamps the normal force at zero (never
+Source: verification group A1. The code clamps the normal force at zero (never
 attractive), so the contact ends when the force vanishes, before the overlap closes; the damping
 ratio is calibrated so that this clamped contact rebounds at the requested e
 (physics/restitution.py, Schwager & Poeschel 2007). References are therefore the clamped closed
@@ -98,7 +98,7 @@ def _collide(tmp_path, e: float, on_wall: bool):
 @pytest.mark.parametrize("e", [0.2, 0.5, 0.8, 1.0])
 @pytest.mark.parametrize("on_wall", [False, True], ids=["sphere-sphere", "sphere-wall"])
 def test_linear_impact_restitution_and_duration(tmp_path, e, on_wall):
-    """A1 (shared/validation/README.md): the realised restitution equals the requested e and the
+    """Verification group A1: the realised restitution equals the requested e and the
     contact lasts the clamped closed-form t_c, both within 0.5 % at 50 steps per contact, for
     two equal spheres head-on (m* = m/2) and for a sphere on a fixed wall (m* = m)."""
     e_real, t_contact, t_ref, steps = _collide(tmp_path, e, on_wall)
@@ -111,7 +111,7 @@ def test_linear_impact_restitution_and_duration(tmp_path, e, on_wall):
 def test_clamped_restitution_differs_from_textbook(tmp_path, e):
     """A1: the damping is calibrated for the clamp. With the textbook zeta = -ln e/sqrt(pi^2 +
     ln^2 e) the clamped contact would rebound at 0.325, 0.550, 0.808 for e = 0.2, 0.5, 0.8
-    (shared/validation A1). This guards the calibration independently of the 0.5 % test above:
+    (verification group A1). This guards the calibration independently of the 0.5 % test above:
     the bound, half the distance to the textbook value, is 31 %, 5 % and
     0.5 % of e for e = 0.2, 0.5, 0.8, well above the discretisation error of each case (1.9 %,
     0.4 %, 0.05 % measured at 50 steps per contact with a half-step dashpot) and half of what a

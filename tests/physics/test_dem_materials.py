@@ -2,9 +2,9 @@
 walls of a material, stiff mixtures at the automatic time step, and the time-step limit itself.
 
 Sources: the Hertz effective moduli 1/E* = (1-nu_1^2)/E_1 + (1-nu_2^2)/E_2 and the Mindlin
-1/G* = (2-nu_1)/G_1 + (2-nu_2)/G_2 (shared/validation A2; Johnson, Contact Mechanics, 1985,
+1/G* = (2-nu_1)/G_1 + (2-nu_2)/G_2 (verification group A2; Johnson, Contact Mechanics, 1985,
 sections 4.2 and 7.4); the A2 impact formulas; the documented rules of physics/materials.py;
-shared/validation E for the stability limit (dt_crit with the smallest m* and largest k of any
+verification group E for the stability limit (dt_crit with the smallest m* and largest k of any
 possible pair; Hertz: Rayleigh time) and the stiffness ratio of 1e4.
 """
 
@@ -250,7 +250,7 @@ STIFF_PAIRS = {
 
 @pytest.mark.parametrize("law", list(STIFF_PAIRS))
 def test_stiffness_ratio_1e4_pair_rebounds_at_auto_dt(tmp_path, law):
-    """shared/validation E: a soft and a stiff sphere (E or k_n 1e4 apart) collide head-on at the
+    """verification group E: a soft and a stiff sphere (E or k_n 1e4 apart) collide head-on at the
     automatic dt without blowing up and rebound at the requested e = 0.8 within 1 %.
 
     With one particle of each, no stiff-stiff contact is possible, so the linear limit is set by
@@ -271,7 +271,7 @@ def test_stiffness_ratio_1e4_pair_rebounds_at_auto_dt(tmp_path, law):
 
 @pytest.mark.parametrize("law", list(STIFF_PAIRS))
 def test_stiff_mixture_runs_stably_at_auto_dt(tmp_path, law):
-    """shared/validation E: 27 spheres, soft and stiff (ratio 1e4) mixed at random, thrown at each
+    """verification group E: 27 spheres, soft and stiff (ratio 1e4) mixed at random, thrown at each
     other and at six walls with random velocities of ~0.1 m/s at the automatic dt: no NaN or
     runaway (the stability check of the run loop, every 100 steps), and no energy gained: the
     total energy (kinetic + elastic) never exceeds the initial one by more than 2e-3 of it and
@@ -316,7 +316,7 @@ def test_stiff_mixture_runs_stably_at_auto_dt(tmp_path, law):
 
 
 def test_hertz_limit_is_the_smallest_over_materials_pairs_and_walls(tmp_path):
-    """shared/validation E: dt_limit is the smallest of the Rayleigh time pi r sqrt(rho/G)/(0.1631
+    """verification group E: dt_limit is the smallest of the Rayleigh time pi r sqrt(rho/G)/(0.1631
     nu + 0.8766) of the smallest particle of each material and the contact limit of every
     possible pair and particle-wall contact (tangent stiffness at the largest initial overlap);
     a material with a single particle forms no like pair. Checked against an independent

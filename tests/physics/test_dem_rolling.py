@@ -9,7 +9,7 @@ gives (I/R^2 + m) dv/dt = -mu_r m g, i.e.
     dv/dt = -(5/7) mu_r g,
 constant until the sphere stops at t_stop = 7 v0/(5 mu_r g) after rolling v0^2/(2 (5/7) mu_r g);
 it then stays at rest (the torque only opposes rolling). This is the rolling analogue of A4's
-"sphere on an incline" (shared/validation/README.md): there g sin(theta) drives, here the
+"sphere on an incline": there g sin(theta) drives, here the
 torque brakes, with the same factor 5/7 from I = (2/5) m R^2.
 """
 

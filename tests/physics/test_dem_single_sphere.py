@@ -1,4 +1,4 @@
-"""A4: single-particle mechanics with the linear contact (shared/validation/README.md, A4).
+"""A4: single-particle mechanics with the linear contact (verification group A4).
 
 Free fall, two spheres resting on a wall, a bouncing ball, a sphere launched sliding, a sphere on
 an "incline" (gravity tilted against a horizontal wall, which is the same problem in the frame of

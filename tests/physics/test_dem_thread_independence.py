@@ -1,4 +1,4 @@
-"""Results do not depend on the number of threads (shared/design.md, section 3: deterministic
+"""Results do not depend on the number of threads (deterministic
 parallelism, gather not scatter; reproducible runs and bitwise restarts depend on it).
 
 A few hundred polydisperse spheres thrown down into a walled box, friction and damping on, run with

@@ -1,5 +1,5 @@
 """Particles and the Navier-Stokes fluid coupled both ways through the drag of physics/fluid/drag.py,
-run through the case file and the real loop (shared/validation/README.md D).
+run through the case file and the real loop (verification group D).
 """
 
 from __future__ import annotations

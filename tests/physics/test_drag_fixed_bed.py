@@ -1,4 +1,4 @@
-"""Ergun pressure drop through a fixed bed of imposed uniform porosity (shared/validation D):
+"""Ergun pressure drop through a fixed bed of imposed uniform porosity (verification group D):
 the Navier-Stokes solver with the cell-averaged drag of kernels/fluid/drag.py (cell_drag).
 
 Ergun (1952): dP/L = 150 mu (1-eps)^2 U/(eps^3 d^2) + 1.75 rho (1-eps) U^2/(eps^3 d), U the

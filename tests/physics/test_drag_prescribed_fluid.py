@@ -1,6 +1,6 @@
 """Particles in a prescribed fluid state (one-way coupling): the drag module of physics/fluid/drag.py
 driven by the real DEM loop (velocity Verlet with its second half kick replaced), and its
-momentum exchange with the fluid (shared/validation/README.md D and E).
+momentum exchange with the fluid (verification group D and E).
 """
 
 from __future__ import annotations

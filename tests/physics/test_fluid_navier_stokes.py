@@ -1,4 +1,4 @@
-"""C: the porous Navier-Stokes fluid alone (shared/validation/README.md, section C), driven
+"""C: the porous Navier-Stokes fluid alone (verification group C), driven
 through physics/navier_stokes.NavierStokesSolver on imposed porosity, without particles.
 
 - no forcing at all: p and v stay exactly 0;

@@ -1,4 +1,4 @@
-"""Packings B of shared/validation/README.md: frictionless random close packing (solid fraction
+"""Packings (verification group B): frictionless random close packing (solid fraction
 0.630-0.648, coordination 6.0 +/- 0.2) and a poured packing with mu = 0.5 (0.57-0.61,
 coordination 4-5). References: random close packing of frictionless spheres phi_rcp ~ 0.64 with
 isostatic coordination 2d = 6 (O'Hern, Silbert, Liu & Nagel 2003, Phys. Rev. E 68:011306);

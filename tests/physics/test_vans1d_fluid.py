@@ -1,5 +1,5 @@
 """The 1D fluid momentum balance of the vans1d model alone, against exact solutions
-(shared/validation C; Maurin et al. 2018, fluid validation of YADE's HydroForceEngine).
+(verification group C; Maurin et al. 2018, fluid validation of YADE's HydroForceEngine).
 
 Errors are measured at the layer centres against the exact profile, and the observed order of
 the spatial error is log2 of the ratio of errors at n and 2n layers; the scheme is second order

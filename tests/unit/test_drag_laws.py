@@ -1,4 +1,4 @@
-"""Drag laws of kernels/fluid/drag.py: limits, branch switches, dimensions (shared/validation D, E).
+"""Drag laws of kernels/fluid/drag.py: limits, branch switches, dimensions (verification group D, E).
 
 References: Ergun (1952) and Wen & Yu (1966) in the form of Gidaspow (1994, "Multiphase flow and
 fluidization", eqs. 9.4-9.5): beta = 150 mu (1-phi)^2/(phi d^2) + 1.75 rho (1-phi) w/d for

@@ -3,8 +3,8 @@ kernels/fluid/poisson.py).
 
 Manufactured solutions: pick a smooth x(x, y, z) and a(x, y, z), compute b analytically, solve,
 and compare with x at the cell centres. The scheme is the second-order finite-volume 7-point
-stencil (the discrete Laplacian of shared/reference/sphere-fluid-particle-interaction.md with
-face coefficients), so the max-norm error must fall by 4 when the cells halve: the observed
+stencil (the discrete Laplacian of the original sphere's fluid model, with face coefficients),
+so the max-norm error must fall by 4 when the cells halve: the observed
 order from 16^3 to 32^3 is 1.97-1.98 here, and the tests ask for >= 1.9 (an O(h) slip at a
 boundary gives 1, far below). Solver tolerances are 1e-10, far below the discretisation error.
 """

@@ -1,6 +1,6 @@
 """Porosity of the fluid cells from the particles (physics/fluid/porosity.py, kernels/fluid/porosity.py):
 exact lens volumes with a cell-centred sampling sphere of radius R = half the smallest cell edge
-(shared/reference/sphere-fluid-particle-interaction.md, "Porosity estimation")."""
+("Porosity estimation" in the documentation of the original sphere)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Restitution calibration of the clamped linear and Hertz-Tsuji normal contacts.
 
-Checks against direct integration of the equations of motion (shared/validation A1-A3):
+Checks against direct integration of the equations of motion (verification group A1-A3):
 clamped linear spring-dashpot (Schwager & Poeschel 2007) and Hertz with the Tsuji dashpot.
 """
 
@@ -160,7 +160,7 @@ def test_hertz_elastic():
 
 
 def test_hertz_elastic_contact_time_matches_chung_ooi():
-    # shared/validation A3 test 2: Al alloy sphere on a rigid plane, t_c = 731.7 us
+    # verification group A3 test 2: Al alloy sphere on a rigid plane, t_c = 731.7 us
     young, nu, rho, radius, v = 7.0e10, 0.30, 2699.0, 0.1, 0.2
     e_star = young / (1.0 - nu**2)
     mass = rho * 4.0 / 3.0 * math.pi * radius**3
@@ -228,7 +228,7 @@ def integrate_dimensional_hertz(mass, k_h, c_h, v0, steps_per_unit=4000):
 
 @pytest.mark.parametrize("e", [0.2, 0.5, 0.9])
 def test_dimensional_hertz_realises_requested_restitution_at_any_speed(e):
-    # shared/validation A3 test 3: Al oxide sphere (R = 2.5 mm) on a rigid plane
+    # verification group A3 test 3: Al oxide sphere (R = 2.5 mm) on a rigid plane
     young, nu, rho, radius = 3.8e11, 0.23, 4000.0, 2.5e-3
     mass = rho * 4.0 / 3.0 * math.pi * radius**3
     k_h = hertz_stiffness(young / (1.0 - nu**2), radius)

@@ -1,4 +1,4 @@
-"""The stability suite of `sphere verify` (shared/validation/README.md, section E), one test per
+"""The stability suite of `sphere verify` (verification group E), one test per
 case: each must refuse, run stably or report a numerical failure as it promises, and the dt
 search must show that every dt the builder accepts is stable.
 

@@ -1,7 +1,7 @@
 """`sphere verify --quick`: every verification case over its quick ladder must meet its
 tolerance and its order of convergence (registry in sphere_cli/verify/); once through the CLI.
 
-Each case states its reference (shared/validation/README.md A1, A4, or a closed form) in its
+Each case states its reference (verification group A1, A4, or a closed form) in its
 registry entry; this test fails when a case misses a tolerance, falls short of its order, is
 not deterministic across repeats, or crashes.
 """

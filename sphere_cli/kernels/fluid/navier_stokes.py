@@ -1,5 +1,6 @@
 """Porous (volume-averaged) Navier-Stokes on a regular cell-centred grid, by operator splitting
-(Langtangen et al. 2002, as in sphere's documentation: shared/reference/sphere-fluid-*.{md,rst}).
+(Langtangen et al. 2002, as in the documentation of the original sphere: Damsgaard et al. 2015,
+The Cryosphere 9:2183).
 
 Momentum, with porosity phi, fluid density rho, viscosity mu and the interaction force f_i the
 fluid exerts on the particles per unit volume (the fluid receives -f_i):
