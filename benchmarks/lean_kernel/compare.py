@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from sphere_cli.bench.dem import _settled_scene
-from sphere_cli.kernels.contact import D_N, D_T, K_N, K_T, MU
+from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, MU
 from sphere_cli.simulation import advance
 
 HERE = Path(__file__).resolve().parent

@@ -1,6 +1,6 @@
 """Plane walls on the faces of the box: their contact with particles and their motion.
 
-Contact: the law of `contact.py` (linear or Hertz-Mindlin, tangential spring with Coulomb cap,
+Contact: the law of `laws.py` (linear or Hertz-Mindlin, tangential spring with Coulomb cap,
 optional rolling resistance) against a body of infinite mass and radius moving at the wall's
 velocity: m* = m_i, R* = r_i, I* = I_i, relative spin w_i, relative velocity v_i - V_w.
 Particles that do not move by forces (inv_mass = 0: fixed, prescribed or glued to a wall)
@@ -71,13 +71,13 @@ from .contact import (
     B_W1,
     B_W2,
     BLOCK,
-    COLUMNS,
     ZERO,
     from_block,
     to_block,
     wall_law,
 )
 from .contact_probe import wall_normal
+from .laws import COLUMNS
 from .layout import U1, U2, U3, flat
 
 FIXED = 0
@@ -99,11 +99,11 @@ NC = 10
 
 @njit(cache=True)
 def _flush_walls(
-    buf, ids, count, hertz, rolling, spring_dt, step_dt, radius, wall_hist, force, torque, record, pforce
+    buf, ids, count, law, rolling, spring_dt, step_dt, radius, wall_hist, force, torque, record, pforce
 ):
     """The law for a block of wall contacts, then each particle's contacts summed in wall order
     and added to its force and torque (a particle's contacts are never split between blocks)."""
-    wall_law(buf, count, hertz, rolling, spring_dt, step_dt)
+    wall_law(buf, count, law, rolling, spring_dt, step_dt)
     b = np.uint64(0)
     end = np.uint64(count)
     while b < end:
@@ -166,7 +166,7 @@ def wall_forces(
     wall_vel_pred,
     wall_table,
     wall_hist,
-    hertz,
+    law,
     rolling,
     spring_dt,
     step_dt,
@@ -213,7 +213,7 @@ def wall_forces(
                 continue
             if filled + nw > BLOCK:  # room for all of this particle's walls
                 _flush_walls(
-                    buf, ids, filled, hertz, rolling, spring_dt, step_dt, radius, wall_hist, force, torque,
+                    buf, ids, filled, law, rolling, spring_dt, step_dt, radius, wall_hist, force, torque,
                     record, pforce,
                 )  # fmt: skip
                 filled = ZERO
@@ -273,7 +273,7 @@ def wall_forces(
             buf,
             ids,
             filled,
-            hertz,
+            law,
             rolling,
             spring_dt,
             step_dt,

@@ -27,9 +27,11 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import BLOCK, D_N, D_T, FIELDS, K_N, K_T, chunk_pair_forces, cross_chunk_pairs
+from ..kernels.contact import BLOCK, FIELDS, chunk_pair_forces, cross_chunk_pairs
+from ..kernels.laws import K_T
 from ..kernels.observe.energy import pair_elastic_energy
 from ..state import State
+from .laws import ContactLaw
 from .materials import ContactTables
 from .module import Module
 from .neighbors import listed_slots
@@ -58,7 +60,7 @@ class PairContactForces(Module):
     def __init__(self, tables: ContactTables):
         self.tables = tables
         self.table = np.ascontiguousarray(tables.table)
-        self.hertz = tables.hertz
+        self.law_code = tables.law.code  # the kernels' law code (kernels/laws.py)
         self.rolling = tables.rolling
         # per-pair slots (scratch, sized with the neighbour list, used by the pairs across
         # chunks only): force on the first member, n x F_t, and the rolling torque when rolling
@@ -118,7 +120,7 @@ class PairContactForces(Module):
             nl.start,
             nl.hist,
             self.table,
-            self.hertz,
+            self.law_code,
             self.rolling,
             box.length,
             box.periodic,
@@ -155,7 +157,7 @@ class PairContactForces(Module):
             nl.start,
             nl.hist,
             self.table,
-            self.hertz,
+            self.law_code,
             box.length,
             box.periodic,
         )
@@ -182,20 +184,11 @@ def verlet_limit(kn: float, kt: float, zeta: float, m_eff: float) -> float:
     return limit
 
 
-def row_limit(row: np.ndarray, hertz: bool, m_eff: float, r_eff: float, delta: float) -> float:
-    """dt_contact of one table row (kernels/contact.py) at reduced mass m_eff [kg]; for Hertz at
-    effective radius r_eff [m] and overlap delta [m] (tangent stiffnesses)."""
-    if hertz:
-        s = math.sqrt(r_eff * delta)
-        zeta = row[D_N] / (2.0 * math.sqrt(1.5 * row[K_N]))  # c_h/sqrt6
-        return verlet_limit(1.5 * row[K_N] * s, row[K_T] * s, zeta, m_eff)
-    zeta = row[D_N] / (2.0 * math.sqrt(row[K_N]))
-    return verlet_limit(row[K_N], row[K_T], zeta, m_eff)
-
-
-def rayleigh_time(radius: float, density: float, shear_modulus: float, poisson_ratio: float) -> float:
-    """pi r sqrt(rho/G)/(0.1631 nu + 0.8766) [s] (Li, Xu & Thornton 2005)."""
-    return math.pi * radius * math.sqrt(density / shear_modulus) / (0.1631 * poisson_ratio + 0.8766)
+def row_limit(row: np.ndarray, law: ContactLaw, m_eff: float, r_eff: float, delta: float) -> float:
+    """dt_contact of one table row (kernels/laws.py) at reduced mass m_eff [kg], with the
+    tangent stiffnesses at effective radius r_eff [m] and overlap delta [m]."""
+    stiffness = law.normal_stiffness(row, r_eff, delta)
+    return verlet_limit(stiffness, row[K_T] * law.scale(r_eff, delta), law.damping_ratio(row), m_eff)
 
 
 def _lightest(material: np.ndarray, mass: np.ndarray, materials: int) -> dict[int, np.ndarray]:
@@ -225,17 +218,6 @@ def coordination_bound(radius: float, smallest: float, others: int) -> int:
         sin_theta = smallest / (radius + smallest)
         most = math.floor(2.0 / (1.0 - math.sqrt(1.0 - sin_theta * sin_theta)))
     return max(1, min(most, others))
-
-
-def contact_coefficients(row: np.ndarray, hertz: bool, r_eff: float, delta: float) -> tuple[float, float]:
-    """(kappa [N/m], d [kg^1/2/s]) of one table row: the largest stiffness a contact offers a
-    sphere that it holds, max(k_n, 3.5 k_t) (the tangential spring also turns the sphere,
-    1 + m r^2/I = 3.5), and likewise its damping max(c_n, 3.5 c_t) = d sqrt(m*); for Hertz the
-    tangent stiffnesses at overlap delta [m] and effective radius r_eff [m]."""
-    s = math.sqrt(r_eff * delta) if hertz else 1.0
-    k_n = (1.5 if hertz else 1.0) * row[K_N] * s
-    kappa = max(k_n, 3.5 * row[K_T] * s)
-    return kappa, max(row[D_N], 3.5 * row[D_T]) * math.sqrt(s)
 
 
 def damped_limit(omega2: float, gamma: float) -> float:
@@ -275,8 +257,7 @@ def stability_limit(
     For two equal spheres this is the limit of their one contact; for a chain it is reached.
     For Hertz the stiffnesses are the tangent ones at the overlap `overlap` x the radius (the
     Rayleigh time, an impact criterion, is in one_contact_limit)."""
-    hertz = tables.hertz
-    law = "Hertz-Mindlin" if hertz else "linear"
+    law = tables.law
     limits: list[tuple[float, str]] = []
     lightest = _lightest(material, mass, len(tables.names))
     smallest = float(radius.min()) if radius.size else 0.0
@@ -290,11 +271,11 @@ def stability_limit(
                 continue
             m_b = float(mass[second[0]])  # the lightest partner: the smallest m*
             r_b = float(radius[material == b].max())  # the largest: the stiffest Hertz contact
-            k, d = contact_coefficients(tables.table[a, b], hertz, r * r_b / (r + r_b), overlap * r)
+            k, d = law.coefficients(tables.table[a, b], r * r_b / (r + r_b), overlap * r)
             m_eff = m * m_b / (m + m_b)
             omega2, gamma = max(omega2, k / m_eff), max(gamma, d / math.sqrt(m_eff))
         for w in range(len(wall_faces)):
-            k, d = contact_coefficients(tables.wall_table[w, a], hertz, r, overlap * r)
+            k, d = law.coefficients(tables.wall_table[w, a], r, overlap * r)
             omega2, gamma = max(omega2, k / m), max(gamma, d / math.sqrt(m))
         contacts = coordination_bound(r, smallest, others)
         value = damped_limit(contacts * omega2, contacts * gamma)
@@ -302,10 +283,10 @@ def stability_limit(
             limits.append(
                 (
                     value,
-                    f"{law} contacts of the lightest particle of {_label(tables, a)} (r = {r:.4g} m), "
+                    f"{law.label} contacts of the lightest particle of {_label(tables, a)} (r = {r:.4g} m), "
                     f"held by up to {contacts} bodies at once: omega^2 dt^2 + 4 gamma dt <= 4 with "
                     f"omega^2 = {contacts} x {omega2:.4g} s^-2, gamma = {contacts} x {gamma:.4g} s^-1"
-                    + (f" (tangent stiffness at {overlap:g} of the radius)" if hertz else ""),
+                    + law.tangent_note(overlap),
                 )
             )
     if not limits:
@@ -326,21 +307,10 @@ def one_contact_limit(
     sets it): the scale a collision is resolved on (dt = "auto" takes dt_safety of it), not a
     bound for spheres held by several contacts (stability_limit). inf if no contact can occur.
     overlap: the largest initial overlap as a fraction of the smaller radius."""
-    hertz = tables.hertz
-    law = "Hertz-Mindlin" if hertz else "linear"
-    limits: list[tuple[float, str]] = []
+    law = tables.law
     lightest = _lightest(material, mass, len(tables.names))
+    contacts: list[tuple[float, str]] = []
     for a, first in lightest.items():
-        if hertz:
-            mat = tables.materials[a]
-            r = float(radius[first[0]])
-            limits.append(
-                (
-                    rayleigh_time(r, mat.density, mat.shear_modulus, mat.poisson_ratio),
-                    f"Rayleigh time pi r sqrt(rho/G)/(0.1631 nu + 0.8766) of the smallest particle of "
-                    f"{_label(tables, a)}, r = {r:.4g} m",
-                )
-            )
         for b, second in lightest.items():
             if b < a:
                 continue
@@ -354,33 +324,19 @@ def one_contact_limit(
             r_eff = float(radius[i] * radius[j] / (radius[i] + radius[j]))
             delta = overlap * float(min(radius[i], radius[j]))
             what = (
-                f"{law} contact of {_label(tables, a)}"
+                f"{law.label} contact of {_label(tables, a)}"
                 + ("" if a == b else f" with {_label(tables, b)}")
                 + ", lightest pair"
             )
-            limits.append((row_limit(tables.table[a, b], hertz, m_eff, r_eff, delta), what))
+            contacts.append((row_limit(tables.table[a, b], law, m_eff, r_eff, delta), what))
         for w, face in enumerate(wall_faces):
             i = int(first[0])
-            limits.append(
-                (
-                    row_limit(
-                        tables.wall_table[w, a], hertz, float(mass[i]), float(radius[i]), overlap * radius[i]
-                    ),
-                    f"{law} contact of the lightest particle of {_label(tables, a)} with the {face} wall",
-                )
-            )
-    if hertz:
-        suffix = f" (tangent stiffness at {overlap:g} of the radius, the largest initial overlap)"
-        limits = [(v, w + suffix if "contact" in w else w) for v, w in limits]
-    else:
-        limits = [
-            (
-                v,
-                w + ": 2(sqrt(1+4 zeta^2)-2 zeta)/omega for the normal (omega^2 = k_n/m*) and the "
-                "rotation-coupled tangential mode (omega^2 = 3.5 k_t/m*, damping ratio sqrt(3.5) zeta)",
-            )
-            for v, w in limits
-        ]
+            row = tables.wall_table[w, a]
+            value = row_limit(row, law, float(mass[i]), float(radius[i]), overlap * radius[i])
+            what = f"{law.label} contact of the lightest particle of {_label(tables, a)} with the {face} wall"
+            contacts.append((value, what))
+    note = law.limit_note(overlap)
+    limits = law.impact_limits(tables, lightest, radius) + [(v, w + note) for v, w in contacts]
     if not limits:
         return math.inf, "no contact can occur"
     value, what = min(limits, key=lambda item: item[0])

@@ -6,11 +6,7 @@ the properties of [contact]); every particle carries a material id. Each pair of
 and each wall against each material, gets one row of contact parameters, built by these rules
 unless [[contact.pairs]] (or walls[].friction) gives a value explicitly:
 
-- Hertz-Mindlin: 1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b and
-  1/G* = (2 - nu_a)/G_a + (2 - nu_b)/G_b with G = E/(2 (1 + nu)) (Hertz 1882; Mindlin 1949;
-  verification group A2). A rigid wall (no material) adds nothing: 1/E* = (1 - nu_a^2)/E_a.
-- Linear: k = 2 k_a k_b/(k_a + k_b) for k_n and k_t, two half-contacts in series (like pairs
-  keep the material's k). A wall without a material uses the particle material's own k.
+- The elastic properties: by the contact law's own rule (physics/laws/).
 - Restitution, friction and rolling friction: the arithmetic mean (e_a + e_b)/2; against a
   wall without a material, the particle material's own values.
 """
@@ -24,8 +20,8 @@ import numpy as np
 
 from ..config.consistency import particle_materials
 from ..config.schema import Case
-from ..kernels.contact import COLUMNS, D_N, D_T, K_N, K_T, MU, MU_R
-from .restitution import hertz_damping_coefficient, linear_damping_ratio
+from ..kernels.laws import COLUMNS, D_N, D_T, K_N, K_T, MU, MU_R
+from .laws import LAWS, ContactLaw
 
 SINGLE = ""  # name of the one material of the single-material form
 
@@ -64,7 +60,7 @@ class PairLaw:
 
 @dataclass
 class ContactTables:
-    hertz: bool
+    law: ContactLaw
     names: list[str]  # particle materials, by id
     materials: list[Material]  # by id
     fractions: list[float]  # number fractions, by id
@@ -78,10 +74,9 @@ class ContactTables:
         return bool(np.any(self.table[..., MU_R] > 0.0) or np.any(self.wall_table[..., MU_R] > 0.0))
 
 
-def _resolve(case: Case, spec) -> Material:
+def _resolve(case: Case, law: ContactLaw, spec) -> Material:
     """A [[materials]] entry (or None for the single-material form) with [contact]'s defaults."""
     contact = case.contact
-    hertz = contact.model == "hertz-mindlin"
 
     def pick(key):
         own = None if spec is None else getattr(spec, key)
@@ -94,20 +89,10 @@ def _resolve(case: Case, spec) -> Material:
         friction=pick("friction"),
         rolling_friction=pick("rolling_friction"),
     )
-    if hertz:
-        return Material(**common, youngs_modulus=pick("youngs_modulus"), poisson_ratio=pick("poisson_ratio"))
-    kn = pick("normal_stiffness")
-    kt = pick("tangential_stiffness")
-    if spec is not None and spec.normal_stiffness is not None and spec.tangential_stiffness is None:
-        kt = None  # a material's own k_n implies its own default k_t
-    return Material(**common, normal_stiffness=kn, tangential_stiffness=2.0 / 7.0 * kn if kt is None else kt)
+    return Material(**common, **law.resolve(pick, spec))
 
 
-def _series(a: float, b: float) -> float:
-    return 2.0 * a * b / (a + b)
-
-
-def mix(a: Material, b: Material | None, hertz: bool, override=None) -> PairLaw:
+def mix(a: Material, b: Material | None, contact_law: ContactLaw, override=None) -> PairLaw:
     """The contact law of materials a and b (b None: a rigid wall), by the rules of this module;
     `override` (a [[contact.pairs]] entry) replaces what it sets."""
     if b is None:
@@ -117,21 +102,7 @@ def mix(a: Material, b: Material | None, hertz: bool, override=None) -> PairLaw:
             key: 0.5 * (getattr(a, key) + getattr(b, key))
             for key in ("restitution", "friction", "rolling_friction")
         }
-    if hertz:
-        inv_e = (1.0 - a.poisson_ratio**2) / a.youngs_modulus
-        inv_g = (2.0 - a.poisson_ratio) / a.shear_modulus
-        if b is not None:
-            inv_e += (1.0 - b.poisson_ratio**2) / b.youngs_modulus
-            inv_g += (2.0 - b.poisson_ratio) / b.shear_modulus
-        elastic = dict(e_star=1.0 / inv_e, g_star=1.0 / inv_g)
-    elif b is None:
-        elastic = dict(normal_stiffness=a.normal_stiffness, tangential_stiffness=a.tangential_stiffness)
-    else:
-        elastic = dict(
-            normal_stiffness=_series(a.normal_stiffness, b.normal_stiffness),
-            tangential_stiffness=_series(a.tangential_stiffness, b.tangential_stiffness),
-        )
-    law = {**surface, **elastic}
+    law = {**surface, **contact_law.mix(a, b)}
     if override is not None:
         for key in (
             "restitution",
@@ -148,35 +119,24 @@ def mix(a: Material, b: Material | None, hertz: bool, override=None) -> PairLaw:
     return PairLaw(**law)
 
 
-def table_row(law: PairLaw, hertz: bool) -> np.ndarray:
+def table_row(law: PairLaw, contact_law: ContactLaw) -> np.ndarray:
     """The kernel's parameter row (K_N, K_T, D_N, D_T, MU, MU_R) of one pair, damping calibrated
     to its restitution (physics/restitution.py)."""
     row = np.zeros(COLUMNS)
-    if hertz:
-        c_h = hertz_damping_coefficient(law.restitution)
-        row[K_N] = 4.0 / 3.0 * law.e_star
-        row[K_T] = 8.0 * law.g_star
-        row[D_N] = c_h * math.sqrt(4.0 / 3.0 * law.e_star)
-        row[D_T] = c_h * math.sqrt(16.0 / 3.0 * law.g_star)
-    else:
-        zeta = linear_damping_ratio(law.restitution)
-        row[K_N] = law.normal_stiffness
-        row[K_T] = law.tangential_stiffness
-        row[D_N] = 2.0 * zeta * math.sqrt(law.normal_stiffness)
-        row[D_T] = 2.0 * zeta * math.sqrt(law.tangential_stiffness)
+    row[K_N], row[K_T], row[D_N], row[D_T] = contact_law.elastic_row(law)
     row[MU] = law.friction
     row[MU_R] = law.rolling_friction
     return row
 
 
 def contact_tables(case: Case) -> ContactTables:
-    hertz = case.contact.model == "hertz-mindlin"
+    contact_law = LAWS[case.contact.model]
     by_name = {m.name: m for m in case.materials}
     fractions = particle_materials(case)
     if fractions:
-        materials = [_resolve(case, by_name[name]) for name in fractions]
+        materials = [_resolve(case, contact_law, by_name[name]) for name in fractions]
     else:
-        materials = [_resolve(case, None)]
+        materials = [_resolve(case, contact_law, None)]
         fractions = {SINGLE: 1.0}
     names = list(fractions)
     overrides = {frozenset(p.materials): p for p in case.contact.pairs}
@@ -185,24 +145,24 @@ def contact_tables(case: Case) -> ContactTables:
     pair_laws = {}
     for a in range(m):
         for b in range(a, m):
-            law = mix(materials[a], materials[b], hertz, overrides.get(frozenset((names[a], names[b]))))
+            law = mix(materials[a], materials[b], contact_law, overrides.get(frozenset((names[a], names[b]))))
             pair_laws[(a, b)] = law
-            table[a, b] = table[b, a] = table_row(law, hertz)
+            table[a, b] = table[b, a] = table_row(law, contact_law)
     wall_table = np.zeros((len(case.walls), m, COLUMNS))
     wall_laws = {}
     for w, wall in enumerate(case.walls):
-        wall_material = None if wall.material is None else _resolve(case, by_name[wall.material])
+        wall_material = None if wall.material is None else _resolve(case, contact_law, by_name[wall.material])
         for a in range(m):
             override = None
             if wall.material is not None:
                 override = overrides.get(frozenset((names[a], wall.material)))
-            law = mix(materials[a], wall_material, hertz, override)
+            law = mix(materials[a], wall_material, contact_law, override)
             if wall.friction is not None:
                 law = PairLaw(**{**law.__dict__, "friction": wall.friction})
             wall_laws[(w, a)] = law
-            wall_table[w, a] = table_row(law, hertz)
+            wall_table[w, a] = table_row(law, contact_law)
     return ContactTables(
-        hertz=hertz,
+        law=contact_law,
         names=names,
         materials=materials,
         fractions=list(fractions.values()),

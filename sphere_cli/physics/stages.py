@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.contact import MU
+from ..kernels.laws import MU
 from ..kernels.observe.energy import kinetic_energy
 from ..state import State
 from .module import Module

@@ -34,7 +34,7 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import BLOCK, FIELDS, K_N
+from ..kernels.contact import BLOCK, FIELDS
 from ..kernels.observe.energy import wall_elastic_energy
 from ..kernels.walls import (
     C_AMPLITUDE,
@@ -88,8 +88,7 @@ class WallScales:
         delta = max(case.particles.overlap_tolerance, 0.01) * r_mean
         for w in range(tables.wall_table.shape[0]):
             row = tables.wall_table[w, 0]
-            k = 1.5 * row[K_N] * math.sqrt(r_mean * delta) if tables.hertz else row[K_N]
-            stiffness.append(k / d2)
+            stiffness.append(tables.law.normal_stiffness(row, r_mean, delta) / d2)
         self.stiffness_per_area = np.array(stiffness)
 
     def mass(self, spec, area: float) -> float:
@@ -288,7 +287,7 @@ class PlaneWallForces(Module):
             w.vel_pred,
             w.table,
             hist,
-            c.hertz,
+            c.law_code,
             c.rolling,
             dt if spring_dt is None else spring_dt,
             dt,
@@ -346,7 +345,7 @@ class PlaneWallForces(Module):
     def elastic_energy(self, state: State) -> tuple[float, int]:
         p, w, c = state.particles, state.walls, self.contact
         energy, touching = wall_elastic_energy(
-            p.pos, p.radius, p.inv_mass, p.material, w.axis, w.sign, w.coord, w.table, w.hist, c.hertz
+            p.pos, p.radius, p.inv_mass, p.material, w.axis, w.sign, w.coord, w.table, w.hist, c.law_code
         )
         return float(energy), int(touching)
 

@@ -17,8 +17,10 @@ import pytest
 from dem_physics_cases import advance, hertz_contact, hertz_reference, make_scene, sphere_mass
 
 from sphere_cli.config.schema import Simulation
-from sphere_cli.kernels.contact import D_N, D_T, K_N, K_T, MU, MU_R
-from sphere_cli.physics.contact import rayleigh_time, row_limit
+from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, MU, MU_R
+from sphere_cli.physics.contact import row_limit
+from sphere_cli.physics.laws import LAWS
+from sphere_cli.physics.laws.hertz_mindlin import rayleigh_time
 from sphere_cli.physics.observe.energy import observables
 from sphere_cli.physics.restitution import hertz_damping_coefficient, linear_damping_ratio
 from sphere_cli.simulation import check_stable
@@ -68,7 +70,7 @@ def test_hertz_pair_table_follows_the_mixing_rules(tmp_path):
         wall_friction={"x-": 0.7},
     )
     tables = scene.tables
-    assert tables.hertz and tables.names == ["a", "b"]
+    assert tables.law.name == "hertz-mindlin" and tables.names == ["a", "b"]
     assert np.sort(scene.state.particles.material).tolist() == [0, 1, 1]  # exact proportions
     a = {**A, "friction": 0.4, "rolling_friction": 0.0}  # [contact] defaults filled in
     b = B
@@ -345,17 +347,19 @@ def test_hertz_limit_is_the_smallest_over_materials_pairs_and_walls(tmp_path):
     n = p.count
     for i in range(n):
         row = tables.wall_table[0, p.material[i]]
-        candidates.append(row_limit(row, True, p.mass[i], p.radius[i], 0.1 * p.radius[i]))
+        candidates.append(row_limit(row, LAWS["hertz-mindlin"], p.mass[i], p.radius[i], 0.1 * p.radius[i]))
         for j in range(i + 1, n):
             row = tables.table[p.material[i], p.material[j]]
             m_eff = p.mass[i] * p.mass[j] / (p.mass[i] + p.mass[j])
             r_eff = p.radius[i] * p.radius[j] / (p.radius[i] + p.radius[j])
             delta = 0.1 * min(p.radius[i], p.radius[j])
-            candidates.append(row_limit(row, True, m_eff, r_eff, delta))
+            candidates.append(row_limit(row, LAWS["hertz-mindlin"], m_eff, r_eff, delta))
     assert scene.dt_limit == pytest.approx(min(candidates), rel=1e-12)
     # the single b particle has no like partner: a b-b pair limit would be tighter still
     single = np.flatnonzero(p.material == 1)
     assert single.size == 1
     i = int(single[0])
-    bb = row_limit(tables.table[1, 1], True, 0.5 * p.mass[i], 0.5 * p.radius[i], 0.1 * p.radius[i])
+    bb = row_limit(
+        tables.table[1, 1], LAWS["hertz-mindlin"], 0.5 * p.mass[i], 0.5 * p.radius[i], 0.1 * p.radius[i]
+    )
     assert bb < scene.dt_limit

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from dem_physics_cases import advance, hertz_contact, make_scene, sphere_mass
 
-from sphere_cli.kernels.contact import K_T
+from sphere_cli.kernels.laws import K_T
 
 R = 1.0e-3  # m
 DENSITY = 2500.0  # kg/m^3

@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 from sphere_cli.config.load import parse_case
-from sphere_cli.kernels import contact as law
+from sphere_cli.kernels import contact as sweep
+from sphere_cli.kernels import laws as law
 from sphere_cli.kernels.neighbors import minimum_image
 from sphere_cli.physics.contact import rows_across_chunks
 from sphere_cli.physics.neighbors import spring_rows
@@ -131,7 +132,7 @@ def _case(path, hertz: bool) -> str:
     )
 
 
-def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_dt: float):
+def _reference(state, table, code: int, rolling: bool, spring_dt: float, step_dt: float):
     """(force, torque, springs) by a plain sweep in ascending i, each row in ascending j."""
     p, box, nl = state.particles, state.box, state.neighbors
     length, periodic = box.length, box.periodic
@@ -169,9 +170,9 @@ def _reference(state, table, hertz: bool, rolling: bool, spring_dt: float, step_
             u = slip(vel_pred, angvel_pred)
             un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
             root_m = math.sqrt(law.reduced(p.inv_mass[i], p.inv_mass[j]))
-            r_eff = ri * rj / (ri + rj) if hertz or rolling else 0.0
+            r_eff = ri * rj / (ri + rj) if code == law.HERTZ_MINDLIN or rolling else 0.0
             travel, grow, end = law.contact_window(delta, vn, un, step_dt)
-            fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, hertz, delta, r_eff, root_m, un, travel, grow)
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dt, code, delta, r_eff, root_m, un, travel, grow)
             g0, g1, g2, x0, x1, x2 = law.tangential_spring(
                 *hist[i, k], *(v[a] - vn * n[a] for a in range(3)), *n, kt_now, ct, mu, fn, spring_dt * grow,
                 *(u[a] - un * n[a] for a in range(3)), end,
@@ -205,18 +206,18 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
     force = np.zeros_like(p.force)
     torque = np.zeros_like(p.torque)
     slots = np.zeros((hist.shape[0], contact.width))
-    blocks = np.zeros((chunks, law.FIELDS * law.BLOCK))
-    block_ids = np.zeros((chunks, 3 * law.BLOCK), dtype=np.uint64)
-    block_rows = np.zeros((chunks, 2 * law.BLOCK), dtype=np.int64)
+    blocks = np.zeros((chunks, sweep.FIELDS * sweep.BLOCK))
+    block_ids = np.zeros((chunks, 3 * sweep.BLOCK), dtype=np.uint64)
+    block_rows = np.zeros((chunks, 2 * sweep.BLOCK), dtype=np.int64)
     common = (
         p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.inv_mass, p.inv_inertia, p.material,
-        nl.nbr, nl.nbr_count, nl.start, hist, contact.table, contact.hertz, contact.rolling, box.length,
+        nl.nbr, nl.nbr_count, nl.start, hist, contact.table, contact.law_code, contact.rolling, box.length,
         box.periodic, spring_dt, state.clock.dt,
     )  # fmt: skip
     if chunks > 1:
         rows, cuts = rows_across_chunks(nl.nbr, nl.nbr_count, bounds, chunks)
-        law.cross_chunk_pairs(*common, rows, cuts, slots, blocks, block_ids)
-    law.chunk_pair_forces(
+        sweep.cross_chunk_pairs(*common, rows, cuts, slots, blocks, block_ids)
+    sweep.chunk_pair_forces(
         *common,
         nl.rev,
         nl.rev_count,
@@ -244,18 +245,18 @@ def scene(request, tmp_path_factory):
 
 def test_the_scene_exercises_every_path_of_the_blocks(scene):
     nl = scene.state.neighbors
-    assert nl.nbr_count[0] > 3 * law.BLOCK, "the big sphere's row must span several blocks"
+    assert nl.nbr_count[0] > 3 * sweep.BLOCK, "the big sphere's row must span several blocks"
     force, torque, hist = _kernels(scene, np.array([0, scene.state.particles.count]), scene.state.clock.dt)
     touching = np.any(hist != 0.0, axis=2)
-    assert touching.sum() > 4 * law.BLOCK
-    assert scene.contact.rolling == scene.contact.hertz
+    assert touching.sum() > 4 * sweep.BLOCK
+    assert scene.contact.rolling == (scene.contact.law_code == law.HERTZ_MINDLIN)
     assert len(set(scene.state.particles.material.tolist())) == 2
 
 
 @pytest.mark.parametrize("spring_dt", [0.0, 2.0e-6], ids=["initial", "step"])
 def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
     state, contact = scene.state, scene.contact
-    expected = _reference(state, contact.table, contact.hertz, contact.rolling, spring_dt, state.clock.dt)
+    expected = _reference(state, contact.table, contact.law_code, contact.rolling, spring_dt, state.clock.dt)
     n = state.particles.count
     # one chunk; cuts inside the shell, where the rows wait for pairs across chunks, and many
     for bounds in ([0, n], [0, 120, n], [0, 1, 300, 301, 700, n], list(np.linspace(0, n, 12).astype(int))):
@@ -324,7 +325,7 @@ def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
     advance(scene, 20)
     state, walls = scene.state, scene.walls
     p, w = state.particles, state.walls
-    hertz, rolling, dt = scene.contact.hertz, scene.contact.rolling, state.clock.dt
+    code, rolling, dt = scene.contact.law_code, scene.contact.rolling, state.clock.dt
     expected_f = np.zeros_like(p.force)
     expected_t = np.zeros_like(p.torque)
     expected_h = w.hist.copy()
@@ -357,7 +358,7 @@ def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
             un = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
             travel, grow, end = law.contact_window(ri - gap, vn, un, dt)
             root_m = math.sqrt(p.mass[i])
-            fn, kt_now, ct = law.normal_law(kn, kt, dn, dtt, hertz, ri - gap, ri, root_m, un, travel, grow)
+            fn, kt_now, ct = law.normal_law(kn, kt, dn, dtt, code, ri - gap, ri, root_m, un, travel, grow)
             g0, g1, g2, x0, x1, x2 = law.tangential_spring(
                 *expected_h[i, k], *(v[b] - vn * n[b] for b in range(3)), *n, kt_now, ct, mu, fn, dt * grow,
                 *(u[b] - un * n[b] for b in range(3)), end,
@@ -375,7 +376,7 @@ def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
                     t[b] += m[b]
         expected_f[i] = f
         expected_t[i] = t
-    assert contacts > 2 * law.BLOCK, "the walls' contacts must fill several blocks"
+    assert contacts > 2 * sweep.BLOCK, "the walls' contacts must fill several blocks"
     p.force[...] = 0.0
     p.torque[...] = 0.0
     walls.forces(state)

@@ -11,7 +11,7 @@ import math
 
 from numba import njit
 
-from ..contact import K_N, K_T
+from ..laws import HERTZ_MINDLIN, K_N, K_T
 from ..neighbors import minimum_image
 
 
@@ -34,17 +34,17 @@ def potential_energy(pos, mass, body_acc):
 
 
 @njit(cache=True, inline="always")
-def _elastic(row, hertz, delta, r_eff, xi2):
+def _elastic(row, law, delta, r_eff, xi2):
     """Normal plus tangential elastic energy of one contact [J]: linear k_n delta^2/2, Hertz
     (2/5) k_h delta^{5/2} = (2/5) K_N s delta^2 with s = sqrt(R* delta); tangential k_t |xi|^2/2."""
-    if hertz:
+    if law == HERTZ_MINDLIN:
         s = math.sqrt(r_eff * delta)
         return 0.4 * row[K_N] * s * delta * delta + 0.5 * row[K_T] * s * xi2
     return 0.5 * (row[K_N] * delta * delta + row[K_T] * xi2)
 
 
 @njit(cache=True)
-def pair_elastic_energy(pos, radius, material, nbr, nbr_count, start, hist, table, hertz, length, periodic):
+def pair_elastic_energy(pos, radius, material, nbr, nbr_count, start, hist, table, law, length, periodic):
     """Returns (elastic energy [J], number of touching pairs)."""
     total = 0.0
     touching = 0
@@ -64,14 +64,14 @@ def pair_elastic_energy(pos, radius, material, nbr, nbr_count, start, hist, tabl
                 xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                 row = table[0, 0] if single else table[material[i], material[j]]
                 r_eff = radius[i] * radius[j] / reach
-                total += _elastic(row, hertz, delta, r_eff, xi2)
+                total += _elastic(row, law, delta, r_eff, xi2)
                 touching += 1
     return total, touching
 
 
 @njit(cache=True)
 def wall_elastic_energy(
-    pos, radius, inv_mass, material, wall_axis, wall_sign, wall_coord, wall_table, wall_hist, hertz
+    pos, radius, inv_mass, material, wall_axis, wall_sign, wall_coord, wall_table, wall_hist, law
 ):
     """Returns (elastic energy [J], number of particle-wall contacts). Particles with inv_mass = 0
     (fixed, prescribed, glued to a wall) do not touch walls (kernels/walls.py)."""
@@ -87,6 +87,6 @@ def wall_elastic_energy(
                 delta = radius[i] - gap
                 xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
                 row = wall_table[w, 0] if single else wall_table[w, material[i]]
-                total += _elastic(row, hertz, delta, radius[i], xi2)
+                total += _elastic(row, law, delta, radius[i], xi2)
                 touching += 1
     return total, touching

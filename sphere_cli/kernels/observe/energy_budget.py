@@ -46,9 +46,11 @@ import math
 
 from numba import njit, prange
 
-from ..contact import (
+from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
+from ..laws import (
     D_N,
     D_T,
+    HERTZ_MINDLIN,
     K_N,
     K_T,
     MU,
@@ -60,7 +62,6 @@ from ..contact import (
     rolling_torque,
     tangential_force,
 )
-from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
 
 GRAVITY = 0
 WALLS = 1
@@ -129,7 +130,7 @@ def accumulate_budget(
     start,
     hist,
     table,
-    hertz,
+    law,
     rolling,
     body_acc,
     length,
@@ -180,7 +181,7 @@ def accumulate_budget(
             row = table[0, 0] if single else table[ci, material[j]]
             touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
             if not touching:
-                if not hertz:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
+                if law != HERTZ_MINDLIN:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
                     s = start[i] + k
                     xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                     friction += 0.5 * row[K_T] * xi2
@@ -196,8 +197,8 @@ def accumulate_budget(
             r_eff = ri * rj / (ri + rj)
             travel, grow, end = contact_window(delta, vn, un, dt)
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
-            fe = normal_law(kn, kt, dn, dtan, hertz, delta, r_eff, root_m, 0.0, travel, grow)[0]
-            fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, r_eff, root_m, un, travel, grow)
+            fe = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, 0.0, travel, grow)[0]
+            fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, un, travel, grow)
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, hist[start[i] + k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
@@ -246,7 +247,7 @@ def accumulate_budget(
             row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
             touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
             if not touching:
-                if not hertz:
+                if law != HERTZ_MINDLIN:
                     xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
                     friction += 0.5 * row[K_T] * xi2
                 continue
@@ -268,8 +269,8 @@ def accumulate_budget(
             root_m = math.sqrt(mi)
             travel, grow, end = contact_window(delta, vn, un, dt)
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
-            fe = normal_law(kn, kt, dn, dtan, hertz, delta, ri, root_m, 0.0, travel, grow)[0]
-            fn, kt, ct = normal_law(kn, kt, dn, dtan, hertz, delta, ri, root_m, un, travel, grow)
+            fe = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, 0.0, travel, grow)[0]
+            fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, un, travel, grow)
             g0, g1, g2, d_t, f_t = _tangential(
                 scratch, i, wall_hist[i, w], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
                 ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,

@@ -21,8 +21,8 @@ import math
 
 from numba import njit
 
-from ..contact import D_N, D_T, K_N, K_T, MU, normal_law, reduced, tangential_force
 from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
+from ..laws import D_N, D_T, K_N, K_T, MU, normal_law, reduced, tangential_force
 
 
 @njit(cache=True, inline="always")
@@ -55,7 +55,7 @@ def contact_moments(
     start,
     hist,
     table,
-    hertz,
+    law,
     length,
     periodic,
     wall_axis,
@@ -90,7 +90,7 @@ def contact_moments(
             root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
             r_eff = ri * rj / (ri + rj)
             fn, kt, ct = normal_law(
-                row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, r_eff, root_m, un, 0.0, 1.0
+                row[K_N], row[K_T], row[D_N], row[D_T], law, delta, r_eff, root_m, un, 0.0, 1.0
             )
             for a in range(3):
                 scratch[i, 0, a] = hist[start[i] + k, a]
@@ -113,7 +113,7 @@ def contact_moments(
             )
             un = u0 * n0 + u1 * n1 + u2 * n2
             fn, kt, ct = normal_law(
-                row[K_N], row[K_T], row[D_N], row[D_T], hertz, delta, ri, math.sqrt(mi), un, 0.0, 1.0
+                row[K_N], row[K_T], row[D_N], row[D_T], law, delta, ri, math.sqrt(mi), un, 0.0, 1.0
             )
             for a in range(3):
                 scratch[i, 0, a] = wall_hist[i, w, a]

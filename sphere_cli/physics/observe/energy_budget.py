@@ -142,7 +142,7 @@ class EnergyBudget(Module):
             nl.start,
             self.hist,
             contact.table,
-            contact.hertz,
+            contact.law_code,
             contact.rolling,
             box.body_acc,
             box.length,

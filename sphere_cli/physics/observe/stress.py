@@ -70,7 +70,7 @@ class StressProbe:
             nl.start,
             nl.hist,
             self.contact.table,
-            self.contact.hertz,
+            self.contact.law_code,
             box.length,
             box.periodic,
             *walls,

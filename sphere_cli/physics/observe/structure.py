@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...kernels.contact import MU
+from ...kernels.laws import MU
 from ...kernels.observe.structure import (
     contact_counts,
     layer_solid_volume,
