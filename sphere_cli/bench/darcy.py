@@ -56,7 +56,7 @@ face = "z-"
 """
 
 
-def case_text(cells: int, particles: int, tolerance: float, update_every: int = 1) -> str:
+def case_text(cells: int, particles: int, tolerance: float, coupling_steps: int = 1) -> str:
     width = cells * CELL
     per_side = math.ceil(particles ** (1.0 / 3.0))
     spacing = 0.99 * width / per_side / DIAMETER
@@ -67,7 +67,7 @@ def case_text(cells: int, particles: int, tolerance: float, update_every: int = 
 model = "darcy"
 grid = {{ cells = [{cells}, {cells}, {cells}] }}
 bottom = {{ pressure = {pressure!r} }}
-update_every = {update_every}
+coupling = {{ steps = {coupling_steps} }}
 solver = {{ tolerance = {tolerance!r} }}
 """
     )

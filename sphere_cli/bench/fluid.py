@@ -8,7 +8,7 @@ dt = 4e-6 s) on the canonical scene's loose jittered lattice (dem.py: spacing 1.
 filled from the floor: 11 236 a layer at 64^3, so 20 000 make a bed 2 layers (about 1 cell)
 deep under 63 cells of water. Water, Gidaspow drag, an upward seepage of half the bed's buoyant
 weight per area forced by the bottom pressure (top open at 0 Pa), one fluid step per DEM step
-(ndem = 1), the pressure solver and tolerance at their defaults (PCG with multigrid, 1e-10).
+(fluid.coupling.steps = 1), the pressure solver and tolerance at their defaults (PCG with multigrid, 1e-10).
 
 Reported, apart: the compile (or cache-load) time (an 8^3 scene with 200 particles: the same
 kernels, the multigrid's and Jacobi's included), the build time and the first coupled step
@@ -62,7 +62,7 @@ grid = {{ cells = [{cells}, {cells}, {cells}] }}
 bottom = {{ type = "pressure", pressure = {bottom!r} }}
 top = {{ type = "pressure", pressure = 0.0 }}
 [fluid.coupling]
-ndem = 1
+steps = 1
 """
     )
 
@@ -182,7 +182,7 @@ def run_fluid_benchmark(
         cells=list(fluid.grid().shape),
         cell_count=int(np.prod(fluid.grid().shape)),
         dt=scene.state.clock.dt,
-        ndem=fluid.coupling_steps,
+        coupling_steps=fluid.coupling_steps,
         pressure_solver=solver.poisson.describe(),
         tolerance=solver.poisson.tolerance,
         first_step_iterations=fs.iterations,

@@ -13,34 +13,10 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .base import Count, Real, Strict, Vec3, _default_tag
+from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary
 from .fluid_grid import FluidGridConfig
 
-
-class PressureBoundary(Strict):
-    """Prescribed excess pressure on the face: pressure + amplitude sin(2 pi t / period + phase)."""
-
-    condition: Literal["pressure"] = "pressure"
-    pressure: Real = Field(0.0, description="Mean excess pore pressure on the face [Pa].")
-    amplitude: Real = Field(0.0, ge=0, description="Amplitude of the sinusoidal modulation (0 = none) [Pa].")
-    period: Real | None = Field(
-        None, gt=0, description="Period of the modulation; required when amplitude > 0 [s]."
-    )
-    phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
-
-    @model_validator(mode="after")
-    def _period_given(self):
-        if self.amplitude > 0 and self.period is None:
-            raise ValueError("a modulation (amplitude > 0) needs its period [s]")
-        return self
-
-
-class NoFlowBoundary(Strict):
-    """Impermeable face: no fluid crosses it (zero normal gradient of the excess pressure)."""
-
-    condition: Literal["no-flow"]
-
-
-DarcyBoundary = Annotated[PressureBoundary | NoFlowBoundary, Field(discriminator="condition")]
+DarcyBoundary = Annotated[PressureBoundary | NoFlowBoundary, Field(discriminator="type")]
 
 
 class KozenyCarmanPermeability(Strict):
@@ -141,31 +117,27 @@ class DarcyFluid(Strict):
     initial_pressure: Real = Field(0.0, description="Excess pore pressure in every cell at t = 0 [Pa].")
     top: DarcyBoundary = Field(
         default_factory=PressureBoundary,
-        description='Top face (z+): condition = "pressure" (default, 0 Pa) or "no-flow".',
+        description='Top face (z+): type = "pressure" (default, 0 Pa) or "no-flow".',
     )
     bottom: DarcyBoundary = Field(
-        default_factory=lambda: NoFlowBoundary(condition="no-flow"),
-        description='Bottom face (z-): condition = "no-flow" (default) or "pressure".',
+        default_factory=NoFlowBoundary,
+        description='Bottom face (z-): type = "no-flow" (default) or "pressure".',
     )
     fixed_pressure: list[FixedPressureRegion] = Field(
         default_factory=list,
         description="Regions whose cells hold a prescribed excess pressure, one table per region.",
     )
-    update_every: Count = Field(
-        1,
-        ge=1,
-        description=(
-            "DEM steps per fluid step; the pressure is solved for every update_every-th step with "
-            "the time step update_every dt [-]."
-        ),
+    coupling: CouplingConfig = Field(
+        default_factory=CouplingConfig,
+        description="Fluid steps against DEM steps (default: steps = 1); one pressure solve a fluid step.",
     )
     solver: DarcySolver = Field(default_factory=DarcySolver, description="The implicit pressure solve.")
 
     @model_validator(mode="before")
     @classmethod
     def _default_tags(cls, data):
-        data = _default_tag(data, "top", "condition", "pressure")
-        data = _default_tag(data, "bottom", "condition", "pressure")
+        data = _default_tag(data, "top", "type", "pressure")
+        data = _default_tag(data, "bottom", "type", "pressure")
         return _default_tag(data, "permeability", "model", "kozeny-carman")
 
     @model_validator(mode="after")

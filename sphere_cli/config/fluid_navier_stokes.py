@@ -7,46 +7,35 @@ sphere_cli/kernels/fluid/navier_stokes.py and docs/user-guide.md ("Fluid flow (p
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
 from .base import Count, Flag, Real, Strict, _default_tag
 from .drag import DragConfig
+from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary
 from .fluid_grid import FluidGridConfig
 
 
-class NoFlowBoundary(Strict):
-    """A closed boundary: no flow through it (Neumann for the pressure correction)."""
+class NoSlipNoFlow(NoFlowBoundary):
+    """A closed face; optionally no slip along it."""
 
-    type: Literal["no-flow"] = "no-flow"
     no_slip: Flag = Field(
         False,
         description="The velocity along the boundary vanishes there too (otherwise free slip) [-].",
     )
 
 
-class PressureBoundary(Strict):
-    """An open boundary at a prescribed pressure (Dirichlet), optionally modulated in time:
-    p_b(t) = pressure + amplitude sin(2 pi frequency t + phase). Fluid may flow through it."""
+class NoSlipPressure(PressureBoundary):
+    """An open face at a prescribed pressure; optionally no slip along it."""
 
-    type: Literal["pressure"]
-    pressure: Real = Field(0.0, description="Mean pressure at the boundary face [Pa].")
-    amplitude: Real = Field(0.0, ge=0, description="Amplitude of the sinusoidal modulation [Pa].")
-    frequency: Real = Field(0.0, ge=0, description="Frequency of the modulation [Hz].")
-    phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
     no_slip: Flag = Field(
         False,
         description="The velocity along the boundary vanishes there (otherwise free slip) [-].",
     )
 
-    def value(self, time: float) -> float:
-        """Boundary pressure at `time` [s] -> [Pa]."""
-        return self.pressure + self.amplitude * math.sin(2.0 * math.pi * self.frequency * time + self.phase)
 
-
-Boundary = Annotated[NoFlowBoundary | PressureBoundary, Field(discriminator="type")]
+Boundary = Annotated[NoSlipNoFlow | NoSlipPressure, Field(discriminator="type")]
 
 
 class PressureSolverConfig(Strict):
@@ -73,37 +62,6 @@ class PressureSolverConfig(Strict):
     )
 
 
-class CouplingConfig(Strict):
-    """How the fluid steps interleave with the DEM steps: the DEM takes ndem steps in the fluid
-    field of the last fluid step, then the fluid takes one step over the same time with the
-    particles where they are now. Give ndem, or fluid_dt, not both."""
-
-    ndem: Count | None = Field(
-        None,
-        ge=1,
-        description=(
-            'DEM steps per fluid step (default 1): the fluid step is ndem dt, and dt ("auto" or '
-            "given) must satisfy the fluid's limits divided by ndem [-]."
-        ),
-    )
-    fluid_dt: Real | None = Field(
-        None,
-        gt=0,
-        description=(
-            "The fluid step instead, sub-stepped by the DEM: ndem = round(fluid_dt / dt) DEM steps "
-            "(at least one, the rule of every span of time in a case) per fluid step of ndem dt. "
-            "fluid_dt and the fluid step ndem dt must satisfy the fluid's limits, and dt may not "
-            "exceed fluid_dt [s]."
-        ),
-    )
-
-    @model_validator(mode="after")
-    def _one_way(self):
-        if self.ndem is not None and self.fluid_dt is not None:
-            raise ValueError("give either ndem or fluid_dt, not both")
-        return self
-
-
 class NavierStokesFluid(Strict):
     """A Newtonian fluid filling the pores: porous Navier-Stokes on the fluid grid, x and y
     periodic, z bounded by the bottom and top boundaries."""
@@ -121,7 +79,7 @@ class NavierStokesFluid(Strict):
             "conditionally valid (Zhou et al. 2010, J. Fluid Mech. 661) [-]."
         ),
     )
-    beta: Real = Field(
+    old_pressure_weight: Real = Field(
         0.0,
         ge=0,
         le=1,
@@ -132,17 +90,17 @@ class NavierStokesFluid(Strict):
         ),
     )
     bottom: Boundary = Field(
-        default_factory=NoFlowBoundary, description="Boundary at the lower z face of the box."
+        default_factory=NoSlipNoFlow, description="Boundary at the lower z face of the box."
     )
     top: Boundary = Field(
-        default_factory=lambda: PressureBoundary(type="pressure"),
+        default_factory=NoSlipPressure,
         description="Boundary at the upper z face of the box (default: open at 0 Pa).",
     )
     solver: PressureSolverConfig = Field(
         default_factory=PressureSolverConfig, description="Solver of the pressure equation."
     )
     coupling: CouplingConfig = Field(
-        default_factory=CouplingConfig, description="Fluid steps against DEM steps."
+        default_factory=CouplingConfig, description="Fluid steps against DEM steps (default: steps = 1)."
     )
     drag: DragConfig = Field(
         default_factory=DragConfig, description="Momentum exchange between particles and fluid."

@@ -10,6 +10,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .base import Count, Real, Strict
+from .fluid_common import CouplingConfig
 
 
 class SolvedFlow(Strict):
@@ -21,8 +22,9 @@ class SolvedFlow(Strict):
         description=(
             'Eddy viscosity nu_t = l^2 |du/dz| with the mixing length l: "none" (laminar), "prandtl" '
             'l = kappa s, "parabolic" l = kappa s sqrt(1 - s/H) (s: height above the fluid bottom, H: '
-            'flow depth), "li-sawamoto" l = kappa * integral of (phi_max - phi)/phi_max dz from the '
-            "bottom, which damps it inside the bed (Li & Sawamoto 1995) [-]."
+            'flow depth), "li-sawamoto" l = kappa * integral of (c_max - c)/c_max dz from the bottom '
+            "(c: the solid fraction, c_max: packed_solid_fraction), which damps it inside the bed "
+            "(Li & Sawamoto 1995) [-]."
         ),
     )
     kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")
@@ -132,30 +134,29 @@ class Vans1dFluid(Strict):
     flow: Flow = Field(
         default_factory=SolvedFlow, description="How the fluid velocity is found: solved or prescribed."
     )
-    coupling_interval: Real = Field(
-        1.0e-3,
-        gt=0,
+    coupling: CouplingConfig = Field(
+        default_factory=lambda: CouplingConfig(interval=1.0e-3),
         description=(
-            "Simulated time between two fluid updates: the particles move this long in a frozen "
-            "profile, then the solid profiles are averaged and the fluid advanced over the same "
-            "time (rounded to whole DEM steps) [s]."
+            "Time between two fluid updates (default: interval = 1e-3 s): the particles move this "
+            "long in a frozen profile, then the solid profiles are averaged and the fluid advanced "
+            "over the same time."
         ),
     )
     drag_exponent: Real = Field(
         3.1,
         ge=0,
         description=(
-            "Richardson-Zaki exponent n of the hindrance (1 - phi)^-n in the drag coefficient "
-            "C_d = (0.44 + 24/Re_p)(1 - phi)^-n [-]."
+            "Richardson-Zaki exponent n of the hindrance (1 - c)^-n in the drag coefficient "
+            "C_d = (0.44 + 24/Re_p)(1 - c)^-n, c the solid fraction [-]."
         ),
     )
-    phi_max: Real = Field(
+    packed_solid_fraction: Real = Field(
         0.61,
         gt=0,
         lt=1,
         description=(
             "Solid fraction of the packed bed: the Li-Sawamoto mixing length vanishes at it, and "
-            "the hindrance uses min(phi, phi_max) [-]."
+            "the hindrance uses the solid fraction up to it [-]."
         ),
     )
     buoyancy: Literal["wall-normal", "full"] = Field(

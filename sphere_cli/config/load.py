@@ -26,6 +26,7 @@ from pydantic import ValidationError
 
 from ..errors import CaseError, MissingInputError, SphereError
 from .consistency import case_warnings, check_consistency
+from .fluid_common import RENAMED
 from .locate import KeyLines, format_location
 from .schema import NON_PHYSICS_KEYS, Case, Strict
 
@@ -223,12 +224,16 @@ def _value_at(data, loc: tuple):
 
 
 def _clean_location(data, loc: tuple) -> tuple:
-    """Drop the union tags pydantic inserts (e.g. 'uniform' in particles.radius.uniform.min)."""
+    """Drop the union tags pydantic inserts (e.g. 'uniform' in particles.radius.uniform.min). A
+    tag that is also a key of the table (the "pressure" boundary has a `pressure`) is told apart
+    by what follows it: a tag is followed by keys, a plain value is not."""
     cleaned, node = [], data
     for i, part in enumerate(loc):
         found = (isinstance(node, dict) and part in node) or (
             isinstance(node, list) and isinstance(part, int) and part < len(node)
         )
+        if found and i < len(loc) - 1 and not isinstance(node[part], (dict, list)):
+            found = False
         if found:
             cleaned.append(part)
             node = node[part]
@@ -243,7 +248,9 @@ def _validation_errors(exc: ValidationError, data) -> list[tuple[tuple, object, 
     for err in exc.errors(include_url=False):
         loc = _clean_location(data, tuple(err["loc"]))
         message = err["msg"]
-        if err["type"] == "extra_forbidden":
+        if err["type"] == "extra_forbidden" and loc in RENAMED:
+            message = f"a key of earlier versions, now {RENAMED[loc]}"
+        elif err["type"] == "extra_forbidden":
             message = "unknown key (check the spelling; `sphere schema` lists every key)"
         elif err["type"] == "missing":
             message = "required key is missing"

@@ -10,6 +10,7 @@ it adds its forces after the contacts and walls, may take over the particles' se
 from __future__ import annotations
 
 import importlib
+import math
 
 import numpy as np
 
@@ -40,10 +41,54 @@ class FluidModule(Module):
 
     def start(self, state) -> None:
         """Called once state.clock.dt is known, for a new run and a resumed one alike: sets
-        coupling_steps, the DEM steps between two fluid steps."""
+        coupling_steps, the DEM steps between two fluid steps (start_coupling)."""
+        self.start_coupling(state)
 
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
+
+    # -- the coupling of [fluid.coupling], the same for every model --------------------------------
+
+    def fluid_step_limit(self) -> tuple[float, str]:
+        """The stability limit on the fluid step itself [s] and what sets it (inf: none)."""
+        return math.inf, ""
+
+    def coupling_limit(self) -> tuple[float, str]:
+        """The limit the coupling puts on dt [s]: the DEM sub-steps fluid.coupling.interval, or
+        takes fluid.coupling.steps steps a fluid step (the fluid step's own limit divided by
+        them). Checks, first, that a given interval is within the fluid step's limit."""
+        coupling = self.loaded.case.fluid.coupling
+        limit, reason = self.fluid_step_limit()
+        if coupling.interval is not None:
+            if coupling.interval > limit:
+                raise self.loaded.error(
+                    ("fluid", "coupling", "interval"),
+                    f"above the fluid's stability limit {limit:.4g} s ({reason}); "
+                    f"use interval <= {limit:.4g} s",
+                )
+            return coupling.interval, "the DEM sub-steps the fluid step fluid.coupling.interval"
+        steps = coupling.steps or 1
+        if steps > 1:
+            return limit / steps, f"{reason}, divided by fluid.coupling.steps = {steps}"
+        return limit, reason
+
+    def start_coupling(self, state) -> None:
+        """coupling_steps and the fluid step fluid_dt [s] once dt is known (the one rule for a
+        span of time, Clock.steps_in, for an interval); a rounded interval above the fluid
+        step's limit is refused."""
+        coupling = self.loaded.case.fluid.coupling
+        clock = state.clock
+        interval = coupling.interval
+        self.coupling_steps = clock.steps_in(interval) if interval is not None else coupling.steps or 1
+        self.fluid_dt = self.coupling_steps * clock.dt
+        limit, reason = self.fluid_step_limit()
+        if interval is not None and self.fluid_dt > limit:
+            raise self.loaded.error(
+                ("fluid", "coupling", "interval"),
+                f"is {self.coupling_steps} DEM steps of dt = {clock.dt:.6g} s, a fluid step of "
+                f"{self.fluid_dt:.6g} s, above the fluid's stability limit {limit:.4g} s ({reason}); "
+                f"use interval <= {limit - clock.dt:.4g} s or a dt that divides it",
+            )
 
     def first_unstable(self, state) -> str | None:
         """A message naming the cell (or level), the quantity and its value when the fluid state

@@ -22,7 +22,7 @@ def test_fluid_bench_reports_cells_particles_steps_and_both_pressure_solvers(tmp
     assert report["case"] == "fluid"
     assert report["particles"] == 200
     assert report["cells"] == [8, 8, 8] and report["cell_count"] == 512
-    assert report["ndem"] == 1 and report["steps"] == 2
+    assert report["coupling_steps"] == 1 and report["steps"] == 2
     assert report["compile_seconds"] > 0 and report["first_step_seconds"] > 0
     assert report["threading_layer"] in ("omp", "tbb", "workqueue")
     assert len(report["load_average_before"]) == len(report["load_average_after"]) == 3

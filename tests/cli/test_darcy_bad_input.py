@@ -37,15 +37,15 @@ CASE_ERRORS = [
     (
         "unknown-boundary-condition",
         'model = "darcy"',
-        'model = "darcy"\nbottom = { condition = "open" }',
-        "fluid.bottom.condition",
+        'model = "darcy"\nbottom = { type = "open" }',
+        "fluid.bottom.type",
         "bottom =",
         ["unknown choice", '"no-flow"'],
     ),
     (
         "no-flow-with-a-pressure",
         'model = "darcy"',
-        'model = "darcy"\nbottom = { condition = "no-flow", pressure = 3.0 }',
+        'model = "darcy"\nbottom = { type = "no-flow", pressure = 3.0 }',
         "fluid.bottom.pressure",
         "bottom =",
         ["unknown key"],

@@ -13,7 +13,7 @@ FLUID = (
     'title = "fluid"\n\n'
     + NAVIER_STOKES_SCENE
     + """viscosity = 0.001
-beta = 0.0
+old_pressure_weight = 0.0
 formulation = "A"
 top = { type = "pressure", pressure = 0.0 }
 
@@ -21,27 +21,41 @@ top = { type = "pressure", pressure = 0.0 }
 method = "pcg"
 
 [fluid.coupling]
-ndem = 5
+steps = 5
 """
 )
 
 # (id, text to replace, replacement, key named, text on the line named, other fragments)
 SCHEMA_ERRORS = [
-    ("beta-above-1", "beta = 0.0", "beta = 1.5", "fluid.beta", "beta =", []),
+    (
+        "weight-above-1",
+        "old_pressure_weight = 0.0",
+        "old_pressure_weight = 1.5",
+        "fluid.old_pressure_weight",
+        "old_pressure_weight =",
+        [],
+    ),
     ("formulation", 'formulation = "A"', 'formulation = "C"', "fluid.formulation", "formulation =", []),
     ("solver-method", 'method = "pcg"', 'method = "sor"', "fluid.solver.method", 'method = "sor"', []),
-    ("ndem-zero", "ndem = 5", "ndem = 0", "fluid.coupling.ndem", "ndem =", []),
+    ("steps-zero", "steps = 5", "steps = 0", "fluid.coupling.steps", "steps =", []),
     (
-        "ndem-and-fluid-dt",
-        "ndem = 5",
-        "ndem = 5\nfluid_dt = 1e-4",
+        "steps-and-interval",
+        "steps = 5",
+        "steps = 5\ninterval = 1e-4",
         "fluid.coupling",
         "[fluid.coupling]",
         ["not both"],
     ),
     ("boundary-type", 'type = "pressure"', 'type = "open"', "fluid.top", "top =", []),
     ("negative-viscosity", "viscosity = 0.001", "viscosity = -1.0", "fluid.viscosity", "viscosity =", []),
-    ("typo", "beta = 0.0", "betta = 0.0", "fluid.betta", "betta", ["unknown key"]),
+    (
+        "typo",
+        "old_pressure_weight = 0.0",
+        "old_presure_weight = 0.0",
+        "fluid.old_presure_weight",
+        "old_presure_weight",
+        ["unknown key"],
+    ),
 ]
 
 
@@ -73,10 +87,11 @@ def test_fluid_needs_periodic_x_and_y(tmp_path):
 
 def test_dt_above_the_viscous_limit_names_it(tmp_path):
     """A viscous fluid (nu = 0.1 m^2/s on 2.5 mm cells: dx^2/(8 nu) = 7.8 us, 1.6 us per DEM step
-    with ndem = 5) limits dt below the contact limit (~23 us): a given dt above it is refused."""
+    with fluid.coupling.steps = 5) limits dt below the contact limit (~23 us): a given dt above
+    it is refused."""
     text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), 'dt = "auto"', "dt = 1e-5")
     result = _run(tmp_path, text)
-    assert_clean_error(result, 65, "simulation.dt", "viscous diffusion", "ndem = 5")
+    assert_clean_error(result, 65, "simulation.dt", "viscous diffusion", "steps = 5")
     limit = float(re.search(r"stability limit ([0-9.eE+-]+) s", result.stderr).group(1))
     assert limit == pytest.approx(0.25**2 * 1e-4 / (8 * 0.1) / 5, rel=1e-3)  # printed to 4 digits
 
@@ -84,24 +99,24 @@ def test_dt_above_the_viscous_limit_names_it(tmp_path):
 def test_dt_above_the_advective_limit_of_max_speed_names_it(tmp_path):
     """fluid.max_speed = 50 m/s on 2.5 mm cells: the advective limit sum |u| dt_f/dx <= 1/2 (the
     bound of the limited advection, kernels/fluid/navier_stokes.py) gives dt_f <= 0.5/(50 * 3/2.5e-3)
-    = 8.33 us, 1.67 us per DEM step with ndem = 5, below the contact limit (6.9 us): a given
+    = 8.33 us, 1.67 us per DEM step with 5 DEM steps a fluid step, below the contact limit (6.9 us): a given
     dt = 5e-6 s is refused naming it (with the factor 1 of first-order upwind it would be 3.3 us)."""
     text = edit(FLUID, "viscosity = 0.001", "viscosity = 0.001\nmax_speed = 50.0")
     text = edit(text, 'dt = "auto"', "dt = 5e-6")
     result = _run(tmp_path, text)
-    assert_clean_error(result, 65, "simulation.dt", "advective limit", "fluid.max_speed = 50", "ndem = 5")
+    assert_clean_error(result, 65, "simulation.dt", "advective limit", "fluid.max_speed = 50", "steps = 5")
     limit = float(re.search(r"stability limit ([0-9.eE+-]+) s", result.stderr).group(1))
     assert limit == pytest.approx(0.5 / (50.0 * 3 / 2.5e-3) / 5, rel=1e-3)  # printed to 4 digits
 
 
-def test_fluid_dt_above_the_viscous_limit_is_refused(tmp_path):
-    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), "ndem = 5", "fluid_dt = 1e-4")
+def test_coupling_interval_above_the_viscous_limit_is_refused(tmp_path):
+    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), "steps = 5", "interval = 1e-4")
     result = _run(tmp_path, text)
     assert_clean_error(
         result,
         65,
-        "fluid.coupling.fluid_dt",
-        f"case.toml:{line_of(text, 'fluid_dt =')}:",
+        "fluid.coupling.interval",
+        f"case.toml:{line_of(text, 'interval =')}:",
         "viscous diffusion",
     )
 
@@ -120,23 +135,23 @@ def test_fluid_outrunning_the_advective_limit_stops_naming_the_cell(tmp_path):
     text = edit(
         FLUID, 'top = { type = "pressure", pressure = 0.0 }', 'bottom = { type = "pressure", pressure = 1e8 }'
     )
-    text = edit(text, "ndem = 5", "ndem = 50")
+    text = edit(text, "steps = 5", "steps = 50")
     text = edit(text, 'dt = "auto"', 'dt = "auto"\nblowup_check_every = 5')
     result = _run(tmp_path, text)
     assert_clean_error(result, 70, "fluid cell (", "Courant number")
 
 
 def test_fluid_step_rounded_above_the_viscous_limit_is_refused(tmp_path):
-    # viscous limit dx^2/(8 nu) = 7.8125e-4 s; fluid_dt just below it is 1411.6 steps of dt,
+    # viscous limit dx^2/(8 nu) = 7.8125e-4 s; an interval just below it is 1411.6 steps of dt,
     # which the one rule for spans of time makes 1412: a fluid step of 7.8146e-4 s
-    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 1.0"), "ndem = 5", "fluid_dt = 7.8124e-4")
+    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 1.0"), "steps = 5", "interval = 7.8124e-4")
     text = edit(text, 'dt = "auto"', f"dt = {7.8124e-4 / 1411.6!r}")
     result = _run(tmp_path, text)
     assert_clean_error(
         result,
         65,
-        "fluid.coupling.fluid_dt",
-        f"case.toml:{line_of(text, 'fluid_dt =')}:",
+        "fluid.coupling.interval",
+        f"case.toml:{line_of(text, 'interval =')}:",
         "is 1412 DEM steps",
         "above the fluid's stability limit 0.0007813 s",
     )

@@ -117,7 +117,7 @@ def terzaghi_run(nz: int, dt_factor: float, times=(0.1, 0.2, 0.5, 1.0)):
         {
             "permeability": {"model": "constant", "value": 1e-12},
             "initial_pressure": p0,
-            "bottom": {"condition": "no-flow"},
+            "bottom": {"type": "no-flow"},
         },
     )
     D = 1e-12 / (COMPRESSIBILITY * POROSITY * VISCOSITY)
@@ -190,7 +190,7 @@ def test_sinusoidal_top_pressure_decays_and_lags_with_depth():
         {
             "permeability": {"model": "constant", "value": k},
             "top": {"amplitude": A, "period": period},
-            "bottom": {"condition": "no-flow"},
+            "bottom": {"type": "no-flow"},
         },
     )
     z = model.grid.centres(2)

@@ -57,7 +57,7 @@ density = 1000.0
 grid = {{ cells = [2, 2, 10] }}
 bottom = {{ pressure = {pressure} }}
 top = {{ pressure = 0.0 }}
-update_every = {update_every}
+coupling = {{ steps = {update_every} }}
 [output]
 frames = {{ every_steps = 100 }}
 checkpoints = {{ every_steps = {checkpoint_every} }}
@@ -136,7 +136,7 @@ def test_coupling_is_stable_at_its_time_step_limit():
 
 
 def test_resume_is_bitwise_identical(tmp_path: Path):
-    """A run stopped at a step between two fluid steps (update_every = 3) and resumed ends in
+    """A run stopped at a step between two fluid steps (fluid.coupling.steps = 3) and resumed ends in
     exactly the state of an uninterrupted one: particles, pressure, porosities and gradient."""
     case = tmp_path / "bed.toml"
     case.write_text(bed_case(3.0 * CRITICAL * 0.01, duration=200 * 4e-6, update_every=3, checkpoint_every=50))
@@ -229,7 +229,7 @@ model = "darcy"
 grid = { cells = [2, 2, 4] }
 permeability = { model = "constant", value = 7.2e-12 }
 top = { pressure = 0.0 }
-bottom = { condition = "no-flow" }"""
+bottom = { type = "no-flow" }"""
     settlements = {}
     for name, table in (("dry", ""), ("wet", fluid)):
         scene = build_scene(parse_case(OEDOMETER.format(stress=sigma, fluid=table)))

@@ -181,7 +181,7 @@ def test_ergun_pressure_drop_through_a_dem_packing(tmp_path, formulation):
             "grid": {"cells": [1, 1, 3]},
             "bottom": {"type": "pressure", "pressure": 0.0},
             "top": {"type": "pressure", "pressure": top_pressure},
-            "coupling": {"ndem": 5},
+            "coupling": {"steps": 5},
         },
     )
     advance(scene, 1000)  # 0.1 s, ten times the column's relaxation time

@@ -63,7 +63,7 @@ def test_column_at_rest_stays_at_rest_on_a_moving_grid(speed, phi, beta):
     test_fluid_navier_stokes.py) and p = p_top + rho g (H(t) - z) at the current cell centres to
     1e-9 rho g H (the solver tolerance 1e-10 times the conditioning of a 8-cell column)."""
     p_top = 100.0
-    solver = _solver(beta=beta, top={"type": "pressure", "pressure": p_top})
+    solver = _solver(old_pressure_weight=beta, top={"type": "pressure", "pressure": p_top})
     fs = solver.allocate()
     fs.phi[...] = phi
     fs.v[..., 0] = DRIFT

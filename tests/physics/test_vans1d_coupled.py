@@ -92,7 +92,7 @@ normal_stiffness = 1.0e4
 model = "vans1d"
 surface = 0.02
 cells = 40
-coupling_interval = 1.0e-4
+coupling = { interval = 1.0e-4 }
 flow = { kind = "log-law", friction_velocity = 0.05, bed_level = 0.002, roughness_length = 1.0e-4 }
 """
 

@@ -136,11 +136,11 @@ def test_uniform_porous_layer_with_drag():
 
 
 def test_li_sawamoto_mixing_length():
-    """Li & Sawamoto (1995): l = kappa * integral of (phi_max - phi)/phi_max: equal to Prandtl's
-    kappa z in clear water (bitwise here), 0 through a bed packed at phi_max, and kappa (z - z_bed)
-    above it; half the rate in a layer at phi_max / 2."""
+    """Li & Sawamoto (1995): l = kappa * integral of (c_max - c)/c_max, c the solid fraction and
+    c_max the packed one: equal to Prandtl's kappa z in clear water (bitwise here), 0 through a bed
+    packed at c_max, and kappa (z - z_bed) above it; half the rate in a layer at c_max / 2."""
     faces = np.linspace(0.0, 0.1, 11)
-    clear = FluidColumn(faces, RHO, 1e-6, mixing="li-sawamoto", phi_max=0.6)
+    clear = FluidColumn(faces, RHO, 1e-6, mixing="li-sawamoto", packed_solid_fraction=0.6)
     prandtl = FluidColumn(faces, RHO, 1e-6, mixing="prandtl")
     clear.update_mixing_length(np.zeros(10))
     prandtl.update_mixing_length(np.zeros(10))

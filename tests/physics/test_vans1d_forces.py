@@ -48,7 +48,7 @@ def test_drag_and_buoyancy_in_uniform_flow():
     np.testing.assert_allclose(f_full - f, [-RHO * volume * 0.5, 0.0, 0.0], rtol=1e-12)
 
 
-def test_hindrance_is_capped_at_phi_max():
+def test_hindrance_is_capped_at_the_packed_solid_fraction():
     f_cap, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), phi=0.61)
     f_over, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), phi=0.9)
     assert f_over[0] == f_cap[0]

@@ -27,9 +27,9 @@ def _edit(text: str, old: str, new: str) -> str:
     return text.replace(old, new)
 
 
-# the fixed-grid restart case (box 10 x 10 x 20 mm, 4 x 4 x 8 cells, beta = 0.5, ndem = 7, a
-# modulated top pressure; 200 steps, resumed from step 101) with a top wall coming down and the
-# grid following it
+# the fixed-grid restart case (box 10 x 10 x 20 mm, 4 x 4 x 8 cells, old_pressure_weight = 0.5,
+# 7 DEM steps a fluid step, a modulated top pressure; 200 steps, resumed from step 101) with a
+# top wall coming down and the grid following it
 CASE = _edit(
     _edit(
         FIXED_GRID_CASE,

@@ -1,5 +1,5 @@
 """A run with the Navier-Stokes fluid stopped and resumed ends bitwise in the state of an
-uninterrupted one -- also when it stops in the middle of a fluid step's block of ndem DEM steps --
+uninterrupted one -- also when it stops in the middle of a fluid step's block of DEM steps --
 and its fluid frames match. The fluid's checkpoint group holds the whole fluid state."""
 
 from __future__ import annotations
@@ -36,16 +36,18 @@ face = "z-"
 [fluid]
 model = "navier-stokes"
 grid = { cells = [4, 4, 8] }
-beta = 0.5
-top = { type = "pressure", pressure = 100.0, amplitude = 50.0, frequency = 200.0 }
+old_pressure_weight = 0.5
+top = { type = "pressure", pressure = 100.0, amplitude = 50.0, period = 0.005 }
 [fluid.coupling]
-ndem = 7
+steps = 7
 [output]
 frames = { every_steps = 10 }
 checkpoints = { every_steps = 1000 }
 """
 STEPS = 200
-SPLIT = 101  # not a multiple of ndem: the resumed run starts inside a fluid step's block
+SPLIT = (
+    101  # not a multiple of the 7 DEM steps a fluid step: the resumed run starts inside a fluid step's block
+)
 
 
 def _final_state(run_dir: Path) -> dict:

@@ -1,7 +1,7 @@
 """Darcy pore-pressure flow coupled to the particles (`[fluid] model = "darcy"`).
 
 The fluid is the pore-pressure equation of physics/fluid/pore_pressure.py on the shared fluid grid.
-Each fluid step (every `update_every` DEM steps, after the kick and the clock) measures the
+Each fluid step (every fluid.coupling.steps DEM steps, after the kick and the clock) measures the
 porosity and the mean particle velocity per cell from the particles (physics/fluid/porosity.py),
 takes dphi/dt as the backward difference over the fluid step, and solves one implicit step.
 The forces phase of every DEM step adds to each particle the pressure-gradient force -V grad p
@@ -64,7 +64,7 @@ class Darcy(FluidModule):
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
-        self.coupling_steps = config.update_every
+        self.coupling_steps = config.coupling.steps or 1
         self.fluid_dt = math.nan
         self.warned_clamp = False
         state.fluid = self.pore.state
@@ -72,6 +72,9 @@ class Darcy(FluidModule):
     # -- schedule --------------------------------------------------------------------------------
 
     def dt_limit(self) -> tuple[float, str]:
+        return self.coupling_limit()
+
+    def fluid_step_limit(self) -> tuple[float, str]:
         """The diffusion is implicit and sets no limit; the coupling is explicit. A compacting
         skeleton raises, through the source term, a pressure whose gradient pushes back on the
         grains one fluid step later, like a Darcy drag of relaxation time rho_s k / mu. Measured
@@ -86,16 +89,12 @@ class Darcy(FluidModule):
         else:
             k = self.pore.kc * phi**3 / (1.0 - phi) ** 2
         relaxation = self.lightest_density * k / config.viscosity
-        limit = COUPLING_FRACTION * relaxation / self.coupling_steps
+        limit = COUPLING_FRACTION * relaxation
         where = "" if self.pore.kc is None else f" at porosity {phi:g}"
         return limit, (
-            f"explicit Darcy coupling: {COUPLING_FRACTION:g} rho_s k / mu / update_every with rho_s = "
-            f"{self.lightest_density:.4g} kg/m^3, k = {k:.3g} m^2{where}, mu = {config.viscosity:g} Pa s, "
-            f"update_every = {self.coupling_steps}"
+            f"explicit Darcy coupling: {COUPLING_FRACTION:g} rho_s k / mu with rho_s = "
+            f"{self.lightest_density:.4g} kg/m^3, k = {k:.3g} m^2{where}, mu = {config.viscosity:g} Pa s"
         )
-
-    def start(self, state) -> None:
-        self.fluid_dt = self.coupling_steps * state.clock.dt
 
     def initialize(self, state) -> None:
         s = self.pore.state

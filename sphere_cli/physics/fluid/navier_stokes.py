@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config.fluid_navier_stokes import NavierStokesFluid, NoFlowBoundary, PressureBoundary
+from ...config.fluid_common import NoFlowBoundary, PressureBoundary
+from ...config.fluid_navier_stokes import NavierStokesFluid
 from ...errors import NumericalError
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
@@ -94,7 +95,7 @@ class NavierStokesSolver:
         self.gravity = np.asarray(gravity, dtype=np.float64).copy()
         self.rho = float(config.density)
         self.mu = float(config.viscosity)
-        self.beta = float(config.beta)
+        self.beta = float(config.old_pressure_weight)  # Langtangen et al.'s beta
         self.pressure_in_solid = config.formulation == "A"
         self.boundaries = (config.bottom, config.top)
         self.bc_sign = np.ones((2, 3))
@@ -258,7 +259,7 @@ class NavierStokesSolver:
             return f"{where} has a non-finite fluid state ({values})"
         return (
             f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > "
-            f"{COURANT_LIMIT:g} ({values}); use a smaller dt or fluid.coupling.ndem, or set fluid.max_speed"
+            f"{COURANT_LIMIT:g} ({values}); use a smaller dt or fluid.coupling.steps, or set fluid.max_speed"
         )
 
     def describe(self) -> dict[str, str]:
@@ -267,14 +268,14 @@ class NavierStokesSolver:
         for name, b in zip(("bottom", "top"), self.boundaries, strict=True):
             text = "no flow" if isinstance(b, NoFlowBoundary) else f"pressure {b.pressure:g} Pa"
             if isinstance(b, PressureBoundary) and b.amplitude > 0:
-                text += f" + {b.amplitude:g} Pa sin(2 pi {b.frequency:g} Hz t + {b.phase:g})"
+                text += f" + {b.amplitude:g} Pa sin(2 pi t / {b.period:g} s + {b.phase:g})"
             if b.no_slip:
                 text += ", no slip"
             bounds.append(f"{name}: {text}")
         return {
             "fluid": (
                 f"porous Navier-Stokes, formulation {c.formulation}, rho = {c.density:g} kg/m^3, "
-                f"mu = {c.viscosity:g} Pa s, beta = {c.beta:g}"
+                f"mu = {c.viscosity:g} Pa s, old_pressure_weight = {c.old_pressure_weight:g}"
             ),
             "fluid grid": self.grid.describe()
             + ", periodic in x and y"
@@ -326,17 +327,11 @@ class NavierStokes(FluidModule):
         state.fluid = self.fs
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
-        self.coupling_steps = cfg.coupling.ndem or 1
-        self.fluid_dt = math.nan  # ndem dt, set by start()
-        limit, reason = self._fluid_limit()
-        fixed = cfg.coupling.fluid_dt
-        if fixed is not None and fixed > limit:
-            raise loaded.error(
-                ("fluid", "coupling", "fluid_dt"),
-                f"above the fluid's stability limit {limit:.4g} s ({reason}); use fluid_dt <= {limit:.4g} s",
-            )
+        self.coupling_steps = cfg.coupling.steps or 1
+        self.fluid_dt = math.nan  # coupling_steps dt, set by start()
+        self.coupling_limit()  # refuses an interval above the fluid step's limit now
 
-    def _fluid_limit(self) -> tuple[float, str]:
+    def fluid_step_limit(self) -> tuple[float, str]:
         """The fluid step's own limit [s] and what sets it."""
         nu = self.config.viscosity / self.config.density
         limit = self.solver.viscous_limit()
@@ -352,33 +347,11 @@ class NavierStokes(FluidModule):
         return limit, reason
 
     def dt_limit(self) -> tuple[float, str]:
-        fixed = self.config.coupling.fluid_dt
-        if fixed is not None:
-            limit, reason = fixed, "the DEM sub-steps the fluid step fluid.coupling.fluid_dt"
-        else:
-            limit, reason = self._fluid_limit()
-            if self.coupling_steps > 1:
-                limit /= self.coupling_steps
-                reason += f", divided by fluid.coupling.ndem = {self.coupling_steps}"
+        limit, reason = self.coupling_limit()
         drag_limit, drag_reason = self.drag.dt_limit()
         if drag_limit < limit:
             return drag_limit, drag_reason
         return limit, reason
-
-    def start(self, state) -> None:
-        dt = state.clock.dt
-        fixed = self.config.coupling.fluid_dt
-        if fixed is not None:
-            self.coupling_steps = state.clock.steps_in(fixed)
-        self.fluid_dt = self.coupling_steps * dt
-        limit, reason = self._fluid_limit()
-        if fixed is not None and self.fluid_dt > limit:
-            raise self.loaded.error(
-                ("fluid", "coupling", "fluid_dt"),
-                f"is {self.coupling_steps} DEM steps of dt = {dt:.6g} s, a fluid step of "
-                f"{self.fluid_dt:.6g} s, above the fluid's stability limit {limit:.4g} s ({reason}); "
-                f"use fluid_dt <= {limit - dt:.4g} s or a dt that divides it",
-            )
 
     def initialize(self, state) -> None:
         """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
@@ -432,14 +405,14 @@ class NavierStokes(FluidModule):
             raise NumericalError(
                 f"{where}; the wall moved {abs(height - self.fs.height):.4g} m in one fluid step of "
                 f"{self.fluid_dt:.4g} s, more than half a cell ({dz_old:.4g} m), the advective limit of "
-                "the moving grid's explicit flux; use a smaller dt or fluid.coupling.ndem"
+                "the moving grid's explicit flux; use a smaller dt or fluid.coupling.steps"
             )
         self.solver.resize(height)
         limit = self.solver.viscous_limit()
         if self.fluid_dt > limit:
             raise NumericalError(
                 f"{where}, where the fluid step {self.fluid_dt:.4g} s exceeds the viscous limit "
-                f"dx^2/(8 nu) {limit:.4g} s; use a smaller dt or fluid.coupling.ndem"
+                f"dx^2/(8 nu) {limit:.4g} s; use a smaller dt or fluid.coupling.steps"
             )
 
     def _measure_porosity(self, state) -> None:

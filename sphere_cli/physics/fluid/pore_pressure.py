@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...config.fluid_darcy import ConstantPermeability, DarcyFluid, PressureBoundary
+from ...config.fluid_common import PressureBoundary
+from ...config.fluid_darcy import ConstantPermeability, DarcyFluid
 from ...kernels.fluid.poisson import face_means
 from ...kernels.fluid.pore_pressure import (
     backward_euler_system,
@@ -39,14 +40,9 @@ from .poisson import PoissonResult, PoissonSolver
 
 
 def boundary_pressure(boundary, time: float) -> float:
-    """Excess pressure held on a "pressure" face at `time` [Pa]: pressure + amplitude
-    sin(2 pi t / period + phase); 0 for a no-flow face (unused there)."""
-    if not isinstance(boundary, PressureBoundary):
-        return 0.0
-    value = boundary.pressure
-    if boundary.amplitude > 0.0:
-        value += boundary.amplitude * math.sin(2.0 * math.pi * time / boundary.period + boundary.phase)
-    return value
+    """Excess pressure held on a "pressure" face at `time` [Pa]; 0 for a no-flow face (unused
+    there)."""
+    return boundary.value(time) if isinstance(boundary, PressureBoundary) else 0.0
 
 
 def fixed_pressure_cells(config: DarcyFluid, grid: FluidGrid) -> tuple[np.ndarray, np.ndarray, list[int]]:

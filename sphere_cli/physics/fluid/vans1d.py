@@ -40,7 +40,7 @@ class FluidColumn:
         nu: float,
         mixing: str = "none",
         kappa: float = 0.41,
-        phi_max: float = 0.61,
+        packed_solid_fraction: float = 0.61,
         top_no_slip: bool = False,
         van_driest: float = 0.0,
     ):
@@ -49,7 +49,7 @@ class FluidColumn:
         n = self.centres.size
         self.rho, self.nu = float(rho), float(nu)
         self.kind = MIXING_KINDS[mixing]
-        self.kappa, self.phi_max = float(kappa), float(phi_max)
+        self.kappa, self.packed_solid_fraction = float(kappa), float(packed_solid_fraction)
         self.top_no_slip = bool(top_no_slip)
         self.van_driest = float(van_driest)
         self.u = np.zeros(n)
@@ -68,7 +68,7 @@ class FluidColumn:
         return self.centres.size
 
     def update_mixing_length(self, phi: np.ndarray) -> None:
-        mixing_length(self.faces, phi, self.kind, self.kappa, self.phi_max, self.mixing)
+        mixing_length(self.faces, phi, self.kind, self.kappa, self.packed_solid_fraction, self.mixing)
         damp_mixing_length(self.mixing, self.kappa, self.van_driest, self.u_star[0], self.nu, self.damped)
 
     def advance(self, phi, vel_p, beta, source: float, dt: float, steps: int) -> None:
@@ -126,7 +126,7 @@ class Vans1d(FluidModule):
             nu=cfg.viscosity,
             mixing=flow.mixing_length if solved else "none",
             kappa=flow.kappa if solved else 0.41,
-            phi_max=cfg.phi_max,
+            packed_solid_fraction=cfg.packed_solid_fraction,
             top_no_slip=solved and flow.top == "no-slip",
             van_driest=flow.van_driest if solved else 0.0,
         )
@@ -150,7 +150,8 @@ class Vans1d(FluidModule):
         self._dt_limit = self._drag_relaxation_limit(p, selected)
         self.coupling_steps = 1
         self.fluid_steps = 1
-        self.fluid_dt = 0.0
+        self.fluid_dt = 0.0  # the coupling interval as whole DEM steps [s]
+        self.substep_dt = 0.0  # the fluid's own implicit steps within it [s]
 
     # ---------------------------------------------------------------- checks and schedule
 
@@ -187,28 +188,27 @@ class Vans1d(FluidModule):
 
     def _drag_relaxation_limit(self, p, selected) -> tuple[float, str]:
         """The explicit drag needs dt below the relaxation time m/K of every particle; K is at
-        least its viscous part 3 pi rho nu d (1 - phi)^-n, largest at phi_max. (Faster slip
+        least its viscous part 3 pi rho nu d (1 - phi)^-n, largest at the packed solid fraction. (Faster slip
         raises K further: first_unstable checks m/K of each particle as the run goes.)"""
         sel = selected == 1
         if not sel.any():
             return math.inf, ""
         cfg = self.cfg
-        hindrance = (1.0 - cfg.phi_max) ** (-cfg.drag_exponent)
+        hindrance = (1.0 - cfg.packed_solid_fraction) ** (-cfg.drag_exponent)
         k_viscous = 6.0 * math.pi * cfg.density * cfg.viscosity * p.radius[sel] * hindrance
         relax = p.mass[sel] / k_viscous
         i = int(np.argmin(relax))
         return float(relax[i]), (
             f"explicit drag: relaxation time m/K of the particle of radius {p.radius[sel][i]:.4g} m in the "
-            f"viscous limit at phi_max = {cfg.phi_max:g}"
+            f"viscous limit at fluid.packed_solid_fraction = {cfg.packed_solid_fraction:g}"
         )
 
     def start(self, state) -> None:
-        dt = state.clock.dt
-        self.coupling_steps = state.clock.steps_in(self.cfg.coupling_interval)
-        interval = self.coupling_steps * dt
+        self.start_coupling(state)
+        interval = self.fluid_dt
         if self.solved:
             self.fluid_steps = max(1, math.ceil(interval / self.cfg.flow.dt - 1e-9))
-            self.fluid_dt = interval / self.fluid_steps
+            self.substep_dt = interval / self.fluid_steps
 
     def initialize(self, state) -> None:
         self._average(state)
@@ -223,17 +223,16 @@ class Vans1d(FluidModule):
         cfg = self.cfg
         profile_forces(
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
-            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.phi_max, self.gravity,
-            cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
+            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
+            self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
         )  # fmt: skip
 
     def after_step(self, state) -> None:
         self._average(state)
         if self.solved:
             f = state.fluid
-            f.column.advance(
-                f.profiles.phi, f.profiles.vel, f.profiles.beta, self.source, self.fluid_dt, self.fluid_steps
-            )
+            prof = f.profiles
+            f.column.advance(prof.phi, prof.vel, prof.beta, self.source, self.substep_dt, self.fluid_steps)
 
     def _average(self, state) -> None:
         """Solid profiles of the current particles, the drag evaluated with the current fluid."""
@@ -241,7 +240,8 @@ class Vans1d(FluidModule):
         col, cfg = f.column, self.cfg
         drag_coefficients(
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
-            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.phi_max, f.drag_coef, f.drag_x,
+            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
+            f.drag_coef, f.drag_x,
         )  # fmt: skip
         f.profiles.average(p.pos, p.vel, p.radius, f.selected, f.drag_coef, f.drag_x, col.faces, self.area)
         col.update_mixing_length(f.profiles.phi)
@@ -300,7 +300,7 @@ class Vans1d(FluidModule):
             k = int(bad[0])
             return (
                 f"the vans1d fluid velocity is {u[k]} m/s in layer {k} (z = {f.column.centres[k]:.6g} m); "
-                "a smaller fluid.flow.dt or fluid.coupling_interval may help"
+                "a smaller fluid.flow.dt or fluid.coupling.interval may help"
             )
         p = state.particles
         ratio = f.drag_coef * p.inv_mass * state.clock.dt
@@ -351,9 +351,8 @@ class Vans1d(FluidModule):
         flow = cfg.flow
         mesh = "regular" if cfg.stretching == 1.0 else f"stretched x{cfg.stretching:g}"
         if self.solved:
-            how = (
-                f"solved, mixing length {flow.mixing_length}, top {flow.top}, fluid dt {self.fluid_dt:.3g} s"
-            )
+            how = f"solved, mixing length {flow.mixing_length}, top {flow.top}, "
+            how += f"fluid dt {self.substep_dt:.3g} s"
         else:
             how = f"prescribed ({flow.kind})"
         return {

@@ -1,0 +1,93 @@
+"""What every fluid model's table shares: the `[fluid.coupling]` table and the boundary schema of
+the bottom and top faces.
+
+Coupling: the DEM takes `steps` steps (or the nearest whole number of steps to `interval`
+seconds, the rule of every span of time in a case) with the fluid held, then the fluid advances
+over the same time with the particles where they are then. Each model has its own default.
+
+Boundaries: `type = "pressure"` holds the face at pressure + amplitude sin(2 pi t / period +
+phase); `type = "no-flow"` lets no fluid through it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from .base import Count, Real, Strict
+
+
+class CouplingConfig(Strict):
+    """DEM steps per fluid step, given as a count or as a span of time (not both)."""
+
+    steps: Count | None = Field(
+        None,
+        ge=1,
+        description=(
+            "DEM steps per fluid step: the fluid step is steps x dt, and dt must satisfy the "
+            "fluid's limits divided by steps [-]."
+        ),
+    )
+    interval: Real | None = Field(
+        None,
+        gt=0,
+        description=(
+            "The fluid step as a time instead: round(interval / dt) DEM steps (at least one) per "
+            "fluid step; the fluid step must satisfy the fluid's limits, and dt may not exceed "
+            "interval [s]."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if self.steps is not None and self.interval is not None:
+            raise ValueError("give either steps or interval, not both")
+        return self
+
+
+class NoFlowBoundary(Strict):
+    """A closed face: no fluid crosses it (zero normal gradient of the pressure)."""
+
+    type: Literal["no-flow"] = "no-flow"
+
+
+class PressureBoundary(Strict):
+    """An open face at a prescribed pressure, optionally modulated in time:
+    p_b(t) = pressure + amplitude sin(2 pi t / period + phase). Fluid may flow through it."""
+
+    type: Literal["pressure"] = "pressure"
+    pressure: Real = Field(0.0, description="Mean pressure on the face [Pa].")
+    amplitude: Real = Field(0.0, ge=0, description="Amplitude of the sinusoidal modulation (0 = none) [Pa].")
+    period: Real | None = Field(
+        None, gt=0, description="Period of the modulation; required when amplitude > 0 [s]."
+    )
+    phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
+
+    @model_validator(mode="after")
+    def _period_given(self):
+        if self.amplitude > 0 and self.period is None:
+            raise ValueError("a modulation (amplitude > 0) needs its period [s]")
+        return self
+
+    def value(self, time: float) -> float:
+        """The pressure on the face at `time` [s] -> [Pa]."""
+        if self.amplitude == 0.0:
+            return self.pressure
+        return self.pressure + self.amplitude * math.sin(2.0 * math.pi * time / self.period + self.phase)
+
+
+# case keys of earlier versions -> the key that replaces them (an old key is refused by name)
+RENAMED = {
+    ("fluid", "update_every"): "fluid.coupling.steps",
+    ("fluid", "coupling_interval"): "fluid.coupling.interval",
+    ("fluid", "coupling", "ndem"): "fluid.coupling.steps",
+    ("fluid", "coupling", "fluid_dt"): "fluid.coupling.interval",
+    ("fluid", "top", "condition"): "fluid.top.type",
+    ("fluid", "bottom", "condition"): "fluid.bottom.type",
+    ("fluid", "top", "frequency"): "fluid.top.period (= 1/frequency)",
+    ("fluid", "bottom", "frequency"): "fluid.bottom.period (= 1/frequency)",
+    ("fluid", "beta"): "fluid.old_pressure_weight",
+    ("fluid", "phi_max"): "fluid.packed_solid_fraction",
+}
