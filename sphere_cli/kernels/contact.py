@@ -310,7 +310,8 @@ def box_axes(length, periodic):
 @njit(cache=True, inline="always")
 def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
     """(touching, d = x_i - x_j (3 values), |d|^2) of the pair (i at x, j) whose spring is
-    hist[s]; clears the spring of a pair that does not touch. box: box_axes(length, periodic)."""
+    hist[s]; clears the spring of a pair that does not touch (hist has no rows when no contact has
+    friction: nothing to clear). box: box_axes(length, periodic)."""
     j3 = U3 * j
     s3 = U3 * s
     d0 = minimum_image(x0 - pos[j3], box[0], box[3])
@@ -319,7 +320,7 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
     dist2 = d0 * d0 + d1 * d1 + d2 * d2
     reach = ri + rj
     if dist2 >= reach * reach:
-        if hist[s3] != 0.0 or hist[s3 + U1] != 0.0 or hist[s3 + U2] != 0.0:
+        if hist.shape[0] > 0 and (hist[s3] != 0.0 or hist[s3 + U1] != 0.0 or hist[s3 + U2] != 0.0):
             hist[s3] = 0.0  # the pair has separated: its spring is gone
             hist[s3 + U1] = 0.0
             hist[s3 + U2] = 0.0
@@ -358,9 +359,14 @@ def gather(
     to_block(buf, B_MI, c, reduced(inv_mass[i], inv_mass[j]))
     to_block(buf, B_RI, c, ri)
     to_block(buf, B_RJ, c, rj)
-    to_block(buf, B_H0, c, hist[s3])
-    to_block(buf, B_H1, c, hist[s3 + U1])
-    to_block(buf, B_H2, c, hist[s3 + U2])
+    if hist.shape[0] > 0:
+        to_block(buf, B_H0, c, hist[s3])
+        to_block(buf, B_H1, c, hist[s3 + U1])
+        to_block(buf, B_H2, c, hist[s3 + U2])
+    else:  # frictionless: no springs
+        to_block(buf, B_H0, c, 0.0)
+        to_block(buf, B_H1, c, 0.0)
+        to_block(buf, B_H2, c, 0.0)
     if rolling:
         to_block(buf, B_W0, c, angvel[i3] - angvel[j3])
         to_block(buf, B_W1, c, angvel[i3 + U1] - angvel[j3 + U1])
@@ -397,9 +403,10 @@ def _flush_to_slots(buf, ids, count, law, rolling, single, table, spring_dt, ste
         c = np.uint64(b)
         s = ids[np.uint64(ID_S * BLOCK) + c]
         s3 = U3 * s
-        hist[s3] = from_block(buf, B_H0, c)
-        hist[s3 + U1] = from_block(buf, B_H1, c)
-        hist[s3 + U2] = from_block(buf, B_H2, c)
+        if hist.shape[0] > 0:
+            hist[s3] = from_block(buf, B_H0, c)
+            hist[s3 + U1] = from_block(buf, B_H1, c)
+            hist[s3 + U2] = from_block(buf, B_H2, c)
         slots[s, 0] = from_block(buf, B_E0, c)
         slots[s, 1] = from_block(buf, B_E1, c)
         slots[s, 2] = from_block(buf, B_E2, c)
@@ -513,9 +520,10 @@ def _flush_to_forces(
             s = ids[np.uint64(ID_S * BLOCK) + b]
             j3 = U3 * j
             s3 = U3 * s
-            hist[s3] = from_block(buf, B_H0, b)
-            hist[s3 + U1] = from_block(buf, B_H1, b)
-            hist[s3 + U2] = from_block(buf, B_H2, b)
+            if hist.shape[0] > 0:
+                hist[s3] = from_block(buf, B_H0, b)
+                hist[s3 + U1] = from_block(buf, B_H1, b)
+                hist[s3 + U2] = from_block(buf, B_H2, b)
             e0 = from_block(buf, B_E0, b)
             e1 = from_block(buf, B_E1, b)
             e2 = from_block(buf, B_E2, b)

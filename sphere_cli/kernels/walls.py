@@ -19,7 +19,8 @@ Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3); radius, mass, inertia,
 material (N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.0 on a lower face
 (normal along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_vel, wall_vel_pred (W,3)
 [m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in contact.py (the
-wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m];
+wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m]
+(no rows when no contact has friction);
 force, torque (N,3) accumulated in place; springs (N,) uint64 bit mask of the walls whose spring
 with particle i may be non-zero (W <= 64); record (W,) uint8: for the walls marked, also store
 each particle's wall force in pforce (N,W,3) [N] (their reaction, summed by wall_totals);
@@ -118,9 +119,10 @@ def _flush_walls(
         t2 = 0.0
         while b < end and ids[b] == i:
             w = ids[np.uint64(BLOCK) + b]
-            wall_hist[i, w, 0] = from_block(buf, B_H0, b)
-            wall_hist[i, w, 1] = from_block(buf, B_H1, b)
-            wall_hist[i, w, 2] = from_block(buf, B_H2, b)
+            if wall_hist.shape[0] > 0:
+                wall_hist[i, w, 0] = from_block(buf, B_H0, b)
+                wall_hist[i, w, 1] = from_block(buf, B_H1, b)
+                wall_hist[i, w, 2] = from_block(buf, B_H2, b)
             e0 = from_block(buf, B_E0, b)
             e1 = from_block(buf, B_E1, b)
             e2 = from_block(buf, B_E2, b)
@@ -229,9 +231,10 @@ def wall_forces(
                 touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
                 if not touching:
                     if held & bit:  # the contact has ended: its spring is gone
-                        wall_hist[i, w, 0] = 0.0
-                        wall_hist[i, w, 1] = 0.0
-                        wall_hist[i, w, 2] = 0.0
+                        if wall_hist.shape[0] > 0:  # (none without friction)
+                            wall_hist[i, w, 0] = 0.0
+                            wall_hist[i, w, 1] = 0.0
+                            wall_hist[i, w, 2] = 0.0
                         held &= ~bit
                     continue
                 held |= bit
@@ -257,9 +260,14 @@ def wall_forces(
                 to_block(buf, B_Q2, b, ri * angvel_pred[i3 + U2])
                 to_block(buf, B_MI, b, mass[i])
                 to_block(buf, B_RI, b, ri)
-                to_block(buf, B_H0, b, wall_hist[i, w, 0])
-                to_block(buf, B_H1, b, wall_hist[i, w, 1])
-                to_block(buf, B_H2, b, wall_hist[i, w, 2])
+                if wall_hist.shape[0] > 0:
+                    to_block(buf, B_H0, b, wall_hist[i, w, 0])
+                    to_block(buf, B_H1, b, wall_hist[i, w, 1])
+                    to_block(buf, B_H2, b, wall_hist[i, w, 2])
+                else:  # frictionless: no springs
+                    to_block(buf, B_H0, b, 0.0)
+                    to_block(buf, B_H1, b, 0.0)
+                    to_block(buf, B_H2, b, 0.0)
                 if rolling:
                     to_block(buf, B_W0, b, angvel[i3])
                     to_block(buf, B_W1, b, angvel[i3 + U1])
@@ -308,7 +316,7 @@ def near_walls(
             reach[count] = close
             count += 1
         far = springs[i] & ~close
-        if far != 0:
+        if far != 0 and wall_hist.shape[0] > 0:
             springs[i] &= close
             for w in range(wall_axis.shape[0]):
                 if far & (np.uint64(1) << np.uint64(w)):

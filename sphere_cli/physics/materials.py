@@ -68,6 +68,9 @@ class ContactTables:
     wall_table: np.ndarray  # (W,M,6) wall rows
     pair_laws: dict  # (a, b) -> PairLaw, a <= b
     wall_laws: dict  # (w, a) -> PairLaw
+    # some contact has friction in some stage: only then do contacts carry tangential springs
+    # (with mu = 0 the spring is capped to zero at every step, so it is left out)
+    frictional: bool = True
 
     @property
     def rolling(self) -> bool:
@@ -170,6 +173,11 @@ def contact_tables(case: Case) -> ContactTables:
         wall_table=wall_table,
         pair_laws=pair_laws,
         wall_laws=wall_laws,
+        frictional=bool(
+            np.any(table[..., MU] > 0.0)
+            or np.any(wall_table[..., MU] > 0.0)
+            or any((stage.friction or 0.0) > 0.0 for stage in case.stages)
+        ),
     )
 
 

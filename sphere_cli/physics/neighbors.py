@@ -61,8 +61,11 @@ def search_cells(length: np.ndarray, largest: float, skin: float) -> np.ndarray:
 class NeighborSearch(Module):
     name = "neighbors"
 
-    def __init__(self, state: State):
+    def __init__(self, state: State, springs: bool = True):
         box, p, nl = state.box, state.particles, state.neighbors
+        # the pairs carry tangential springs (nl.hist) only when some contact has friction;
+        # without, nl.hist has no rows and the kernels read none
+        self.springs = springs
         self.ncell = search_cells(box.length, float(p.radius.max()), nl.skin)
         self.cell_size = box.length / self.ncell
         self.cell_of = np.zeros(p.count, dtype=np.int64)
@@ -117,18 +120,19 @@ class NeighborSearch(Module):
             self._grow(nl, needed)
             self.builds_since_growth = 0
         pairs = int(row_starts(self.spare_count, self.spare_nbr.shape[1], self.spare_start))
-        if self.spare_hist.shape[0] < pairs:
-            self.spare_hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
-        carry_springs(
-            nl.nbr,
-            nl.nbr_count,
-            nl.start,
-            nl.hist,
-            self.spare_nbr,
-            self.spare_count,
-            self.spare_start,
-            self.spare_hist,
-        )
+        if self.springs:
+            if self.spare_hist.shape[0] < pairs:
+                self.spare_hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
+            carry_springs(
+                nl.nbr,
+                nl.nbr_count,
+                nl.start,
+                nl.hist,
+                self.spare_nbr,
+                self.spare_count,
+                self.spare_start,
+                self.spare_hist,
+            )
         nl.nbr, self.spare_nbr = self.spare_nbr, nl.nbr
         nl.nbr_count, self.spare_count = self.spare_count, nl.nbr_count
         nl.start, self.spare_start = self.spare_start, nl.start
@@ -172,13 +176,13 @@ class NeighborSearch(Module):
         nl.nbr = nbr
         self.spare_nbr = np.zeros_like(nl.nbr)
 
-    @staticmethod
-    def prognostic_state(state: State) -> dict:
+    def prognostic_state(self, state: State) -> dict:
         """The list with its springs in rows (N,C,3) like the rows of nbr: the checkpoint's
-        layout does not depend on how the springs are packed."""
+        layout does not depend on how the springs are packed (no springs without friction)."""
         nl = state.neighbors
-        arrays = {name: getattr(nl, name) for name in NeighborList.PROGNOSTIC}
-        arrays["hist"] = spring_rows(nl)
+        arrays = {name: getattr(nl, name) for name in NeighborList.PROGNOSTIC if name != "hist"}
+        if self.springs:
+            arrays["hist"] = spring_rows(nl)
         arrays["skin"] = np.float64(nl.skin)
         return arrays
 
@@ -187,8 +191,11 @@ class NeighborSearch(Module):
         simulation.neighbor_skin) rebuild it at once, carrying the history across."""
         nl = state.neighbors
         for name in NeighborList.PROGNOSTIC:
-            setattr(nl, name, np.array(arrays[name]))
-        _pack_springs(nl)
+            if name != "hist":
+                setattr(nl, name, np.array(arrays[name]))
+        row_starts(nl.nbr_count, nl.nbr.shape[1], nl.start)
+        if self.springs:
+            _pack_springs(nl, arrays["hist"])
         self._spare_like(nl)
         self._reverse(nl)
         if float(arrays["skin"]) != nl.skin:
@@ -208,10 +215,9 @@ def spring_rows(nl: NeighborList) -> np.ndarray:
     return rows
 
 
-def _pack_springs(nl: NeighborList) -> None:
-    """nl.hist holds springs in rows (N,C,3) (a checkpoint): pack them, and set the row starts."""
-    row_starts(nl.nbr_count, nl.nbr.shape[1], nl.start)
+def _pack_springs(nl: NeighborList, rows: np.ndarray) -> None:
+    """Pack the springs in rows (N,C,3) of a checkpoint into nl.hist (row starts set)."""
     pairs = int(nl.start[-1])
     hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
-    hist[:pairs] = nl.hist[listed_slots(nl.nbr, nl.nbr_count)]
+    hist[:pairs] = rows[listed_slots(nl.nbr, nl.nbr_count)]
     nl.hist = hist

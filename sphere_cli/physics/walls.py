@@ -177,11 +177,15 @@ class PlaneWallForces(Module):
             if a is not None
         ]
 
-    def _spring_mask(self, hist: np.ndarray) -> np.ndarray:
-        """The bit mask of possibly non-zero springs of `hist`, derived again whenever the
-        state's hist is a new array (start, restore)."""
+    def _spring_mask(self, hist: np.ndarray, n: int) -> np.ndarray:
+        """The bit mask of possibly non-zero springs of `hist` for the n particles, derived again
+        whenever the state's hist is a new array (start, restore); none without friction (hist
+        has no rows)."""
         if self._springs_of is not hist:
-            held = np.any(hist != 0.0, axis=2).astype(np.uint64)
+            if hist.shape[0]:
+                held = np.any(hist != 0.0, axis=2).astype(np.uint64)
+            else:
+                held = np.zeros((n, hist.shape[1]), dtype=np.uint64)
             self._springs = (held << np.arange(hist.shape[1], dtype=np.uint64)).sum(axis=1, dtype=np.uint64)
             self._springs_of = hist
             self._near_build = -1
@@ -238,7 +242,7 @@ class PlaneWallForces(Module):
         settled canonical beds, two threads: the wall time 87 -> 72 us at 10 000, 438 -> 350 us
         at 100 000 against touching walls weighted 4 and no memory term (docs/performance.md)."""
         threads = numba.get_num_threads()
-        touching = np.count_nonzero(np.any(hist[near] != 0.0, axis=2), axis=1)
+        touching = np.count_nonzero(np.any(hist[near] != 0.0, axis=2), axis=1) if hist.shape[0] else 0
         isolated = np.diff(near, prepend=near[:1] - 3) > 2
         work = np.cumsum(1 + touching + 4 * isolated)
         total = work[-1] if work.size else 0
@@ -247,7 +251,7 @@ class PlaneWallForces(Module):
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         hist = state.walls.hist
-        springs = self._spring_mask(hist)
+        springs = self._spring_mask(hist, state.particles.count)
         near = self._near_walls(state, springs)
         p = state.particles
         self._forces(state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces)
@@ -351,12 +355,16 @@ class PlaneWallForces(Module):
 
     @staticmethod
     def prognostic_state(state: State) -> dict:
-        return {name: getattr(state.walls, name) for name in Walls.PROGNOSTIC}
+        walls = state.walls
+        # the wall springs only when some contact has friction (hist has rows)
+        kept = [name for name in Walls.PROGNOSTIC if name != "hist" or walls.hist.shape[0]]
+        return {name: getattr(walls, name) for name in kept}
 
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Walls.PROGNOSTIC:
-            setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
+            if name in arrays or name != "hist":
+                setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
 
 
 class WallMotion(Module):

@@ -174,7 +174,9 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     scales = None
     if case.walls:
         moving = any(w.moves for w in case.walls) or any(w.moves for s in case.stages for w in s.walls)
-        walls_state = allocate_walls(case.walls, n, box.lower, box.upper, tables.wall_table, moving)
+        walls_state = allocate_walls(
+            case.walls, n, box.lower, box.upper, tables.wall_table, moving, tables.frictional
+        )
         if restart is None and n > n_placed:
             walls_state.attached = np.arange(n_placed, n, dtype=np.int64)
             walls_state.attached_wall = rough_wall
@@ -208,7 +210,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         stages = Stages(case, walls_state, scales, contact)
     elif walls_state is not None:
         apply_modes(walls_state, dict(enumerate(case.walls)), scales, box, 0.0, walls_state.coord)
-    neighbors = NeighborSearch(state)
+    neighbors = NeighborSearch(state, tables.frictional)
     scene = Scene(
         case=case,
         state=state,

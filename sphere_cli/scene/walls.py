@@ -11,9 +11,12 @@ from ..physics.walls import AXES
 from ..state import Walls
 
 
-def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray, moving: bool) -> Walls:
+def allocate_walls(
+    wall_specs, n_particles: int, lower, upper, wall_table: np.ndarray, moving: bool, springs: bool = True
+) -> Walls:
     """Walls at the box faces, every one fixed (modes are set by `apply_modes`). `moving`: some
-    wall moves in some stage, so steps record the particles' forces on the moving walls."""
+    wall moves in some stage, so steps record the particles' forces on the moving walls;
+    `springs`: some contact has friction, so wall contacts carry tangential springs."""
     faces = [w.face for w in wall_specs]
     nw = len(faces)
     axis = np.array([AXES[f[0]] for f in faces], dtype=np.int64)
@@ -28,7 +31,7 @@ def allocate_walls(wall_specs, n_particles: int, lower, upper, wall_table: np.nd
         sign=sign,
         coord=coord,
         table=np.ascontiguousarray(wall_table),
-        hist=np.zeros((n_particles, nw, 3)),
+        hist=np.zeros((n_particles if springs else 0, nw, 3)),  # no springs without friction
         vel=np.zeros((nw, 3)),
         acc=np.zeros((nw, 3)),
         shift=np.zeros((nw, 3)),

@@ -61,7 +61,9 @@ def pair_elastic_energy(pos, radius, material, nbr, nbr_count, start, hist, tabl
             if d2 < reach * reach:
                 delta = reach - d2**0.5
                 s = start[i] + k
-                xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
+                xi2 = 0.0  # no springs without friction
+                if hist.shape[0] > 0:
+                    xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                 row = table[0, 0] if single else table[material[i], material[j]]
                 r_eff = radius[i] * radius[j] / reach
                 total += _elastic(row, law, delta, r_eff, xi2)
@@ -85,7 +87,9 @@ def wall_elastic_energy(
             gap = wall_sign[w] * (pos[i, wall_axis[w]] - wall_coord[w])
             if gap < radius[i]:
                 delta = radius[i] - gap
-                xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
+                xi2 = 0.0
+                if wall_hist.shape[0] > 0:
+                    xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
                 row = wall_table[w, 0] if single else wall_table[w, material[i]]
                 total += _elastic(row, law, delta, radius[i], xi2)
                 touching += 1

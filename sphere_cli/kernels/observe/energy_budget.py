@@ -44,6 +44,7 @@ accumulated in place by a serial sum in particle order (thread-count independent
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
@@ -153,6 +154,7 @@ def accumulate_budget(
     cap = nbr.shape[1]
     single = table.shape[0] == 1
     wall_single = wall_table.shape[1] == 1
+    no_spring = np.zeros(3)  # the spring of every contact when none has friction (read only)
     for i in prange(n):
         ri = radius[i]
         mi = mass[i]
@@ -181,7 +183,8 @@ def accumulate_budget(
             row = table[0, 0] if single else table[ci, material[j]]
             touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
             if not touching:
-                if law != HERTZ_MINDLIN:  # a parting pair's spring is dropped (Hertz: k_t = 0 at touch)
+                # a parting pair's spring is dropped (Hertz: k_t = 0 at touch; none without friction)
+                if law != HERTZ_MINDLIN and hist.shape[0] > 0:
                     s = start[i] + k
                     xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
                     friction += 0.5 * row[K_T] * xi2
@@ -199,8 +202,9 @@ def accumulate_budget(
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
             fe = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, 0.0, travel, grow)[0]
             fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, un, travel, grow)
+            spring = hist[start[i] + k] if hist.shape[0] > 0 else no_spring
             g0, g1, g2, d_t, f_t = _tangential(
-                scratch, i, hist[start[i] + k], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
+                scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
                 row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             damping += -(fn - fe) * wn * dt + d_t
@@ -247,7 +251,7 @@ def accumulate_budget(
             row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
             touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
             if not touching:
-                if law != HERTZ_MINDLIN:
+                if law != HERTZ_MINDLIN and wall_hist.shape[0] > 0:
                     xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
                     friction += 0.5 * row[K_T] * xi2
                 continue
@@ -271,8 +275,9 @@ def accumulate_budget(
             kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
             fe = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, 0.0, travel, grow)[0]
             fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, un, travel, grow)
+            spring = wall_hist[i, w] if wall_hist.shape[0] > 0 else no_spring
             g0, g1, g2, d_t, f_t = _tangential(
-                scratch, i, wall_hist[i, w], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
+                scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
                 ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
             )  # fmt: skip
             walls += ((fn * n0 + g0) * wv0 + (fn * n1 + g1) * wv1 + (fn * n2 + g2) * wv2) * dt

@@ -92,8 +92,8 @@ def contact_moments(
             fn, kt, ct = normal_law(
                 row[K_N], row[K_T], row[D_N], row[D_T], law, delta, r_eff, root_m, un, 0.0, 1.0
             )
-            for a in range(3):
-                scratch[i, 0, a] = hist[start[i] + k, a]
+            for a in range(3):  # (no springs without friction)
+                scratch[i, 0, a] = hist[start[i] + k, a] if hist.shape[0] > 0 else 0.0
             g0, g1, g2 = tangential_force(
                 scratch, i, 0, 0.0, 0.0, 0.0, n0, n1, n2, kt, ct, row[MU], fn, 0.0,
                 u0 - un * n0, u1 - un * n1, u2 - un * n2, 1.0,
@@ -116,7 +116,7 @@ def contact_moments(
                 row[K_N], row[K_T], row[D_N], row[D_T], law, delta, ri, math.sqrt(mi), un, 0.0, 1.0
             )
             for a in range(3):
-                scratch[i, 0, a] = wall_hist[i, w, a]
+                scratch[i, 0, a] = wall_hist[i, w, a] if wall_hist.shape[0] > 0 else 0.0
             g0, g1, g2 = tangential_force(
                 scratch, i, 0, 0.0, 0.0, 0.0, n0, n1, n2, kt, ct, row[MU], fn, 0.0,
                 u0 - un * n0, u1 - un * n1, u2 - un * n2, 1.0,
