@@ -113,7 +113,7 @@ def settled_cache_dir(n: int) -> Path:
 
 
 def _settled_scene(n: int, log):
-    from . import api
+    from .. import api
 
     run_dir = settled_cache_dir(n)
     ck = newest_valid_checkpoint(run_dir / "checkpoints") if run_dir.is_dir() else None
