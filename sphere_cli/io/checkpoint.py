@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import OutputError
 from .atomic import publish
 
-FORMAT = 2  # 2: with the digest
+FORMAT = 3  # 2: with the digest; 3: one fluid vocabulary, no springs without friction
 NAME = re.compile(r"^ckpt-(\d{12})\.h5$")
 
 

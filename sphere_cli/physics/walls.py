@@ -363,7 +363,7 @@ class PlaneWallForces(Module):
     @staticmethod
     def restore(state: State, arrays: dict) -> None:
         for name in Walls.PROGNOSTIC:
-            if name in arrays or name != "hist":
+            if name != "hist" or state.walls.hist.shape[0]:  # springs only with friction
                 setattr(state.walls, name, np.array(arrays[name], dtype=getattr(state.walls, name).dtype))
 
 

@@ -1,5 +1,5 @@
 """`sphere bench fluid` (sphere_cli/bench/fluid.py) at a tiny size: the report holds
-every figure issue 3 asks for, with consistent values. No timing is asserted (a shared machine
+every figure docs/performance.md quotes, with consistent values. No timing is asserted (a shared machine
 makes any bound either loose or flaky); only that times are positive and parts fit in wholes."""
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Reference: for frictional spheres (mu = 0.5, no rolling resistance) in quasi-sta
 steady (critical-state) effective friction tau/sigma is about 0.35-0.4 (GDR MiDi 2004, Eur. Phys.
 J. E 14:367; da Cruz et al. 2005, Phys. Rev. E 72:021309: mu(I -> 0) ~ 0.38 at I ~ 1e-2), and a
 dense packing first reaches a higher peak while it dilates, then softens to that steady value
-(Thornton 2000, Geotechnique 50:43). Accepted band (issue 7): 0.3 <= steady tau/sigma <= 0.5.
+(Thornton 2000, Geotechnique 50:43). Accepted band: 0.3 <= steady tau/sigma <= 0.5.
 
 Measured on the top wall over the shear stage (strain V t/H up to about 0.7): steady = mean tau
 over mean sigma in its second half (strain > 0.35, the sample of ~40 frames averages the

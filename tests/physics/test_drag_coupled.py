@@ -69,7 +69,7 @@ def fluid_momentum(scene) -> np.ndarray:
     """sum over cells of rho phi v V_cell [kg m/s]."""
     fs = scene.state.fluid
     fluid = scene.fluid
-    momentum = fluid.config.density * (fs.phi[..., None] * fs.v).reshape(-1, 3).sum(axis=0)
+    momentum = fluid.config.density * (fs.porosity[..., None] * fs.v).reshape(-1, 3).sum(axis=0)
     return momentum * fluid.grid().cell_volume
 
 
@@ -186,7 +186,7 @@ def test_ergun_pressure_drop_through_a_dem_packing(tmp_path, formulation):
     )
     advance(scene, 1000)  # 0.1 s, ten times the column's relaxation time
     fs = scene.state.fluid
-    vz, phi = fs.v[0, 0, :, 2], fs.phi[0, 0, :]
+    vz, phi = fs.v[0, 0, :, 2], fs.porosity[0, 0, :]
     superficial = -0.25 * (phi[0] + phi[1]) * (vz[0] + vz[1])
     eps = phi[:2].mean()
     assert eps == pytest.approx(1 - math.pi / 6, abs=0.005)
@@ -241,7 +241,7 @@ def test_fluidization_plateau():
         start = p.pos[free, 2].mean()
         advance(scene, round(0.04 / scene.state.clock.dt))
         drop = bed_pressure_drop(scene)
-        flux[pressure] = (fs.phi * fs.v[..., 2]).mean()
+        flux[pressure] = (fs.porosity * fs.v[..., 2]).mean()
         rise = p.pos[free, 2].mean() - start
         if pressure < 100:
             assert drop < 0.8 * weight

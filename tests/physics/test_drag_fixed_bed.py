@@ -57,20 +57,20 @@ def test_ergun_pressure_drop_with_imposed_porosity(formulation, eps):
     solver = NavierStokesSolver(config, grid, (0.0, 0.0, 0.0))
     fs = solver.allocate()
     bed = slice(10, 30)
-    fs.phi[:, :, bed] = eps
+    fs.porosity[:, :, bed] = eps
     diameter = np.full(grid.shape, D)
     at_rest = np.zeros((grid.cell_count, 3))  # the bed's velocity
     solver.initial_pressure(fs, 0.0)
     dt = 2e-4
     for n in range(600):
         cell_drag(
-            GIDASPOW, RHO, MU, 0.1, fs.v.reshape(-1, 3), fs.phi.reshape(-1), diameter.reshape(-1),
+            GIDASPOW, RHO, MU, 0.1, fs.v.reshape(-1, 3), fs.porosity.reshape(-1), diameter.reshape(-1),
             at_rest, fs.grad_p.reshape(-1, 3), formulation == "B",
             fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3),
         )  # fmt: skip
         solver.step(fs, n * dt, dt)
     # the discrete flux through the face between cells k and k+1: phi_f v_f, face means
-    vz, phi = fs.v[0, 0, :, 2], fs.phi[0, 0, :]
+    vz, phi = fs.v[0, 0, :, 2], fs.porosity[0, 0, :]
     flux = 0.25 * (phi[1:] + phi[:-1]) * (vz[1:] + vz[:-1])
     superficial = flux[13:27].mean()  # through the bed, away from its ends
     gradient = (fs.p[0, 0, 13] - fs.p[0, 0, 27]) / (14 * dz)

@@ -31,7 +31,7 @@ def fluid_state(shape, spacing, origin=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), phi=1
             periodic=np.ones(3, bool),
         ),
         v=np.tile(np.array(v, float), (*cells, 1)),
-        phi=np.full(cells, float(phi)),
+        porosity=np.full(cells, float(phi)),
         grad_p=np.tile(np.array(grad_p, float), (*cells, 1)),
         f_i=np.zeros((*cells, 3)),
         k_drag=np.zeros(cells),
@@ -184,8 +184,8 @@ def _random_bed(tmp_path, n=120, seed=3):
     )
     fs = fluid_state((5, 4, 6), (1e-3, 1e-3, 1e-3))
     fs.v[...] = rng.normal(0.0, 0.02, fs.v.shape)
-    fs.phi[...] = rng.uniform(0.35, 1.0, fs.phi.shape)
-    fs.phi.flat[0] = 0.05  # below the floor: clamped, with a warning
+    fs.porosity[...] = rng.uniform(0.35, 1.0, fs.porosity.shape)
+    fs.porosity.flat[0] = 0.05  # below the floor: clamped, with a warning
     fs.grad_p[...] = rng.normal(0.0, 1e4, fs.grad_p.shape)
     return scene, fs
 

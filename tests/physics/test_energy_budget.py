@@ -1,5 +1,5 @@
 """The energy budget closes: work of gravity (and walls) = Delta(kinetic + elastic) + energy
-dissipated by damping, friction and rolling resistance (issue 7, acceptance: within 1 %).
+dissipated by damping, friction and rolling resistance (within 1 %).
 
 Energy conservation of the equations of motion (work-energy theorem, summed over particles and
 contacts): every term is accumulated independently by kernels/observe/energy_budget.py from the contact
@@ -107,7 +107,7 @@ def test_direct_shear_budget_closes():
     """configs/direct-shear.toml as it is (deposit, consolidate under a stress-controlled top
     wall, shear at 0.1 m/s between rough walls of glued spheres): over the whole run the work of
     the walls (their contacts and their glued spheres) and of gravity equals Delta(kinetic +
-    elastic) + dissipated within 1 % (issue 7 acceptance; measured 1e-4)."""
+    elastic) + dissipated within 1 % (measured 1e-4)."""
     text = (CONFIGS / "direct-shear.toml").read_text()
     assert text.count("\nquantities = [") == 1  # its observables, with the budget added
     text = text.replace("\nquantities = [", '\nquantities = ["energy_budget", ')

@@ -65,7 +65,7 @@ def test_column_at_rest_stays_at_rest_on_a_moving_grid(speed, phi, beta):
     p_top = 100.0
     solver = _solver(old_pressure_weight=beta, top={"type": "pressure", "pressure": p_top})
     fs = solver.allocate()
-    fs.phi[...] = phi
+    fs.porosity[...] = phi
     fs.v[..., 0] = DRIFT
     solver.initial_pressure(fs, 0.0)
     worst = 0.0
@@ -103,23 +103,23 @@ def test_compressed_column_expels_the_volume_it_loses():
     solver = _solver()
     fs = solver.allocate()
     phi_old = 1.0 - solid
-    fs.phi[...] = phi_old
+    fs.porosity[...] = phi_old
     solver.initial_pressure(fs, 0.0)
-    pore0 = float(fs.phi.sum()) * solver.grid.cell_volume
+    pore0 = float(fs.porosity.sum()) * solver.grid.cell_volume
     height = HEIGHT
     for step in range(STEPS):
         height = HEIGHT + speed * (step + 1) * DT
         phi_new = 1.0 - solid * HEIGHT / height
         solver.resize(height)
-        fs.phi[...] = phi_new
-        fs.dphi[...] = (phi_new - phi_old) / DT
+        fs.porosity[...] = phi_new
+        fs.porosity_rate[...] = (phi_new - phi_old) / DT
         solver.step(fs, step * DT, DT)
         phi_old = phi_new
     expelled = area * (HEIGHT - height)
-    pore = float(fs.phi.sum()) * solver.grid.cell_volume
+    pore = float(fs.porosity.sum()) * solver.grid.cell_volume
     assert pore0 - pore == pytest.approx(expelled, rel=1e-12)
     assert fs.outflow == pytest.approx(expelled, rel=1e-7)
-    rate = float(fs.dphi[0, 0, 0])  # dphi/dt of the last step [1/s]
+    rate = float(fs.porosity_rate[0, 0, 0])  # dphi/dt of the last step [1/s]
     faces = solver.grid.centres(2)[1:] - 0.5 * solver.grid.spacing[2]
     face_velocity = 0.5 * (fs.v[..., 1:, 2] + fs.v[..., :-1, 2])
     exact = -faces * rate / phi_old

@@ -49,7 +49,7 @@ def test_no_forcing_stays_exactly_zero(formulation, top):
     grid = _grid((6, 5, 7), (0.06, 0.05, 0.07))
     solver = _solver(grid, formulation=formulation, top={"type": top, "no_slip": True})
     fs = solver.allocate()
-    fs.phi[...] = np.random.default_rng(3).uniform(0.35, 1.0, grid.shape)
+    fs.porosity[...] = np.random.default_rng(3).uniform(0.35, 1.0, grid.shape)
     for n in range(50):
         solver.step(fs, n * 1e-3, 1e-3)
     assert not fs.v.any() and not fs.p.any() and not fs.grad_p.any()
@@ -83,7 +83,7 @@ def test_hydrostatic_column_stays_at_rest(formulation, beta, phi):
         solver={"tolerance": HYDRO_TOL},
     )
     fs = solver.allocate()
-    fs.phi[...] = phi
+    fs.porosity[...] = phi
     dt = 1e-3  # s; the viscous limit is 0.049 s
     worst = 0.0
     for step in range(1000):
@@ -132,7 +132,7 @@ def _decay_rate_error(cells: int, phi: float = 1.0, formulation: str = "A") -> f
         grid, viscosity=NU * RHO, formulation=formulation, bottom={"type": "no-flow"}, top={"type": "no-flow"}
     )
     fs = solver.allocate()
-    fs.phi[...] = phi
+    fs.porosity[...] = phi
     k = 2 * math.pi / length
     profile = np.sin(k * grid.centres(1))
     fs.v[..., 0] = AMPLITUDE * profile[None, :, None]
@@ -191,7 +191,7 @@ def test_pcg_and_jacobi_give_the_same_fluid_step():
             solver={"method": method, "tolerance": 1e-10},
         )
         fs = solver.allocate()
-        fs.phi[...] = phi
+        fs.porosity[...] = phi
         fs.v[...] = v0
         result = solver.step(fs, 0.0, 1e-3)
         results[method] = (fs.v.copy(), fs.p.copy(), result.iterations)
@@ -310,7 +310,7 @@ def test_fluid_step_does_not_depend_on_the_thread_count():
                 grid, (0.0, 0.0, -G), old_pressure_weight=1.0, top={"type": "pressure", "no_slip": True}
             )
             fs = solver.allocate()
-            fs.phi[...] = phi
+            fs.porosity[...] = phi
             fs.v[...] = v0
             solver.initial_pressure(fs, 0.0)
             for step in range(5):

@@ -1,4 +1,4 @@
-"""Restitution against prescribed-motion bodies (issue 20): a sphere dropped head-on on an equal
+"""Restitution against prescribed-motion bodies: a sphere dropped head-on on an equal
 sphere that is fixed, driven at a constant velocity, or glued to a rough wall rebounds with the
 restitution asked, as on a plain wall, for linear and Hertz contacts.
 
@@ -6,7 +6,7 @@ The dashpot is calibrated for the reduced mass of the contact. A prescribed body
 mass were infinite (its inverse mass is 0), so the reduced mass is the free sphere's own,
 m* = 1/(1/m + 0) = m; the two finite masses would give m/2, and with the linear law e = 0.60
 where 0.50 was asked. The measured e is the ratio of the normal relative velocities after and
-before the contact, in a scene without gravity; the tolerance 0.01 is the issue's, ten times
+before the contact, in a scene without gravity; the tolerance 0.01 is the required one, ten times
 the calibration error of a free pair at the automatic dt (tests/physics/test_dem_linear_collision.py).
 """
 

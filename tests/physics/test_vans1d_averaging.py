@@ -54,7 +54,7 @@ def test_one_layer_per_lattice_period():
     """Layers of one lattice spacing: every one holds 4 pi r^3/(3 a^3) = 0.3817 exactly."""
     pos, radius = lattice(3)
     prof = average(pos, radius, layer_faces(0.0, 3 * A, 3))
-    np.testing.assert_allclose(prof.phi, 4 * math.pi * R**3 / (3 * A**3), rtol=1e-13)
+    np.testing.assert_allclose(prof.solid_fraction, 4 * math.pi * R**3 / (3 * A**3), rtol=1e-13)
 
 
 @pytest.mark.parametrize("stretching", [1.0, 5.0])
@@ -67,16 +67,16 @@ def test_lattice_profile_equals_analytic(stretching):
     centres = 0.5 * A + 0.1 * A + np.arange(3) * A
     exact = np.array([lattice_fraction(a, b, centres) for a, b in zip(faces[:-1], faces[1:], strict=True)])
     # round-off: the slice volume is a difference of antiderivatives of size pi r^3, so its error
-    # is about 1e-16 pi r^3 / (a^2 dz) ~ 1e-15 in phi, whatever the size of the slice
-    np.testing.assert_allclose(prof.phi, exact, rtol=0, atol=1e-13)
+    # is about 1e-16 pi r^3 / (a^2 dz) ~ 1e-15 in solid, whatever the size of the slice
+    np.testing.assert_allclose(prof.solid_fraction, exact, rtol=0, atol=1e-13)
     k = np.searchsorted(faces, centres[1]) - 1
     dz = faces[k + 1] - faces[k]
-    assert prof.phi[k] == pytest.approx(math.pi * R**2 / A**2, abs=math.pi / A**2 * dz**2)
+    assert prof.solid_fraction[k] == pytest.approx(math.pi * R**2 / A**2, abs=math.pi / A**2 * dz**2)
 
 
 def test_profile_integral_is_the_solid_volume():
     """Random polydisperse spheres inside the column, stretched layers: the integral of
-    phi over the column is the total solid volume, and the integral of beta the sum of the
+    solid over the column is the total solid volume, and the integral of exchange the sum of the
     drag coefficients, to round-off; the volume-weighted velocity of a uniform motion is it."""
     rng = np.random.default_rng(3)
     n = 500
@@ -90,10 +90,10 @@ def test_profile_integral_is_the_solid_volume():
     prof = average(pos, radius, faces, vel, drag_coef, drag_coef * 0.7)
     layer_volume = (SIDE * A) ** 2 * np.diff(faces)
     solid = 4.0 / 3.0 * math.pi * np.sum(radius**3)
-    assert np.sum(prof.phi * layer_volume) == pytest.approx(solid, rel=1e-13)
-    assert np.sum(prof.beta * layer_volume) == pytest.approx(drag_coef.sum(), rel=1e-13)
+    assert np.sum(prof.solid_fraction * layer_volume) == pytest.approx(solid, rel=1e-13)
+    assert np.sum(prof.exchange_coefficient * layer_volume) == pytest.approx(drag_coef.sum(), rel=1e-13)
     assert np.sum(prof.drag * layer_volume) == pytest.approx(0.7 * drag_coef.sum(), rel=1e-13)
-    occupied = prof.phi > 0
+    occupied = prof.solid_fraction > 0
     np.testing.assert_allclose(prof.vel[occupied], 0.3, rtol=1e-13)
 
 
@@ -105,7 +105,7 @@ def test_parts_outside_the_column_are_not_counted():
     prof = average(pos, radius, faces)
     above = slice_volume(0.2 * R, R, 0.0, 1.0)
     assert above < 4 / 3 * math.pi * R**3
-    assert np.sum(prof.phi * (SIDE * A) ** 2 * np.diff(faces)) == pytest.approx(above, rel=1e-13)
+    assert np.sum(prof.solid_fraction * (SIDE * A) ** 2 * np.diff(faces)) == pytest.approx(above, rel=1e-13)
     # the slice volume itself: a hemisphere, a whole sphere
     assert slice_volume(0.0, R, 0.0, 1.0) == pytest.approx(2 / 3 * math.pi * R**3, rel=1e-14)
     assert slice_volume(0.0, R, -1.0, 1.0) == pytest.approx(4 / 3 * math.pi * R**3, rel=1e-14)

@@ -2,7 +2,7 @@
 
 Static immersed bed: 96 glass beads settle in still water on a floor; at rest each one's contact
 and wall forces balance its weight and its buoyancy, so the floor carries the buoyant weight
-sum (m_p - rho_f V_p) g of the whole bed. Tolerance 1 % (issue 5); the residual motion of the
+sum (m_p - rho_f V_p) g of the whole bed. Tolerance 1 %; the residual motion of the
 settled bed is measured and far below it.
 """
 

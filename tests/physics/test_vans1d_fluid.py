@@ -19,12 +19,12 @@ from sphere_cli.physics.fluid.vans1d import FluidColumn
 RHO = 1000.0
 
 
-def steady(column: FluidColumn, phi, vel_p, beta, source, dt, chunk=50, tol=1e-13, max_chunks=400):
+def steady(column: FluidColumn, solid, vel_p, exchange, source, dt, chunk=50, tol=1e-13, max_chunks=400):
     """Implicit steps of dt until the profile changes by less than tol (relative) per chunk."""
-    column.update_mixing_length(phi)
+    column.update_mixing_length(solid)
     for _ in range(max_chunks):
         before = column.u.copy()
-        column.advance(phi, vel_p, beta, source, dt, chunk)
+        column.advance(solid, vel_p, exchange, source, dt, chunk)
         if np.abs(column.u - before).max() <= tol * max(np.abs(column.u).max(), 1e-300):
             return column
     raise AssertionError("no steady state")
@@ -114,21 +114,21 @@ def test_parabolic_exact_solution_is_the_log_law():
 
 def test_uniform_porous_layer_with_drag():
     """Laminar free-surface flow through a fixed porous layer filling the depth H: uniform
-    solid fraction phi, exchange coefficient beta, particles at rest:
-    rho eps nu u'' + eps S - beta u = 0, u(0) = 0, u'(H) = 0, eps = 1 - phi, so
-    u = (eps S / beta) (1 - cosh(k (H - z)) / cosh(k H)), k = sqrt(beta / (rho eps nu)).
+    solid fraction solid, exchange coefficient exchange, particles at rest:
+    rho eps nu u'' + eps S - exchange u = 0, u(0) = 0, u'(H) = 0, eps = 1 - solid, so
+    u = (eps S / exchange) (1 - cosh(k (H - z)) / cosh(k H)), k = sqrt(exchange / (rho eps nu)).
     Checks the drag and porosity terms; order 2 on a stretched mesh."""
-    depth, nu, phi, beta, source = 0.01, 1e-3, 0.4, 2.0e5, 500.0
-    eps = 1.0 - phi
-    k = math.sqrt(beta / (RHO * eps * nu))
+    depth, nu, solid, exchange, source = 0.01, 1e-3, 0.4, 2.0e5, 500.0
+    eps = 1.0 - solid
+    k = math.sqrt(exchange / (RHO * eps * nu))
     errors = []
     for cells in (20, 40, 80):
         column = FluidColumn.regular(0.0, depth, cells, 3.0, rho=RHO, nu=nu)
         ones = np.ones(cells)
-        column.update_mixing_length(phi * ones)
-        column.advance(phi * ones, 0.0 * ones, beta * ones, source, 1e12, 2)
+        column.update_mixing_length(solid * ones)
+        column.advance(solid * ones, 0.0 * ones, exchange * ones, source, 1e12, 2)
         z = column.centres
-        u = eps * source / beta * (1.0 - np.cosh(k * (depth - z)) / np.cosh(k * depth))
+        u = eps * source / exchange * (1.0 - np.cosh(k * (depth - z)) / np.cosh(k * depth))
         errors.append(np.abs(column.u - u).max() / u.max())
     assert errors[-1] < 1e-3
     for order in observed_orders(errors):
@@ -145,9 +145,9 @@ def test_li_sawamoto_mixing_length():
     clear.update_mixing_length(np.zeros(10))
     prandtl.update_mixing_length(np.zeros(10))
     np.testing.assert_allclose(clear.mixing, prandtl.mixing, rtol=1e-15, atol=0)
-    phi = np.zeros(10)
-    phi[:4] = 0.6  # packed bed up to z = 0.04 m
-    phi[4] = 0.3
-    clear.update_mixing_length(phi)
+    solid = np.zeros(10)
+    solid[:4] = 0.6  # packed bed up to z = 0.04 m
+    solid[4] = 0.3
+    clear.update_mixing_length(solid)
     np.testing.assert_allclose(clear.mixing[:5], 0.0, atol=0)
     np.testing.assert_allclose(clear.mixing[5:], 0.41 * (faces[5:] - 0.045), rtol=1e-13)

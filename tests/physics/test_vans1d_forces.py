@@ -1,6 +1,6 @@
 """Fluid forces of the vans1d model on single spheres (kernels/fluid/profile_forces.py), against the
 closed forms of YADE's HydroForceEngine (Maurin et al. 2015): drag 1/2 C_d A rho |u_r| u_r with
-C_d = (0.44 + 24/Re_p)(1 - phi)^-n, buoyancy -rho V g (or its z part), lift
+C_d = (0.44 + 24/Re_p)(1 - solid)^-n, buoyancy -rho V g (or its z part), lift
 1/2 rho C_L A (u_top^2 - u_bottom^2) (Wiberg & Smith 1985).
 """
 
@@ -18,7 +18,7 @@ RHO, NU, R = 1000.0, 1.0e-6, 0.5e-3
 GRAVITY = np.array([0.5, 0.0, -9.8])
 
 
-def forces(z, vel, u_of_z, phi=0.0, full=False, lift=0.0, top=0.02, exponent=3.1):
+def forces(z, vel, u_of_z, solid=0.0, full=False, lift=0.0, top=0.02, exponent=3.1):
     faces = layer_faces(0.0, top, 200)
     centres = 0.5 * (faces[1:] + faces[:-1])
     u = u_of_z(centres)
@@ -27,7 +27,8 @@ def forces(z, vel, u_of_z, phi=0.0, full=False, lift=0.0, top=0.02, exponent=3.1
     coef, drag_x = np.zeros(1), np.zeros(1)
     profile_forces(
         pos, np.array([vel], dtype=float), np.array([R]), np.ones(1, np.uint8), faces, centres, u,
-        np.full(centres.size, phi), False, RHO, NU, exponent, 0.61, GRAVITY, full, lift, force, coef, drag_x,
+        np.full(centres.size, solid), False, RHO, NU, exponent, 0.61, GRAVITY, full, lift, force, coef,
+        drag_x,
     )  # fmt: skip
     return force[0], coef[0], drag_x[0], (faces, centres, u)
 
@@ -35,7 +36,7 @@ def forces(z, vel, u_of_z, phi=0.0, full=False, lift=0.0, top=0.02, exponent=3.1
 def test_drag_and_buoyancy_in_uniform_flow():
     volume, area = 4 / 3 * math.pi * R**3, math.pi * R**2
     vel = (0.1, 0.02, -0.03)
-    f, coef, drag_x, _ = forces(0.01, vel, lambda z: np.full_like(z, 0.5), phi=0.3)
+    f, coef, drag_x, _ = forces(0.01, vel, lambda z: np.full_like(z, 0.5), solid=0.3)
     rel = np.array([0.5, 0.0, 0.0]) - vel
     speed = np.linalg.norm(rel)
     cd = (0.44 + 24 * NU / (speed * 2 * R)) * (1 - 0.3) ** -3.1
@@ -44,13 +45,13 @@ def test_drag_and_buoyancy_in_uniform_flow():
     np.testing.assert_allclose(f, drag + buoyancy, rtol=1e-13)
     assert drag_x == pytest.approx(drag[0], rel=1e-13)
     assert coef == pytest.approx(drag[0] / rel[0], rel=1e-13)
-    f_full, *_ = forces(0.01, vel, lambda z: np.full_like(z, 0.5), phi=0.3, full=True)
+    f_full, *_ = forces(0.01, vel, lambda z: np.full_like(z, 0.5), solid=0.3, full=True)
     np.testing.assert_allclose(f_full - f, [-RHO * volume * 0.5, 0.0, 0.0], rtol=1e-12)
 
 
 def test_hindrance_is_capped_at_the_packed_solid_fraction():
-    f_cap, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), phi=0.61)
-    f_over, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), phi=0.9)
+    f_cap, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), solid=0.61)
+    f_over, *_ = forces(0.01, (0, 0, 0), lambda z: np.full_like(z, 0.5), solid=0.9)
     assert f_over[0] == f_cap[0]
 
 
@@ -97,13 +98,13 @@ def test_forces_do_not_depend_on_the_thread_count():
     pos = rng.uniform(0.0, 0.021, (n, 3))
     vel = rng.normal(0.0, 0.1, (n, 3))
     radius = rng.uniform(0.4e-3, 0.6e-3, n)
-    u, phi = rng.uniform(0, 1, centres.size), rng.uniform(0, 0.6, centres.size)
+    u, solid = rng.uniform(0, 1, centres.size), rng.uniform(0, 0.6, centres.size)
     results = []
     for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
         numba.set_num_threads(threads)
         force, coef, drag_x = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
         profile_forces(
-            pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, phi, False, RHO, NU, 3.1, 0.61,
+            pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, solid, False, RHO, NU, 3.1, 0.61,
             GRAVITY, True, 0.2, force, coef, drag_x,
         )  # fmt: skip
         results.append((force, coef, drag_x))

@@ -8,7 +8,7 @@ laterally periodic, between a fixed floor and a top wall.
 Checks (the reference is statics, not a fit):
 - At rest the wall's force balance M dV/dt = A sigma - A sigma_c - C V leaves sigma_c = sigma, so
   the contact stress on the top wall must equal the target once the bed is still: within 1 %
-  over the last half of the load stage, frame by frame (the issue's criterion).
+  over the last half of the load stage, frame by frame (the acceptance criterion).
 - The floor carries the target plus the weight of the bed per area, W/A, within 1 % of the
   target (the bed is at rest and the lateral boundaries are periodic: no wall friction).
 - In the sine stage the contact stress follows the forcing. For a bed of stiffness K the wall

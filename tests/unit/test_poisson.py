@@ -238,7 +238,7 @@ def test_singular_all_no_flux_gives_the_zero_mean_solution(periodic, preconditio
 
 
 def test_pcg_and_jacobi_agree_and_pcg_needs_far_fewer_iterations():
-    """The issue's acceptance: same solution to the tolerance, far fewer iterations on 32^3.
+    """Required: the same solution to the tolerance, far fewer iterations on 32^3.
     Each stops at ||b - A x|| <= 1e-9 ||b||; the solutions then differ by at most
     cond(A) * 2e-9 relative, and cond(A) < 1e3 here (4/(h^2 lambda_min) with the Helmholtz
     term). Measured: 13 (multigrid) and 144 (diagonal) CG iterations; Jacobi needs thousands."""

@@ -4,17 +4,17 @@ volume of its slice there,
 
     V_pk = pi [ r^2 s - s^3/3 ] from s_a to s_b,   s = z - z_p clipped to [-r, r],
 
-    phi_k  = sum_p V_pk / (A dz_k)                     solid fraction [-]
-    vx_k   = sum_p V_pk vx_p / sum_p V_pk              mean streamwise particle velocity [m/s]
-    beta_k = sum_p (V_pk / V_p) K_p / (A dz_k)         momentum exchange coefficient [kg/(m^3 s)]
-    drag_k = sum_p (V_pk / V_p) fx_p / (A dz_k)        streamwise drag per unit volume [N/m^3]
+    solid_k    = sum_p V_pk / (A dz_k)                 solid fraction [-]
+    vx_k       = sum_p V_pk vx_p / sum_p V_pk          mean streamwise particle velocity [m/s]
+    exchange_k = sum_p (V_pk / V_p) K_p / (A dz_k)     momentum exchange coefficient [kg/(m^3 s)]
+    drag_k     = sum_p (V_pk / V_p) fx_p / (A dz_k)    streamwise drag per unit volume [N/m^3]
 
 with A the horizontal area of the cell and K_p the particle's drag coefficient (drag = K_p (u - v)).
 The part of a sphere below the first face or above the last one is not counted.
 
 Arguments: pos, vel_p (N,3) [m, m/s] (vx_p = vel_p[:, 0]); radius (N,) [m]; selected (N,) uint8 (1 = counted);
 drag_coef (N,) [kg/s]; drag_x (N,) [N]; faces (n+1,) increasing [m]; area [m^2];
-outputs phi, vel, beta, drag (n,) and the scratch volume (n,) [m^3].
+outputs solid, vel, exchange, drag (n,) and the scratch volume (n,) [m^3].
 
 Serial in the particle order: the sums do not depend on the thread count, and the work
 (a few layers per particle, at the coupling interval only) is far below a DEM step's.
@@ -49,12 +49,14 @@ def layer_of(faces, z):
 
 
 @njit(cache=True)
-def layer_average(pos, vel_p, radius, selected, drag_coef, drag_x, faces, area, phi, vel, beta, drag, volume):
+def layer_average(
+    pos, vel_p, radius, selected, drag_coef, drag_x, faces, area, solid, vel, exchange, drag, volume
+):
     n = faces.shape[0] - 1
     for k in range(n):
         volume[k] = 0.0
         vel[k] = 0.0
-        beta[k] = 0.0
+        exchange[k] = 0.0
         drag[k] = 0.0
     for i in range(pos.shape[0]):
         if not selected[i]:
@@ -70,11 +72,11 @@ def layer_average(pos, vel_p, radius, selected, drag_coef, drag_x, faces, area, 
                 continue
             volume[k] += vk
             vel[k] += vk * vel_p[i, 0]
-            beta[k] += vk / v_p * drag_coef[i]
+            exchange[k] += vk / v_p * drag_coef[i]
             drag[k] += vk / v_p * drag_x[i]
     for k in range(n):
         layer = area * (faces[k + 1] - faces[k])
-        phi[k] = volume[k] / layer
+        solid[k] = volume[k] / layer
         vel[k] = vel[k] / volume[k] if volume[k] > 0.0 else 0.0
-        beta[k] /= layer
+        exchange[k] /= layer
         drag[k] /= layer

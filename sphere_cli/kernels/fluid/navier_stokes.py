@@ -50,7 +50,7 @@ Comput. Phys. 14): over a cell moving with the faces, continuity and momentum ar
   (1/V) d(phi V)/dt|_cell + div(phi (v - w)) = 0,
   (1/V) d(phi V v)/dt|_cell + div(phi v (v - w)) = (forces as above),
 the time derivative being the backward difference of the cell's own values (dphi from the
-porosity measured on the new cells, fs.dphi). With the step's stretch rate s = (H_new - H_old)
+porosity measured on the new cells, fs.porosity_rate). With the step's stretch rate s = (H_new - H_old)
 / (H_new dt) [1/s] (dz is the new height / nz), (V_new - V_old)/(V_new dt) = s and w_k =
 k dz s exactly, so that:
   pressure source   dphi + phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k),   phi_old = phi - dt dphi

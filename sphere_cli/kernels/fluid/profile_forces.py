@@ -1,9 +1,9 @@
 """Fluid forces on spheres from a vertical profile of streamwise fluid velocity u(z) and solid
-fraction phi(z) (YADE HydroForceEngine::action; Maurin et al. 2015).
+fraction solid(z) (YADE HydroForceEngine::action; Maurin et al. 2015).
 
-Drag      f_D = K (u(z_p) e_x - v_p),  K = 1/2 rho_f (pi d^2/4) (0.44 |u_r| + 24 nu/d) (1 - phi_p)^-n
-          i.e. C_d = (0.44 + 24/Re_p)(1 - phi_p)^-n with Re_p = |u_r| d/nu (Dallavalle 1948,
-          Richardson & Zaki 1954); phi_p is capped at phi_max.
+Drag      f_D = K (u(z_p) e_x - v_p),  K = 1/2 rho_f (pi d^2/4) (0.44 |u_r| + 24 nu/d) (1 - solid_p)^-n
+          i.e. C_d = (0.44 + 24/Re_p)(1 - solid_p)^-n with Re_p = |u_r| d/nu (Dallavalle 1948,
+          Richardson & Zaki 1954); solid_p is capped at solid_max.
 Buoyancy  f_B = -rho_f V g (full) or -rho_f V g_z e_z (wall-normal part only, steady flow).
 Lift      f_L = 1/2 rho_f C_L (pi d^2/4) (u_r,top^2 - u_r,bottom^2) e_z, u_r = u - v_x taken at the
           top and the bottom of the sphere (Wiberg & Smith 1985).
@@ -11,11 +11,11 @@ All three scale with the submerged fraction of the sphere (the part below the su
 
 The profiles live at the layer centres; between centres they are linear. Below the first centre
 u goes linearly to 0 at the bottom (no-slip); above the last centre it is constant (free surface)
-or goes linearly to 0 at the lid (no-slip top). phi is constant beyond the end centres.
+or goes linearly to 0 at the lid (no-slip top). solid is constant beyond the end centres.
 
 Arguments: pos, vel (N,3) [m, m/s]; radius (N,) [m]; selected (N,) uint8; faces (n+1,) [m];
-centres (n,) [m]; u (n,) [m/s]; phi (n,) [-]; top_no_slip (bool); rho [kg/m^3]; nu [m^2/s];
-exponent n [-]; phi_max [-]; gravity (3,) [m/s^2]; buoyancy_full (bool); lift_coef [-];
+centres (n,) [m]; u (n,) [m/s]; solid (n,) [-]; top_no_slip (bool); rho [kg/m^3]; nu [m^2/s];
+exponent n [-]; solid_max [-]; gravity (3,) [m/s^2]; buoyancy_full (bool); lift_coef [-];
 force (N,3) [N] (added to); drag_coef (N,) [kg/s] and drag_x (N,) [N] (written).
 """
 
@@ -68,8 +68,8 @@ def fluid_velocity_at(faces, centres, u, top_no_slip, z):
 
 
 @njit(cache=True, inline="always")
-def _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max):
-    hindrance = (1.0 - min(max(phi_p, 0.0), phi_max)) ** (-exponent)
+def _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max):
+    hindrance = (1.0 - min(max(solid_p, 0.0), solid_max)) ** (-exponent)
     return 0.5 * rho * math.pi * r * r * (0.44 * speed + 12.0 * nu / r) * hindrance
 
 
@@ -82,12 +82,12 @@ def profile_forces(
     faces,
     centres,
     u,
-    phi,
+    solid,
     top_no_slip,
     rho,
     nu,
     exponent,
-    phi_max,
+    solid_max,
     gravity,
     buoyancy_full,
     lift_coef,
@@ -114,8 +114,8 @@ def profile_forces(
         vr = -vel[i, 1]
         wr = -vel[i, 2]
         speed = math.sqrt(ur * ur + vr * vr + wr * wr)
-        phi_p = (1.0 - w) * phi[lo] + w * phi[hi]
-        k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
+        solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
+        k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)
         drag_coef[i] = k
         drag_x[i] = k * ur
         force[i, 0] += k * ur
@@ -142,12 +142,12 @@ def drag_coefficients(
     faces,
     centres,
     u,
-    phi,
+    solid,
     top_no_slip,
     rho,
     nu,
     exponent,
-    phi_max,
+    solid_max,
     drag_coef,
     drag_x,
 ):
@@ -168,7 +168,7 @@ def drag_coefficients(
         lo, hi, w = bracket(centres, z)
         ur = _velocity(faces, centres, u, top_no_slip, z, lo, hi, w) - vel[i, 0]
         speed = math.sqrt(ur * ur + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
-        phi_p = (1.0 - w) * phi[lo] + w * phi[hi]
-        k = frac * _drag_coefficient(rho, nu, r, speed, phi_p, exponent, phi_max)
+        solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
+        k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)
         drag_coef[i] = k
         drag_x[i] = k * ur

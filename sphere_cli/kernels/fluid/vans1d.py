@@ -1,9 +1,9 @@
 """1D vertical volume-averaged (VANS/RANS) streamwise momentum balance of the fluid over a
 granular bed (Maurin et al. 2015, 2016; Revil-Baudard & Chauchat 2013):
 
-    rho (1-phi) du/dt = d/dz[ rho (1-phi) (nu + nu_t) du/dz ] + (1-phi) S - beta (u - v_p),
+    rho (1-solid) du/dt = d/dz[ rho (1-solid) (nu + nu_t) du/dz ] + (1-solid) S - exchange (u - v_p),
 
-S = rho g_x - dp/dx the streamwise driving [N/m^3], beta the momentum exchange coefficient of the
+S = rho g_x - dp/dx the streamwise driving [N/m^3], exchange the momentum exchange coefficient of the
 layer-averaged drag (kernels/fluid/layer_averaging.py), v_p the mean particle velocity, and the eddy
 viscosity of a mixing length l: nu_t = l^2 |du/dz|.
 
@@ -17,14 +17,14 @@ Mixing lengths at the faces (s = z - z_0 height above the bottom, H the depth):
   0 "none"        l = 0 (laminar)
   1 "prandtl"     l = kappa s
   2 "parabolic"   l = kappa s sqrt(1 - s/H)
-  3 "li-sawamoto" l = kappa * integral_0^s (phi_max - phi)/phi_max dz  (Li & Sawamoto 1995),
-                  the integrand taken as 0 where phi > phi_max.
+  3 "li-sawamoto" l = kappa * integral_0^s (solid_max - solid)/solid_max dz  (Li & Sawamoto 1995),
+                  the integrand taken as 0 where solid > solid_max.
 Optionally damped in the viscous sublayer (van Driest 1956): l (1 - exp(-z+/A+)), z+ = (l/kappa)
 u*/nu, u* = sqrt(tau_b/rho) with tau_b the largest fluid shear stress of the previous step (A+ = 0:
 no damping). The solve uses the damped length `damped`, kept equal to damp(mixing, u*).
 
-Arguments: faces (n+1,) [m]; centres (n,) [m]; u (n,) [m/s] (advanced in place); phi, vel_p,
-beta (n,) [-, m/s, kg/(m^3 s)]; mixing, damped (n+1,) [m]; kappa [-]; a_plus [-]; u_star (1,)
+Arguments: faces (n+1,) [m]; centres (n,) [m]; u (n,) [m/s] (advanced in place); solid, vel_p,
+exchange (n,) [-, m/s, kg/(m^3 s)]; mixing, damped (n+1,) [m]; kappa [-]; a_plus [-]; u_star (1,)
 [m/s] (updated in place); rho [kg/m^3]; nu [m^2/s]; source S [N/m^3]; top_no_slip (bool); dt [s];
 scratch arrays of n+1 (coef) and n (lower, diag, upper, rhs, work).
 """
@@ -37,7 +37,7 @@ MIXING_KINDS = {"none": 0, "prandtl": 1, "parabolic": 2, "li-sawamoto": 3}
 
 
 @njit(cache=True)
-def mixing_length(faces, phi, kind, kappa, phi_max, out):
+def mixing_length(faces, solid, kind, kappa, solid_max, out):
     n = faces.shape[0] - 1
     depth = faces[n] - faces[0]
     fluid_height = 0.0
@@ -52,7 +52,7 @@ def mixing_length(faces, phi, kind, kappa, phi_max, out):
         else:
             out[f] = kappa * fluid_height
             if f < n:
-                fluid_height += max(0.0, phi_max - phi[f]) / phi_max * (faces[f + 1] - faces[f])
+                fluid_height += max(0.0, solid_max - solid[f]) / solid_max * (faces[f + 1] - faces[f])
 
 
 @njit(cache=True)
@@ -66,21 +66,21 @@ def damp_mixing_length(mixing, kappa, a_plus, u_star, nu, out):
 
 
 @njit(cache=True)
-def face_coefficients(faces, centres, u, phi, mixing, rho, nu, top_no_slip, coef):
-    """rho (1-phi) (nu + nu_t) / h at each face, h the distance between the values it links."""
+def face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, coef):
+    """rho (1-solid) (nu + nu_t) / h at each face, h the distance between the values it links."""
     n = centres.shape[0]
     h = centres[0] - faces[0]
     grad = u[0] / h
-    coef[0] = rho * (1.0 - phi[0]) * (nu + mixing[0] * mixing[0] * abs(grad)) / h
+    coef[0] = rho * (1.0 - solid[0]) * (nu + mixing[0] * mixing[0] * abs(grad)) / h
     for f in range(1, n):
         h = centres[f] - centres[f - 1]
         grad = (u[f] - u[f - 1]) / h
-        eps = 1.0 - 0.5 * (phi[f - 1] + phi[f])
+        eps = 1.0 - 0.5 * (solid[f - 1] + solid[f])
         coef[f] = rho * eps * (nu + mixing[f] * mixing[f] * abs(grad)) / h
     if top_no_slip:
         h = faces[n] - centres[n - 1]
         grad = -u[n - 1] / h
-        coef[n] = rho * (1.0 - phi[n - 1]) * (nu + mixing[n] * mixing[n] * abs(grad)) / h
+        coef[n] = rho * (1.0 - solid[n - 1]) * (nu + mixing[n] * mixing[n] * abs(grad)) / h
     else:
         coef[n] = 0.0
 
@@ -104,9 +104,9 @@ def advance_fluid(
     faces,
     centres,
     u,
-    phi,
+    solid,
     vel_p,
-    beta,
+    exchange,
     mixing,
     damped,
     kappa,
@@ -125,21 +125,21 @@ def advance_fluid(
     rhs,
     work,
 ):
-    """`steps` implicit Euler steps of dt with phi, vel_p, beta held fixed."""
+    """`steps` implicit Euler steps of dt with solid, vel_p, exchange held fixed."""
     n = centres.shape[0]
     for _ in range(steps):
-        face_coefficients(faces, centres, u, phi, damped, rho, nu, top_no_slip, coef)
+        face_coefficients(faces, centres, u, solid, damped, rho, nu, top_no_slip, coef)
         for k in range(n):
             dz = faces[k + 1] - faces[k]
-            eps = 1.0 - phi[k]
+            eps = 1.0 - solid[k]
             m = rho * eps * dz / dt
             lower[k] = -coef[k] if k > 0 else 0.0
             upper[k] = -coef[k + 1] if k < n - 1 else 0.0
-            diag[k] = m + coef[k] + coef[k + 1] + beta[k] * dz
-            rhs[k] = m * u[k] + dz * (eps * source + beta[k] * vel_p[k])
+            diag[k] = m + coef[k] + coef[k + 1] + exchange[k] * dz
+            rhs[k] = m * u[k] + dz * (eps * source + exchange[k] * vel_p[k])
         solve_tridiagonal(lower, diag, upper, rhs, work, u)
         if a_plus > 0.0:
-            shear_stress(faces, centres, u, phi, damped, rho, nu, top_no_slip, coef)
+            shear_stress(faces, centres, u, solid, damped, rho, nu, top_no_slip, coef)
             largest = 0.0
             for f in range(n + 1):
                 largest = max(largest, coef[f])
@@ -148,10 +148,10 @@ def advance_fluid(
 
 
 @njit(cache=True)
-def shear_stress(faces, centres, u, phi, mixing, rho, nu, top_no_slip, out):
-    """Fluid shear stress rho (1-phi) (nu + nu_t) du/dz at each face [Pa]."""
+def shear_stress(faces, centres, u, solid, mixing, rho, nu, top_no_slip, out):
+    """Fluid shear stress rho (1-solid) (nu + nu_t) du/dz at each face [Pa]."""
     n = centres.shape[0]
-    face_coefficients(faces, centres, u, phi, mixing, rho, nu, top_no_slip, out)
+    face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, out)
     out[0] *= u[0]
     for f in range(n - 1, 0, -1):
         out[f] *= u[f] - u[f - 1]

@@ -3,7 +3,7 @@ particle, the particles' semi-implicit velocity update, and the equal and opposi
 on the fluid (laws and scheme in kernels/fluid/drag.py).
 
 Called by the fluid module (physics/fluid/navier_stokes.py) in its phases, with its fluid state `fs`
-(cell-centred fs.v (nx,ny,nz,3) [m/s], fs.phi (nx,ny,nz) [-], fs.grad_p (nx,ny,nz,3) [Pa/m] of the
+(cell-centred fs.v (nx,ny,nz,3) [m/s], fs.porosity (nx,ny,nz) [-], fs.grad_p (nx,ny,nz,3) [Pa/m] of the
 last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] written here):
 - forces():        every DEM step, after contacts and walls: adds -V grad(p) and the drag to each
                    particle's force;
@@ -81,7 +81,7 @@ class FluidParticleDrag:
         """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
         p = state.particles
         bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
-        phi = fs.phi.reshape(-1)
+        phi = fs.porosity.reshape(-1)
         below = particle_drag(
             self.law,
             self.density,

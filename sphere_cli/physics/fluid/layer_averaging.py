@@ -36,9 +36,9 @@ def layer_faces(bottom: float, top: float, cells: int, stretching: float = 1.0) 
 class LayerProfiles:
     """Layer averages of the particles; arrays of one value per layer."""
 
-    phi: np.ndarray  # solid fraction [-]
+    solid_fraction: np.ndarray  # [-]
     vel: np.ndarray  # mean streamwise particle velocity [m/s]
-    beta: np.ndarray  # momentum exchange coefficient [kg/(m^3 s)]
+    exchange_coefficient: np.ndarray  # momentum exchange coefficient [kg/(m^3 s)]
     drag: np.ndarray  # streamwise drag on the particles per unit volume [N/m^3]
     volume: np.ndarray  # scratch: solid volume of each layer [m^3]
 
@@ -49,5 +49,5 @@ class LayerProfiles:
     def average(self, pos, vel, radius, selected, drag_coef, drag_x, faces, area) -> None:
         layer_average(
             pos, vel, radius, selected, drag_coef, drag_x, faces, area,
-            self.phi, self.vel, self.beta, self.drag, self.volume,
+            self.solid_fraction, self.vel, self.exchange_coefficient, self.drag, self.volume,
         )  # fmt: skip

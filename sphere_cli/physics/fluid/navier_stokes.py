@@ -45,8 +45,8 @@ class NavierStokesState:
     v: np.ndarray  # (nx,ny,nz,3) [m/s] interstitial fluid velocity
     p: np.ndarray  # (nx,ny,nz) [Pa] pressure
     grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p (central differences)
-    phi: np.ndarray  # (nx,ny,nz) [-] porosity
-    dphi: np.ndarray  # (nx,ny,nz) [1/s] d phi/dt
+    porosity: np.ndarray  # (nx,ny,nz) [-]
+    porosity_rate: np.ndarray  # (nx,ny,nz) [1/s] d porosity/dt
     f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles at the old fluid v
     k_drag: np.ndarray  # (nx,ny,nz) [kg/(m^3 s)] its derivative with respect to the fluid v
     f_exchange: np.ndarray  # (nx,ny,nz,3) [N/m^3] f_i + k_drag (v_new - v_old) of the last step
@@ -67,7 +67,7 @@ class NavierStokesState:
     height: float = 0.0
     outflow: float = 0.0
 
-    PROGNOSTIC = ("v", "p", "grad_p", "phi", "dphi", "f_i", "k_drag", "f_exchange")
+    PROGNOSTIC = ("v", "p", "grad_p", "porosity", "porosity_rate", "f_i", "k_drag", "f_exchange")
     SCALARS = ("steps", "iterations", "residual")
     MOVING_GRID = ("height", "outflow")
 
@@ -95,7 +95,7 @@ class NavierStokesSolver:
         self.gravity = np.asarray(gravity, dtype=np.float64).copy()
         self.rho = float(config.density)
         self.mu = float(config.viscosity)
-        self.beta = float(config.old_pressure_weight)  # Langtangen et al.'s beta
+        self.old_pressure_weight = float(config.old_pressure_weight)  # beta of the kernels
         self.pressure_in_solid = config.formulation == "A"
         self.boundaries = (config.bottom, config.top)
         self.bc_sign = np.ones((2, 3))
@@ -127,8 +127,8 @@ class NavierStokesSolver:
             v=np.zeros(vec),
             p=np.zeros(shape),
             grad_p=np.zeros(vec),
-            phi=np.ones(shape),
-            dphi=np.zeros(shape),
+            porosity=np.ones(shape),
+            porosity_rate=np.zeros(shape),
             f_i=np.zeros(vec),
             k_drag=np.zeros(shape),
             f_exchange=np.zeros(vec),
@@ -176,7 +176,7 @@ class NavierStokesSolver:
     def step(self, fs: NavierStokesState, time: float, dt: float) -> PoissonResult:
         """Advance the fluid from `time` to `time + dt` [s] with the porosity, its rate and the
         interaction force already in fs."""
-        rho, beta, solid = self.rho, self.beta, self.pressure_in_solid
+        rho, beta, solid = self.rho, self.old_pressure_weight, self.pressure_in_solid
         old = self.boundary_pressure(time, self.p_old)
         stretch = 0.0
         if self.follows:
@@ -185,17 +185,17 @@ class NavierStokesSolver:
             if beta != 0.0 and stretch != 0.0:
                 pressure_gradient(fs.p, self.spacing, self.p_kind, old, fs.grad_p)
         predict(
-            fs.v, fs.grad_p, fs.phi, fs.dphi, fs.f_i, fs.k_drag, self.spacing, self.gravity,
+            fs.v, fs.grad_p, fs.porosity, fs.porosity_rate, fs.f_i, fs.k_drag, self.spacing, self.gravity,
             self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
         )  # fmt: skip
         if stretch != 0.0:
-            add_grid_motion(fs.v, fs.phi, fs.k_drag, self.bc_sign, rho, dt, stretch, fs.v_star)
+            add_grid_motion(fs.v, fs.porosity, fs.k_drag, self.bc_sign, rho, dt, stretch, fs.v_star)
         pressure_rhs(
-            fs.v_star, fs.phi, fs.dphi, fs.mobility, fs.grad_p, fs.p, self.spacing, self.bc_sign, self.p_kind,
-            old, beta, rho, dt, fs.rhs,
+            fs.v_star, fs.porosity, fs.porosity_rate, fs.mobility, fs.grad_p, fs.p, self.spacing,
+            self.bc_sign, self.p_kind, old, beta, rho, dt, fs.rhs,
         )  # fmt: skip
         if stretch != 0.0:
-            add_grid_source(fs.phi, fs.dphi, rho, dt, stretch, fs.rhs)
+            add_grid_source(fs.porosity, fs.porosity_rate, rho, dt, stretch, fs.rhs)
         face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
         self.boundary_pressure(time + dt, self.p_bound)
         np.multiply(old, -beta, out=self.eps_bound)
@@ -215,12 +215,12 @@ class NavierStokesSolver:
             )
         if self.follows:
             fs.outflow += dt * top_outflow(
-                fs.v_star, fs.phi, fs.mobility, fs.grad_p, fs.p, fs.eps, fs.az, self.spacing, self.bc_sign,
-                self.p_kind, old, self.eps_bound, beta, rho, dt, stretch,
+                fs.v_star, fs.porosity, fs.mobility, fs.grad_p, fs.p, fs.eps, fs.az, self.spacing,
+                self.bc_sign, self.p_kind, old, self.eps_bound, beta, rho, dt, stretch,
             )  # fmt: skip
             fs.height = self.height
         correct(
-            fs.v_star, fs.eps, fs.phi, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
+            fs.v_star, fs.eps, fs.porosity, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
             self.eps_bound, rho, beta, dt, fs.v, fs.p, fs.f_exchange,
         )  # fmt: skip
         pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
@@ -357,7 +357,7 @@ class NavierStokes(FluidModule):
         """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
         fs = self.fs
         self._measure_porosity(state)
-        fs.dphi[...] = 0.0
+        fs.porosity_rate[...] = 0.0
         self.solver.initial_pressure(fs, state.clock.time)
 
     def forces(self, state, spring_dt: float | None = None) -> None:
@@ -372,10 +372,10 @@ class NavierStokes(FluidModule):
         if self.top_wall is not None:
             self._follow_wall(state)
         # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
-        np.copyto(fs.dphi, fs.phi)
+        np.copyto(fs.porosity_rate, fs.porosity)
         self._measure_porosity(state)
-        np.subtract(fs.phi, fs.dphi, out=fs.dphi)
-        fs.dphi *= 1.0 / self.fluid_dt
+        np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
+        fs.porosity_rate *= 1.0 / self.fluid_dt
         self.drag.fluid_forcing(state, fs, self.fluid_dt)
         self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
 
@@ -416,23 +416,23 @@ class NavierStokes(FluidModule):
             )
 
     def _measure_porosity(self, state) -> None:
-        """fs.phi from the particles where they are now, floored at fluid.drag.porosity_floor:
+        """fs.porosity from the particles where they are now, floored at fluid.drag.porosity_floor:
         the fluid divides by phi, and the drag correlations take the same floor."""
         fs = self.fs
-        self.porosity.measure(state.particles, fs.phi)
-        if fs.phi.min() >= self.floor:
+        self.porosity.measure(state.particles, fs.porosity)
+        if fs.porosity.min() >= self.floor:
             return
         if not self.warned:
             self.warned = True
-            i, j, k = np.unravel_index(int(np.argmin(fs.phi)), fs.phi.shape)
+            i, j, k = np.unravel_index(int(np.argmin(fs.porosity)), fs.porosity.shape)
             warnings.warn(
-                f"step {state.clock.step}: porosity {fs.phi[i, j, k]:.3g} in fluid cell ({i}, {j}, {k}) "
+                f"step {state.clock.step}: porosity {fs.porosity[i, j, k]:.3g} in fluid cell ({i}, {j}, {k}) "
                 f"is below fluid.drag.porosity_floor = {self.floor}; the fluid and the drag use the floor "
-                f"there ({int(np.count_nonzero(fs.phi < self.floor))} cell(s) now, not repeated)",
+                f"there ({int(np.count_nonzero(fs.porosity < self.floor))} cell(s) now, not repeated)",
                 RuntimeWarning,
                 stacklevel=2,
             )
-        np.maximum(fs.phi, self.floor, out=fs.phi)
+        np.maximum(fs.porosity, self.floor, out=fs.porosity)
 
     def prognostic_state(self, state) -> dict[str, np.ndarray]:
         fs = self.fs
@@ -467,7 +467,7 @@ class NavierStokes(FluidModule):
         fields = {
             "pressure": (fs.p, "Pa"),
             "velocity": (fs.v, "m s-1"),
-            "porosity": (fs.phi, "1"),
+            "porosity": (fs.porosity, "1"),
             "interaction_force": (fs.f_exchange, "N m-3"),
         }
         if self.top_wall is not None:
@@ -486,7 +486,7 @@ class NavierStokes(FluidModule):
         }
         if self.top_wall is not None:
             values["fluid_grid_height"] = (fs.height, "m")
-            values["fluid_pore_volume"] = (float(fs.phi.sum()) * self._grid.cell_volume, "m3")
+            values["fluid_pore_volume"] = (float(fs.porosity.sum()) * self._grid.cell_volume, "m3")
             values["fluid_top_outflow_volume"] = (fs.outflow, "m3")
         return values
 

@@ -31,7 +31,7 @@ from .layer_averaging import LayerProfiles, layer_faces
 
 class FluidColumn:
     """Velocity profile u at the centres of the layers `faces`, advanced with fixed solid
-    profiles (phi, vel_p, beta); every array is allocated here, once."""
+    profiles (solid, vel_p, exchange); every array is allocated here, once."""
 
     def __init__(
         self,
@@ -67,23 +67,23 @@ class FluidColumn:
     def cells(self) -> int:
         return self.centres.size
 
-    def update_mixing_length(self, phi: np.ndarray) -> None:
-        mixing_length(self.faces, phi, self.kind, self.kappa, self.packed_solid_fraction, self.mixing)
+    def update_mixing_length(self, solid: np.ndarray) -> None:
+        mixing_length(self.faces, solid, self.kind, self.kappa, self.packed_solid_fraction, self.mixing)
         damp_mixing_length(self.mixing, self.kappa, self.van_driest, self.u_star[0], self.nu, self.damped)
 
-    def advance(self, phi, vel_p, beta, source: float, dt: float, steps: int) -> None:
+    def advance(self, solid, vel_p, exchange, source: float, dt: float, steps: int) -> None:
         """`steps` implicit steps of dt [s] with the solid profiles fixed; source = rho g_x - dp/dx
-        [N/m^3]. The mixing length must be up to date with phi."""
+        [N/m^3]. The mixing length must be up to date with solid."""
         advance_fluid(
-            self.faces, self.centres, self.u, phi, vel_p, beta, self.mixing, self.damped, self.kappa,
+            self.faces, self.centres, self.u, solid, vel_p, exchange, self.mixing, self.damped, self.kappa,
             self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip, float(dt),
             int(steps), self._coef, *self._scratch,
         )  # fmt: skip
 
-    def shear_stress(self, phi: np.ndarray, out: np.ndarray) -> np.ndarray:
+    def shear_stress(self, solid: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Fluid shear stress at the n+1 faces [Pa] into `out`."""
         shear_stress(
-            self.faces, self.centres, self.u, phi, self.damped, self.rho, self.nu, self.top_no_slip, out
+            self.faces, self.centres, self.u, solid, self.damped, self.rho, self.nu, self.top_no_slip, out
         )
         return out
 
@@ -188,8 +188,9 @@ class Vans1d(FluidModule):
 
     def _drag_relaxation_limit(self, p, selected) -> tuple[float, str]:
         """The explicit drag needs dt below the relaxation time m/K of every particle; K is at
-        least its viscous part 3 pi rho nu d (1 - phi)^-n, largest at the packed solid fraction. (Faster slip
-        raises K further: first_unstable checks m/K of each particle as the run goes.)"""
+        least its viscous part 3 pi rho nu d (1 - c)^-n (c the solid fraction), largest at the
+        packed solid fraction. (Faster slip raises K further: first_unstable checks m/K of each
+        particle as the run goes.)"""
         sel = selected == 1
         if not sel.any():
             return math.inf, ""
@@ -222,7 +223,7 @@ class Vans1d(FluidModule):
         col = f.column
         cfg = self.cfg
         profile_forces(
-            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
+            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
         )  # fmt: skip
@@ -232,19 +233,22 @@ class Vans1d(FluidModule):
         if self.solved:
             f = state.fluid
             prof = f.profiles
-            f.column.advance(prof.phi, prof.vel, prof.beta, self.source, self.substep_dt, self.fluid_steps)
+            f.column.advance(
+                prof.solid_fraction, prof.vel, prof.exchange_coefficient, self.source, self.substep_dt,
+                self.fluid_steps,
+            )  # fmt: skip
 
     def _average(self, state) -> None:
         """Solid profiles of the current particles, the drag evaluated with the current fluid."""
         p, f = state.particles, state.fluid
         col, cfg = f.column, self.cfg
         drag_coefficients(
-            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.phi,
+            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             f.drag_coef, f.drag_x,
         )  # fmt: skip
         f.profiles.average(p.pos, p.vel, p.radius, f.selected, f.drag_coef, f.drag_x, col.faces, self.area)
-        col.update_mixing_length(f.profiles.phi)
+        col.update_mixing_length(f.profiles.solid_fraction)
 
     def _steady_start(self, state, tol: float = 1e-9, max_rounds: int = 20000) -> None:
         """Advance the fluid over the fixed initial particles until its profile stops changing:
@@ -255,7 +259,8 @@ class Vans1d(FluidModule):
         dt = 100.0 * self.cfg.flow.dt
         for _ in range(max_rounds):
             before = col.u.copy()
-            col.advance(f.profiles.phi, f.profiles.vel, f.profiles.beta, self.source, dt, 100)
+            prof = f.profiles
+            col.advance(prof.solid_fraction, prof.vel, prof.exchange_coefficient, self.source, dt, 100)
             self._average(state)
             change = float(np.abs(col.u - before).max())
             if change <= tol * max(float(np.abs(col.u).max()), 1e-30):
@@ -276,9 +281,9 @@ class Vans1d(FluidModule):
         return {
             "u": f.column.u,
             "u_star": f.column.u_star,
-            "phi": prof.phi,
+            "solid_fraction": prof.solid_fraction,
             "vel": prof.vel,
-            "beta": prof.beta,
+            "exchange_coefficient": prof.exchange_coefficient,
             "drag": prof.drag,
         }
 
@@ -286,9 +291,9 @@ class Vans1d(FluidModule):
         f = state.fluid
         f.column.u[...] = arrays["u"]
         f.column.u_star[...] = arrays["u_star"]
-        for name in ("phi", "vel", "beta", "drag"):
+        for name in ("solid_fraction", "vel", "exchange_coefficient", "drag"):
             getattr(f.profiles, name)[...] = arrays[name]
-        f.column.update_mixing_length(f.profiles.phi)
+        f.column.update_mixing_length(f.profiles.solid_fraction)
 
     # ---------------------------------------------------------------- diagnostics
 
@@ -315,7 +320,7 @@ class Vans1d(FluidModule):
 
     def bed_shear_stress(self, state) -> float:
         f = state.fluid
-        return float(f.column.shear_stress(f.profiles.phi, f.stress).max())
+        return float(f.column.shear_stress(f.profiles.solid_fraction, f.stress).max())
 
     def observables(self, state) -> dict:
         p, f = state.particles, state.fluid
@@ -341,7 +346,7 @@ class Vans1d(FluidModule):
         return {
             "layer_height": (f.column.centres, "m"),
             "fluid_velocity": (f.column.u, "m s-1"),
-            "solid_fraction": (prof.phi, "1"),
+            "solid_fraction": (prof.solid_fraction, "1"),
             "particle_velocity": (prof.vel, "m s-1"),
             "drag": (prof.drag, "N m-3"),
         }
