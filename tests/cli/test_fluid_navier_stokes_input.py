@@ -109,18 +109,6 @@ def test_dt_above_the_advective_limit_of_max_speed_names_it(tmp_path):
     assert limit == pytest.approx(0.5 / (50.0 * 3 / 2.5e-3) / 5, rel=1e-3)  # printed to 4 digits
 
 
-def test_coupling_interval_above_the_viscous_limit_is_refused(tmp_path):
-    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 100.0"), "steps = 5", "interval = 1e-4")
-    result = _run(tmp_path, text)
-    assert_clean_error(
-        result,
-        65,
-        "fluid.coupling.interval",
-        f"case.toml:{line_of(text, 'interval =')}:",
-        "viscous diffusion",
-    )
-
-
 def test_grid_finer_than_the_particles_is_refused(tmp_path):
     text = edit(FLUID, "cells = [4, 4, 8]", "cells = [20, 4, 8]")
     result = _run(tmp_path, text)
@@ -141,17 +129,25 @@ def test_fluid_outrunning_the_advective_limit_stops_naming_the_cell(tmp_path):
     assert_clean_error(result, 70, "fluid cell (", "Courant number")
 
 
-def test_fluid_step_rounded_above_the_viscous_limit_is_refused(tmp_path):
-    # viscous limit dx^2/(8 nu) = 7.8125e-4 s; an interval just below it is 1411.6 steps of dt,
-    # which the one rule for spans of time makes 1412: a fluid step of 7.8146e-4 s
-    text = edit(edit(FLUID, "viscosity = 0.001", "viscosity = 1.0"), "steps = 5", "interval = 7.8124e-4")
-    text = edit(text, 'dt = "auto"', f"dt = {7.8124e-4 / 1411.6!r}")
+# an interval above the viscous limit dx^2/(8 nu), and one just below it (7.8125e-4 s at nu =
+# 1e-3 m^2/s) that is 1411.6 steps of dt, which the one rule for spans of time makes 1412: a fluid
+# step of 7.8146e-4 s
+INTERVALS = [
+    ("above", "viscosity = 100.0", "interval = 1e-4", None, ["viscous diffusion"]),
+    (
+        "rounded-above", "viscosity = 1.0", "interval = 7.8124e-4", 7.8124e-4 / 1411.6,
+        ["is 1412 DEM steps", "above the fluid's stability limit 0.0007813 s"],
+    ),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "viscosity, interval, dt, fragments", [i[1:] for i in INTERVALS], ids=[i[0] for i in INTERVALS]
+)
+def test_a_coupling_interval_above_the_viscous_limit_is_refused(tmp_path, viscosity, interval, dt, fragments):
+    text = edit(edit(FLUID, "viscosity = 0.001", viscosity), "steps = 5", interval)
+    if dt is not None:
+        text = edit(text, 'dt = "auto"', f"dt = {dt!r}")
     result = _run(tmp_path, text)
-    assert_clean_error(
-        result,
-        65,
-        "fluid.coupling.interval",
-        f"case.toml:{line_of(text, 'interval =')}:",
-        "is 1412 DEM steps",
-        "above the fluid's stability limit 0.0007813 s",
-    )
+    where = f"case.toml:{line_of(text, 'interval =')}:"
+    assert_clean_error(result, 65, "fluid.coupling.interval", where, *fragments)
