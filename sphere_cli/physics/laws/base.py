@@ -4,13 +4,14 @@ its row of the contact table, and its stiffness and damping for the time-step li
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 
 import numpy as np
 
 from ...kernels.laws import D_N, D_T, K_N, K_T
 
 
-class ContactLaw:
+class ContactLaw(ABC):
     """One contact law, chosen by `[contact] model` (physics/laws/__init__.py LAWS). A new law
     subclasses this, adds its code and branch to kernels/laws.py normal_law and its elastic
     energy to kernels/observe/energy.py, and its parameters to the schema."""
@@ -19,19 +20,19 @@ class ContactLaw:
     label = ""  # in messages
     code = -1  # the kernels' law code (kernels/laws.py)
 
+    @abstractmethod
     def resolve(self, pick, spec) -> dict:
         """The elastic properties of a material ([[materials]] entry `spec`, None for the
         single-material form); pick(key) gives the material's value or [contact]'s."""
-        raise NotImplementedError
 
+    @abstractmethod
     def mix(self, a, b) -> dict:
         """The elastic part of the law of a pair of materials a and b (b None: a rigid wall)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def elastic_row(self, law) -> tuple[float, float, float, float]:
         """The columns K_N, K_T, D_N, D_T of a pair law (physics/materials.py PairLaw), damping
         calibrated so that the clamped contact rebounds at its restitution."""
-        raise NotImplementedError
 
     def scale(self, r_eff: float, delta: float) -> float:
         """s of kernels/laws.py: the stiffness columns times s are the tangent stiffnesses at
