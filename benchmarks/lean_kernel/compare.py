@@ -20,7 +20,8 @@ import numba
 import numpy as np
 
 from sphere_cli.bench.dem import _settled_scene
-from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, MU
+from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, LINEAR, MU
+from sphere_cli.physics.module import Module
 from sphere_cli.simulation import advance
 
 HERE = Path(__file__).resolve().parent
@@ -44,15 +45,19 @@ def address(a: np.ndarray) -> int:
     return a.ctypes.data
 
 
-class LeanKernel:
-    """Stands in for the scene's Motion, PairContactForces and PlaneWallForces."""
+class LeanKernel(Module):
+    """Stands in for the scene's Motion, PairContactForces and PlaneWallForces: one module of the
+    step (physics/module.py) with their kick_drift, forces and kick."""
+
+    name = "particles"
 
     def __init__(self, lib, scene):
         st = scene.state
         p = st.particles
         walls = st.walls
         assert np.ptp(p.radius) == 0 and np.ptp(p.mass) == 0 and not st.box.periodic.any()
-        assert not scene.contact.hertz and not scene.contact.rolling and scene.contact.table.shape[0] == 1
+        contact = scene.contact
+        assert contact.law_code == LINEAR and not contact.rolling and contact.table.shape[0] == 1
         assert (walls.table == walls.table[0]).all() and not walls.vel.any()
         self.lib, self.r, self.m = lib, float(p.radius[0]), float(p.mass[0])
         self.inv_m, self.inv_i = float(p.inv_mass[0]), float(p.inv_inertia[0])
@@ -93,8 +98,9 @@ def main(n: int, steps: int, rounds: int) -> None:
     ours = _settled_scene(n, print)
     lean = _settled_scene(n, print)
     kernel = LeanKernel(load_library(), lean)
-    lean.motion = lean.contact = kernel
+    lean.motion, lean.contact = kernel, None
     lean.walls = None  # the lean kernel does the walls itself
+    lean.order_modules()  # the step's hooks are the kernel's
     advance(ours, 20)
     advance(lean, 20)
     a, b = ours.state.particles, lean.state.particles

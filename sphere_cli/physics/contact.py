@@ -34,7 +34,7 @@ from ..state import State
 from .laws import ContactLaw
 from .materials import ContactTables
 from .module import Module
-from .neighbors import listed_slots
+from .neighbors import SPRING_ROOM, listed_slots
 
 
 def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray, np.ndarray]:
@@ -90,7 +90,14 @@ class PairContactForces(Module):
             self.bounds = np.concatenate(([0], cuts, [n])).astype(np.int64)
             self.bounds_build = nl.builds
             self.cross_rows, self.cross_bounds = rows_across_chunks(nl.nbr, nl.nbr_count, self.bounds, chunks)
-        rows = nl.hist.shape[0] if chunks > 1 else 0  # one per spring
+        # one slot per spring index (start[i] + k): as many as the springs' rows, or without
+        # friction (no springs) as many as the listed pairs, with the springs' room
+        rows = nl.hist.shape[0]
+        if not rows:
+            pairs = int(nl.start[-1])
+            rows = self.slots.shape[0] if self.slots.shape[0] >= pairs else int(SPRING_ROOM * pairs) + 64
+        if chunks == 1:
+            rows = 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
         if self.blocks.shape[0] != chunks:
