@@ -111,7 +111,7 @@ def set_threads(case) -> None:
 
 def shared_cores_warning() -> str | None:
     """Warn at once (stderr) when other busy processes share the run's cores
-    (below); returns the warning for the run's log. Called once the command is
+    (shared_cores_note); returns the warning for the run's log. Called once the command is
     known to go ahead and before any kernel runs, so that no thread of this run counts as busy."""
     import numba
 

@@ -77,8 +77,8 @@ def advance(scene, steps: int) -> bool:
         for hook in finish_step:
             hook(state)
         clock.step += 1
-        for every, hook in after_step:
-            if clock.step % every == 0:
+        for module, hook in after_step:
+            if clock.step % module.coupling_steps == 0:
                 hook(state)
     return scene.stages is not None and scene.stages.ended
 

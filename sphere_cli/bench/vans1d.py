@@ -33,7 +33,7 @@ def measure(case: Path, threads: int, simulated: float) -> dict:
         "averaging": Stopwatch(fluid, "_average"),
         "fluid resolution": Stopwatch(state.fluid.column, "advance"),
     }
-    steps = round(simulated / state.clock.dt)
+    steps = state.clock.steps_in(simulated)
     start = time.perf_counter()
     advance(scene, steps)
     wall = time.perf_counter() - start

@@ -135,7 +135,7 @@ class Vans1dFluid(Strict):
         default_factory=SolvedFlow, description="How the fluid velocity is found: solved or prescribed."
     )
     coupling: CouplingConfig = Field(
-        default_factory=lambda: CouplingConfig(interval=1.0e-3),
+        default_factory=CouplingConfig,
         description=(
             "Time between two fluid updates (default: interval = 1e-3 s): the particles move this "
             "long in a frozen profile, then the solid profiles are averaged and the fluid advanced "

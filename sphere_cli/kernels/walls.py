@@ -18,7 +18,7 @@ limits the step.
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3); radius, mass, inertia, inv_mass (N,);
 material (N,) int32; wall_axis (W,) int64 axis of the normal; wall_sign (W,) +1.0 on a lower face
 (normal along +axis), -1.0 on an upper face; wall_coord (W,) [m]; wall_vel, wall_vel_pred (W,3)
-[m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in contact.py (the
+[m/s]; wall_table (W,M,6) parameters of wall w against material m, columns as in laws.py (the
 wall's own elasticity, if any, is in E* and G*; a rigid wall has none); wall_hist (N,W,3) [m]
 (no rows when no contact has friction);
 force, torque (N,3) accumulated in place; springs (N,) uint64 bit mask of the walls whose spring
@@ -316,9 +316,10 @@ def near_walls(
             reach[count] = close
             count += 1
         far = springs[i] & ~close
-        if far != 0 and wall_hist.shape[0] > 0:
+        if far != 0:
             springs[i] &= close
-            for w in range(wall_axis.shape[0]):
+            # the springs of the walls out of reach are gone (none without friction)
+            for w in range(wall_axis.shape[0] if wall_hist.shape[0] > 0 else 0):
                 if far & (np.uint64(1) << np.uint64(w)):
                     wall_hist[i, w, 0] = 0.0
                     wall_hist[i, w, 1] = 0.0

@@ -1,5 +1,5 @@
 """One module per physical process: orchestration only, the arithmetic lives in `kernels/`.
 
-Each module declares the phase it runs in and, beside each other, `prognostic_state()` (every
-array a bitwise restart needs) and `restore()`.
+A module of the step derives from `module.Module` and defines the hooks it takes part in, with
+`prognostic_state()` (every array a bitwise restart needs) and `restore()` side by side.
 """

@@ -1,5 +1,6 @@
-"""Particle-particle contacts (the forces hook): the linear or Hertz-Mindlin law of kernels/contact.py
-with per-pair parameters (physics/materials.py), and the time-step limit the contacts impose.
+"""Particle-particle contacts (the forces hook): the contact law of kernels/laws.py
+(physics/laws/), swept over the pairs by kernels/contact.py, with per-pair parameters
+(physics/materials.py), and the time-step limits the contacts impose.
 
 Time-step limits (verification group E; user guide section 2). The dashpots act at the
 predicted velocity v_n + dt a_n (kernels/motion.py): on a damped linear mode (omega, zeta) that
@@ -209,10 +210,6 @@ def _lightest(material: np.ndarray, mass: np.ndarray, materials: int) -> dict[in
     return lightest
 
 
-def _label(tables: ContactTables, a: int) -> str:
-    return "the particles" if tables.names[a] == "" else f"material {tables.names[a]!r}"
-
-
 def coordination_bound(radius: float, smallest: float, others: int) -> int:
     """The most bodies that can touch a sphere of `radius` at once, when no sphere is smaller
     than `smallest` (a plane wall counts as a sphere of infinite radius) and `others` bodies
@@ -290,7 +287,7 @@ def stability_limit(
             limits.append(
                 (
                     value,
-                    f"{law.label} contacts of the lightest particle of {_label(tables, a)} (r = {r:.4g} m), "
+                    f"{law.label} contacts of the lightest particle of {tables.label(a)} (r = {r:.4g} m), "
                     f"held by up to {contacts} bodies at once: omega^2 dt^2 + 4 gamma dt <= 4 with "
                     f"omega^2 = {contacts} x {omega2:.4g} s^-2, gamma = {contacts} x {gamma:.4g} s^-1"
                     + law.tangent_note(overlap),
@@ -331,8 +328,8 @@ def one_contact_limit(
             r_eff = float(radius[i] * radius[j] / (radius[i] + radius[j]))
             delta = overlap * float(min(radius[i], radius[j]))
             what = (
-                f"{law.label} contact of {_label(tables, a)}"
-                + ("" if a == b else f" with {_label(tables, b)}")
+                f"{law.label} contact of {tables.label(a)}"
+                + ("" if a == b else f" with {tables.label(b)}")
                 + ", lightest pair"
             )
             contacts.append((row_limit(tables.table[a, b], law, m_eff, r_eff, delta), what))
@@ -340,7 +337,7 @@ def one_contact_limit(
             i = int(first[0])
             row = tables.wall_table[w, a]
             value = row_limit(row, law, float(mass[i]), float(radius[i]), overlap * radius[i])
-            what = f"{law.label} contact of the lightest particle of {_label(tables, a)} with the {face} wall"
+            what = f"{law.label} contact of the lightest particle of {tables.label(a)} with the {face} wall"
             contacts.append((value, what))
     note = law.limit_note(overlap)
     limits = law.impact_limits(tables, lightest, radius) + [(v, w + note) for v, w in contacts]

@@ -33,6 +33,9 @@ class FluidModule(Module):
 
     model = ""  # the [fluid] model tag, written to the trajectory
     name = "fluid"  # the checkpoint group of its prognostic state
+    # the coupling when [fluid.coupling] gives neither steps nor interval: 1 step, or this [s]
+    default_interval: float | None = None
+    fluid_dt = math.nan  # the fluid step, coupling_steps x dt [s] (start_coupling)
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate
@@ -47,6 +50,10 @@ class FluidModule(Module):
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
 
+    def dt_limit(self) -> tuple[float, str]:
+        """The coupling's limit on dt (coupling_limit); a model adds its own."""
+        return self.coupling_limit()
+
     # -- the coupling of [fluid.coupling], the same for every model --------------------------------
 
     def fluid_step_limit(self) -> tuple[float, str]:
@@ -57,29 +64,35 @@ class FluidModule(Module):
         """The limit the coupling puts on dt [s]: the DEM sub-steps fluid.coupling.interval, or
         takes fluid.coupling.steps steps a fluid step (the fluid step's own limit divided by
         them). Checks, first, that a given interval is within the fluid step's limit."""
-        coupling = self.loaded.case.fluid.coupling
+        interval, steps = self._coupling()
         limit, reason = self.fluid_step_limit()
-        if coupling.interval is not None:
-            if coupling.interval > limit:
+        if interval is not None:
+            if interval > limit:
                 raise self.loaded.error(
                     ("fluid", "coupling", "interval"),
                     f"above the fluid's stability limit {limit:.4g} s ({reason}); "
                     f"use interval <= {limit:.4g} s",
                 )
-            return coupling.interval, "the DEM sub-steps the fluid step fluid.coupling.interval"
-        steps = coupling.steps or 1
+            return interval, "the DEM sub-steps the fluid step fluid.coupling.interval"
         if steps > 1:
             return limit / steps, f"{reason}, divided by fluid.coupling.steps = {steps}"
         return limit, reason
+
+    def _coupling(self) -> tuple[float | None, int]:
+        """(interval [s] or None, steps) of [fluid.coupling], the model's default where it gives
+        neither."""
+        coupling = self.loaded.case.fluid.coupling
+        if coupling.interval is None and coupling.steps is None:
+            return self.default_interval, 1
+        return coupling.interval, coupling.steps or 1
 
     def start_coupling(self, state) -> None:
         """coupling_steps and the fluid step fluid_dt [s] once dt is known (the one rule for a
         span of time, Clock.steps_in, for an interval); a rounded interval above the fluid
         step's limit is refused."""
-        coupling = self.loaded.case.fluid.coupling
+        interval, steps = self._coupling()
         clock = state.clock
-        interval = coupling.interval
-        self.coupling_steps = clock.steps_in(interval) if interval is not None else coupling.steps or 1
+        self.coupling_steps = clock.steps_in(interval) if interval is not None else steps
         self.fluid_dt = self.coupling_steps * clock.dt
         limit, reason = self.fluid_step_limit()
         if interval is not None and self.fluid_dt > limit:

@@ -1,5 +1,5 @@
-"""Materials and the per-pair contact parameters (no kernels: the tables feed kernels/contact.py
-and kernels/walls.py).
+"""Materials and the per-pair contact parameters (no kernels: the tables, whose columns
+kernels/laws.py defines, feed kernels/contact.py and kernels/walls.py).
 
 A scene has M particle materials (M = 1 for the single-material form: particles.density and
 the properties of [contact]); every particle carries a material id. Each pair of materials,
@@ -64,13 +64,17 @@ class ContactTables:
     names: list[str]  # particle materials, by id
     materials: list[Material]  # by id
     fractions: list[float]  # number fractions, by id
-    table: np.ndarray  # (M,M,6) pair rows (kernels/contact.py)
+    table: np.ndarray  # (M,M,6) pair rows (columns of kernels/laws.py)
     wall_table: np.ndarray  # (W,M,6) wall rows
     pair_laws: dict  # (a, b) -> PairLaw, a <= b
     wall_laws: dict  # (w, a) -> PairLaw
     # some contact has friction in some stage: only then do contacts carry tangential springs
     # (with mu = 0 the spring is capped to zero at every step, so it is left out)
     frictional: bool = True
+
+    def label(self, a: int) -> str:
+        """Material a in a message."""
+        return "the particles" if self.names[a] == "" else f"material {self.names[a]!r}"
 
     @property
     def rolling(self) -> bool:

@@ -17,7 +17,8 @@ One step of velocity Verlet, in the order the loop runs the hooks:
 
 Beside the step: `prognostic_state`/`restore` (everything a bitwise restart needs, written to
 the checkpoint group `name`), `observables` (scalars and arrays of the output schedule) and
-`dt_limit` (the module's limit on the step, read while the scene is built).
+`dt_limit` (a fluid model's limit on the step, read while the scene is built; the contact and
+wall limits need the whole scene and are functions of physics/contact.py and physics/walls.py).
 """
 
 from __future__ import annotations
@@ -126,6 +127,7 @@ class Step:
         self.forces = bound("forces")
         self.kick = bound("kick")
         self.finish_step = bound("finish_step")
-        self.after_step = tuple((m.coupling_steps, m.after_step) for m in modules if defines(m, "after_step"))
+        # with the module: its coupling_steps is read at each step (a fluid sets it in start())
+        self.after_step = tuple((m, m.after_step) for m in modules if defines(m, "after_step"))
         self.stateful = {m.name: m for m in modules if defines(m, "prognostic_state") and m.name}
         self.observed = tuple(m.observables for m in modules if defines(m, "observables"))

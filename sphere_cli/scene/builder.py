@@ -81,7 +81,9 @@ class Scene:
             self.fluid, self.stages, self.observer,
         )  # fmt: skip
         self.modules = tuple(m for m in every if m is not None)
-        assert not order_problems(self.modules), order_problems(self.modules)
+        problems = order_problems(self.modules)
+        if problems:  # a programming error: the order above breaks physics/module.py ORDER
+            raise RuntimeError("; ".join(problems))
         self.step = Step(self.modules)
 
     def compute_initial_forces(self) -> None:

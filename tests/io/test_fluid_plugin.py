@@ -88,7 +88,7 @@ class ToyFluid(FluidModule):
         return {"counter": (self.counter, "1"), "vector": (np.stack([self.counter] * 3, axis=-1), "m s-1")}
 
     def grid(self):
-        # duck-typed like physics/fluid_grid.FluidGrid
+        # duck-typed like physics/fluid/grid.py FluidGrid
         return SimpleNamespace(origin=np.zeros(3), spacing=np.array([0.005, 0.01 / 3, 0.005]), shape=SHAPE)
 
     def observables(self, state):

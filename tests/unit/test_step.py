@@ -71,8 +71,8 @@ def test_a_wrong_order_is_named():
 def test_a_fluid_with_implicit_drag_takes_the_particles_kick():
     scene = scene_of(ROOT / "configs" / "fluid-settling.toml")
     assert scene.step.kick == (scene.fluid.kick,)
-    every, advance = scene.step.after_step[0]
-    assert advance == scene.fluid.after_step and every == scene.fluid.coupling_steps == 10
+    module, advance = scene.step.after_step[0]
+    assert module is scene.fluid and advance == scene.fluid.after_step and module.coupling_steps == 10
 
 
 def test_a_dry_scene_without_walls_runs_three_hooks():

@@ -10,7 +10,7 @@ w_k of its contact point: this kernel runs after the second half kick (vel = v_k
 the springs of step k-1 and of the half-step velocities taken before the contact forces, and it
 evaluates each contact (the half list: each pair once, in the row of its lower index) with
 the law's own functions (normal_law, tangential_force,
-rolling_torque of kernels/contact.py) on a scratch copy of its spring, reproducing the force
+rolling_torque of kernels/laws.py) on a scratch copy of its spring, reproducing the force
 F_k the contact kernel applied. Per step:
   gravity   m g . v_{k-1/2} dt, exactly the work over the drift x_k - x_{k-1};
   walls     (F_n n + F_t) . V_k dt, the force of the wall on the particle times the wall's

@@ -5,7 +5,7 @@ Per particle (Love-Weber; Christoffersen, Mehrabadi & Nemat-Nasser 1981, J. Appl
     M_i = sum over the contacts c of i of (x_c - x_i) (x) f_c        [N m]
 with x_c - x_i = -r_i n (n from the other body to i) and f_c the contact force on i (normal and
 tangential, with the dashpots); for j, x_c - x_j = r_j n and the force is -f_c, so its moment is
-the same expression with r_j. The forces are evaluated with the law of kernels/contact.py and
+the same expression with r_j. The forces are evaluated with the law of kernels/laws.py and
 kernels/walls.py on the current state (the springs as stored, no growth), on a scratch copy of
 each spring: they are the forces of the last force evaluation.
 The stress of a region of volume V, compression positive, is

@@ -4,14 +4,13 @@ The fluid is the pore-pressure equation of physics/fluid/pore_pressure.py on the
 Each fluid step (every fluid.coupling.steps DEM steps, after the kick and the clock) measures the
 porosity and the mean particle velocity per cell from the particles (physics/fluid/porosity.py),
 takes dphi/dt as the backward difference over the fluid step, and solves one implicit step.
-The forces phase of every DEM step adds to each particle the pressure-gradient force -V grad p
+The forces hook of every DEM step adds to each particle the pressure-gradient force -V grad p
 and the buoyancy -rho_f V g (kernels/fluid/darcy.py).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 
 import numpy as np
 
@@ -64,15 +63,10 @@ class Darcy(FluidModule):
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
-        self.coupling_steps = config.coupling.steps or 1
-        self.fluid_dt = math.nan
         self.warned_clamp = False
         state.fluid = self.pore.state
 
     # -- schedule --------------------------------------------------------------------------------
-
-    def dt_limit(self) -> tuple[float, str]:
-        return self.coupling_limit()
 
     def fluid_step_limit(self) -> tuple[float, str]:
         """The diffusion is implicit and sets no limit; the coupling is explicit. A compacting

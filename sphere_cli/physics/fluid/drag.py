@@ -2,7 +2,7 @@
 particle, the particles' semi-implicit velocity update, and the equal and opposite force density
 on the fluid (laws and scheme in kernels/fluid/drag.py).
 
-Called by the fluid module (physics/fluid/navier_stokes.py) in its phases, with its fluid state `fs`
+Called by the fluid module (physics/fluid/navier_stokes.py) in its hooks, with its fluid state `fs`
 (cell-centred fs.v (nx,ny,nz,3) [m/s], fs.porosity (nx,ny,nz) [-], fs.grad_p (nx,ny,nz,3) [Pa/m] of the
 last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] written here):
 - forces():        every DEM step, after contacts and walls: adds -V grad(p) and the drag to each

@@ -289,10 +289,10 @@ class NavierStokes(FluidModule):
     """The porous Navier-Stokes fluid in the DEM loop: x/y periodic box, the grid of
     [fluid.grid], porosity from the particles, drag both ways (physics/fluid/drag.py).
 
-    Schedule: the DEM takes ndem steps in the fluid field of the last fluid step (forces() and
-    kick() hand the drag to physics/fluid/drag.py), then after_step() measures the porosity where the
-    particles are now, has the drag module gather the force density the fluid receives, and
-    advances the fluid by ndem dt."""
+    Schedule: the DEM takes coupling_steps steps in the fluid field of the last fluid step
+    (forces() and kick() hand the drag to physics/fluid/drag.py), then after_step() measures the
+    porosity where the particles are now, has the drag module gather the force density the fluid
+    receives, and advances the fluid by fluid_dt = coupling_steps dt."""
 
     model = "navier-stokes"
     name = "fluid"
@@ -327,9 +327,6 @@ class NavierStokes(FluidModule):
         state.fluid = self.fs
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
-        self.coupling_steps = cfg.coupling.steps or 1
-        self.fluid_dt = math.nan  # coupling_steps dt, set by start()
-        self.coupling_limit()  # refuses an interval above the fluid step's limit now
 
     def fluid_step_limit(self) -> tuple[float, str]:
         """The fluid step's own limit [s] and what sets it."""

@@ -102,6 +102,7 @@ class Vans1dState:
 
 class Vans1d(FluidModule):
     model = "vans1d"
+    default_interval = 1.0e-3  # s between fluid updates when [fluid.coupling] gives neither
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
@@ -148,10 +149,8 @@ class Vans1d(FluidModule):
         self.diameter = 2.0 * float(p.radius[selected == 1].mean()) if selected.any() else 0.0
         self.particle_density = float(density.mean()) if density.size else 0.0
         self._dt_limit = self._drag_relaxation_limit(p, selected)
-        self.coupling_steps = 1
         self.fluid_steps = 1
-        self.fluid_dt = 0.0  # the coupling interval as whole DEM steps [s]
-        self.substep_dt = 0.0  # the fluid's own implicit steps within it [s]
+        self.substep_dt = 0.0  # the fluid's own implicit steps within a fluid step [s]
 
     # ---------------------------------------------------------------- checks and schedule
 
@@ -184,7 +183,7 @@ class Vans1d(FluidModule):
             )
 
     def dt_limit(self) -> tuple[float, str]:
-        return self._dt_limit
+        return min(self._dt_limit, self.coupling_limit(), key=lambda limit: limit[0])
 
     def _drag_relaxation_limit(self, p, selected) -> tuple[float, str]:
         """The explicit drag needs dt below the relaxation time m/K of every particle; K is at

@@ -62,12 +62,11 @@ class HertzMindlin(ContactLaw):
         for a, first in lightest.items():
             mat = tables.materials[a]
             r = float(radius[first[0]])
-            label = "the particles" if tables.names[a] == "" else f"material {tables.names[a]!r}"
             limits.append(
                 (
                     rayleigh_time(r, mat.density, mat.shear_modulus, mat.poisson_ratio),
                     f"Rayleigh time pi r sqrt(rho/G)/(0.1631 nu + 0.8766) of the smallest particle of "
-                    f"{label}, r = {r:.4g} m",
+                    f"{tables.label(a)}, r = {r:.4g} m",
                 )
             )
         return limits

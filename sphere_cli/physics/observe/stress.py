@@ -1,4 +1,4 @@
-"""Granular stress tensor (diagnose phase, on the observables schedule only): contact virial plus
+"""Granular stress tensor (on the observables schedule only): contact virial plus
 kinetic part, for the whole sample and per horizontal layer; pressure and the effective friction.
 See kernels/observe/stress.py for the formula. Compression is positive (soil-mechanics convention):
 a sample squeezed along z has sigma_zz > 0.

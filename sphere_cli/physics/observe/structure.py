@@ -1,4 +1,4 @@
-"""Packing structure observables (diagnose phase, on the observables schedule only): the sample
+"""Packing structure observables (on the observables schedule only): the sample
 region and its interior, solid fractions (sample, interior, per layer), coordination numbers.
 See kernels/observe/structure.py.
 
