@@ -35,7 +35,42 @@ class NoSlipPressure(PressureBoundary):
     )
 
 
-Boundary = Annotated[NoSlipNoFlow | NoSlipPressure, Field(discriminator="type")]
+class NoSlipVelocity(Strict):
+    """A face through which the fluid enters or leaves at a prescribed rate (give velocity or
+    flux); optionally no slip along it. The other boundary must then be open (pressure)."""
+
+    type: Literal["velocity"] = "velocity"
+    velocity: Real | None = Field(
+        None,
+        description=(
+            "Superficial velocity through the face along +z, the volume flux per unit area "
+            "(positive upward: an inflow at the bottom, an outflow at the top) [m/s]. Exclusive "
+            "with flux."
+        ),
+    )
+    flux: Real | None = Field(
+        None,
+        description=(
+            "Volume flux through the whole face along +z (positive upward) [m^3/s]. Exclusive with velocity."
+        ),
+    )
+    no_slip: Flag = Field(
+        False,
+        description="The velocity along the boundary vanishes there (otherwise free slip) [-].",
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if (self.velocity is None) == (self.flux is None):
+            raise ValueError("give either velocity [m/s] or flux [m^3/s], one of them")
+        return self
+
+    def superficial(self, area: float) -> float:
+        """The superficial velocity through a face of this area [m^2] -> [m/s]."""
+        return self.velocity if self.velocity is not None else self.flux / area
+
+
+Boundary = Annotated[NoSlipNoFlow | NoSlipPressure | NoSlipVelocity, Field(discriminator="type")]
 
 
 class PressureSolverConfig(Strict):
@@ -120,3 +155,13 @@ class NavierStokesFluid(Strict):
     def _default_tags(cls, data):
         data = _default_tag(data, "bottom", "type", "no-flow")
         return _default_tag(data, "top", "type", "pressure")
+
+    @model_validator(mode="after")
+    def _an_open_face_with_a_prescribed_flow(self):
+        kinds = {self.bottom.type, self.top.type}
+        if "velocity" in kinds and "pressure" not in kinds:
+            raise ValueError(
+                'a boundary of type "velocity" needs the other one of type "pressure": with both '
+                "faces closed or prescribed, the flow in need not match the flow out"
+            )
+        return self

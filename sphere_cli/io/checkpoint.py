@@ -21,10 +21,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import OutputError
+from ..errors import OutputError, ResumeRefused
 from .atomic import publish
 
-FORMAT = 3  # 2: with the digest; 3: one fluid vocabulary, no springs without friction
+# 2: with the digest; 3: one fluid vocabulary, no springs without friction; 4: the Navier-Stokes
+# velocity on the faces of a staggered grid (3 held it at the cell centres)
+FORMAT = 4
 NAME = re.compile(r"^ckpt-(\d{12})\.h5$")
 
 
@@ -111,7 +113,7 @@ def read_checkpoint(path: Path) -> CheckpointData:
             if int(f.attrs.get("complete", 0)) != 1:
                 raise OutputError(f"{path}: incomplete checkpoint")
             if int(f.attrs.get("format", -1)) != FORMAT:
-                raise OutputError(f"{path}: checkpoint format {f.attrs.get('format')} is not {FORMAT}")
+                raise ResumeRefused(_format_refusal(path, f))
             if str(f.attrs.get("digest", "")) != _digest(f):
                 raise OutputError(f"{path}: digest mismatch (an attribute or dataset was changed)")
             step = int(f.attrs["step"])
@@ -129,7 +131,7 @@ def read_checkpoint(path: Path) -> CheckpointData:
                 resolved=json.loads(f.attrs["resolved_case"]),
                 arrays=arrays,
             )
-    except OutputError:
+    except (OutputError, ResumeRefused):
         raise
     except Exception as exc:  # a damaged file can fail in any way inside h5py
         raise OutputError(f"{path}: unreadable or corrupt checkpoint ({type(exc).__name__}: {exc})") from None
@@ -162,6 +164,28 @@ def _digest(f: h5py.File) -> str:
         if isinstance(obj, h5py.Dataset):
             add("data", name, obj[()])
     return sha.hexdigest()
+
+
+def _format_refusal(path: Path, f) -> str:
+    """Why a checkpoint of another format cannot be resumed (a complete, older checkpoint is not
+    damaged: it must be refused, not skipped for an even older one of the same run)."""
+    found = f.attrs.get("format")
+    text = f"{path}: checkpoint format {found}, this version reads format {FORMAT} only"
+    fluid = (
+        "sphere/state/fluid" in f
+        and "v" in f["sphere/state/fluid"]
+        and "v_face" not in f["sphere/state/fluid"]
+    )
+    if fluid:
+        text += (
+            "; it holds a Navier-Stokes fluid on the collocated grid of earlier versions (velocity at the "
+            "cell centres), which the staggered grid of this version (velocity on the cell faces) cannot "
+            "continue from"
+        )
+    return (
+        text
+        + ". Start the run again from its case file (sphere run), or resume it with the version that wrote it"
+    )
 
 
 def newest_valid_checkpoint(directory: Path, log=None) -> CheckpointData | None:

@@ -66,7 +66,8 @@ friction = {mu_contact!r}
 
 
 def fluid_momentum(scene) -> np.ndarray:
-    """sum over cells of rho phi v V_cell [kg m/s]."""
+    """sum over cells of rho phi v V_cell [kg m/s] (the cell velocities carry the fluxes of the
+    faces: x and y periodic, this is the sum over the faces of rho phi_f v_f V_cell)."""
     fs = scene.state.fluid
     fluid = scene.fluid
     momentum = fluid.config.density * (fs.porosity[..., None] * fs.v).reshape(-1, 3).sum(axis=0)
@@ -108,10 +109,11 @@ def test_global_momentum_balance(tmp_path, formulation):
     """D: a particle launched along x through glycerol at rest, no gravity, x and y periodic,
     closed free-slip top and bottom: nothing outside acts along x, so the momentum of particle
     and fluid together stays what the particle started with while the drag hands it over (the
-    particle keeps < 1/3 of it after 10 tau_p). The fluid receives exactly the drag impulses the
-    particle received, except the part its last step took ahead (sum (f_exchange - f_i) V dt_f,
-    deducted from the next exchange): with that counted, the balance holds to 1e-12 (round-off
-    of 250 steps); without it, to 1e-4 (measured 2e-5)."""
+    particle keeps < 1/3 of it after 10 tau_p). The fluid takes ahead the drag the particle will
+    receive over the next interval (kernels/fluid/drag.py): with the part taken and not yet
+    received counted (sum (f_exchange - f_i + predicted) V dt_f less the impulse since), the
+    balance holds to 1e-12 (round-off of 250 steps); without it, to 5e-2 (one interval's drag,
+    dt/tau_p = 1/25 of the particle's momentum)."""
     d = 2e-3
     tau = STEEL * d * d / (18 * MU)
     cell = 4 * d
@@ -139,12 +141,13 @@ def test_global_momentum_balance(tmp_path, formulation):
     for _ in range(10):
         advance(scene, 25)
         total = p.mass[0] * p.vel[0, 0] + fluid_momentum(scene)[0]
-        ahead = (fs.f_exchange - fs.f_i)[..., 0].sum() * cell_volume * scene.state.clock.dt
+        took = fs.f_exchange - fs.f_i + scene.fluid.drag.predicted.reshape(fs.f_i.shape)
+        pending = took[..., 0].sum() * cell_volume * scene.state.clock.dt - scene.fluid.drag.impulse[0, 0]
         worst = max(worst, abs(total / start - 1))
-        worst_counted = max(worst_counted, abs((total + ahead) / start - 1))
+        worst_counted = max(worst_counted, abs((total + pending) / start - 1))
     assert p.vel[0, 0] < 0.01 / 3
     assert worst_counted < 1e-12
-    assert worst < 1e-4
+    assert worst < 5e-2
 
 
 def cubic_bed(nx, ny, nz, d):
@@ -156,45 +159,51 @@ def cubic_bed(nx, ny, nz, d):
 
 @pytest.mark.parametrize("formulation", ["A", "B"])
 def test_ergun_pressure_drop_through_a_dem_packing(tmp_path, formulation):
-    """D: water forced down through a packing of 128 touching 1 mm spheres (4 x 4 x 8, simple
+    """D: water forced down through a packing of 256 touching 1 mm spheres (4 x 4 x 16, simple
     cubic, resting on the z- wall; no gravity, so the flow itself holds the bed on the wall) by
     10 Pa at the top boundary over 0 Pa at the bottom one, on cells of 4 mm (the lens porosity of
     the packing's cells: 0.480, its geometric porosity 1 - pi/6 = 0.476). At steady state the
-    pressure drop over the bed height L = 8 mm equals Ergun's at the superficial velocity U (the
-    flux phi_f v_f through the face between the bed's two cells) and the bed's measured porosity
-    (the mean of its cells') within 5 % (validation D); and the fluid's total force on the
-    particles (drag and pressure-gradient force) equals the pressure drop times the area within
-    1 %. Measured: Ergun +1.0 % (A), +1.7 % (B); force 0.2 %, 0.1 %."""
-    d, n, layers = 1e-3, 4, 8
+    pressure gradient across the face in the middle of the bed equals Ergun's at the superficial
+    velocity U through that face (phi_f v_f) and the bed's measured porosity (the mean of its
+    cells') within 5 % (validation D); and the fluid's total force on the particles (drag and
+    pressure-gradient force) equals the pressure drop between the boundaries times the area
+    within 1 %. Measured: Ergun +0.6 % (A), -0.6 % (B); force +0.3 %, +0.02 %.
+
+    The pressure drop over the whole bed height is 4 % below Ergun's at that U: the face at the
+    bed's top has the mean porosity of a bed cell and a clear one and half the drag of the bed
+    cell, so it offers half a bed cell's resistance at a larger porosity (the staggered grid's
+    smearing of a porosity jump over one face, kernels/fluid/navier_stokes.py)."""
+    d, n, layers = 1e-3, 4, 16
     top_pressure = 10.0
     scene = coupled_scene(
         tmp_path,
         cubic_bed(n, n, layers, d),
         d / 2,
-        upper=(n * d, n * d, 12 * d),
+        upper=(n * d, n * d, 20 * d),
         gravity=(0.0, 0.0, 0.0),
         dt=1e-4,
         kn=20.0,
         walls=("z-",),
         fluid={
             "formulation": formulation,
-            "grid": {"cells": [1, 1, 3]},
+            "grid": {"cells": [1, 1, 5]},
             "bottom": {"type": "pressure", "pressure": 0.0},
             "top": {"type": "pressure", "pressure": top_pressure},
             "coupling": {"steps": 5},
         },
     )
-    advance(scene, 1000)  # 0.1 s, ten times the column's relaxation time
+    advance(scene, 1500)  # 0.15 s, fifteen times the column's relaxation time
     fs = scene.state.fluid
-    vz, phi = fs.v[0, 0, :, 2], fs.porosity[0, 0, :]
-    superficial = -0.25 * (phi[0] + phi[1]) * (vz[0] + vz[1])
-    eps = phi[:2].mean()
+    phi = fs.porosity[0, 0, :]
+    superficial = -0.5 * (phi[1] + phi[2]) * fs.v_face[0, 0, 2, 2]  # through the bed's middle face
+    eps = phi[:4].mean()
     assert eps == pytest.approx(1 - math.pi / 6, abs=0.005)
     length = layers * d
     expected = 150 * 1e-3 * (1 - eps) ** 2 * superficial / (eps**3 * d**2) + 1.75 * 1000 * (
         1 - eps
     ) * superficial**2 / (eps**3 * d)
-    assert top_pressure / length == pytest.approx(expected, rel=0.05)
+    gradient = (fs.p[0, 0, 2] - fs.p[0, 0, 1]) / (length / 4)  # across that face
+    assert gradient == pytest.approx(expected, rel=0.05)
     force = scene.fluid.drag.fluid_force(scene.state, fs)
     area = (n * d) ** 2
     assert -force[2] == pytest.approx(top_pressure * area, rel=0.01)
@@ -228,9 +237,12 @@ def test_fluidization_plateau():
     weight per area (1 - eps)(rho_p - rho_f) g L = 61.64 Pa (validation D): at 150 and 250 Pa it
     is that within 2 % while the bed rises and the flow grows with the pressure; at 50 Pa (below
     U_mf, where the bed's share of the drop is ~ 2/3 of it) the bed stays put under a smaller
-    drop. 0.04 s of each (tau_p = 14 ms; the bed is lifted within 0.02 s). Measured: 31.5 Pa at
-    50 Pa; 61.3 Pa (-0.6 %) at 150 Pa; 62.6 Pa (+1.5 %) at 250 Pa, where the still expanding bed's
-    own acceleration adds to the drop (hence 2 %, not the 1 % of a steady state)."""
+    drop. 0.04 s of each (tau_p = 14 ms; the bed is lifted within 0.02 s), the drop averaged over
+    the last 10 ms (five samples): a particle whose centre crosses into the cell above the bed
+    takes that cell's pressure gradient, and the drop of an expanding bed on 4 mm cells jumps by
+    up to 15 % at such a crossing. Measured: 31.5 Pa at 50 Pa; 61.2 Pa (-0.7 %) at 150 Pa;
+    61.2 Pa (-0.8 %) at 250 Pa, where the still expanding bed's own acceleration adds to the drop
+    (hence 2 %, not the 1 % of a steady state)."""
     weight = 128 * (2500.0 - 1000.0) * 9.81 * math.pi / 6 * 1e-9 / 0.004**2
     assert weight == pytest.approx(0.5236 * 1500 * 9.81 * 0.008, rel=1e-3)
     flux = {}
@@ -239,8 +251,12 @@ def test_fluidization_plateau():
         p, fs = scene.state.particles, scene.state.fluid
         free = p.inv_mass > 0
         start = p.pos[free, 2].mean()
-        advance(scene, round(0.04 / scene.state.clock.dt))
-        drop = bed_pressure_drop(scene)
+        advance(scene, round(0.03 / scene.state.clock.dt))
+        drops = []
+        for _ in range(5):
+            advance(scene, round(0.002 / scene.state.clock.dt))
+            drops.append(bed_pressure_drop(scene))
+        drop = float(np.mean(drops))
         flux[pressure] = (fs.porosity * fs.v[..., 2]).mean()
         rise = p.pos[free, 2].mean() - start
         if pressure < 100:
@@ -250,3 +266,37 @@ def test_fluidization_plateau():
             assert drop == pytest.approx(weight, rel=0.02)
             assert rise > 1e-4  # lifted by a tenth of a diameter at least
     assert flux[50.0] < flux[150.0] < flux[250.0]
+
+
+def test_sinking_bead_column_has_no_alternating_cells(tmp_path):
+    """D: one 1 mm glass bead sinking in water from the face between two cells of a closed column
+    of 1 x 1 x 8 cells (4 mm). Continuity allows only the flux phi_f v_f = -(sum below the face
+    of (dphi - m) dz): dphi of the cells the bead's volume moves between, less the mean m the
+    pressure solve removes from a closed box (the porosity estimate's sampling spheres do not
+    tile the cells, so the bead's solid volume is not conserved exactly: m != 0 spreads as a
+    uniform expansion). On the staggered grid the projection enforces exactly that, to 1e-9 of
+    the largest flux (the solver's 1e-10), and the cell velocities are monotone along the column
+    away from the bead; the collocated grid drove alternating velocities of up to 7.7e-3 m/s."""
+    side, cells = 4e-3, 8
+    scene = coupled_scene(
+        tmp_path,
+        [[0.5 * side, 0.5 * side, 4.0 * side]],  # on the face between cells 3 and 4
+        0.5e-3,
+        upper=(side, side, cells * side),
+        dt=1e-4,
+        fluid={"grid": {"cells": [1, 1, cells]}, "top": {"type": "no-flow"}},
+    )
+    fs = scene.state.fluid
+    advance(scene, 100)
+    rate = fs.porosity_rate[0, 0, :]
+    flux = 0.5 * (fs.porosity[0, 0, 1:] + fs.porosity[0, 0, :-1]) * fs.v_face[0, 0, 1:-1, 2]
+    continuity = -np.cumsum((rate - rate.mean()) * side)[:-1]
+    scale = np.abs(flux).max()
+    assert scale > 1e-4  # the bead drives a flow
+    np.testing.assert_allclose(flux, continuity, rtol=0, atol=1e-9 * scale)
+    touched = np.flatnonzero(np.abs(rate) > 1e-6 * np.abs(rate).max())
+    assert 1 <= touched.size <= 3
+    velocity = fs.v[0, 0, :, 2]
+    for away in (velocity[: touched[0]], velocity[touched[-1] + 1 :]):
+        steps = np.diff(away)
+        assert (steps >= -1e-9 * scale).all() or (steps <= 1e-9 * scale).all(), velocity

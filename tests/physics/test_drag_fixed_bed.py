@@ -32,10 +32,11 @@ def test_ergun_pressure_drop_with_imposed_porosity(formulation, eps):
     through a bed (cells 10-29 of 40, porosity eps; clear fluid around) of 1 mm spheres held
     still, no gravity. At steady state (600 steps of 0.2 ms, ~20 relaxation times of the column):
     - the pressure gradient inside the bed equals Ergun's at the superficial velocity U (the mean
-      flux phi_f v_f through its faces) within 1 % (validation D; measured 0.2-0.5 %);
+      flux phi_f v_f through its faces) within 1 % (validation D; measured 1e-10: the drag, implicit
+      in the fluid, is exactly Ergun's at the faces' flux inside the uniform bed);
     - the force the fluid exerts on the bed (the exchange the fluid steps took, drag plus
       pressure-gradient force) equals the pressure drop between the boundaries times the area
-      within 1 % (measured 1e-4: the clear fluid either side of the bed has no losses and the
+      within 1 % (measured 5e-5: the clear fluid either side of the bed has no losses and the
       same momentum flux in and out, so nothing else acts on the column).
     Both formulations: in A the fluid's -phi grad p carries the reaction of the pressure-gradient
     force, in B the exchange does; the physics is the same."""
@@ -65,13 +66,13 @@ def test_ergun_pressure_drop_with_imposed_porosity(formulation, eps):
     for n in range(600):
         cell_drag(
             GIDASPOW, RHO, MU, 0.1, fs.v.reshape(-1, 3), fs.porosity.reshape(-1), diameter.reshape(-1),
-            at_rest, fs.grad_p.reshape(-1, 3), formulation == "B",
-            fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3),
+            at_rest, fs.grad_p.reshape(-1, 3), formulation == "B", fs.f_i.reshape(-1, 3),
+            fs.k_drag.reshape(-1),
         )  # fmt: skip
         solver.step(fs, n * dt, dt)
-    # the discrete flux through the face between cells k and k+1: phi_f v_f, face means
-    vz, phi = fs.v[0, 0, :, 2], fs.porosity[0, 0, :]
-    flux = 0.25 * (phi[1:] + phi[:-1]) * (vz[1:] + vz[:-1])
+    # the discrete flux through the face between cells k - 1 and k: phi_f v_f
+    phi = fs.porosity[0, 0, :]
+    flux = 0.5 * (phi[1:] + phi[:-1]) * fs.v_face[0, 0, 1:-1, 2]
     superficial = flux[13:27].mean()  # through the bed, away from its ends
     gradient = (fs.p[0, 0, 13] - fs.p[0, 0, 27]) / (14 * dz)
     assert gradient == pytest.approx(ergun(eps, superficial), rel=0.01)

@@ -193,13 +193,15 @@ def _random_bed(tmp_path, n=120, seed=3):
 @pytest.mark.parametrize("formulation_b", [False, True])
 @pytest.mark.parametrize("law", ["gidaspow", "di-felice"])
 def test_fluid_receives_exactly_what_the_particles_received(tmp_path, law, formulation_b):
-    """Newton's third law over a fluid interval of 3 DEM steps: the force density the fluid
-    receives, summed over the cells times cell volume and interval, is the momentum the drag gave
-    the particles, m (v_3 - v_0) less the impulse of every other force over the three steps
+    """Newton's third law over a fluid interval of 3 DEM steps: what fluid_forcing settles for
+    the interval, summed over the cells times cell volume and interval, is the momentum the drag
+    gave the particles, m (v_3 - v_0) less the impulse of every other force over the three steps
     (h (F_0 + 2 F_1 + 2 F_2 + F_3), h = dt/2, velocity Verlet), plus in formulation B the
-    pressure-gradient force (A carries its reaction in -phi grad p). Then the part a fluid step
-    takes ahead (f_exchange - f_i) comes off the next interval's exchange. To round-off: 1e-12 of
-    the particles' momentum (sums over 120 particles in another order)."""
+    pressure-gradient force (A carries its reaction in -phi grad p). The settled part of f_i is
+    f_i less the new prediction plus what the last fluid step took (the old prediction and its
+    implicit part f_exchange - f_i, here random). To round-off: 1e-12 of the particles' momentum
+    (sums over 120 particles in another order). And the prediction is the exact relaxation's
+    mean drag at the fluid velocity now (kernels/fluid/drag.py)."""
     scene, fs = _random_bed(tmp_path)
     with pytest.warns(RuntimeWarning, match="porosity_floor"):
         drag = drag_module(scene, fs, 1000.0, 1e-3, formulation_b, law=law)
@@ -208,25 +210,36 @@ def test_fluid_receives_exactly_what_the_particles_received(tmp_path, law, formu
     volume = math.pi / 6 * (2 * p.radius) ** 3
     cell_volume = 1e-9
     scale = 1e-12 * np.abs(p.mass[:, None] * p.vel).sum()
-    ahead = np.zeros(fs.f_i.shape)
+    implicit = np.zeros(fs.f_i.shape)
     for interval in range(2):
         v0 = p.vel.copy()
         other = [drag.f_other.copy()]
         for _ in range(3):
             coupled_advance(scene, drag, fs, 1)
             other.append(drag.f_other.copy())
-        fs.f_exchange[...] = fs.f_i + ahead
+        fs.f_exchange[...] = fs.f_i + implicit
+        took = implicit + drag.predicted.reshape(fs.f_i.shape)
         drag.fluid_forcing(scene.state, fs, 3 * dt)
         others = 0.5 * dt * (other[0] + 2 * other[1] + 2 * other[2] + other[3])
         gained = (p.mass[:, None] * (p.vel - v0) - others).sum(axis=0)
         if formulation_b:
             gained -= 3 * dt * (volume[:, None] * fs.grad_p.reshape(-1, 3)[drag.cell_of]).sum(axis=0)
-        exchanged = (fs.f_i + ahead).reshape(-1, 3).sum(axis=0) * cell_volume * 3 * dt
+        settled = fs.f_i - drag.predicted.reshape(fs.f_i.shape) + took
+        exchanged = settled.reshape(-1, 3).sum(axis=0) * cell_volume * 3 * dt
         assert np.abs(gained).max() > 1e6 * scale  # the drag did act
         np.testing.assert_allclose(exchanged, gained, rtol=0, atol=scale)
         assert not drag.impulse.any()  # handed over
         assert fs.k_drag.sum() > 0.0
-        ahead = np.random.default_rng(interval).normal(0.0, 1.0, fs.f_i.shape)
+        implicit = np.random.default_rng(interval).normal(0.0, 1.0, fs.f_i.shape)
+    # the prediction: sum over a cell's particles of phi1 K (u - v) + (phi1 - 1) F_o
+    from sphere_cli.kernels.fluid.drag import phi1
+
+    g = np.array([phi1(x) for x in drag.coef * p.inv_mass * 3 * dt])
+    expected = g[:, None] * drag.coef[:, None] * (fs.v.reshape(-1, 3)[drag.cell_of] - p.vel)
+    expected += (g - 1.0)[:, None] * drag.f_other
+    per_cell = np.zeros((fs.k_drag.size, 3))
+    np.add.at(per_cell, drag.cell_of, expected / cell_volume)
+    np.testing.assert_allclose(drag.predicted, per_cell, rtol=1e-12, atol=1e-12 * np.abs(per_cell).max())
     # the particles felt the drag the kick computed: force = other + drag
     np.testing.assert_array_equal(p.force, drag.f_other + drag.f_drag)
     total = drag.fluid_force(scene.state, fs)

@@ -135,16 +135,16 @@ def _decay_rate_error(cells: int, phi: float = 1.0, formulation: str = "A") -> f
     fs.porosity[...] = phi
     k = 2 * math.pi / length
     profile = np.sin(k * grid.centres(1))
-    fs.v[..., 0] = AMPLITUDE * profile[None, :, None]
+    solver.set_velocity(fs, (AMPLITUDE * profile[None, :, None], 0.0, 0.0))
     duration = 0.2 / (NU * k * k)
     steps = math.ceil(duration / (0.1 * solver.viscous_limit()))
     dt = duration / steps
     for step in range(steps):
         solver.step(fs, step * dt, dt)
     # the discrete wave keeps its shape: project on sin(k y)
-    amplitude = 2.0 / cells * float(fs.v[0, :, 1, 0] @ profile)
-    assert np.abs(fs.v[..., 1:]).max() == 0.0  # a pure shear flow has no pressure and no v_y, v_z
-    assert (fs.v[..., 0] == fs.v[0:1, :, 0:1, 0]).all()  # and stays uniform along x and z
+    amplitude = 2.0 / cells * float(fs.v_face[0, :, 1, 0] @ profile)
+    assert np.abs(fs.v_face[..., 1:]).max() == 0.0  # a pure shear flow has no pressure and no v_y, v_z
+    assert (fs.v_face[..., :-1, 0] == fs.v_face[0:1, :, 0:1, 0]).all()  # and stays uniform along x and z
     rate = -math.log(amplitude / AMPLITUDE) / duration
     return rate / (NU * k * k) - 1.0
 
@@ -181,7 +181,7 @@ def test_pcg_and_jacobi_give_the_same_fluid_step():
     grid = _grid((8, 8, 8), (0.08, 0.08, 0.08))
     rng = np.random.default_rng(7)
     phi = rng.uniform(0.4, 1.0, grid.shape)
-    v0 = rng.normal(0.0, 1e-3, (*grid.shape, 3))
+    v0 = rng.normal(0.0, 1e-3, (3, grid.shape[0], grid.shape[1], grid.shape[2] + 1))
     results = {}
     for method in ("pcg", "jacobi"):
         solver = _solver(
@@ -192,7 +192,7 @@ def test_pcg_and_jacobi_give_the_same_fluid_step():
         )
         fs = solver.allocate()
         fs.porosity[...] = phi
-        fs.v[...] = v0
+        solver.set_velocity(fs, (v0[0, ..., :-1], v0[1, ..., :-1], v0[2]))
         result = solver.step(fs, 0.0, 1e-3)
         results[method] = (fs.v.copy(), fs.p.copy(), result.iterations)
     (v_pcg, p_pcg, it_pcg), (v_jac, p_jac, it_jac) = results["pcg"], results["jacobi"]
@@ -223,16 +223,15 @@ def _advected_sine_errors(cells: int) -> tuple[float, float]:
     fs = solver.allocate()
     k = 2 * math.pi / length
     x = grid.centres(0)
-    fs.v[..., 0] = speed
-    fs.v[..., 1] = amplitude * np.sin(k * x)[:, None, None]
+    solver.set_velocity(fs, (speed, amplitude * np.sin(k * x)[:, None, None], 0.0))
     courant = 0.2 * 32 / cells
     duration = length / speed
     steps = round(duration / (courant * dx / speed))
     dt = duration / steps
     for step in range(steps):
         solver.step(fs, step * dt, dt)
-    assert (fs.v[..., 0] == speed).all() and not fs.p.any()
-    error = (fs.v[:, 0, 0, 1] - amplitude * np.sin(k * (x - speed * duration))) / amplitude
+    assert (fs.v_face[..., :-1, 0] == speed).all() and not fs.p.any()
+    error = (fs.v_face[:, 0, 0, 1] - amplitude * np.sin(k * (x - speed * duration))) / amplitude
     return float(np.mean(np.abs(error))), float(np.sqrt(np.mean(error**2)))
 
 
@@ -263,16 +262,15 @@ def _advected_block_overshoot(courant: float, steps: int = 200) -> tuple[float, 
     solver = _solver(grid, viscosity=1e-9, bottom={"type": "pressure"}, top={"type": "pressure"})
     fs = solver.allocate()
     flow = (1.0, 0.5)
-    fs.v[..., 0], fs.v[..., 1] = flow
     x, y = grid.centres(0), grid.centres(1)
     inside = (np.abs(x - 0.5)[:, None] < 0.25) & (np.abs(y - 0.5)[None, :] < 0.15)
-    fs.v[..., 2] = np.where(inside, 2.0, -1.0)[:, :, None]
+    solver.set_velocity(fs, (*flow, np.where(inside, 2.0, -1.0)[:, :, None]))
     dt = courant / ((abs(flow[0]) + abs(flow[1])) / dx)
     worst = 0.0
     for step in range(steps):
         solver.step(fs, step * dt, dt)
-        worst = max(worst, float(fs.v[..., 2].max()) - 2.0, -1.0 - float(fs.v[..., 2].min()))
-    assert (fs.v[..., :2] == flow).all() and not fs.p.any()
+        worst = max(worst, float(fs.v_face[..., 2].max()) - 2.0, -1.0 - float(fs.v_face[..., 2].min()))
+    assert (fs.v_face[..., :-1, :2] == flow).all() and not fs.p.any()
     return worst, 3.0
 
 
@@ -300,7 +298,7 @@ def test_fluid_step_does_not_depend_on_the_thread_count():
     grid = _grid((6, 5, 7), (0.06, 0.05, 0.07))
     rng = np.random.default_rng(11)
     phi = rng.uniform(0.4, 1.0, grid.shape)
-    v0 = rng.normal(0.0, 1e-2, (*grid.shape, 3))
+    v0 = rng.normal(0.0, 1e-2, (3, grid.shape[0], grid.shape[1], grid.shape[2] + 1))
     results = []
     previous = numba.get_num_threads()
     try:
@@ -311,11 +309,11 @@ def test_fluid_step_does_not_depend_on_the_thread_count():
             )
             fs = solver.allocate()
             fs.porosity[...] = phi
-            fs.v[...] = v0
+            solver.set_velocity(fs, (v0[0, ..., :-1], v0[1, ..., :-1], v0[2]))
             solver.initial_pressure(fs, 0.0)
             for step in range(5):
                 solver.step(fs, step * 1e-3, 1e-3)
-            results.append((fs.v.copy(), fs.p.copy()))
+            results.append((fs.v_face.copy(), fs.p.copy()))
     finally:
         numba.set_num_threads(previous)
     np.testing.assert_array_equal(results[0][0], results[1][0])

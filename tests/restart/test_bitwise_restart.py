@@ -20,7 +20,7 @@ from restart_support import CASE, assert_same_state, final_state, frames, step_d
 
 from sphere_cli import api
 from sphere_cli.config.load import load_case
-from sphere_cli.errors import OutputError, ResumeRefused
+from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.scene.builder import build_scene
 
@@ -234,12 +234,13 @@ def test_changed_output_fields_refused(tmp_path: Path):
 
 def test_a_checkpoint_of_an_older_format_is_refused(tmp_path: Path):
     """Checkpoints of another layout (format 2 named the fluid state phi/beta and kept all-zero
-    springs) are not read as if they were this one's: the reader names both formats."""
+    springs) are not read as if they were this one's, nor skipped for an older checkpoint: the
+    reader refuses the resume (exit 78) naming both formats."""
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(CASE.format(duration=0.002)))
     api.run(case, tmp_path / "run", until=200 * step_dt(case))
     newest = list_checkpoints(tmp_path / "run" / "checkpoints")[-1]
     with h5py.File(newest, "r+") as f:
         f.attrs["format"] = 2
-    with pytest.raises(OutputError, match="checkpoint format 2 is not 3"):
+    with pytest.raises(ResumeRefused, match="checkpoint format 2, this version reads format 4"):
         read_checkpoint(newest)

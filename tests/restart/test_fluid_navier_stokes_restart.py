@@ -81,3 +81,27 @@ def test_fluid_resume_is_bitwise_identical(tmp_path, write_case):
                     fw[f"fluid/{name}/value"][steps_w.index(step)],
                     fs[f"fluid/{name}/value"][steps_s.index(step)],
                 ), (name, step)
+
+
+def test_a_checkpoint_of_the_collocated_grid_is_refused(tmp_path, write_case):
+    """A checkpoint of format 3 holds the Navier-Stokes velocity at the cell centres; `sphere
+    resume` refuses it (exit 78, EX_CONFIG) with a message naming the collocated grid and what to
+    do, rather than skipping it for an older checkpoint or reading it as face velocities."""
+    import subprocess
+    import sys
+
+    case = write_case(CASE)
+    dt = build_scene(load_case(case)).state.clock.dt
+    api.run(case, tmp_path / "run", until=30 * dt)
+    for path in list_checkpoints(tmp_path / "run" / "checkpoints"):
+        with h5py.File(path, "r+") as f:  # as format 3 wrote it: no face velocities
+            f.attrs["format"] = 3
+            del f["sphere/state/fluid/v_face"]
+    result = subprocess.run(
+        [sys.executable, "-m", "sphere_cli.cli", "resume", str(tmp_path / "run")],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 78, result.stderr
+    assert "collocated grid" in result.stderr and "Traceback" not in result.stderr
+    assert "format 3" in result.stderr and "format 4" in result.stderr

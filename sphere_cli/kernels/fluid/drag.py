@@ -27,23 +27,30 @@ far below dt). The force stored for the next first half kick is the one that mak
 this same exact update:  F_drag = phi1 K (u - v) + (phi1 - 1) F_o  (-> K (u - v) as
 lambda h -> 0).
 
-Momentum exchange. Each particle accumulates the drag impulse J its two half kicks gave it;
-before a fluid step of length dt_f the fluid of each cell receives minus the sum over its
-particles, as the force density f_i = sum J / (V_cell dt_f) (gathered in particle order:
-bitwise independent of the thread count), with the implicit coefficient k_drag = sum
-phi1(lambda dt_f) K / V_cell: the mean over dt_f of the drag's response to a change of u while
-the particle follows (K when lambda dt_f << 1; m/dt_f, the inertia of a particle carried along,
-when >> 1). The fluid step takes -(f_i + k_drag (u_new - u)); the part k_drag (u_new - u) it
-took ahead of the particles (who feel the new u only afterwards, in J) is deducted from the next
-f_i, so over any number of steps the fluid receives exactly minus what the particles received,
-up to the one pending deduction.
+Momentum exchange. Each particle accumulates the drag impulse J its two half kicks gave it. A
+fluid step of length dt_f takes the drag its cell's particles will receive over the next
+interval, implicitly in its own new velocity u': over that interval, with u' and the other
+forces F_o frozen, the exact relaxation above gives the particle the mean drag
+    phi1(lambda dt_f) K (u' - v) + (phi1 - 1) F_o,
+linear in u' with the slope phi1 K (K when lambda dt_f << 1; m/dt_f, the inertia of a particle
+carried along, when >> 1). Per cell the fluid step therefore takes f_i + k_drag (u' - u), with
+f_i that sum at the fluid velocity u now over the cell volume and k_drag = sum phi1 K / V_cell:
+a bed held in place (1/m = 0) is fully implicit and stable at any drag relaxation time. What the
+particles then actually receive (their DEM steps differ from the frozen prediction) is settled
+with the next fluid step: its f_i adds the impulses received, sum J / (V_cell dt_f), and
+subtracts what the last step took for that interval (the old prediction and f_exchange - f_i).
+Over any number of steps the fluid receives exactly minus what the particles received, up to
+the one pending interval. Gathered per cell in particle order: bitwise independent of the
+thread count.
 
 Arrays: vel, force, f_other, f_drag (N,3) [m, m/s, N, N, N]; impulse (N,3) [N s] the drag
 impulse since the last fluid step; radius, inv_mass (N,) [m, 1/kg];
 coef (N,) [kg/s] the particle's K; cell_of (N,) int64 flat index (ix ny + iy) nz + iz of its
 fluid cell; fluid arrays flattened over cells: u (C,3) [m/s], phi (C,) [-], grad_p (C,3) [Pa/m],
 f_i (C,3) [N/m^3] force density of the fluid on the particles, f_i_coef (C,) [kg/(m^3 s)],
-f_exchange (C,3) [N/m^3] what the last fluid step took, f_i + f_i_coef (u_new - u).
+f_exchange (C,3) [N/m^3] what the last fluid step took, f_i + f_i_coef (u_new - u); predicted
+(C,3) [N/m^3] the drag the particles of each cell were expected to receive over the interval
+since the last fluid step.
 """
 
 import math
@@ -166,8 +173,11 @@ def exchange(
     order,
     impulse,
     coef,
-    radius,
     inv_mass,
+    f_other,
+    vel,
+    radius,
+    u,
     grad_p,
     pressure_exchanged,
     fluid_dt,
@@ -175,64 +185,79 @@ def exchange(
     f_i,
     f_i_coef,
     f_exchange,
+    predicted,
 ):
-    """Per cell, in particle order: f_i = (sum of the drag impulses of its particles / fluid_dt,
-    plus -V grad(p) if pressure_exchanged) / cell volume, less what the last fluid step took
-    ahead (f_exchange - f_i, read before f_i is overwritten); f_i_coef = sum of
-    phi1(lambda fluid_dt) K / cell volume. The impulses are reset to zero."""
+    """Per cell, in particle order (module docstring, "Momentum exchange"): `predicted` = the drag
+    its particles will receive over the next fluid interval at the fluid velocity u now, sum
+    (phi1 K (u - v) + (phi1 - 1) F_o) / cell volume; f_i = that, plus the drag impulses received
+    over the last interval / (fluid_dt cell volume) less what the last fluid step took for them
+    (its implicit part f_exchange - f_i and the old `predicted`), plus -V grad(p) / cell volume if
+    pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt). The
+    impulses are reset to zero."""
     inv_dt = 1.0 / fluid_dt
     for c in prange(f_i_coef.shape[0]):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
+        r0 = r1 = r2 = 0.0  # drag impulses received
+        e0 = e1 = e2 = 0.0  # drag expected over the next interval
         sk = 0.0
         sv = 0.0
         for j in range(start[c], start[c + 1]):
             i = order[j]
-            s0 += impulse[i, 0]
-            s1 += impulse[i, 1]
-            s2 += impulse[i, 2]
+            g = phi1(coef[i] * inv_mass[i] * fluid_dt)
+            k = g * coef[i]
+            sk += k
+            r0 += impulse[i, 0]
+            r1 += impulse[i, 1]
+            r2 += impulse[i, 2]
             impulse[i, 0] = 0.0
             impulse[i, 1] = 0.0
             impulse[i, 2] = 0.0
-            sk += phi1(coef[i] * inv_mass[i] * fluid_dt) * coef[i]
+            e0 += k * (u[c, 0] - vel[i, 0]) + (g - 1.0) * f_other[i, 0]
+            e1 += k * (u[c, 1] - vel[i, 1]) + (g - 1.0) * f_other[i, 1]
+            e2 += k * (u[c, 2] - vel[i, 2]) + (g - 1.0) * f_other[i, 2]
             d = 2.0 * radius[i]
             sv += math.pi / 6.0 * d * d * d
-        s0 *= inv_dt
-        s1 *= inv_dt
-        s2 *= inv_dt
-        if pressure_exchanged:
-            s0 -= sv * grad_p[c, 0]
-            s1 -= sv * grad_p[c, 1]
-            s2 -= sv * grad_p[c, 2]
-        ahead0 = f_exchange[c, 0] - f_i[c, 0]
-        ahead1 = f_exchange[c, 1] - f_i[c, 1]
-        ahead2 = f_exchange[c, 2] - f_i[c, 2]
-        f_i[c, 0] = s0 * inv_cell_volume - ahead0
-        f_i[c, 1] = s1 * inv_cell_volume - ahead1
-        f_i[c, 2] = s2 * inv_cell_volume - ahead2
+        _settle(
+            c, 0, r0, e0, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
+        )
+        _settle(
+            c, 1, r1, e1, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
+        )
+        _settle(
+            c, 2, r2, e2, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
+        )
         f_i_coef[c] = sk * inv_cell_volume
 
 
+@njit(cache=True, inline="always")
+def _settle(
+    c, a, received, expected, solid, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange,
+    predicted,
+):  # fmt: skip
+    """Component a of cell c's f_i: the new prediction, plus what the particles received over the
+    last interval less what the last fluid step took for it (its implicit part f_exchange - f_i
+    and the old prediction), plus -V grad(p) if pressure_exchanged; the new prediction kept."""
+    took = f_exchange[c, a] - f_i[c, a] + predicted[c, a]
+    predicted[c, a] = expected * inv_cell_volume
+    f_i[c, a] = predicted[c, a] + received * inv_dt * inv_cell_volume - took
+    if pressure_exchanged:
+        f_i[c, a] -= solid * grad_p[c, a] * inv_cell_volume
+
+
 @njit(cache=True, parallel=True)
-def cell_drag(
-    law, rho, mu, floor, u, phi, diameter, vp, grad_p, pressure_exchanged, f_i, f_i_coef, f_exchange
-):
+def cell_drag(law, rho, mu, floor, u, phi, diameter, vp, grad_p, pressure_exchanged, f_i, f_i_coef):
     """The cell-averaged form of the sphere documentation, for a bed given by its porosity, mean
-    diameter diameter (C,) [m] and mean particle velocity vp (C,3) [m/s] alone:
-    f_i = (1 - phi) k (u - vp) (minus (1 - phi) grad(p) if pressure_exchanged), less what the
-    last fluid step took ahead (f_exchange - f_i, as in `exchange`); f_i_coef = (1 - phi) k.
-    Cells with phi >= 1 hold no solid and get zero."""
+    diameter diameter (C,) [m] and mean particle velocity vp (C,3) [m/s] alone (no particles
+    receive it): f_i = (1 - phi) k (u - vp) (minus (1 - phi) grad(p) if pressure_exchanged),
+    f_i_coef = (1 - phi) k, so that the fluid step takes f_i + f_i_coef (u_new - u) = (1 - phi) k
+    (u_new - vp): implicit in the fluid velocity, stable at any drag relaxation time. Cells with
+    phi >= 1 hold no solid and get zero."""
     for c in prange(f_i_coef.shape[0]):
         solid = 1.0 - phi[c]
-        ahead0 = f_exchange[c, 0] - f_i[c, 0]
-        ahead1 = f_exchange[c, 1] - f_i[c, 1]
-        ahead2 = f_exchange[c, 2] - f_i[c, 2]
         if solid <= 0.0:
             f_i_coef[c] = 0.0
-            f_i[c, 0] = -ahead0
-            f_i[c, 1] = -ahead1
-            f_i[c, 2] = -ahead2
+            f_i[c, 0] = 0.0
+            f_i[c, 1] = 0.0
+            f_i[c, 2] = 0.0
             continue
         w0 = u[c, 0] - vp[c, 0]
         w1 = u[c, 1] - vp[c, 1]
@@ -240,9 +265,9 @@ def cell_drag(
         w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         beta = solid * drag_rate(law, phi[c], diameter[c], w, rho, mu, floor)
         f_i_coef[c] = beta
-        f_i[c, 0] = beta * w0 - ahead0
-        f_i[c, 1] = beta * w1 - ahead1
-        f_i[c, 2] = beta * w2 - ahead2
+        f_i[c, 0] = beta * w0
+        f_i[c, 1] = beta * w1
+        f_i[c, 2] = beta * w2
         if pressure_exchanged:
             f_i[c, 0] -= solid * grad_p[c, 0]
             f_i[c, 1] -= solid * grad_p[c, 1]

@@ -1,74 +1,83 @@
-"""Porous (volume-averaged) Navier-Stokes on a regular cell-centred grid, by operator splitting
-(Langtangen et al. 2002, as in the documentation of the original sphere: Damsgaard et al. 2015,
-The Cryosphere 9:2183).
+"""Porous (volume-averaged) Navier-Stokes on a regular staggered (MAC) grid, by operator
+splitting (Langtangen et al. 2002, as in the documentation of the original sphere: Damsgaard et
+al. 2015, The Cryosphere 9:2183; the MAC arrangement of Harlow & Welch 1965, Phys. Fluids 8).
 
-Momentum, with porosity phi, fluid density rho, viscosity mu and the interaction force f_i the
-fluid exerts on the particles per unit volume (the fluid receives -f_i):
+Momentum, with porosity phi, fluid density rho, viscosity mu, the body acceleration g (gravity
+and any body-force field) and the interaction force f_i the fluid exerts on the particles per
+unit volume (the fluid receives -f_i):
   d(phi v)/dt + div(phi v v) = -(phi or 1)/rho grad p + div(phi tau)/rho - f_i/rho + phi g,
   tau = mu (grad v + grad v^T);  pressure factor phi in formulation A (pressure in both phases,
   Zhu et al. 2007 model A), 1 in formulation B (pressure in the fluid only).
 Continuity: d phi/dt + div(phi v) = 0.
 
-One fluid step of length dt:
-1. predictor  v* = v + dt [-beta (1 or 1/phi)/rho grad p + div(phi tau)/(rho phi)
-                            - div(phi v v)/phi + g - f_i/(rho phi)] - v dphi dt/phi,
-   with the drag's change over the step, k_drag (v* - v), implicit (see `predict`);
-2. pressure equation for eps = p_new - beta p from continuity with face fluxes phi_f v_f:
-     A:  v = v* - dt/rho grad eps          ->  div(phi_f grad eps) = rho/dt (div(phi_f v*_f) + dphi)
-     B:  v = v* - dt/(rho phi) grad eps    ->  div(grad eps)       = rho/dt (div(phi_f v*_f) + dphi)
-   (the reference's B derivation drops a derivative of 1/phi and gains a spurious grad(phi).grad(eps)
-   term; done exactly, B's operator has constant coefficients); with implicit drag both carry the
-   factor D = 1/(1 + dt k_drag/(rho phi)) (see `predict`): faces a_f = mean(phi D) or mean(D);
-3. correction v = v* - dt/rho (1 or 1/phi) D grad eps, p = beta p + eps.
+Grid. Pressure p, porosity phi and its rate dphi live at the cell centres; each velocity
+component on the faces normal to it. The face array v_face (nx, ny, nz+1, 3) holds component c
+of face (i, j, k) at the centre of cell (i, j, k) shifted by half a cell towards -c: x faces
+i = 0 .. nx-1 and y faces j = 0 .. ny-1 (x and y periodic: face n is face 0), z faces
+k = 0 .. nz (0 the bottom boundary, nz the top); the x and y components of layer k = nz are not
+faces and stay zero. Face porosity phi_f = mean of the two cells either side (the boundary cell
+at a z boundary face), edge porosity the mean of the four cells around an edge; the exact lens
+porosity of the cells is what the particles give (physics/fluid/porosity.py).
 
-Space: second-order central differences; viscous stress compact (3-point) in each direction;
-the cross terms of grad v^T with the 4-point mixed stencil. Advection div(phi v v_c) in flux form,
-second order and bounded: through each face the flux phi_f u_f (means of the two cells) carries
-the value of v_c reconstructed from the upwind cell U with a limited slope (MUSCL, van Leer 1979,
-J. Comput. Phys. 32, 101; van Leer's limiter psi(r) = (r + |r|)/(1 + r), Sweby 1984, SIAM J.
-Numer. Anal. 21, 995; Versteeg & Malalasekera 2007, sec. 5.10):
-  v_f = v_U + 0.5 L(v_U - v_UU, v_D - v_U),  L(a, b) = 2ab/(a + b) if ab > 0, else 0,
-UU the cell upwind of U, D the cell across the face; at an extremum L = 0 (first-order upwind).
-With forward Euler this is TVD (no new extrema) for sum |u_i| dt/dx_i <= 1/2: the update of a
-cell is a convex combination of it and its upwind neighbours when the coefficient of each
-difference, C_i (1 + psi/2 - psi/(2r)) <= 2 C_i (psi <= 2 and psi/r >= 0), sums to at most 1
-(Harten 1983, J. Comput. Phys. 49, 357); first-order upwind allowed 1.
-x and y are periodic. In z the cells k < 0 and k >= nz are ghosts, mirrors of the cells inside:
-velocity ghost k = -1 - m (bottom) or nz + m (top) = sign * v of cell m from that boundary (bc_sign
-(2,3): row 0 bottom, row 1 top; -1 for the normal component at a no-flow wall and the tangential
-ones at a no-slip wall, +1 otherwise; the advection reads two ghost layers, the other terms one);
-porosity ghost = boundary cell; pressure ghost 2 p_b - p_0 at a prescribed-pressure face, linear
-extrapolation 2 p_0 - p_1 at a no-flow face (so a hydrostatic pressure has its exact gradient in
-every cell).
+One fluid step of length dt, each face momentum balance divided by its phi_f:
+1. predictor  v* = v + dt [-beta (1 or 1/phi_f)/rho grad_f p + div(phi tau)_f/(rho phi_f)
+                            - div(phi v v)_f/phi_f + g - f_f/(rho phi_f)] - v dphi_f dt/phi_f,
+   the drag's change over the step, k_f (v_new - v), implicit: every explicit increment and the
+   pressure correction are divided by 1 + dt k_f/(rho phi_f) (factor D_f); f_f, k_f and dphi_f
+   are the means of the two cells' f_i, k_drag and dphi (see `predict`);
+2. pressure equation for eps = p_new - beta p from continuity of every cell,
+     dphi + div(phi_f v_f) = 0,  phi_f v_f = phi_f v*_f - dt/rho a_f grad_f eps,
+     a_f = phi_f D_f (A) or D_f (B):   -div(a_f grad eps) = -rho/dt (div(phi_f v*_f) + dphi),
+   the 7-point system of kernels/fluid/poisson.py with these face coefficients, so that after
+   the correction the discrete divergence of every cell is the solver's residual;
+3. correction v_f = v*_f - dt/rho (a_f/phi_f) grad_f eps, p = beta p + eps.
+grad_f is the compact difference across the face, so no odd-even pressure mode exists and no
+interpolation of the momentum to the faces (Rhie & Chow) is needed.
+
+Space: viscous stress compact: the normal stress 2 phi mu d_c v_c at the cell centres either
+side of a c face, the shear stress phi mu (d_a v_c + d_c v_a) at the edges. Advection
+div(phi v v_c) in flux form over the face's control volume: through each of its sides the flux
+phi u (phi at the cell centre or edge there, u the mean of the two faces of that component
+nearest) carries the value of v_c reconstructed from the upwind face U with a limited slope
+(MUSCL, van Leer 1979, J. Comput. Phys. 32, 101; van Leer's limiter psi(r) = (r + |r|)/(1 + r),
+Sweby 1984, SIAM J. Numer. Anal. 21, 995):
+  v_s = v_U + 0.5 L(v_U - v_UU, v_D - v_U),  L(a, b) = 2ab/(a + b) if ab > 0, else 0;
+with forward Euler this is TVD for sum |u_i| dt/dx_i <= 1/2 (Harten 1983, J. Comput. Phys. 49).
+
+z boundaries. A no-flow face holds v_z = 0, a prescribed-velocity face v_z = U/phi_f (U the
+superficial velocity; both Neumann faces of the pressure equation, their flux in its right-hand
+side); a prescribed-pressure face (bottom k = 0 or top
+k = nz) has its own momentum balance, with the pressure ghost 2 p_b - p of the cell inside (so
+grad_f p = 2 (p_inside - p_b)/dz there, the Dirichlet face of the pressure equation) and the
+normal velocity mirrored about the face (zero gradient). The tangential components see ghost
+cells k = -1 - m and nz + m equal to sign * the component of cell m from that boundary: bc_sign
+(2,3) (row 0 bottom, row 1 top) is -1 for the normal component at a no-flow face and the
+tangential ones at a no-slip face, +1 otherwise. Porosity ghost = boundary cell.
 
 Moving grid (`[fluid.grid] follow_top_wall`): the grid's top is the top wall at height H(t)
-above the bottom, and its nz layers stretch uniformly, so the face k (k = 0 .. nz) moves with
-w_k = k dz H'/H and a cell's volume V = dx dy dz changes at dV/dt = dx dy (w_(k+1) - w_k): the
-geometric conservation law (Thomas & Lombard 1979, AIAA J. 17) holds exactly on every step.
-Fields belong to the moving cells (arbitrary Lagrangian-Eulerian form, Hirt et al. 1974, J.
-Comput. Phys. 14): over a cell moving with the faces, continuity and momentum are
-  (1/V) d(phi V)/dt|_cell + div(phi (v - w)) = 0,
-  (1/V) d(phi V v)/dt|_cell + div(phi v (v - w)) = (forces as above),
-the time derivative being the backward difference of the cell's own values (dphi from the
-porosity measured on the new cells, fs.porosity_rate). With the step's stretch rate s = (H_new - H_old)
-/ (H_new dt) [1/s] (dz is the new height / nz), (V_new - V_old)/(V_new dt) = s and w_k =
-k dz s exactly, so that:
-  pressure source   dphi + phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k),   phi_old = phi - dt dphi
-                    (the last term is the grid's flux div_z(phi_f w_f); `add_grid_source`);
-  predictor rate    + s (phi_(k+1/2) (k+1) v_(k+1/2) - phi_(k-1/2) k v_(k-1/2)) / phi - s v
-                    (v_f upwind of the flux relative to the faces, -w: first order;
-                    `add_grid_motion`, with the implicit drag's factor D).
-A uniform phi and v stay so (both pairs of terms cancel); summed over a column, the pore volume
-sum(phi V) changes by exactly the relative flux phi_f (v_f - H') through the top face, which must
-then be open (prescribed pressure; the bottom face does not move). These kernels run only on a
-moving grid, after `predict` and `pressure_rhs`: a fixed grid runs exactly what it ran before.
+above the bottom, and its nz layers stretch uniformly, so a plane at z-index zeta (in cells)
+moves with w = zeta dz H'/H and every control volume changes at the same rate s = (H_new -
+H_old)/(H_new dt) [1/s]: the geometric conservation law (Thomas & Lombard 1979, AIAA J. 17)
+holds on every step. Fields belong to the moving cells (arbitrary Lagrangian-Eulerian form,
+Hirt et al. 1974, J. Comput. Phys. 14): over a volume moving with the grid
+  (1/V) d(phi V)/dt + div(phi (v - w)) = 0,  (1/V) d(phi V v)/dt + div(phi v (v - w)) = (forces),
+so that (`add_grid_source`, `add_grid_motion`):
+  pressure source   dphi + phi_old s - s (phi_(k+1) (k+1) - phi_k k),  phi_old = phi - dt dphi,
+                    phi_k the porosity of z face k;
+  momentum rate     + s (zeta_up phi_up v_up - zeta_dn phi_dn v_dn)/phi_f - s v of a face whose
+                    control volume spans zeta_dn .. zeta_up (k .. k+1 for x and y faces, k-1/2 ..
+                    k+1/2 for z faces), v_up, v_dn upwind of the flux relative to the grid.
+A uniform phi and v stay so; summed over a column, the pore volume changes by exactly the
+relative flux through the top face, which must be open (prescribed pressure).
 
-Arguments: v, v_star, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, Pa/m]; p, eps, phi,
-dphi, k_drag, rhs, mobility (nx,ny,nz) [Pa, -, 1/s, kg/(m^3 s), Pa/m^2, -]; spacing (3,) [m]; gravity (3,)
-[m/s^2]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure, 0 = no flow;
-p_bound (2,) [Pa] boundary pressure (bottom, top); rho [kg/m^3]; mu [Pa s]; beta [-];
-pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step; stretch [1/s] the
-moving grid's s.
+Arguments: v_face, v_star, mobility, acceleration (nx,ny,nz+1,3) [m/s, m/s, -, m/s^2] on the
+faces; v, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, N/m^3, Pa/m] at the cell centres
+(v from the fluxes of the cell's faces, `cell_velocity`); p, eps, phi, dphi, k_drag, rhs (nx,ny,nz) [Pa,
+Pa, -, 1/s, kg/(m^3 s), Pa/m^2]; spacing (3,) [m]; bc_sign (2,3) float64; p_kind (2,) int64, 1 =
+prescribed pressure, 0 = no flow, 2 = prescribed velocity; p_bound (2,) [Pa] boundary pressure
+(bottom, top); inflow (2,) [m/s] superficial velocity along +z of a prescribed-velocity face; rho
+[kg/m^3]; mu [Pa s]; beta [-]; pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid
+step; stretch [1/s] the moving grid's s.
 """
 
 import math
@@ -77,10 +86,8 @@ import numpy as np
 from numba import njit, prange
 
 
-# Not inline="always": Numba's IR inlining of this index wrap, reached through every other helper
-# at some hundred call sites, was most of the module's compile time (predict and pressure_rhs:
-# 75 s -> 24 s on the loaded 2-core machine); LLVM still inlines it, the run time is unchanged.
-# Each call site of an inlined helper costs compile time: _advection has one per face.
+# Not inline="always": Numba's IR inlining of this index wrap at some hundred call sites was
+# most of the module's compile time; LLVM still inlines it, the run time is unchanged.
 @njit(cache=True)
 def _wrap(i, n):
     if i < 0:
@@ -92,7 +99,7 @@ def _wrap(i, n):
 
 @njit(cache=True, inline="always")
 def _shift(i, j, k, a, s):
-    """The cell s (= +1 or -1) steps from (i,j,k) along axis a (not wrapped)."""
+    """The index s (= +1 or -1) steps from (i,j,k) along axis a (not wrapped)."""
     if a == 0:
         return i + s, j, k
     if a == 1:
@@ -101,242 +108,43 @@ def _shift(i, j, k, a, s):
 
 
 @njit(cache=True, inline="always")
-def _vel(v, i, j, k, c, bc_sign):
-    """v[i,j,k,c], periodic in x and y (i, j at most one period outside), z ghost cells mirrored:
-    k = -1 - m and nz + m are sign * v of cell m from the boundary (clamped to the column)."""
-    nz = v.shape[2]
-    i = _wrap(i, v.shape[0])
-    j = _wrap(j, v.shape[1])
-    if k < 0:
-        return bc_sign[0, c] * v[i, j, min(-1 - k, nz - 1), c]
-    if k >= nz:
-        return bc_sign[1, c] * v[i, j, max(2 * nz - 1 - k, 0), c]
-    return v[i, j, k, c]
-
-
-@njit(cache=True, inline="always")
-def _cell(f, i, j, k):
-    """f[i,j,k], periodic in x and y, the boundary cell's value in the z ghost cells."""
-    nz = f.shape[2]
-    k = 0 if k < 0 else (nz - 1 if k >= nz else k)
-    return f[_wrap(i, f.shape[0]), _wrap(j, f.shape[1]), k]
-
-
-@njit(cache=True, inline="always")
-def _pres(p, i, j, k, p_kind, p_bound):
-    """p[i,j,k] with the z ghost cells of a pressure (see the module docstring)."""
-    nz = p.shape[2]
-    i = _wrap(i, p.shape[0])
-    j = _wrap(j, p.shape[1])
-    if k < 0:
-        if p_kind[0] == 1:
-            return 2.0 * p_bound[0] - p[i, j, 0]
-        return 2.0 * p[i, j, 0] - p[i, j, 1]
-    if k >= nz:
-        if p_kind[1] == 1:
-            return 2.0 * p_bound[1] - p[i, j, nz - 1]
-        return 2.0 * p[i, j, nz - 1] - p[i, j, nz - 2]
-    return p[i, j, k]
-
-
-@njit(cache=True, inline="always")
-def _grad(p, i, j, k, a, spacing, p_kind, p_bound):
-    """Central difference of p along axis a at cell (i,j,k)."""
-    i1, j1, k1 = _shift(i, j, k, a, 1)
-    i0, j0, k0 = _shift(i, j, k, a, -1)
-    return (_pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)) / (
-        2.0 * spacing[a]
-    )
-
-
-@njit(cache=True, parallel=True)
-def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
-    """grad_p = central-difference gradient of p in every cell [Pa/m]."""
-    nx, ny, nz = p.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
-        for j in range(ny):
-            for k in range(nz):
-                for a in range(3):
-                    grad_p[i, j, k, a] = _grad(p, i, j, k, a, spacing, p_kind, p_bound)
-
-
-@njit(cache=True, inline="always")
-def _viscous(v, phi, i, j, k, c, spacing, bc_sign):
-    """div(phi (grad v + grad v^T))_c / viscosity: compact 3-point second differences for
-    d_a(phi d_a v_c) and d_c(phi d_c v_c), the 4-point mixed stencil for d_a(phi d_c v_a), a != c."""
-    ph = phi[i, j, k]
-    vc = v[i, j, k, c]
-    total = 0.0
-    for a in range(3):
-        i1, j1, k1 = _shift(i, j, k, a, 1)
-        i0, j0, k0 = _shift(i, j, k, a, -1)
-        phi_up = 0.5 * (ph + _cell(phi, i1, j1, k1))
-        phi_dn = 0.5 * (ph + _cell(phi, i0, j0, k0))
-        second = (
-            phi_up * (_vel(v, i1, j1, k1, c, bc_sign) - vc) - phi_dn * (vc - _vel(v, i0, j0, k0, c, bc_sign))
-        ) / (spacing[a] * spacing[a])
-        if a == c:
-            total += 2.0 * second
-        else:
-            # d_a(phi d_c v_a), d_c v_a centred at the two neighbours along a
-            ia, ja, ka = _shift(i1, j1, k1, c, 1)
-            ib, jb, kb = _shift(i1, j1, k1, c, -1)
-            up = _cell(phi, i1, j1, k1) * (_vel(v, ia, ja, ka, a, bc_sign) - _vel(v, ib, jb, kb, a, bc_sign))
-            ia, ja, ka = _shift(i0, j0, k0, c, 1)
-            ib, jb, kb = _shift(i0, j0, k0, c, -1)
-            dn = _cell(phi, i0, j0, k0) * (_vel(v, ia, ja, ka, a, bc_sign) - _vel(v, ib, jb, kb, a, bc_sign))
-            total += second + (up - dn) / (4.0 * spacing[a] * spacing[c])
-    return total
-
-
-@njit(cache=True, inline="always")
-def _limited_face_value(upwind_upwind, upwind, downwind):
-    """v_U + 0.5 L(v_U - v_UU, v_D - v_U): the face value reconstructed from the upwind cell with
-    van Leer's limited slope L(a, b) = 2ab/(a + b), 0 unless a and b have the same sign."""
-    back = upwind - upwind_upwind
-    ahead = downwind - upwind
-    product = back * ahead
-    if product > 0.0:
-        return upwind + product / (back + ahead)
-    return upwind
-
-
-@njit(cache=True, inline="always")
-def _far(i, j, k, a, s, shape):
-    """The cell two steps s (= +1 or -1) from (i,j,k) along axis a, wrapped in x and y so that
-    _vel's single wrap suffices even on a grid one cell wide (z is left to _vel's mirror)."""
+def _far(i, j, k, a, s, nx, ny):
+    """The index two steps s (= +1 or -1) from (i,j,k) along axis a, wrapped in x and y so that
+    the single wrap of the readers suffices even on a grid one cell wide."""
     if a == 0:
-        return _wrap(_wrap(i + 2 * s, shape[0]), shape[0]), j, k
+        return _wrap(_wrap(i + 2 * s, nx), nx), j, k
     if a == 1:
-        return i, _wrap(_wrap(j + 2 * s, shape[1]), shape[1]), k
+        return i, _wrap(_wrap(j + 2 * s, ny), ny), k
     return i, j, k + 2 * s
 
 
 @njit(cache=True, inline="always")
-def _advection(v, phi, i, j, k, c, spacing, bc_sign):
-    """div(phi v v_c): face fluxes phi_f u_f carrying the limited upwind-biased value of v_c (see
-    the module docstring); the five cells W2, W, P, E, E2 along each axis."""
-    ph = phi[i, j, k]
-    vc = v[i, j, k, c]
-    total = 0.0
-    for a in range(3):
-        i1, j1, k1 = _shift(i, j, k, a, 1)
-        i0, j0, k0 = _shift(i, j, k, a, -1)
-        i2, j2, k2 = _far(i, j, k, a, 1, v.shape)
-        im, jm, km = _far(i, j, k, a, -1, v.shape)
-        va = v[i, j, k, a]
-        flux_up = 0.25 * (ph + _cell(phi, i1, j1, k1)) * (va + _vel(v, i1, j1, k1, a, bc_sign))
-        flux_dn = 0.25 * (ph + _cell(phi, i0, j0, k0)) * (_vel(v, i0, j0, k0, a, bc_sign) + va)
-        east = _vel(v, i1, j1, k1, c, bc_sign)
-        west = _vel(v, i0, j0, k0, c, bc_sign)
-        # (far upwind, upwind, downwind) of each face; one call site each (compile time)
-        if flux_up > 0.0:
-            uu, u, d = west, vc, east
-        else:
-            uu, u, d = _vel(v, i2, j2, k2, c, bc_sign), east, vc
-        up = _limited_face_value(uu, u, d)
-        if flux_dn > 0.0:
-            uu, u, d = _vel(v, im, jm, km, c, bc_sign), west, vc
-        else:
-            uu, u, d = east, vc, west
-        dn = _limited_face_value(uu, u, d)
-        total += (flux_up * up - flux_dn * dn) / spacing[a]
-    return total
+def _face(u, i, j, k, c, bc_sign):
+    """Component c of face (i,j,k) (module docstring), periodic in x and y (at most one period
+    outside), the z ghosts mirrored: a z face -m or nz + m is sign * the face m inside from that
+    boundary; an x or y face in ghost cell -1 - m or nz + m is sign * the one of cell m."""
+    nz = u.shape[2] - 1
+    i = _wrap(i, u.shape[0])
+    j = _wrap(j, u.shape[1])
+    if c == 2:
+        if k < 0:
+            return bc_sign[0, 2] * u[i, j, min(-k, nz), 2]
+        if k > nz:
+            return bc_sign[1, 2] * u[i, j, max(2 * nz - k, 0), 2]
+        return u[i, j, k, 2]
+    if k < 0:
+        return bc_sign[0, c] * u[i, j, min(-1 - k, nz - 1), c]
+    if k >= nz:
+        return bc_sign[1, c] * u[i, j, max(2 * nz - 1 - k, 0), c]
+    return u[i, j, k, c]
 
 
 @njit(cache=True, inline="always")
-def _grid_advection(v, phi, i, j, k, c, stretch, bc_sign):
-    """The moving grid's share of the momentum rate of cell (i,j,k), component c (module
-    docstring): s (phi_(k+1/2) (k+1) v_(k+1/2) - phi_(k-1/2) k v_(k-1/2)) / phi - s v, v_f of the
-    cell the relative flux -w_f comes from (above when the grid stretches, s > 0)."""
-    ph = phi[i, j, k]
-    vc = v[i, j, k, c]
-    phi_up = 0.5 * (ph + _cell(phi, i, j, k + 1))
-    phi_dn = 0.5 * (ph + _cell(phi, i, j, k - 1))
-    if stretch > 0.0:
-        v_up = _vel(v, i, j, k + 1, c, bc_sign)
-        v_dn = vc
-    else:
-        v_up = vc
-        v_dn = _vel(v, i, j, k - 1, c, bc_sign)
-    return stretch * ((k + 1) * phi_up * v_up - k * phi_dn * v_dn) / ph - stretch * vc
-
-
-@njit(cache=True, parallel=True)
-def predict(
-    v,
-    grad_p,
-    phi,
-    dphi,
-    f_i,
-    k_drag,
-    spacing,
-    gravity,
-    bc_sign,
-    rho,
-    mu,
-    beta,
-    pressure_in_solid,
-    dt,
-    v_star,
-    mobility,
-):
-    """Predicted velocity v* (step 1 of the module docstring) and the pressure mobility of each
-    cell, mobility = phi D (A) or D (B) with D = 1/(1 + dt k_drag/(rho phi)).
-
-    The drag on the fluid is f_i + k_drag (v_new - v): f_i at the old fluid velocity v, k_drag its
-    derivative (kernels/fluid/drag.py), so it is implicit in the fluid's own velocity. Solving the
-    momentum balance for v_new divides every explicit increment, the pressure's included, by
-    1 + dt k_drag/(rho phi): v* = v + D dt [...], and v_new = v* - D dt/rho (1 or 1/phi) grad eps =
-    v* - dt/rho (mobility/phi) grad eps, with the same D in the pressure equation's faces."""
-    nx, ny, nz = phi.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
-        for j in range(ny):
-            for k in range(nz):
-                ph = phi[i, j, k]
-                inv = 1.0 / (rho * ph)
-                p_factor = 1.0 / rho if pressure_in_solid else inv
-                implicit = dt * k_drag[i, j, k] * inv
-                for c in range(3):
-                    vc = v[i, j, k, c]
-                    rate = (
-                        mu * inv * _viscous(v, phi, i, j, k, c, spacing, bc_sign)
-                        - _advection(v, phi, i, j, k, c, spacing, bc_sign) / ph
-                        - beta * p_factor * grad_p[i, j, k, c]
-                        + gravity[c]
-                        - inv * f_i[i, j, k, c]
-                    )
-                    explicit = vc + dt * rate - vc * dphi[i, j, k] * dt / ph
-                    v_star[i, j, k, c] = (explicit + implicit * vc) / (1.0 + implicit)
-                mobility[i, j, k] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
-
-
-@njit(cache=True, inline="always")
-def _face_flux(
-    v_star, phi, mobility, grad_p, p, i, j, k, a, spacing, bc_sign, p_kind, p_bound, beta, rho, dt
-):
-    """phi_f v_f through the face between cell (i,j,k) and its +a neighbour (either may be a z
-    ghost): the mean of the two predicted velocities, in which the old pressure's share (beta > 0)
-    is taken with the compact face gradient instead of the mean of the two central ones (Rhie &
-    Chow 1983), so an odd-even pressure mode is seen and removed."""
-    nz = phi.shape[2]
-    i1, j1, k1 = _shift(i, j, k, a, 1)
-    phi_f = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i1, j1, k1))
-    flux = 0.5 * phi_f * (_vel(v_star, i, j, k, a, bc_sign) + _vel(v_star, i1, j1, k1, a, bc_sign))
-    if beta == 0.0:
-        return flux
-    if a == 2 and ((k < 0 and p_kind[0] == 0) or (k1 >= nz and p_kind[1] == 0)):
-        return flux  # a no-flow wall: zero
-    m0 = _cell(mobility, i, j, k)
-    m1 = _cell(mobility, i1, j1, k1)
-    central = 0.5 * (
-        m0 / _cell(phi, i, j, k) * _cell_vec(grad_p, i, j, k, a)
-        + m1 / _cell(phi, i1, j1, k1) * _cell_vec(grad_p, i1, j1, k1, a)
-    )
-    compact = (_pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i, j, k, p_kind, p_bound)) / spacing[a]
-    return flux + beta * dt / rho * (phi_f * central - 0.5 * (m0 + m1) * compact)
+def _cell(f, i, j, k):
+    """f[i,j,k] of a cell field, periodic in x and y, the boundary cell's value in z ghosts."""
+    nz = f.shape[2]
+    k = 0 if k < 0 else (nz - 1 if k >= nz else k)
+    return f[_wrap(i, f.shape[0]), _wrap(j, f.shape[1]), k]
 
 
 @njit(cache=True, inline="always")
@@ -347,73 +155,379 @@ def _cell_vec(f, i, j, k, a):
     return f[_wrap(i, f.shape[0]), _wrap(j, f.shape[1]), k, a]
 
 
+@njit(cache=True, inline="always")
+def _pres(p, i, j, k, p_kind, p_bound):
+    """p[i,j,k] with the z ghost cells of a pressure: 2 p_b - p of the boundary cell at a
+    prescribed-pressure face, linear extrapolation at a no-flow face."""
+    nz = p.shape[2]
+    i = _wrap(i, p.shape[0])
+    j = _wrap(j, p.shape[1])
+    if k < 0:
+        if p_kind[0] == 1:
+            return 2.0 * p_bound[0] - p[i, j, 0]
+        return 2.0 * p[i, j, 0] - p[i, j, 1] if nz > 1 else p[i, j, 0]
+    if k >= nz:
+        if p_kind[1] == 1:
+            return 2.0 * p_bound[1] - p[i, j, nz - 1]
+        return 2.0 * p[i, j, nz - 1] - p[i, j, nz - 2] if nz > 1 else p[i, j, 0]
+    return p[i, j, k]
+
+
+@njit(cache=True, inline="always")
+def _phi_face(phi, i, j, k, c):
+    """Porosity of face (i,j,k) of component c: the mean of the cells either side."""
+    i0, j0, k0 = _shift(i, j, k, c, -1)
+    return 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
+
+
+@njit(cache=True, inline="always")
+def _phi_edge(phi, i, j, k, c, a):
+    """Porosity of the edge half a cell along +a from face (i,j,k) of component c (a != c): the
+    mean of the four cells around it."""
+    ia, ja, ka = _shift(i, j, k, a, 1)
+    ic, jc, kc = _shift(i, j, k, c, -1)
+    iac, jac, kac = _shift(ia, ja, ka, c, -1)
+    return 0.25 * (
+        _cell(phi, i, j, k) + _cell(phi, ia, ja, ka) + _cell(phi, ic, jc, kc) + _cell(phi, iac, jac, kac)
+    )
+
+
+@njit(cache=True, inline="always")
+def _is_face(k, c, nz, p_kind):
+    """Whether (i,j,k) of component c is a face with a momentum balance: not the unused layer
+    k = nz of x and y, not a no-flow z boundary."""
+    if c < 2:
+        return k < nz
+    if k == 0:
+        return p_kind[0] == 1
+    if k == nz:
+        return p_kind[1] == 1
+    return True
+
+
 @njit(cache=True, parallel=True)
-def pressure_rhs(
-    v_star, phi, dphi, mobility, grad_p, p, spacing, bc_sign, p_kind, p_bound, beta, rho, dt, rhs
-):
-    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b, with
-    the face fluxes of `_face_flux` (zero at a no-flow wall); p, grad_p and p_bound of the old
-    pressure."""
-    nx, ny, nz = phi.shape
+def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
+    """grad_p of every cell: the mean of the compact gradients of its two faces of each
+    component (central differences with the pressure ghosts) [Pa/m]; what the particles feel."""
+    nx, ny, nz = p.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(nz):
-                div = 0.0
                 for a in range(3):
+                    i1, j1, k1 = _shift(i, j, k, a, 1)
                     i0, j0, k0 = _shift(i, j, k, a, -1)
-                    up = _face_flux(
-                        v_star,
-                        phi,
-                        mobility,
-                        grad_p,
-                        p,
-                        i,
-                        j,
-                        k,
-                        a,
-                        spacing,
-                        bc_sign,
-                        p_kind,
-                        p_bound,
-                        beta,
-                        rho,
-                        dt,
-                    )
-                    dn = _face_flux(
-                        v_star,
-                        phi,
-                        mobility,
-                        grad_p,
-                        p,
-                        i0,
-                        j0,
-                        k0,
-                        a,
-                        spacing,
-                        bc_sign,
-                        p_kind,
-                        p_bound,
-                        beta,
-                        rho,
-                        dt,
-                    )
-                    div += (up - dn) / spacing[a]
-                rhs[i, j, k] = -rho / dt * (div + dphi[i, j, k])
+                    grad_p[i, j, k, a] = (
+                        _pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)
+                    ) / (2.0 * spacing[a])
+
+
+@njit(cache=True, inline="always")
+def _viscous(u, phi, i, j, k, c, spacing, bc_sign):
+    """div(phi (grad v + grad v^T))_c / viscosity at face (i,j,k) of component c: the normal
+    stress at the cell centres either side, the shear stresses at the four edges around."""
+    uc = _face(u, i, j, k, c, bc_sign)
+    total = 0.0
+    for a in range(3):
+        i1, j1, k1 = _shift(i, j, k, a, 1)
+        i0, j0, k0 = _shift(i, j, k, a, -1)
+        if a == c:
+            up = _cell(phi, i, j, k) * (_face(u, i1, j1, k1, c, bc_sign) - uc)
+            dn = _cell(phi, i0, j0, k0) * (uc - _face(u, i0, j0, k0, c, bc_sign))
+            total += 2.0 * (up - dn) / (spacing[a] * spacing[a])
+        else:
+            ic, jc, kc = _shift(i, j, k, c, -1)
+            i1c, j1c, k1c = _shift(i1, j1, k1, c, -1)
+            shear_up = (_face(u, i1, j1, k1, c, bc_sign) - uc) / spacing[a] + (
+                _face(u, i1, j1, k1, a, bc_sign) - _face(u, i1c, j1c, k1c, a, bc_sign)
+            ) / spacing[c]
+            shear_dn = (uc - _face(u, i0, j0, k0, c, bc_sign)) / spacing[a] + (
+                _face(u, i, j, k, a, bc_sign) - _face(u, ic, jc, kc, a, bc_sign)
+            ) / spacing[c]
+            up = _phi_edge(phi, i, j, k, c, a) * shear_up
+            dn = _phi_edge(phi, i0, j0, k0, c, a) * shear_dn
+            total += (up - dn) / spacing[a]
+    return total
+
+
+@njit(cache=True, inline="always")
+def _limited_face_value(upwind_upwind, upwind, downwind):
+    """v_U + 0.5 L(v_U - v_UU, v_D - v_U) with van Leer's limited slope L(a, b) = 2ab/(a + b),
+    0 unless a and b have the same sign."""
+    back = upwind - upwind_upwind
+    ahead = downwind - upwind
+    product = back * ahead
+    if product > 0.0:
+        return upwind + product / (back + ahead)
+    return upwind
+
+
+@njit(cache=True, inline="always")
+def _advection(u, phi, i, j, k, c, spacing, bc_sign):
+    """div(phi v v_c) over the control volume of face (i,j,k) of component c: through each side
+    the flux phi u carrying the limited upwind-biased v_c (module docstring)."""
+    nx, ny = u.shape[0], u.shape[1]
+    uc = _face(u, i, j, k, c, bc_sign)
+    total = 0.0
+    for a in range(3):
+        i1, j1, k1 = _shift(i, j, k, a, 1)
+        i0, j0, k0 = _shift(i, j, k, a, -1)
+        if a == c:
+            flux_up = _cell(phi, i, j, k) * 0.5 * (uc + _face(u, i1, j1, k1, c, bc_sign))
+            flux_dn = _cell(phi, i0, j0, k0) * 0.5 * (_face(u, i0, j0, k0, c, bc_sign) + uc)
+        else:
+            ic, jc, kc = _shift(i, j, k, c, -1)
+            i1c, j1c, k1c = _shift(i1, j1, k1, c, -1)
+            flux_up = (
+                _phi_edge(phi, i, j, k, c, a)
+                * 0.5
+                * (_face(u, i1, j1, k1, a, bc_sign) + _face(u, i1c, j1c, k1c, a, bc_sign))
+            )
+            flux_dn = (
+                _phi_edge(phi, i0, j0, k0, c, a)
+                * 0.5
+                * (_face(u, i, j, k, a, bc_sign) + _face(u, ic, jc, kc, a, bc_sign))
+            )
+        east = _face(u, i1, j1, k1, c, bc_sign)
+        west = _face(u, i0, j0, k0, c, bc_sign)
+        # (far upwind, upwind, downwind) of each side; one call site each (compile time)
+        if flux_up > 0.0:
+            uu, up_, d = west, uc, east
+        else:
+            i2, j2, k2 = _far(i, j, k, a, 1, nx, ny)
+            uu, up_, d = _face(u, i2, j2, k2, c, bc_sign), east, uc
+        value_up = _limited_face_value(uu, up_, d)
+        if flux_dn > 0.0:
+            im, jm, km = _far(i, j, k, a, -1, nx, ny)
+            uu, up_, d = _face(u, im, jm, km, c, bc_sign), west, uc
+        else:
+            uu, up_, d = east, uc, west
+        value_dn = _limited_face_value(uu, up_, d)
+        total += (flux_up * value_up - flux_dn * value_dn) / spacing[a]
+    return total
 
 
 @njit(cache=True, parallel=True)
-def add_grid_motion(v, phi, k_drag, bc_sign, rho, dt, stretch, v_star):
-    """v* += dt D (the moving grid's momentum rate) after `predict` (module docstring; D =
-    1/(1 + dt k_drag/(rho phi)) as in `predict`), from the old velocity v."""
+def predict(
+    v_face,
+    p,
+    phi,
+    dphi,
+    f_i,
+    k_drag,
+    acceleration,
+    spacing,
+    bc_sign,
+    p_kind,
+    p_bound,
+    rho,
+    mu,
+    beta,
+    pressure_in_solid,
+    dt,
+    inflow,
+    v_star,
+    mobility,
+):
+    """Predicted face velocities v* (step 1 of the module docstring) and the pressure
+    equation's face coefficients, mobility = phi_f D_f (A) or D_f (B), D_f = 1/(1 + dt k_f/(rho
+    phi_f)). A face without a momentum balance (module docstring) gets mobility 0 and keeps its
+    prescribed velocity: inflow[row] / phi_f at a z boundary (row 0 bottom, 1 top; the
+    superficial velocity of a prescribed-velocity face, 0 at a no-flow face), 0 elsewhere.
+
+    The drag on the fluid of a face is f_f + k_f (v_new - v): f_f at the old velocity, k_f its
+    derivative, so it is implicit in the fluid's own velocity. Solving the face's momentum
+    balance for v_new divides every explicit increment, the pressure's included, by 1 + dt k_f/
+    (rho phi_f): v* = v + D_f dt [...], v_new = v* - dt/rho (mobility/phi_f) grad eps."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz + 1):
+                for c in range(3):
+                    if not _is_face(k, c, nz, p_kind):
+                        prescribed = 0.0
+                        if c == 2:
+                            prescribed = inflow[0 if k == 0 else 1] / _phi_face(phi, i, j, k, 2)
+                        v_star[i, j, k, c] = prescribed
+                        mobility[i, j, k, c] = 0.0
+                        continue
+                    i0, j0, k0 = _shift(i, j, k, c, -1)
+                    ph = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
+                    rate_phi = 0.5 * (_cell(dphi, i, j, k) + _cell(dphi, i0, j0, k0))
+                    force = 0.5 * (_cell_vec(f_i, i, j, k, c) + _cell_vec(f_i, i0, j0, k0, c))
+                    coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
+                    grad = (
+                        _pres(p, i, j, k, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)
+                    ) / spacing[c]
+                    inv = 1.0 / (rho * ph)
+                    p_factor = 1.0 / rho if pressure_in_solid else inv
+                    implicit = dt * coefficient * inv
+                    uc = v_face[i, j, k, c]
+                    rate = (
+                        mu * inv * _viscous(v_face, phi, i, j, k, c, spacing, bc_sign)
+                        - _advection(v_face, phi, i, j, k, c, spacing, bc_sign) / ph
+                        - beta * p_factor * grad
+                        + acceleration[i, j, k, c]
+                        - inv * force
+                    )
+                    explicit = uc + dt * rate - uc * rate_phi * dt / ph
+                    v_star[i, j, k, c] = (explicit + implicit * uc) / (1.0 + implicit)
+                    mobility[i, j, k, c] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
+
+
+@njit(cache=True, parallel=True)
+def face_coefficients(mobility, ax, ay, az):
+    """Copy the face mobilities into the pressure solver's face arrays (kernels/fluid/poisson.py:
+    ax (nx+1,ny,nz), ay (nx,ny+1,nz), az (nx,ny,nz+1); the periodic faces nx and ny repeat 0)."""
+    nx, ny, nz = ax.shape[0] - 1, ay.shape[1] - 1, ax.shape[2]
+    for ii in prange(nx + 1):
+        i = np.int64(ii)
+        for j in range(ny + 1):
+            for k in range(nz + 1):
+                if j < ny and k < nz:
+                    ax[i, j, k] = mobility[i % nx, j, k, 0]
+                if i < nx and k < nz:
+                    ay[i, j, k] = mobility[i, j % ny, k, 1]
+                if i < nx and j < ny:
+                    az[i, j, k] = mobility[i, j, k, 2]
+
+
+@njit(cache=True, inline="always")
+def _divergence(v_face, phi, i, j, k, spacing):
+    """div(phi_f v_f) of cell (i,j,k): the net flux out through its six faces per volume."""
+    nx, ny = phi.shape[0], phi.shape[1]
+    i1 = i + 1 if i + 1 < nx else 0
+    j1 = j + 1 if j + 1 < ny else 0
+    div = (
+        _phi_face(phi, i1, j, k, 0) * v_face[i1, j, k, 0] - _phi_face(phi, i, j, k, 0) * v_face[i, j, k, 0]
+    ) / spacing[0]
+    div += (
+        _phi_face(phi, i, j1, k, 1) * v_face[i, j1, k, 1] - _phi_face(phi, i, j, k, 1) * v_face[i, j, k, 1]
+    ) / spacing[1]
+    div += (
+        _phi_face(phi, i, j, k + 1, 2) * v_face[i, j, k + 1, 2]
+        - _phi_face(phi, i, j, k, 2) * v_face[i, j, k, 2]
+    ) / spacing[2]
+    return div
+
+
+@njit(cache=True, parallel=True)
+def pressure_rhs(v_star, phi, dphi, spacing, rho, dt, rhs):
+    """rhs = -rho/dt (div(phi_f v*_f) + dphi): the right-hand side b of -div(a grad eps) = b."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
+        for j in range(ny):
+            for k in range(nz):
+                rhs[i, j, k] = -rho / dt * (_divergence(v_star, phi, i, j, k, spacing) + dphi[i, j, k])
+
+
+@njit(cache=True, parallel=True)
+def continuity_error(v_face, phi, dphi, spacing, out):
+    """out = dphi + div(phi_f v_f) of every cell [1/s]: zero for a fluid that conserves volume."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
+        for j in range(ny):
+            for k in range(nz):
+                out[i, j, k] = _divergence(v_face, phi, i, j, k, spacing) + dphi[i, j, k]
+
+
+@njit(cache=True, parallel=True)
+def correct(v_star, eps, phi, mobility, spacing, p_kind, eps_bound, rho, beta, dt, v_face, p):
+    """v_f = v*_f - dt/rho (mobility/phi_f) grad_f eps (v*_f, the prescribed value, on a face
+    without a momentum balance); p = beta p + eps."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz + 1):
+                for c in range(3):
+                    if not _is_face(k, c, nz, p_kind):
+                        v_face[i, j, k, c] = v_star[i, j, k, c]
+                        continue
+                    i0, j0, k0 = _shift(i, j, k, c, -1)
+                    ph = _phi_face(phi, i, j, k, c)
+                    grad = (
+                        _pres(eps, i, j, k, p_kind, eps_bound) - _pres(eps, i0, j0, k0, p_kind, eps_bound)
+                    ) / spacing[c]
+                    v_face[i, j, k, c] = v_star[i, j, k, c] - dt / rho * mobility[i, j, k, c] / ph * grad
+                if k < nz:
+                    p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
+
+
+@njit(cache=True, parallel=True)
+def cell_velocity(v_face, v_old, phi, f_i, k_drag, v, f_exchange):
+    """The cell-centred interstitial velocity v = mean of the fluxes phi_f v_f through the cell's
+    two faces of each component / phi: the flux a cell carries, which is what its particles feel
+    (a plain mean of the face velocities would understate it beside a porosity jump); and what
+    the faces took of the cell's drag in the step from v_old to v_face, f_exchange = f_i +
+    k_drag (mean over the two faces of v_new - v_old) [N/m^3] (each face takes the mean of its
+    two cells' f_i + k_drag (v_new - v_old), so these sum to what the fluid received, with the
+    opposite sign; a no-flow face, fixed, passes its share to the wall)."""
+    nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
+        i1 = i + 1 if i + 1 < nx else 0
+        for j in range(ny):
+            j1 = j + 1 if j + 1 < ny else 0
+            for k in range(nz):
+                half = 0.5 / phi[i, j, k]
+                kd = 0.5 * k_drag[i, j, k]
+                for c in range(3):
+                    i2, j2, k2 = (i1, j, k) if c == 0 else ((i, j1, k) if c == 1 else (i, j, k + 1))
+                    v[i, j, k, c] = half * (
+                        _phi_face(phi, i, j, k, c) * v_face[i, j, k, c]
+                        + _phi_face(phi, i2, j2, k2, c) * v_face[i2, j2, k2, c]
+                    )
+                    change = (
+                        v_face[i, j, k, c] - v_old[i, j, k, c] + v_face[i2, j2, k2, c] - v_old[i2, j2, k2, c]
+                    )
+                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + kd * change
+
+
+@njit(cache=True, inline="always")
+def _grid_advection(u, phi, i, j, k, c, stretch, bc_sign):
+    """The moving grid's share of the momentum rate of face (i,j,k), component c (module
+    docstring), v_up and v_dn from the side the flux relative to the grid comes from (above when
+    the grid stretches, s > 0)."""
+    uc = _face(u, i, j, k, c, bc_sign)
+    ph = _phi_face(phi, i, j, k, c)
+    if c == 2:
+        zeta_up, zeta_dn = k + 0.5, k - 0.5
+        phi_up = _cell(phi, i, j, k)
+        phi_dn = _cell(phi, i, j, k - 1)
+    else:
+        zeta_up, zeta_dn = k + 1.0, 1.0 * k
+        phi_up = _phi_edge(phi, i, j, k, c, 2)
+        phi_dn = _phi_edge(phi, i, j, k - 1, c, 2)
+    if stretch > 0.0:
+        v_up = _face(u, i, j, k + 1, c, bc_sign)
+        v_dn = uc
+    else:
+        v_up = uc
+        v_dn = _face(u, i, j, k - 1, c, bc_sign)
+    return stretch * (zeta_up * phi_up * v_up - zeta_dn * phi_dn * v_dn) / ph - stretch * uc
+
+
+@njit(cache=True, parallel=True)
+def add_grid_motion(v_face, phi, k_drag, bc_sign, p_kind, rho, dt, stretch, v_star):
+    """v* += dt D_f (the moving grid's momentum rate) after `predict` (module docstring), from
+    the old face velocities."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
         i = np.int64(ii)
         for j in range(ny):
-            for k in range(nz):
-                d = 1.0 / (1.0 + dt * k_drag[i, j, k] / (rho * phi[i, j, k]))
+            for k in range(nz + 1):
                 for c in range(3):
-                    v_star[i, j, k, c] += dt * d * _grid_advection(v, phi, i, j, k, c, stretch, bc_sign)
+                    if not _is_face(k, c, nz, p_kind):
+                        continue
+                    i0, j0, k0 = _shift(i, j, k, c, -1)
+                    ph = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
+                    coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
+                    d = 1.0 / (1.0 + dt * coefficient / (rho * ph))
+                    v_star[i, j, k, c] += dt * d * _grid_advection(v_face, phi, i, j, k, c, stretch, bc_sign)
 
 
 @njit(cache=True, parallel=True)
@@ -421,110 +535,75 @@ def add_grid_source(phi, dphi, rho, dt, stretch, rhs):
     """rhs -= rho/dt (the moving grid's source) after `pressure_rhs` (module docstring)."""
     nx, ny, nz = phi.shape
     for ii in prange(nx):
-        i = np.int64(ii)
+        i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
         for j in range(ny):
             for k in range(nz):
-                rhs[i, j, k] -= rho / dt * _grid_source(phi, dphi, i, j, k, stretch, dt)
-
-
-@njit(cache=True, inline="always")
-def _grid_source(phi, dphi, i, j, k, stretch, dt):
-    """phi_old s - s (phi_(k+1/2) (k+1) - phi_(k-1/2) k): the cell's volume change less the
-    grid's flux div_z(phi_f w_f), per unit volume and time (module docstring)."""
-    ph = phi[i, j, k]
-    phi_up = 0.5 * (ph + _cell(phi, i, j, k + 1))
-    phi_dn = 0.5 * (ph + _cell(phi, i, j, k - 1))
-    return (ph - dt * dphi[i, j, k]) * stretch - stretch * ((k + 1) * phi_up - k * phi_dn)
+                ph = phi[i, j, k]
+                source = (ph - dt * dphi[i, j, k]) * stretch - stretch * (
+                    (k + 1) * _phi_face(phi, i, j, k + 1, 2) - k * _phi_face(phi, i, j, k, 2)
+                )
+                rhs[i, j, k] -= rho / dt * source
 
 
 @njit(cache=True)
-def top_outflow(
-    v_star,
-    phi,
-    mobility,
-    grad_p,
-    p,
-    eps,
-    az,
-    spacing,
-    bc_sign,
-    p_kind,
-    p_bound,
-    eps_bound,
-    beta,
-    rho,
-    dt,
-    stretch,
-):
+def top_outflow(v_face, phi, spacing, stretch):
     """Fluid volume leaving through the open top face per unit time, relative to the face moving
-    at w = nz dz s [m^3/s]: the sum over the top faces of dx dy (F - phi_f w), F the corrected
-    face flux the pressure equation balances, F = F* - dt/rho a_f 2 (eps_top - eps)/dz (F* of
-    `_face_flux`, eps_top = eps_bound[1]). Call after the solve and before `correct` (p, grad_p,
-    p_bound still the old pressure's). Serial, in a fixed order."""
+    at w = nz dz s [m^3/s]: the sum over the top faces of dx dy phi_f (v_f - w). Serial, in a
+    fixed order."""
     nx, ny, nz = phi.shape
-    k = nz - 1
     w = nz * spacing[2] * stretch
     total = 0.0
     for i in range(nx):
         for j in range(ny):
-            flux = _face_flux(
-                v_star, phi, mobility, grad_p, p, i, j, k, 2, spacing, bc_sign, p_kind, p_bound, beta, rho, dt
-            )
-            flux -= dt / rho * az[i, j, nz] * 2.0 * (eps_bound[1] - eps[i, j, k]) / spacing[2]
-            total += flux - phi[i, j, k] * w
+            total += phi[i, j, nz - 1] * (v_face[i, j, nz, 2] - w)
     return total * spacing[0] * spacing[1]
 
 
-@njit(cache=True, parallel=True)
-def correct(
-    v_star, eps, phi, mobility, f_i, k_drag, spacing, eps_kind, eps_bound, rho, beta, dt, v, p, f_exchange
-):
-    """v_new = v* - dt/rho (mobility/phi) grad eps;  p = beta p + eps (step 3); the drag the fluid
-    took, f_exchange = f_i + k_drag (v_new - v) [N/m^3], which it receives with the opposite sign."""
-    nx, ny, nz = phi.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
-        for j in range(ny):
-            for k in range(nz):
-                factor = dt / rho * mobility[i, j, k] / phi[i, j, k]
-                for c in range(3):
-                    new = v_star[i, j, k, c] - factor * _grad(eps, i, j, k, c, spacing, eps_kind, eps_bound)
-                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + k_drag[i, j, k] * (new - v[i, j, k, c])
-                    v[i, j, k, c] = new
-                p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
+@njit(cache=True, inline="always")
+def _cell_courant(v_face, i, j, k, spacing, dt):
+    """sum over the axes of the larger |v| of the cell's two faces, times dt/dx_a."""
+    nx, ny = v_face.shape[0], v_face.shape[1]
+    i1 = i + 1 if i + 1 < nx else 0
+    j1 = j + 1 if j + 1 < ny else 0
+    courant = max(abs(v_face[i, j, k, 0]), abs(v_face[i1, j, k, 0])) * dt / spacing[0]
+    courant += max(abs(v_face[i, j, k, 1]), abs(v_face[i, j1, k, 1])) * dt / spacing[1]
+    courant += max(abs(v_face[i, j, k, 2]), abs(v_face[i, j, k + 1, 2])) * dt / spacing[2]
+    return courant
 
 
 @njit(cache=True)
-def first_unstable(v, p, spacing, dt, courant_limit):
-    """First cell (flat C index) with a non-finite velocity or pressure (reason 1) or an advective
-    Courant number sum |v_a| dt/dx_a above courant_limit (reason 2); -1 if none. Returns (cell,
-    reason, value)."""
+def first_unstable(v_face, p, spacing, dt, courant_limit):
+    """First cell (flat C index) with a non-finite pressure (reason 1) or a non-finite velocity
+    on one of its faces (reason 2, `component` the axis), or an advective Courant number
+    (`_cell_courant`) above courant_limit (reason 3); -1 if none. Returns (cell, reason,
+    component, value)."""
     nx, ny, nz = p.shape
     for i in range(nx):
+        i1 = i + 1 if i + 1 < nx else 0
         for j in range(ny):
+            j1 = j + 1 if j + 1 < ny else 0
             for k in range(nz):
-                courant = 0.0
-                finite = math.isfinite(p[i, j, k])
-                for a in range(3):
-                    finite = finite and math.isfinite(v[i, j, k, a])
-                    courant += abs(v[i, j, k, a]) * dt / spacing[a]
-                if not finite:
-                    return (i * ny + j) * nz + k, 1, courant
+                cell = (i * ny + j) * nz + k
+                if not math.isfinite(p[i, j, k]):
+                    return cell, 1, -1, p[i, j, k]
+                faces = (v_face[i, j, k, 0], v_face[i1, j, k, 0], v_face[i, j, k, 1], v_face[i, j1, k, 1],
+                         v_face[i, j, k, 2], v_face[i, j, k + 1, 2])  # fmt: skip
+                for n in range(6):
+                    if not math.isfinite(faces[n]):
+                        return cell, 2, n // 2, faces[n]
+                courant = _cell_courant(v_face, i, j, k, spacing, dt)
                 if courant > courant_limit:
-                    return (i * ny + j) * nz + k, 2, courant
-    return -1, 0, 0.0
+                    return cell, 3, -1, courant
+    return -1, 0, -1, 0.0
 
 
 @njit(cache=True)
-def max_courant(v, spacing, dt):
-    """Largest advective Courant number sum |v_a| dt/dx_a over the cells [-]."""
-    nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
+def max_courant(v_face, spacing, dt):
+    """Largest advective Courant number of the cells (`_cell_courant`) [-]."""
+    nx, ny, nz = v_face.shape[0], v_face.shape[1], v_face.shape[2] - 1
     worst = 0.0
     for i in range(nx):
         for j in range(ny):
             for k in range(nz):
-                courant = 0.0
-                for a in range(3):
-                    courant += abs(v[i, j, k, a]) * dt / spacing[a]
-                worst = max(worst, courant)
+                worst = max(worst, _cell_courant(v_face, i, j, k, spacing, dt))
     return worst

@@ -9,10 +9,11 @@ last fluid step; fs.f_i (nx,ny,nz,3) [N/m^3], fs.k_drag (nx,ny,nz) [kg/(m^3 s)] 
                    particle's force;
 - kick():          replaces Motion.kick: the second half kick, exact for the drag relaxation;
 - fluid_forcing(): before each fluid step, after the kick: f_i, the force density of the fluid on
-                   the particles of each cell over the last fluid interval (the drag impulses the
-                   particles received, less what the last fluid step took ahead), and k_drag =
-                   d f_i/d v averaged over the fluid step, so the fluid momentum update takes the
-                   drag semi-implicitly as -(f_i + k_drag (v_new - v)) (fs.f_exchange).
+                   the particles of each cell that the fluid step takes (the drag they will
+                   receive over the next interval, settled against what they received over the
+                   last one), and k_drag = its derivative with respect to the fluid velocity, so
+                   the fluid momentum update takes the drag implicitly as -(f_i + k_drag (v_new -
+                   v)) (fs.f_exchange).
 Formulation A (pressure in both phases: fluid momentum -phi grad p - f_i) exchanges the drag
 alone, its -phi grad p already holding the reaction of the pressure-gradient force; formulation
 B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradient force.
@@ -67,6 +68,7 @@ class FluidParticleDrag:
         self.f_other = np.zeros((n, 3))  # every force but the drag [N]
         self.f_drag = np.zeros((n, 3))  # drag for the next first half kick [N]
         self.impulse = np.zeros((n, 3))  # drag impulse since the last fluid step [N s]
+        self.predicted = np.zeros((cells, 3))  # drag expected over that interval [N/m^3]
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
@@ -134,26 +136,18 @@ class FluidParticleDrag:
         )
 
     def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
-        """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (the time since the last
-        call): the drag impulses since then, less the part of fs.f_exchange the last fluid step
-        took ahead; the impulses restart from zero."""
+        """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (also the time since the
+        last call): the drag expected over the next interval at the fluid velocity now, settled
+        against the impulses received since the last call (kernels/fluid/drag.py, "Momentum
+        exchange"); the impulses restart from zero."""
         p = state.particles
         counting_sort(self.cell_of, self.start.size - 1, self.start, self.order)
         exchange(
-            self.start,
-            self.order,
-            self.impulse,
-            self.coef,
-            p.radius,
-            p.inv_mass,
-            fs.grad_p.reshape(-1, 3),
-            self.pressure_exchanged,
-            fluid_dt,
-            self.inv_cell_volume,
-            fs.f_i.reshape(-1, 3),
-            fs.k_drag.reshape(-1),
-            fs.f_exchange.reshape(-1, 3),
-        )
+            self.start, self.order, self.impulse, self.coef, p.inv_mass, self.f_other, p.vel, p.radius,
+            fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3), self.pressure_exchanged, fluid_dt,
+            self.inv_cell_volume, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3),
+            self.predicted,
+        )  # fmt: skip
 
     def fluid_force(self, state: State, fs) -> np.ndarray:
         """Total force of the fluid on all particles (drag and pressure-gradient force) [N]."""
@@ -164,13 +158,14 @@ class FluidParticleDrag:
         return total
 
     def prognostic_state(self) -> dict[str, np.ndarray]:
-        """What a bitwise restart needs: the drag of the next first half kick and the impulses
-        not yet handed to the fluid."""
-        return {"force": self.f_drag, "impulse": self.impulse}
+        """What a bitwise restart needs: the drag of the next first half kick, the impulses not
+        yet handed to the fluid and the drag the fluid took ahead for them."""
+        return {"force": self.f_drag, "impulse": self.impulse, "predicted": self.predicted}
 
     def restore(self, arrays: dict) -> None:
         self.f_drag[...] = arrays["force"]
         self.impulse[...] = arrays["impulse"]
+        self.predicted[...] = arrays["predicted"]
 
     @staticmethod
     def dt_limit() -> tuple[float, str]:

@@ -1,11 +1,14 @@
-"""Porous Navier-Stokes fluid (`[fluid] model = "navier-stokes"`): the fluid state, one fluid
-step (predictor, pressure equation through the shared Poisson solver, correction; equations in
-kernels/fluid/navier_stokes.py), its stability limits, and the plug-in that couples it to the DEM loop.
+"""Porous Navier-Stokes fluid (`[fluid] model = "navier-stokes"`): the fluid state on the
+staggered grid, one fluid step (predictor, pressure equation through the shared Poisson solver,
+correction; equations in kernels/fluid/navier_stokes.py), its stability limits, and the plug-in
+that couples it to the DEM loop.
 
-NavierStokesSolver advances a NavierStokesState and knows nothing of particles, so the fluid-alone
-checks (tests/physics/test_fluid_navier_stokes.py) drive it directly. NavierStokes (FluidModule)
-adds the particles: porosity from the grid engineer's physics/fluid/porosity.py, the interaction force
-from physics/fluid/drag.py (the contract: /work/wt/NS-CONTRACT.md), and the coupling schedule.
+NavierStokesSolver advances a NavierStokesState and knows nothing of particles, so the
+fluid-alone checks (tests/physics/test_fluid_navier_stokes.py) drive it directly. NavierStokes
+(FluidModule) adds the particles: porosity from physics/fluid/porosity.py, the interaction force
+from physics/fluid/drag.py (which reads the cell-centred fs.v and fs.grad_p and writes the cell
+fields fs.f_i and fs.k_drag; the fluid step takes their means on the faces), and the coupling
+schedule.
 """
 
 from __future__ import annotations
@@ -17,12 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
-from ...config.fluid_navier_stokes import NavierStokesFluid
+from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
 from ...errors import NumericalError
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
     add_grid_source,
+    cell_velocity,
+    continuity_error,
     correct,
+    face_coefficients,
     first_unstable,
     max_courant,
     predict,
@@ -30,7 +36,6 @@ from ...kernels.fluid.navier_stokes import (
     pressure_rhs,
     top_outflow,
 )
-from ...kernels.fluid.poisson import face_means
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
 from .drag import FluidParticleDrag
 from .grid import FluidGrid, fluid_grid
@@ -40,21 +45,25 @@ from .porosity import Porosity
 
 @dataclass
 class NavierStokesState:
-    """Fluid fields on the grid (cell-centred, C order); see NS-CONTRACT.md for who writes what."""
+    """Fluid fields on the staggered grid (C order; kernels/fluid/navier_stokes.py says which
+    face is which): the velocity on the cell faces, everything else at the cell centres."""
 
-    v: np.ndarray  # (nx,ny,nz,3) [m/s] interstitial fluid velocity
+    v_face: np.ndarray  # (nx,ny,nz+1,3) [m/s] interstitial fluid velocity, component c on the c faces
+    v: np.ndarray  # (nx,ny,nz,3) [m/s] its cell-centred value (mean of each cell's two faces)
     p: np.ndarray  # (nx,ny,nz) [Pa] pressure
-    grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p (central differences)
+    grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p at the cell centres (central differences)
     porosity: np.ndarray  # (nx,ny,nz) [-]
     porosity_rate: np.ndarray  # (nx,ny,nz) [1/s] d porosity/dt
     f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles at the old fluid v
     k_drag: np.ndarray  # (nx,ny,nz) [kg/(m^3 s)] its derivative with respect to the fluid v
     f_exchange: np.ndarray  # (nx,ny,nz,3) [N/m^3] f_i + k_drag (v_new - v_old) of the last step
+    acceleration: np.ndarray  # (nx,ny,nz+1,3) [m/s^2] body acceleration on the faces (gravity)
     # scratch of the fluid step (not state)
-    v_star: np.ndarray
+    v_star: np.ndarray  # (nx,ny,nz+1,3)
+    v_old: np.ndarray  # (nx,ny,nz+1,3) the face velocities before the correction
+    mobility: np.ndarray  # (nx,ny,nz+1,3)
     rhs: np.ndarray
     eps: np.ndarray
-    mobility: np.ndarray
     zero: np.ndarray
     ax: np.ndarray
     ay: np.ndarray
@@ -67,7 +76,7 @@ class NavierStokesState:
     height: float = 0.0
     outflow: float = 0.0
 
-    PROGNOSTIC = ("v", "p", "grad_p", "porosity", "porosity_rate", "f_i", "k_drag", "f_exchange")
+    PROGNOSTIC = ("v_face", "v", "p", "grad_p", "porosity", "porosity_rate", "f_i", "k_drag", "f_exchange")
     SCALARS = ("steps", "iterations", "residual")
     MOVING_GRID = ("height", "outflow")
 
@@ -104,10 +113,21 @@ class NavierStokesSolver:
                 self.bc_sign[row, 2] = -1.0
             if b.no_slip:
                 self.bc_sign[row, :2] = -1.0
-        self.p_kind = np.array([isinstance(b, PressureBoundary) for b in self.boundaries], dtype=np.int64)
-        if self.follows and not self.p_kind[1]:
+        # 1 prescribed pressure, 2 prescribed velocity, 0 no flow (kernels/fluid/navier_stokes.py)
+        self.p_kind = np.array(
+            [
+                1 if isinstance(b, PressureBoundary) else (2 if isinstance(b, NoSlipVelocity) else 0)
+                for b in self.boundaries
+            ],
+            dtype=np.int64,
+        )
+        area = float(grid.spacing[0] * grid.spacing[1] * grid.shape[0] * grid.shape[1])
+        self.inflow = np.array(
+            [b.superficial(area) if isinstance(b, NoSlipVelocity) else 0.0 for b in self.boundaries]
+        )
+        if self.follows and self.p_kind[1] != 1:
             raise ValueError("a grid that follows the top wall needs a prescribed-pressure top boundary")
-        kinds = ["dirichlet" if k else "no-flux" for k in self.p_kind]
+        kinds = ["dirichlet" if k == 1 else "no-flux" for k in self.p_kind]
         solver = config.solver
         self.poisson = PoissonSolver(
             grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations
@@ -119,11 +139,16 @@ class NavierStokesSolver:
     # -- state ---------------------------------------------------------------------------------
 
     def allocate(self) -> NavierStokesState:
-        """Fluid at rest, porosity 1, no particles, pressure 0 (initial_pressure() sets it)."""
+        """Fluid at rest, porosity 1, no particles, pressure 0 (initial_pressure() sets it), the
+        body acceleration gravity on every face."""
         shape = tuple(self.grid.shape)
         vec = (*shape, 3)
+        faces = (shape[0], shape[1], shape[2] + 1, 3)
         ax, ay, az = self.poisson.face_arrays()
+        acceleration = np.zeros(faces)
+        acceleration[...] = self.gravity
         return NavierStokesState(
+            v_face=np.zeros(faces),
             v=np.zeros(vec),
             p=np.zeros(shape),
             grad_p=np.zeros(vec),
@@ -132,16 +157,46 @@ class NavierStokesSolver:
             f_i=np.zeros(vec),
             k_drag=np.zeros(shape),
             f_exchange=np.zeros(vec),
-            v_star=np.zeros(vec),
+            acceleration=acceleration,
+            v_star=np.zeros(faces),
+            v_old=np.zeros(faces),
+            mobility=np.zeros(faces),
             rhs=np.zeros(shape),
             eps=np.zeros(shape),
-            mobility=np.zeros(shape),
             zero=np.zeros(shape),
             ax=ax,
             ay=ay,
             az=az,
             height=self.height,
         )
+
+    def face_coordinates(self, c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where the faces of velocity component c (0, 1, 2) are: x, y, z [m] of shapes (nx,1,1),
+        (1,ny,1), (1,1,nz) (nz+1 z faces for c = 2), broadcasting to that component's faces."""
+        g = self.grid
+        axes = []
+        for a in range(3):
+            n = g.shape[a] + (1 if a == 2 == c else 0)
+            offset = 0.0 if a == c else 0.5
+            shape = [1, 1, 1]
+            shape[a] = n
+            axes.append((g.origin[a] + (np.arange(n) + offset) * g.spacing[a]).reshape(shape))
+        return axes[0], axes[1], axes[2]
+
+    def set_velocity(self, fs: NavierStokesState, components) -> None:
+        """Set the face velocities from three values or arrays broadcasting to each component's
+        faces (face_coordinates), keeping v_z = 0 on a no-flow boundary, and the cell velocities
+        (with fs.porosity as it is now; the exchange fs.f_exchange of a fluid at rest)."""
+        nz = self.grid.shape[2]
+        fs.v_face[...] = 0.0
+        for c, value in enumerate(components):
+            layers = nz + 1 if c == 2 else nz
+            fs.v_face[:, :, :layers, c] = value
+        for row, k in ((0, 0), (1, nz)):
+            if self.p_kind[row] != 1:  # a no-flow or prescribed-velocity face keeps its value
+                fs.v_face[:, :, k, 2] = self.inflow[row] / fs.porosity[:, :, 0 if row == 0 else nz - 1]
+        np.copyto(fs.v_old, fs.v_face)
+        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, fs.v, fs.f_exchange)
 
     def resize(self, height: float) -> None:
         """Stretch the grid along z to `height` [m] (a grid following the top wall)."""
@@ -162,9 +217,9 @@ class NavierStokesSolver:
         z = g.centres(2)
         bottom_z, top_z = g.origin[2], g.origin[2] + g.shape[2] * g.spacing[2]
         self.boundary_pressure(time, self.p_bound)
-        if self.p_kind[1]:
+        if self.p_kind[1] == 1:
             z_ref, p_ref = top_z, self.p_bound[1]
-        elif self.p_kind[0]:
+        elif self.p_kind[0] == 1:
             z_ref, p_ref = bottom_z, self.p_bound[0]
         else:
             z_ref, p_ref = 0.5 * (bottom_z + top_z), 0.0
@@ -178,25 +233,21 @@ class NavierStokesSolver:
         interaction force already in fs."""
         rho, beta, solid = self.rho, self.old_pressure_weight, self.pressure_in_solid
         old = self.boundary_pressure(time, self.p_old)
-        stretch = 0.0
-        if self.follows:
-            # (V_new - V_old) / (V_new dt) of every cell; the old pressure's gradient on the new cells
-            stretch = (self.height - fs.height) / (self.height * dt)
-            if beta != 0.0 and stretch != 0.0:
-                pressure_gradient(fs.p, self.spacing, self.p_kind, old, fs.grad_p)
+        # (V_new - V_old) / (V_new dt) of every cell of a grid following the top wall
+        stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
         predict(
-            fs.v, fs.grad_p, fs.porosity, fs.porosity_rate, fs.f_i, fs.k_drag, self.spacing, self.gravity,
-            self.bc_sign, rho, self.mu, beta, solid, dt, fs.v_star, fs.mobility,
+            fs.v_face, fs.p, fs.porosity, fs.porosity_rate, fs.f_i, fs.k_drag, fs.acceleration, self.spacing,
+            self.bc_sign, self.p_kind, old, rho, self.mu, beta, solid, dt, self.inflow, fs.v_star,
+            fs.mobility,
         )  # fmt: skip
         if stretch != 0.0:
-            add_grid_motion(fs.v, fs.porosity, fs.k_drag, self.bc_sign, rho, dt, stretch, fs.v_star)
-        pressure_rhs(
-            fs.v_star, fs.porosity, fs.porosity_rate, fs.mobility, fs.grad_p, fs.p, self.spacing,
-            self.bc_sign, self.p_kind, old, beta, rho, dt, fs.rhs,
-        )  # fmt: skip
+            add_grid_motion(
+                fs.v_face, fs.porosity, fs.k_drag, self.bc_sign, self.p_kind, rho, dt, stretch, fs.v_star
+            )
+        pressure_rhs(fs.v_star, fs.porosity, fs.porosity_rate, self.spacing, rho, dt, fs.rhs)
         if stretch != 0.0:
             add_grid_source(fs.porosity, fs.porosity_rate, rho, dt, stretch, fs.rhs)
-        face_means(fs.mobility, np.uint8(1), np.uint8(1), np.uint8(0), fs.ax, fs.ay, fs.az)
+        face_coefficients(fs.mobility, fs.ax, fs.ay, fs.az)
         self.boundary_pressure(time + dt, self.p_bound)
         np.multiply(old, -beta, out=self.eps_bound)
         self.eps_bound += self.p_bound
@@ -206,6 +257,8 @@ class NavierStokesSolver:
             fs.eps, fs.rhs, fs.zero, fs.ax, fs.ay, fs.az, self.eps_bound[0], self.eps_bound[1]
         )
         fs.iterations, fs.residual = result.iterations, result.residual
+        if not math.isfinite(result.residual):
+            raise NumericalError(f"at t = {time + dt:.6g} s the fluid step met {self._first_non_finite(fs)}")
         if not result.converged:
             raise NumericalError(
                 f"the fluid pressure solve ({self.poisson.describe()}) did not converge in "
@@ -213,19 +266,57 @@ class NavierStokesSolver:
                 f"t = {time + dt:.6g} s; raise fluid.solver.max_iterations or the tolerance, or "
                 'use method = "pcg"'
             )
-        if self.follows:
-            fs.outflow += dt * top_outflow(
-                fs.v_star, fs.porosity, fs.mobility, fs.grad_p, fs.p, fs.eps, fs.az, self.spacing,
-                self.bc_sign, self.p_kind, old, self.eps_bound, beta, rho, dt, stretch,
-            )  # fmt: skip
-            fs.height = self.height
+        np.copyto(fs.v_old, fs.v_face)
         correct(
-            fs.v_star, fs.eps, fs.porosity, fs.mobility, fs.f_i, fs.k_drag, self.spacing, self.p_kind,
-            self.eps_bound, rho, beta, dt, fs.v, fs.p, fs.f_exchange,
+            fs.v_star, fs.eps, fs.porosity, fs.mobility, self.spacing, self.p_kind, self.eps_bound, rho, beta,
+            dt, fs.v_face, fs.p,
         )  # fmt: skip
+        if self.follows:
+            fs.outflow += dt * top_outflow(fs.v_face, fs.porosity, self.spacing, stretch)
+            fs.height = self.height
+        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, fs.v, fs.f_exchange)
         pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
         fs.steps += 1
         return result
+
+    def _first_non_finite(self, fs: NavierStokesState) -> str:
+        """Where the first NaN or infinity of a fluid step's inputs (or, if none, its predicted
+        velocity) sits: the quantity, the cell or face, and its value."""
+        fields = (  # name, array, unit, on the faces
+            ("porosity", fs.porosity, "", False),
+            ("porosity rate", fs.porosity_rate, " 1/s", False),
+            ("interaction force density", fs.f_i, " N/m^3", False),
+            ("drag coefficient", fs.k_drag, " kg/(m^3 s)", False),
+            ("velocity", fs.v_face, " m/s", True),
+            ("pressure", fs.p, " Pa", False),
+            ("body acceleration", fs.acceleration, " m/s^2", True),
+            ("predicted velocity", fs.v_star, " m/s", True),
+        )
+        for name, field, unit, on_faces in fields:
+            bad = np.flatnonzero(~np.isfinite(field))
+            if bad.size:
+                index = np.unravel_index(int(bad[0]), field.shape)
+                where = self._where(index[:3], index[3] if on_faces else None)
+                component = f" {'xyz'[index[3]]}" if field.ndim == 4 else ""
+                return f"a non-finite {name}{component} ({field[index]}{unit}) at {where}"
+        return "a non-finite pressure equation (residual NaN) with finite inputs"
+
+    def _where(self, cell, face_axis: int | None = None) -> str:
+        """Names the fluid cell (i, j, k), or its face of that axis, and where it is."""
+        i, j, k = (int(n) for n in cell)
+        centre = self.grid.origin + (np.array([i, j, k]) + 0.5) * self.spacing
+        place = f"fluid cell ({i}, {j}, {k})"
+        if face_axis is not None:
+            centre[face_axis] -= 0.5 * self.spacing[face_axis]
+            place = f"the {'xyz'[face_axis]} face ({i}, {j}, {k}) of the fluid grid"
+        return f"{place} at {tuple(round(float(x), 9) for x in centre)} m"
+
+    def continuity_error(self, fs: NavierStokesState, out: np.ndarray | None = None) -> np.ndarray:
+        """dphi + div(phi_f v_f) of every cell after the last step [1/s] (zero up to the
+        pressure solver's tolerance)."""
+        out = np.zeros(self.grid.shape) if out is None else out
+        continuity_error(fs.v_face, fs.porosity, fs.porosity_rate, self.spacing, out)
+        return out
 
     # -- limits and checks ---------------------------------------------------------------------
 
@@ -243,22 +334,23 @@ class NavierStokesSolver:
         return COURANT_LIMIT / (speed * float(np.sum(1.0 / self.spacing))) if speed > 0 else math.inf
 
     def courant(self, fs: NavierStokesState, dt: float) -> float:
-        return float(max_courant(fs.v, self.spacing, dt))
+        return float(max_courant(fs.v_face, self.spacing, dt))
 
     def first_unstable(self, fs: NavierStokesState, dt: float) -> str | None:
-        """A message naming the first bad cell (non-finite, or Courant number above COURANT_LIMIT),
-        or None."""
-        cell, reason, courant = first_unstable(fs.v, fs.p, self.spacing, dt, COURANT_LIMIT)
+        """A message naming the first bad cell (a non-finite pressure or face velocity, or a
+        Courant number above COURANT_LIMIT), or None."""
+        cell, reason, axis, value = first_unstable(fs.v_face, fs.p, self.spacing, dt, COURANT_LIMIT)
         if cell < 0:
             return None
         i, j, k = np.unravel_index(int(cell), self.grid.shape)
-        centre = self.grid.origin + (np.array([i, j, k]) + 0.5) * self.spacing
-        where = f"fluid cell ({i}, {j}, {k}) at {tuple(round(float(c), 9) for c in centre)} m"
+        where = self._where((i, j, k))
         values = f"v = {tuple(float(c) for c in fs.v[i, j, k])} m/s, p = {float(fs.p[i, j, k]):.6g} Pa"
         if reason == 1:
-            return f"{where} has a non-finite fluid state ({values})"
+            return f"{where} has a non-finite pressure ({float(value)} Pa)"
+        if reason == 2:
+            return f"{where} has a non-finite velocity {'xyz'[axis]} on a face ({float(value)} m/s)"
         return (
-            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {courant:.3g} > "
+            f"{where} exceeds the advective limit: Courant number sum |v_i| dt_f/dx_i = {value:.3g} > "
             f"{COURANT_LIMIT:g} ({values}); use a smaller dt or fluid.coupling.steps, or set fluid.max_speed"
         )
 
@@ -266,7 +358,12 @@ class NavierStokesSolver:
         c = self.config
         bounds = []
         for name, b in zip(("bottom", "top"), self.boundaries, strict=True):
-            text = "no flow" if isinstance(b, NoFlowBoundary) else f"pressure {b.pressure:g} Pa"
+            if isinstance(b, NoSlipVelocity):
+                text = f"superficial velocity {self.inflow[0 if name == 'bottom' else 1]:g} m/s along +z"
+            elif isinstance(b, NoFlowBoundary):
+                text = "no flow"
+            else:
+                text = f"pressure {b.pressure:g} Pa"
             if isinstance(b, PressureBoundary) and b.amplitude > 0:
                 text += f" + {b.amplitude:g} Pa sin(2 pi t / {b.period:g} s + {b.phase:g})"
             if b.no_slip:

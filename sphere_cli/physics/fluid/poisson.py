@@ -62,6 +62,7 @@ COARSEST_TARGET = 64
 COARSEST_LIMIT = 4096
 BOUNDARIES = ("dirichlet", "no-flux")
 TINY = np.finfo(np.float64).tiny
+RESCALE_EXPONENT = 100  # a right-hand side norm outside 2^-100 .. 2^100 is rescaled
 
 
 @dataclass(frozen=True)
@@ -276,6 +277,15 @@ class PoissonSolver:
         if rhs_norm == 0.0:
             x[:] = 0.0
             return PoissonResult(0, 0.0, True, mean_removed)
+        # a right-hand side far from unit size (an incremental pressure that has settled decays
+        # towards 1e-300) is scaled by a power of two, exactly, so that the iteration's sums of
+        # squares neither underflow nor overflow
+        exponent = math.frexp(rhs_norm)[1]
+        rescale = abs(exponent) > RESCALE_EXPONENT
+        if rescale:
+            self.rhs *= 2.0**-exponent
+            x *= 2.0**-exponent
+            rhs_norm = math.ldexp(rhs_norm, -exponent)
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
             iterations, res = self._pcg(x, c, ax, ay, az, singular, scale)
@@ -283,6 +293,8 @@ class PoissonSolver:
             iterations, res = self._jacobi(x, ax, ay, az, scale)
         if singular:
             shift(x, self._mean(x))
+        if rescale:
+            x *= 2.0**exponent
         return PoissonResult(iterations, res, res <= self.tolerance, mean_removed)
 
     # -- helpers -----------------------------------------------------------------------------
