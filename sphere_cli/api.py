@@ -31,6 +31,7 @@ class RunResult:
     time: float
     wall_seconds: float
     particle_steps_per_second: float
+    steps_per_second: float = 0.0  # the rate of a scene without particles
 
 
 def validate(path: str | Path) -> dict:
@@ -101,15 +102,19 @@ def _drive(
             outcome = loop.run()
         wall = wallclock.monotonic() - started
         # the first step's compilation left out
-        rate = progress.rate(clock.step) * scene.state.particles.count
+        steps_rate = progress.rate(clock.step)
+        rate = steps_rate * scene.state.particles.count
         if outcome != "done":
             log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
             raise StoppedEarly(
                 f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a checkpoint "
                 f"was written: continue with `sphere resume {rundir.path}`"
             )
-        log.info("done at step %d (t = %.6g s), %.3g particle-steps/s", clock.step, clock.time, rate)
-        return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate)
+        log.info(
+            "done at step %d (t = %.6g s), %.3g steps/s, %.3g particle-steps/s",
+            clock.step, clock.time, steps_rate, rate,
+        )  # fmt: skip
+        return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate)
     except NumericalError as exc:
         log.error("%s", exc)
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})

@@ -383,11 +383,14 @@ def _interrupted() -> None:
 
 
 def _report(result: api.RunResult) -> None:
+    rate = f"{result.particle_steps_per_second / 1e6:.2f} M particle-steps/s"
+    if result.particle_steps_per_second == 0.0:  # no particles (or a single step: no rate yet)
+        rate = f"{result.steps_per_second:.3g} steps/s"
+    sidecar = result.run_dir / "trajectory.xmf"  # none for a run with nothing to show in ParaView
+    shown = f" (open {sidecar} in ParaView)" if sidecar.is_file() else ""
     typer.echo(
-        f"done: t = {result.time:.6g} s (step {result.step}) in {result.wall_seconds:.1f} s, "
-        f"{result.particle_steps_per_second / 1e6:.2f} M particle-steps/s\n"
-        f"output: {result.run_dir}/trajectory.h5 (open {result.run_dir}/trajectory.xmf in ParaView), "
-        f"checkpoints in {result.run_dir}/checkpoints/"
+        f"done: t = {result.time:.6g} s (step {result.step}) in {result.wall_seconds:.1f} s, {rate}\n"
+        f"output: {result.run_dir}/trajectory.h5{shown}, checkpoints in {result.run_dir}/checkpoints/"
     )
 
 

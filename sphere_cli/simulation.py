@@ -94,6 +94,8 @@ def check_stable(scene) -> None:
                 "The newest checkpoint before this step is intact; a smaller dt or a finer coupling "
                 "interval may help."
             )
+    if scene.motion is None:  # no particles
+        return
     i, reason = scene.motion.first_unstable(scene.state)
     if i >= 0:
         p = scene.state.particles

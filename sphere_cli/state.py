@@ -137,7 +137,7 @@ class Walls:
 class State:
     clock: Clock
     box: Box
-    particles: Particles
-    neighbors: NeighborList
+    particles: Particles  # empty arrays in a scene without particles (a fluid-only one)
+    neighbors: NeighborList | None  # None without particles
     walls: Walls | None = None
     fluid: object | None = None

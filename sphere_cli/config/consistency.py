@@ -29,6 +29,8 @@ MAX_RADIUS_DRAWS = 1e9
 
 
 def check_consistency(case: Case) -> list[tuple[tuple, str]]:
+    if not case.has_particles:
+        return _fluid_only_problems(case)
     problems: list[tuple[tuple, str]] = []
     dom = case.domain
     extent = [hi - lo for lo, hi in zip(dom.lower, dom.upper, strict=True)]
@@ -88,14 +90,95 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
         if case.particles.count is not None:
             problems += _size_problems(case, lower, upper)
 
-    problems += _material_problems(case)
+    if case.contact is None:
+        problems.append((("contact",), "required key is missing (the particles need a contact law)"))
+    else:
+        problems += _material_problems(case)
     problems += _fluid_grid_problems(case, extent, diameter)
     problems += _path_problems(case)
     problems += _step_problems(case)
+    problems += _frame_problems(case)
+    return problems
 
+
+def _frame_problems(case: Case) -> list[tuple[tuple, str]]:
     frames = case.output.frames
     if frames.every_time is None and frames.every_steps is None and frames.every_wall_minutes is None:
-        problems.append((("output", "frames"), "set every_time, every_steps or every_wall_minutes"))
+        return [(("output", "frames"), "set every_time, every_steps or every_wall_minutes")]
+    return []
+
+
+# what a fluid-only scene has not, in the messages that refuse keys which need particles
+_NO_PARTICLES = "this scene has no particles (no [particles], or particles.count = 0)"
+
+
+def _fluid_only_problems(case: Case) -> list[tuple[tuple, str]]:
+    """A scene without particles: only with a fluid, which then runs alone; nothing that acts
+    on particles or measures them, and a fluid that needs nothing of them."""
+    if case.fluid is None:
+        if "particles" not in case.model_fields_set:
+            return [
+                (
+                    ("particles",),
+                    "required key is missing: a scene needs particles unless it has a [fluid] "
+                    "section (a fluid-only scene)",
+                )
+            ]
+        return [
+            (
+                ("particles", "count"),
+                "no particles is a fluid-only scene, which needs a [fluid] section; give at least 1 "
+                "particle or add [fluid]",
+            )
+        ]
+    problems: list[tuple[tuple, str]] = []
+    if case.particles.placement.method == "file":
+        problems.append(
+            (
+                ("particles", "count"),
+                "the count comes from the placement file; remove this key (or the placement, "
+                "for a fluid-only scene)",
+            )
+        )
+    if case.walls:
+        problems.append((("walls",), f"walls act on particles only and {_NO_PARTICLES}; remove [[walls]]"))
+    if case.stages:
+        problems.append(
+            (("stages",), f"stages drive walls and particles, and {_NO_PARTICLES}; remove [[stages]]")
+        )
+    if case.output.fields:
+        problems.append(
+            (("output", "fields"), f"{_NO_PARTICLES}: there are no per-particle fields; remove this key")
+        )
+    if case.output.observables.quantities:
+        problems.append(
+            (
+                ("output", "observables", "quantities"),
+                f"these measure the particles and {_NO_PARTICLES}; remove this key (the fluid's "
+                "own observables are always recorded)",
+            )
+        )
+    grid = getattr(case.fluid, "grid", None)
+    if grid is not None and grid.cells is None and grid.cell_size is None:
+        problems.append(
+            (
+                ("fluid", "grid"),
+                "give cells or cell_size: the default cell edge is three largest particle diameters, "
+                f"and {_NO_PARTICLES}",
+            )
+        )
+    permeability = getattr(case.fluid, "permeability", None)
+    if getattr(permeability, "model", None) == "kozeny-carman" and permeability.coefficient is None:
+        problems.append(
+            (
+                ("fluid", "permeability", "coefficient"),
+                "required key is missing: its default d^2/180 takes d from the particles, and "
+                f'{_NO_PARTICLES}; give it, or a constant permeability (model = "constant")',
+            )
+        )
+    problems += memory_problems(case, 0, None)  # the fluid alone
+    problems += _step_problems(case)
+    problems += _frame_problems(case)
     return problems
 
 

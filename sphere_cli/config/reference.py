@@ -301,8 +301,11 @@ def _field_intro(field: FieldInfo, kind: _Kind) -> list[str]:
     text = _unit_and_text(field.description)[1]
     if text:
         lines.append(text if text[-1] in ".!?" else text + ".")
+    extra = field.json_schema_extra if isinstance(field.json_schema_extra, dict) else {}
     if field.is_required():
         lines.append("Required.")
+    elif "default_text" in extra:  # what leaving the table out means, where its value does not say it
+        lines += [extra["default_text"]] if extra["default_text"] else []
     else:
         value = field.get_default(call_default_factory=True)
         if value is None:

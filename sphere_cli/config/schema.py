@@ -32,7 +32,8 @@ class Simulation(Strict):
             'Time step [s], or "auto": dt_safety times the stability limit of one contact alone '
             "(each collision resolved by ~25 steps or more), but at most 0.9 times the stability "
             "bound of the scene (spheres held by many contacts at once, driven walls, the fluid). "
-            "A number above that bound is refused (see `stability`)."
+            "Without particles, 0.9 times the fluid's limit, or the fluid.coupling.interval that "
+            "sets it. A number above that bound is refused (see `stability`)."
         ),
     )
     dt_safety: Real = Field(
@@ -450,7 +451,12 @@ class Particles(Strict):
     """The spheres: how many, how big, how dense, where."""
 
     count: Count | None = Field(
-        None, ge=1, description="Number of particles (not used with placement from a file) [-]."
+        None,
+        ge=0,
+        description=(
+            "Number of particles (not used with placement from a file); 0, like leaving out "
+            "[particles], makes a fluid-only scene, which needs a [fluid] section [-]."
+        ),
     )
     density: Real | None = Field(
         None,
@@ -745,8 +751,18 @@ class Case(Strict):
     title: str = Field("", description="Free text describing the case.")
     simulation: Simulation
     domain: Domain
-    particles: Particles
-    contact: ContactModel
+    particles: Particles = Field(
+        default_factory=lambda: Particles(count=0),
+        description=(
+            "Required unless the case has a [fluid] section: left out (or with count = 0), the "
+            "scene is fluid-only and the fluid runs alone."
+        ),
+        json_schema_extra={"default_text": ""},  # the description says what leaving it out means
+    )
+    contact: ContactModel | None = Field(
+        None,
+        description="The contact law of the particles (required when there are particles).",
+    )
     materials: list[Material] = Field(
         default_factory=list,
         description="Materials of particles and walls, referred to by name (one table per material).",
@@ -772,7 +788,32 @@ class Case(Strict):
     @model_validator(mode="before")
     @classmethod
     def _default_tags(cls, data):
-        return _default_tag(data, "contact", "model", "linear")
+        return _fluid_only_defaults(_default_tag(data, "contact", "model", "linear"))
+
+    @property
+    def has_particles(self) -> bool:
+        """False for a fluid-only scene (no [particles], or count = 0)."""
+        return self.particles.count != 0
+
+
+def _fluid_only_defaults(data):
+    """A fluid-only scene (a [fluid], and no [particles] or count = 0) writes no per-particle
+    fields and measures no particle observables unless the case lists some (then refused by
+    consistency.py): the defaults of output.fields and output.observables.quantities are empty."""
+    if not isinstance(data, dict) or data.get("fluid") is None:
+        return data
+    particles = data.get("particles")
+    count = particles.get("count") if isinstance(particles, dict) else None
+    if "particles" in data and not (type(count) is int and count == 0):
+        return data
+    output = data.get("output", {})
+    if not isinstance(output, dict):
+        return data
+    output = {"fields": [], **output}
+    observables = output.get("observables", {})
+    if isinstance(observables, dict):
+        output["observables"] = {"quantities": [], **observables}
+    return {**data, "output": output}
 
 
 # Keys whose change does not alter the physics of a run (resume accepts them changed).

@@ -9,10 +9,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import MissingInputError, OutputError
+from ..errors import MissingInputError, OutputError, ResumeRefused
 from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
+from .trajectory import frame_clock
 
 
 def summarize(path: Path) -> dict:
@@ -50,7 +51,7 @@ def _checkpoint_entry(path: Path) -> dict:
     try:
         ck = read_checkpoint(path)
         return {"file": path.name, "step": ck.step, "time": ck.step * ck.dt, "valid": True}
-    except OutputError as exc:
+    except (OutputError, ResumeRefused) as exc:  # damaged, or of another format
         return {"file": path.name, "valid": False, "error": str(exc)}
 
 
@@ -74,8 +75,9 @@ def _read_trajectory(path: Path) -> dict:
             params = f["parameters"].attrs
             resolved = json.loads(params["resolved_case"])
             part = f["particles/trajectory"]
-            steps = part["position/step"][...]
-            times = part["position/time"][...]
+            clock = frame_clock(f)
+            steps = clock["step"][...]
+            times = clock["time"][...]
             obs = {
                 name: _last_sample(group)
                 for name, group in f["observables"].items()
@@ -85,7 +87,7 @@ def _read_trajectory(path: Path) -> dict:
                 "kind": "trajectory",
                 "path": str(path),
                 "title": resolved.get("title", ""),
-                "particles": int(part["radius"].shape[0]),
+                "particles": int(part["radius"].shape[0]) if "radius" in part else 0,
                 "frames": int(steps.size),
                 "first_time": float(times[0]) if times.size else None,
                 "last_step": int(steps[-1]) if steps.size else None,
@@ -93,7 +95,7 @@ def _read_trajectory(path: Path) -> dict:
                 "dt": float(params["dt"]),
                 "dt_limit": float(params["dt_limit"]),
                 "dt_bound": float(params.get("dt_bound", float("nan"))),  # written since 2026-12
-                "contact_model": resolved["contact"]["model"],
+                "contact_model": (resolved.get("contact") or {}).get("model"),
                 "walls": [w["face"] for w in resolved.get("walls", [])],
                 "periodic": resolved["domain"]["periodic"],
                 "fluid": _fluid(f),
@@ -151,7 +153,7 @@ def _checkpoint(path: Path) -> dict:
         "step": ck.step,
         "time": ck.step * ck.dt,
         "dt": ck.dt,
-        "particles": int(ck.arrays["particles"]["pos"].shape[0]),
+        "particles": int(ck.arrays["particles"]["pos"].shape[0]) if "particles" in ck.arrays else 0,
         "modules": sorted(ck.arrays),
         "physics_hash": ck.physics_hash,
     }

@@ -90,8 +90,7 @@ class Progress:
             self.bar.total = self.end_step
             self.bar.n = info["step"]
             self.bar.set_postfix_str(
-                f"t={info['time']:.4g}/{info['end_time']:.4g} s, "
-                f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s"
+                f"t={info['time']:.4g}/{info['end_time']:.4g} s, {self._rate_text(info)}"
             )
             self.bar.refresh()
         elif due:
@@ -99,10 +98,16 @@ class Progress:
             eta_text = f"{eta:.0f} s" if eta is not None else "?"
             print(
                 f"[sphere] step {info['step']}/{self.end_step}  t = {info['time']:.6g} s  "
-                f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s  ETA {eta_text}",
+                f"{self._rate_text(info)}  ETA {eta_text}",
                 file=self.stream,
                 flush=True,
             )
+
+    def _rate_text(self, info: dict) -> str:
+        """Particle-steps per second, or steps per second in a scene without particles."""
+        if self.n == 0:
+            return f"{info['steps_per_second']:.3g} steps/s"
+        return f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s"
 
     def close(self) -> None:
         if self.bar is not None:

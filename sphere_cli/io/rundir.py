@@ -33,7 +33,7 @@ from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
-from .trajectory import Trajectory, is_grid_field, open_as_writer
+from .trajectory import Trajectory, frame_clock, is_grid_field, open_as_writer
 from .xdmf import frame_grid, write_xdmf
 
 MARKER = ".sphere-run"
@@ -276,7 +276,9 @@ class RunOutput:
         self.physics_hash = physics_hash
         self.log = log
         self.fields = list(scene.case.output.fields)
-        self.trajectory = Trajectory(rundir.trajectory_path, self.fields, log)
+        self.trajectory = Trajectory(
+            rundir.trajectory_path, self.fields, log, scene.state.particles.count > 0
+        )
         self.keep = scene.case.output.checkpoints.keep
         self.last_checkpoint: Path | None = None
         self.xdmf_grids: list[tuple[str, str]] = []  # the sidecar's grids of each frame so far
@@ -301,18 +303,20 @@ class RunOutput:
     def _refresh_xdmf(self, scene) -> None:
         """Add the grids of the frames not yet in the sidecar (all of them after a resume) and
         replace it."""
+        n = scene.state.particles.count
+        fluid = _xdmf_fluid(scene)
+        if n == 0 and fluid is None:  # no particles and no 3D fluid grid (vans1d alone): no sidecar
+            return
         with open_as_writer(self.rundir.trajectory_path, "r") as f:
-            times = f["/particles/trajectory/position/time"][...].tolist()
+            times = frame_clock(f)["time"][...].tolist()
             moving = f"/fluid/{MOVING_GRID_SPACING}/value"
             spacing = f[moving][...] if moving in f else None
         grids = self.xdmf_grids[: len(times)]
-        fluid = _xdmf_fluid(scene)
         for k in range(len(grids), len(times)):
             frame_fluid = None
             if fluid is not None:
                 grid, fields = fluid
                 frame_fluid = (grid, fields, grid.spacing if spacing is None else spacing[k])
-            n = scene.state.particles.count
             grids.append(
                 frame_grid(self.rundir.trajectory_path.name, k, times[k], n, self.fields, frame_fluid)
             )

@@ -5,6 +5,9 @@
 /particles/trajectory/radius   time-independent (N,) [m]
 /particles/trajectory/species  time-independent (N,) material id, @materials its names
 /particles/trajectory/<field>  {step, time, value} for position, velocity, ...
+                               (a scene without particles, a fluid-only one, has the box alone:
+                               no radius, mass, species, fields or vertices; its edges are
+                               the frames' clock, frame_clock)
 /observables/<name>            {step, time, value}: the observables on their own schedule
                                (physics/observe/observables.py); value (samples, ...) holds a scalar,
                                a tensor (3,3) or a profile (layers, ...) per sample
@@ -109,10 +112,18 @@ def _append(g: h5py.Group, step: int, time: float, value) -> None:
     g["value"][k] = value
 
 
+def frame_clock(f: h5py.File) -> h5py.Group:
+    """The series whose step and time index the frames: the positions or, in the file of a run
+    without particles, the box edges (written with every frame too)."""
+    part = f[GROUP]
+    return part["position"] if "position" in part else part["box/edges"]
+
+
 class Trajectory:
-    def __init__(self, path: Path, fields: list[str], log=None):
+    def __init__(self, path: Path, fields: list[str], log=None, particles: bool = True):
+        """`particles` False: a scene without particles, whose frames hold no particle field."""
         self.path = path
-        self.fields = ["position", *fields]
+        self.fields = ["position", *fields] if particles else []
         self.log = log  # where failed tries are reported (the run's log), or None
 
     def create(self, scene, case_text: str, resolved: dict, physics_hash: str, provenance: dict) -> None:
@@ -137,16 +148,17 @@ class Trajectory:
                 # time-dependent, one row per frame: the form MDAnalysis reads
                 _time_series(box, "edges", (3,), np.float64, "m")
                 set_unit(box.create_dataset("offset", data=state.box.lower), "m")
-                set_unit(part.create_dataset("radius", data=state.particles.radius), "m")
-                set_unit(part.create_dataset("mass", data=state.particles.mass), "kg")
-                species = part.create_dataset("species", data=state.particles.material)
-                species.attrs["materials"] = np.array([name.encode() for name in scene.tables.names])
+                if n:  # without particles, the box alone
+                    set_unit(part.create_dataset("radius", data=state.particles.radius), "m")
+                    set_unit(part.create_dataset("mass", data=state.particles.mass), "kg")
+                    species = part.create_dataset("species", data=state.particles.material)
+                    species.attrs["materials"] = np.array([name.encode() for name in scene.tables.names])
+                    f.create_dataset(VERTICES, data=np.arange(n, dtype=np.int64))
                 for field in self.fields:
                     _time_series(part, field, (n, 3), np.float64, FIELD_UNITS[field])
                 obs = f.create_group("observables")  # series are created by their first sample
                 if scene.fluid is not None:
                     _create_fluid(f, scene)
-                f.create_dataset(VERTICES, data=np.arange(n, dtype=np.int64))
                 if state.walls is not None:
                     obs.attrs["wall_faces"] = np.array([face.encode() for face in state.walls.faces])
                 params = f.create_group("parameters")
@@ -175,7 +187,8 @@ class Trajectory:
                 if retry:  # a failed try may have left this frame in some series only
                     _cut_frames(f, step - 1)
                 part = f[GROUP]
-                if part["position/step"].shape[0] and part["position/step"][-1] >= step:
+                clock = frame_clock(f)
+                if clock["step"].shape[0] and clock["step"][-1] >= step:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
                 for field in self.fields:
                     _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
@@ -185,7 +198,7 @@ class Trajectory:
                     grid = scene.fluid.grid()
                     for name, (value, _unit) in fluid.items():
                         _append(f["fluid"][name], step, time, _file_order(value, grid))
-                _add_views(f, part["position/step"].shape[0] - 1)
+                _add_views(f, clock["step"].shape[0] - 1)
 
         self._with_retries(f"the frame of step {step}", "cannot append a frame", write)
 
@@ -243,9 +256,9 @@ class Trajectory:
                 _cut_frames(f, step)
                 _cut_to([f["observables"][name] for name in f["observables"]], step)
                 # files before 2026-12 have no views
-                if VERTICES not in f:
+                if VERTICES not in f and "radius" in f[GROUP]:
                     f.create_dataset(VERTICES, data=np.arange(f[GROUP]["radius"].shape[0], dtype=np.int64))
-                for k in range(f[GROUP]["position/step"].shape[0]):
+                for k in range(frame_clock(f)["step"].shape[0]):
                     _add_views(f, k)
         except OSError as exc:
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None

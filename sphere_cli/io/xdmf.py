@@ -57,8 +57,12 @@ def _fluid_grid(h5name: str, k: int, time: float, grid, fields: dict, spacing) -
 
 
 def frame_grid(h5name: str, k: int, time: float, n: int, fields: list[str], fluid=None) -> str:
-    """The grids of frame `k` at `time` [s]: the particles' and, with `fluid` = (FluidGrid,
-    {field name: components}, spacing (3,) [m] of this frame), the 3D fluid fields' (else "")."""
+    """The grids of frame `k` at `time` [s]: the particles' (none, "", when n = 0: a fluid-only
+    scene) and, with `fluid` = (FluidGrid, {field name: components}, spacing (3,) [m] of this
+    frame), the 3D fluid fields' (else "")."""
+    fluid_grid = "" if fluid is None else _fluid_grid(h5name, k, float(time), *fluid)
+    if n == 0:
+        return "", fluid_grid
     attrs = [
         '<Attribute Name="radius" AttributeType="Scalar" Center="Node">'
         + _hdf(h5name, f"{GROUP}/radius", (n,))
@@ -82,15 +86,17 @@ def frame_grid(h5name: str, k: int, time: float, n: int, fields: list[str], flui
         + "".join(attrs)
         + "</Grid>"
     )
-    return particles, ("" if fluid is None else _fluid_grid(h5name, k, float(time), *fluid))
+    return particles, fluid_grid
 
 
 def write_xdmf(path: Path, grids: list[tuple[str, str]]) -> None:
     """The sidecar of the frames whose (particle, fluid) grids (frame_grid) are given, replaced
-    atomically: a temporal collection of the particles and, with a fluid, one of the fluid cells
-    beside it (in one collection of both per frame, the readers would rename the blocks of
-    every frame but the first)."""
-    collections = [("particles", [p for p, _ in grids])]
+    atomically: a temporal collection of the particles (with particles) and, with a fluid on a
+    3D grid, one of the fluid cells beside it (in one collection of both per frame, the readers
+    would rename the blocks of every frame but the first)."""
+    collections = []
+    if grids and grids[0][0]:
+        collections.append(("particles", [p for p, _ in grids]))
     if grids and grids[0][1]:
         collections.append(("fluid", [fl for _, fl in grids]))
     text = '<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>\n'

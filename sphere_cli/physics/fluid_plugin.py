@@ -33,6 +33,9 @@ class FluidModule(Module):
 
     model = ""  # the [fluid] model tag, written to the trajectory
     name = "fluid"  # the checkpoint group of its prognostic state
+    # forces and kick are the fluid's action on the particles (its own step is after_step): a
+    # scene without particles leaves them out
+    particle_hooks = ("forces", "kick")
     # the coupling when [fluid.coupling] gives neither steps nor interval: 1 step, or this [s]
     default_interval: float | None = None
     fluid_dt = math.nan  # the fluid step, coupling_steps x dt [s] (start_coupling)
@@ -77,6 +80,11 @@ class FluidModule(Module):
         if steps > 1:
             return limit / steps, f"{reason}, divided by fluid.coupling.steps = {steps}"
         return limit, reason
+
+    def coupling_interval(self) -> float | None:
+        """The coupling as a span of time [s] (fluid.coupling.interval, or the model's default
+        where [fluid.coupling] gives neither); None when it is a number of steps."""
+        return self._coupling()[0]
 
     def _coupling(self) -> tuple[float | None, int]:
         """(interval [s] or None, steps) of [fluid.coupling], the model's default where it gives

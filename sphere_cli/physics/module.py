@@ -52,6 +52,9 @@ class Module:
     # hooks of other modules this one runs instead, {hook: module name} (a fluid with implicit
     # drag takes the particles' second half kick)
     takes_over: dict[str, str] = {}
+    # its hooks that act on the particles alone: a scene without particles (a fluid-only one)
+    # leaves them out of the step
+    particle_hooks: tuple[str, ...] = ()
 
     def kick_drift(self, state) -> None:
         """First half kick and drift."""
@@ -112,14 +115,19 @@ def order_problems(modules) -> list[str]:
 
 
 class Step:
-    """The bound methods of each step hook, taken once from the scene's ordered modules."""
+    """The bound methods of each step hook, taken once from the scene's ordered modules; without
+    `particles` (a fluid-only scene), the hooks a module lists in particle_hooks are left out."""
 
-    def __init__(self, modules: tuple):
+    def __init__(self, modules: tuple, particles: bool = True):
         taken = {(name, hook) for m in modules for hook, name in m.takes_over.items()}
 
         def bound(hook: str) -> tuple:
             return tuple(
-                getattr(m, hook) for m in modules if defines(m, hook) and (m.name, hook) not in taken
+                getattr(m, hook)
+                for m in modules
+                if defines(m, hook)
+                and (m.name, hook) not in taken
+                and (particles or hook not in m.particle_hooks)
             )
 
         self.kick_drift = bound("kick_drift")

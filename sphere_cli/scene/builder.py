@@ -1,7 +1,8 @@
 """Case -> scene: radii, positions, walls, the physics modules in play, and the time step.
 
 Only what the case asks for is allocated: no walls, no wall arrays; a dry case, no fluid (the
-fluid model's module is not even imported).
+fluid model's module is not even imported); a fluid-only case (no particles), no particle
+motion, neighbour search or contacts: the fluid's own step is all its step does.
 """
 
 from __future__ import annotations
@@ -44,9 +45,9 @@ AUTO_SHARE = 0.9
 class Scene:
     case: Case
     state: State
-    motion: Motion
-    neighbors: NeighborSearch
-    contact: PairContactForces
+    motion: Motion | None  # None (and neighbors, contact) in a scene without particles
+    neighbors: NeighborSearch | None
+    contact: PairContactForces | None
     walls: PlaneWallForces | None
     dt_limit: float  # smallest stability limit of one contact alone or a fluid process [s]
     dt_limit_reason: str = ""  # what sets it
@@ -84,7 +85,7 @@ class Scene:
         problems = order_problems(self.modules)
         if problems:  # a programming error: the order above breaks physics/module.py ORDER
             raise RuntimeError("; ".join(problems))
-        self.step = Step(self.modules)
+        self.step = Step(self.modules, particles=self.state.particles.count > 0)
 
     def compute_initial_forces(self) -> None:
         """Forces of the initial state, for the first half kick: no time has passed, so the
@@ -101,6 +102,8 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     """Build the scene of a case; with `restart` (a CheckpointData), the particles come from the
     checkpoint (placement files are not needed again) and every module's state is restored."""
     case = loaded.case
+    if not case.has_particles:
+        return _build_fluid_only(loaded, restart)
     rng = np.random.default_rng(case.particles.seed)
     tables = contact_tables(case)
     n_placed = None
@@ -250,6 +253,88 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     return scene
 
 
+def _build_fluid_only(loaded: LoadedCase, restart=None) -> Scene:
+    """The scene of a case without particles: the fluid alone. No particle arrays but empty
+    ones (the fluid reads them), no motion, neighbour search or contacts, and dt from the
+    fluid's limits (_fluid_only_dt)."""
+    case = loaded.case
+    dom = case.domain
+    box = Box(
+        lower=np.array(dom.lower, dtype=np.float64),
+        upper=np.array(dom.upper, dtype=np.float64),
+        periodic=np.array(dom.periodic, dtype=np.uint8),
+        body_acc=np.array(dom.gravity, dtype=np.float64),
+    )
+    none3, none = np.zeros((0, 3)), np.zeros(0)
+    particles = Particles(
+        pos=none3, vel=none3, angvel=none3, force=none3, torque=none3, radius=none, mass=none,
+        inertia=none, inv_mass=none, inv_inertia=none, material=np.zeros(0, dtype=np.int32),
+        vel_pred=none3, angvel_pred=none3,
+    )  # fmt: skip
+    state = State(clock=Clock(dt=math.nan), box=box, particles=particles, neighbors=None)
+    fluid = build_fluid(loaded, state)
+    limit, reason = fluid.dt_limit()
+    state.clock.dt = _fluid_only_dt(loaded, fluid, limit, reason)
+    scene = Scene(
+        case=case,
+        state=state,
+        motion=None,
+        neighbors=None,
+        contact=None,
+        walls=None,
+        dt_limit=limit,
+        dt_limit_reason=reason,
+        dt_bound=limit,
+        dt_bound_reason=reason,
+        fluid=fluid,
+    )
+    fluid.start(state)
+    scene.observer = Observer(scene, case.output.observables)
+    scene.order_modules()
+    if restart is None:
+        fluid.initialize(state)
+    else:
+        _restore(loaded, scene, restart)
+    return scene
+
+
+def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason: str) -> float:
+    """dt of a scene without particles, given the fluid's limit on it and what sets it [s]:
+    with dt = "auto", the coupling interval where it sets the limit (one step a fluid step:
+    there are no particles to sub-step), else AUTO_SHARE of the limit; a limit of none (an
+    implicit fluid step with nothing to couple to) is refused, asking for dt."""
+    sim = loaded.case.simulation
+    if sim.dt != "auto":
+        if sim.dt > limit:
+            raise loaded.error(
+                ("simulation", "dt"),
+                f'above the stability limit {limit:.4g} s ({reason}); use dt <= {limit:.4g} s or dt = "auto"',
+            )
+        _check_steps(loaded, sim.dt)
+        return float(sim.dt)
+    if not math.isfinite(limit):
+        raise loaded.error(
+            ("simulation", "dt"),
+            f'"auto" takes the fluid\'s limits when there are no particles, and this fluid has none '
+            f"({reason}); give dt in seconds (or fluid.coupling.interval)",
+        )
+    interval = fluid.coupling_interval()
+    if interval is not None and limit == interval:
+        dt, how = limit, f"{reason}, one step a fluid step"
+    else:
+        dt, how = AUTO_SHARE * limit, f"{AUTO_SHARE:g} x {reason}"
+    _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({how}): ')
+    steps = sim.duration / dt
+    if steps > MANY_STEPS:
+        warn(
+            loaded.describe(
+                ("simulation", "dt"),
+                f"gives {dt:.3g} s ({how}): {steps:.3g} steps to reach t = {sim.duration:g} s",
+            )
+        )
+    return dt
+
+
 def _driven_wall_limit(case: Case, walls, scales: WallScales, box: Box, limit: float, reason: str):
     """The smaller of `limit` and the stability limit of every stress-driven wall mode of the
     case (against one layer of contacts, physics/walls.py), with what sets it."""
@@ -301,7 +386,7 @@ def check_placement(loaded: LoadedCase) -> None:
     that cannot hold the particles (their radii drawn as the build draws them, from the seed).
     Random insertion is only known by doing it, and placement files are read by `run`."""
     spec = loaded.case.particles
-    if isinstance(spec.placement, LatticePlacement):
+    if isinstance(spec.placement, LatticePlacement) and loaded.case.has_particles:
         radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
         lattice_sites(spec.placement, loaded.case, radius)
 

@@ -11,6 +11,7 @@ and the buoyancy -rho_f V g (kernels/fluid/darcy.py).
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -56,10 +57,14 @@ class Darcy(FluidModule):
                 ("fluid", "fixed_pressure", empty[0]),
                 f"holds no cell centre of the fluid grid ({grid.describe()}); widen the region",
             )
-        self.mean_diameter = 2.0 * float(np.mean(particles.radius))
+        # a scene without particles (fluid only): the porosity of open fluid clamped, porosity_max,
+        # that never changes, and no coupling; the Kozeny-Carman coefficient is then given
+        # (config/consistency.py)
+        self.alone = particles.count == 0
+        self.mean_diameter = 0.0 if self.alone else 2.0 * float(np.mean(particles.radius))
         volume = 4.0 / 3.0 * np.pi * particles.radius**3
-        self.lightest_density = float(np.min(particles.mass / volume))
-        self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0)
+        self.lightest_density = math.inf if self.alone else float(np.min(particles.mass / volume))
+        self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0 or None)
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
@@ -76,6 +81,11 @@ class Darcy(FluidModule):
         0.3 rho_s k / mu, blowing up at 0.5; the limit is COUPLING_FRACTION of it, with k at
         the densest sphere packing (phi = 0.26, or porosity_min if higher; the constant k
         otherwise) and rho_s the lightest particle density."""
+        if self.alone:
+            return (
+                math.inf,
+                "no particles to couple to, and the implicit pore-pressure step is stable at any step",
+            )
         config = self.pore.config
         phi = max(config.porosity_min, DENSEST_POROSITY)
         if self.pore.kc is None:
@@ -92,7 +102,10 @@ class Darcy(FluidModule):
 
     def initialize(self, state) -> None:
         s = self.pore.state
-        self._measure(state)
+        if self.alone:  # open fluid, porosity 1, seen through the clamp as every open cell is
+            s.porosity[...] = self.pore.config.porosity_max
+        else:
+            self._measure(state)
         self.porosity_previous[...] = s.porosity
         s.porosity_rate[...] = 0.0
         self.pore.update_permeability()
@@ -101,16 +114,18 @@ class Darcy(FluidModule):
     def after_step(self, state) -> None:
         clock = state.clock
         s = self.pore.state
-        self._measure(state)
-        np.subtract(s.porosity, self.porosity_previous, out=s.porosity_rate)
-        s.porosity_rate *= 1.0 / self.fluid_dt
+        if not self.alone:  # without particles the porosity stays as initialize() measured it
+            self._measure(state)
+            np.subtract(s.porosity, self.porosity_previous, out=s.porosity_rate)
+            s.porosity_rate *= 1.0 / self.fluid_dt
         try:
             self.pore.advance(self.fluid_dt, clock.time)
         except ArithmeticError as exc:
             raise NumericalError(
                 f"numerical failure at step {clock.step} (t = {clock.time:.6g} s) in the fluid: {exc}"
             ) from None
-        self.porosity_previous[...] = s.porosity
+        if not self.alone:
+            self.porosity_previous[...] = s.porosity
         if s.clamped_cells and not self.warned_clamp:
             self.warned_clamp = True
             config = self.pore.config

@@ -324,6 +324,8 @@ class Vans1d(FluidModule):
     def observables(self, state) -> dict:
         p, f = state.particles, state.fluid
         tau = self.bed_shear_stress(state)
+        if p.count == 0:  # clear water: no sediment to measure
+            return {"bed_shear_stress": (tau, "Pa")}
         g = float(np.linalg.norm(self.gravity))
         rho = self.cfg.density
         sel = f.selected == 1
@@ -342,9 +344,11 @@ class Vans1d(FluidModule):
     def output_fields(self, state) -> dict:
         f = state.fluid
         prof = f.profiles
+        fluid = {"layer_height": (f.column.centres, "m"), "fluid_velocity": (f.column.u, "m s-1")}
+        if state.particles.count == 0:  # clear water: no solid profiles
+            return fluid
         return {
-            "layer_height": (f.column.centres, "m"),
-            "fluid_velocity": (f.column.u, "m s-1"),
+            **fluid,
             "solid_fraction": (prof.solid_fraction, "1"),
             "particle_velocity": (prof.vel, "m s-1"),
             "drag": (prof.drag, "N m-3"),

@@ -37,7 +37,8 @@ class Observer(Module):
         self.config = config
         self.groups = set(config.quantities)
         self.shear_axis = AXES[config.shear_direction]
-        self.margin = config.interior_margin * 2.0 * float(scene.state.particles.radius.max())
+        radius = scene.state.particles.radius
+        self.margin = config.interior_margin * 2.0 * float(radius.max()) if radius.size else 0.0
         self.stress = None
         if self.groups & {"stress", "profiles"}:
             self.stress = StressProbe(scene.state, scene.contact)
@@ -53,6 +54,15 @@ class Observer(Module):
     def sample(self) -> dict[str, tuple]:
         scene, state, groups = self.scene, self.scene.state, self.groups
         out: dict[str, tuple] = {}
+        if groups:  # none without particles: the modules' own alone (the fluid's)
+            self._sample_groups(out)
+        for observed in scene.step.observed:
+            out.update(observed(state))
+        return out
+
+    def _sample_groups(self, out: dict[str, tuple]) -> None:
+        """The groups of output.observables.quantities, into `out`."""
+        scene, state, groups = self.scene, self.scene.state, self.groups
         for name, value in energy.observables(scene).items():
             if energy.GROUPS[name] in groups:
                 out[name] = (value, energy.UNITS[name])
@@ -84,9 +94,6 @@ class Observer(Module):
             out["dilation"] = ((height - ref) / ref, "")
             if state.walls is not None:
                 out["shear_strain"] = (shear_strain(state.walls, self.shear_axis, ref), "")
-        for observed in scene.step.observed:
-            out.update(observed(state))
-        return out
 
     def prognostic_state(self, state: State) -> dict:
         return {"reference_height": self.reference_height}
