@@ -30,7 +30,7 @@ from pathlib import Path
 import numba
 
 from ..config.load import parse_case
-from ..io.checkpoint import newest_valid_checkpoint
+from ..io.checkpoint import FORMAT, newest_valid_checkpoint
 from ..runtime import shared_cores_note
 from ..scene.builder import build_scene
 from ..simulation import advance
@@ -104,9 +104,11 @@ keep = 1
 
 def settled_cache_dir(n: int) -> Path:
     """Where the settled bed of N spheres is kept: the user cache, keyed by the text of the
-    settling case (N and every parameter). A change of the code's defaults is not seen: delete
-    the folder to settle again."""
+    settling case (N and every parameter) and the checkpoint format (a cache another format wrote
+    is settled again). A change of the code's defaults is not seen: delete the folder to settle
+    again."""
     text = canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS, SETTLE_SPACING)
+    text += f"# checkpoint format {FORMAT}\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return base / "sphere" / "bench" / f"settled-{n}-{digest[:12]}"

@@ -13,6 +13,7 @@ from pydantic import Field, model_validator
 
 from .base import Count, Flag, Real, Strict, _default_tag
 from .drag import DragConfig
+from .expression import ExpressionText
 from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary
 from .fluid_grid import FluidGridConfig
 
@@ -97,6 +98,78 @@ class PressureSolverConfig(Strict):
     )
 
 
+Components = tuple[ExpressionText, ExpressionText, ExpressionText]
+
+
+class InitialFluidFields(Strict):
+    """The fluid at the start, instead of at rest under the hydrostatic pressure: expressions of
+    position or an HDF5 file of the grid's values."""
+
+    velocity: Components | None = Field(
+        None,
+        description=(
+            "Interstitial velocity (x, y and z components) as expressions of x, y, z [m], e.g. "
+            '["1e-3*sin(2*pi*x/0.01)", "0", "0"]: numbers, + - * / ^, parentheses, sin, cos, exp, '
+            "pi; evaluated where each component lives, on the cell faces normal to it; a no-flow "
+            "or prescribed-velocity boundary keeps its own value [m/s]."
+        ),
+    )
+    pressure: ExpressionText | None = Field(
+        None,
+        description=(
+            "Pressure as an expression of x, y, z [m] at the cell centres (default: hydrostatic, "
+            "referred to the top if it is a pressure boundary, else the bottom) [Pa]."
+        ),
+    )
+    file: str | None = Field(
+        None,
+        description=(
+            "HDF5 file (relative paths from the case file's folder) with any of the datasets "
+            "velocity_x (nx, ny, nz) on the x faces (face i at x = i dx), velocity_y (nx, ny, nz) on "
+            "the y faces, velocity_z (nx, ny, nz+1) on the z faces (face k at z = k dz, 0 the "
+            "bottom) [m/s] and pressure (nx, ny, nz) at the cell centres [Pa], x, y, z of the "
+            "fluid grid from its lower corner. Exclusive with velocity and pressure."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if self.file is not None and (self.velocity is not None or self.pressure is not None):
+            raise ValueError(
+                "give the initial fields either as expressions (velocity, pressure) or in a file"
+            )
+        return self
+
+
+class BodyForceField(Strict):
+    """A body acceleration that varies in space, acting on the fluid besides gravity (e.g. a
+    forcing that drives a flow in a periodic box): expressions of position or an HDF5 file."""
+
+    acceleration: Components | None = Field(
+        None,
+        description=(
+            "Acceleration (x, y and z components) as expressions of x, y, z [m], evaluated on the "
+            "faces of each component (the syntax of fluid.initial.velocity) [m/s^2]."
+        ),
+    )
+    file: str | None = Field(
+        None,
+        description=(
+            "HDF5 file (relative paths from the case file's folder) with the datasets "
+            "acceleration_x (nx, ny, nz), acceleration_y (nx, ny, nz), acceleration_z (nx, ny, nz+1) "
+            "on the faces, as fluid.initial.file's velocity [m/s^2]. Exclusive with acceleration."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if (self.acceleration is None) == (self.file is None):
+            raise ValueError(
+                "give the body force either as acceleration expressions or as a file, one of them"
+            )
+        return self
+
+
 class NavierStokesFluid(Strict):
     """A Newtonian fluid filling the pores: porous Navier-Stokes on the fluid grid, x and y
     periodic, z bounded by the bottom and top boundaries."""
@@ -139,6 +212,13 @@ class NavierStokesFluid(Strict):
     )
     drag: DragConfig = Field(
         default_factory=DragConfig, description="Momentum exchange between particles and fluid."
+    )
+    initial: InitialFluidFields = Field(
+        default_factory=InitialFluidFields,
+        description="The fluid at the start (default: at rest, hydrostatic pressure).",
+    )
+    body_force: BodyForceField | None = Field(
+        None, description="A body acceleration field on the fluid besides gravity (default: none)."
     )
     max_speed: Real | None = Field(
         None,

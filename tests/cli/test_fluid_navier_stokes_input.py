@@ -49,6 +49,54 @@ SCHEMA_ERRORS = [
     ("boundary-type", 'type = "pressure"', 'type = "open"', "fluid.top", "top =", []),
     ("negative-viscosity", "viscosity = 0.001", "viscosity = -1.0", "fluid.viscosity", "viscosity =", []),
     (
+        "velocity-and-flux",
+        'top = { type = "pressure", pressure = 0.0 }',
+        'top = { type = "velocity", velocity = 0.01, flux = 1e-6 }',
+        "fluid.top",
+        "top =",
+        ["either velocity", "or flux"],
+    ),
+    (
+        "velocity-without-an-open-face",
+        'top = { type = "pressure", pressure = 0.0 }',
+        'top = { type = "velocity", velocity = 0.01 }',
+        "fluid",
+        "[fluid]",
+        ['"velocity" needs the other one of type "pressure"'],
+    ),
+    (
+        "initial-expression",
+        "viscosity = 0.001",
+        'viscosity = 0.001\ninitial = { velocity = ["sin(2*pi*x", "0", "0"] }',
+        "fluid.initial.velocity[0]",
+        "initial =",
+        ['"sin(2*pi*x"', 'or ")"', "found the end"],
+    ),
+    (
+        "initial-unknown-name",
+        "viscosity = 0.001",
+        'viscosity = 0.001\ninitial = { pressure = "1000*r" }',
+        "fluid.initial.pressure",
+        "initial =",
+        ['unknown name "r"'],
+    ),
+    (
+        "initial-file-and-expression",
+        "viscosity = 0.001",
+        'viscosity = 0.001\ninitial = { pressure = "0", file = "f.h5" }',
+        "fluid.initial",
+        "initial =",
+        ["either as expressions", "or in a file"],
+    ),
+    (
+        "body-force-neither",
+        "viscosity = 0.001",
+        "viscosity = 0.001\nbody_force = {}",
+        "fluid.body_force",
+        "body_force =",
+        ["one of them"],
+    ),
+    (
         "typo",
         "old_pressure_weight = 0.0",
         "old_presure_weight = 0.0",
@@ -151,3 +199,27 @@ def test_a_coupling_interval_above_the_viscous_limit_is_refused(tmp_path, viscos
     result = _run(tmp_path, text)
     where = f"case.toml:{line_of(text, 'interval =')}:"
     assert_clean_error(result, 65, "fluid.coupling.interval", where, *fragments)
+
+
+def test_a_body_force_that_is_not_finite_is_refused_naming_the_point(tmp_path):
+    """An expression that divides by zero somewhere on the grid: exit 65 naming the key, the
+    component and where."""
+    text = edit(
+        FLUID, "viscosity = 0.001", 'viscosity = 0.001\nbody_force = { acceleration = ["0", "1/(x-x)", "0"] }'
+    )
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 65, "fluid.body_force.acceleration[1]", "not finite", "x=")
+
+
+def test_an_initial_field_file_that_is_missing_or_misshapen_is_refused(tmp_path):
+    """fluid.initial.file: a missing file exits 66 naming the key; a dataset of another shape
+    than the grid's exits 65 naming the dataset and both shapes."""
+    import h5py
+
+    text = edit(FLUID, "viscosity = 0.001", 'viscosity = 0.001\ninitial = { file = "fields.h5" }')
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 66, "fluid.initial.file", "file not found")
+    with h5py.File(tmp_path / "fields.h5", "w") as f:
+        f["velocity_z"] = [[[0.0] * 8] * 4] * 4  # the z faces are (4, 4, 9)
+    result = _run(tmp_path, text)
+    assert_clean_error(result, 65, "fluid.initial.file", "'velocity_z'", "(4, 4, 8)", "(4, 4, 9)")

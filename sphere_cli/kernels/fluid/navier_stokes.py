@@ -71,13 +71,16 @@ A uniform phi and v stay so; summed over a column, the pore volume changes by ex
 relative flux through the top face, which must be open (prescribed pressure).
 
 Arguments: v_face, v_star, mobility, acceleration (nx,ny,nz+1,3) [m/s, m/s, -, m/s^2] on the
-faces; v, f_i, f_exchange, grad_p (nx,ny,nz,3) [m/s, N/m^3, N/m^3, Pa/m] at the cell centres
-(v from the fluxes of the cell's faces, `cell_velocity`); p, eps, phi, dphi, k_drag, rhs (nx,ny,nz) [Pa,
-Pa, -, 1/s, kg/(m^3 s), Pa/m^2]; spacing (3,) [m]; bc_sign (2,3) float64; p_kind (2,) int64, 1 =
-prescribed pressure, 0 = no flow, 2 = prescribed velocity; p_bound (2,) [Pa] boundary pressure
-(bottom, top); inflow (2,) [m/s] superficial velocity along +z of a prescribed-velocity face; rho
-[kg/m^3]; mu [Pa s]; beta [-]; pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid
-step; stretch [1/s] the moving grid's s.
+faces; edges (nx,ny,nz+1,3) [-] the edge porosities of `edge_porosity`; normal (nx,ny,nz+2,3)
+and shear (nx,ny,nz+1,3) [1/s] the viscous stresses of `viscous_stresses`; flux
+(nx,ny,nz+2,3,3) [m^2/s^2] the advective fluxes of `advective_fluxes`; v, f_i, f_exchange, grad_p (nx,ny,nz,3)
+[m/s, N/m^3, N/m^3, Pa/m] at the cell centres (v from the fluxes of the cell's faces,
+`cell_velocity`); p, eps, phi, dphi, k_drag, rhs (nx,ny,nz) [Pa, Pa, -, 1/s, kg/(m^3 s),
+Pa/m^2]; spacing (3,) [m]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescribed pressure,
+0 = no flow, 2 = prescribed velocity; p_bound (2,) [Pa] boundary pressure (bottom, top); inflow
+(2,) [m/s] superficial velocity along +z of a prescribed-velocity face; rho [kg/m^3]; mu [Pa s];
+beta [-]; pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step; stretch [1/s]
+the moving grid's s.
 """
 
 import math
@@ -158,7 +161,8 @@ def _cell_vec(f, i, j, k, a):
 @njit(cache=True, inline="always")
 def _pres(p, i, j, k, p_kind, p_bound):
     """p[i,j,k] with the z ghost cells of a pressure: 2 p_b - p of the boundary cell at a
-    prescribed-pressure face, linear extrapolation at a no-flow face."""
+    prescribed-pressure face, linear extrapolation at a no-flow or prescribed-velocity face
+    (which the momentum balances never read: their velocity is given)."""
     nz = p.shape[2]
     i = _wrap(i, p.shape[0])
     j = _wrap(j, p.shape[1])
@@ -180,22 +184,43 @@ def _phi_face(phi, i, j, k, c):
     return 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
 
 
+@njit(cache=True, parallel=True)
+def edge_porosity(phi, edges):
+    """edges[i,j,k,m]: the porosity of the edge along axis m at the corner of cell (i,j,k) half a
+    cell towards -1 along both other axes, the mean of the four cells around it (z ghosts: the
+    boundary cell); layer k = nz is the top's (edges along x and y) [-]. Once per fluid step, so
+    that the momentum stencils read each edge once."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)
+        for j in range(ny):
+            for k in range(nz + 1):
+                for m in range(3):
+                    c = 1 if m == 0 else 0
+                    a = 1 if m == 2 else 2
+                    ic, jc, kc = _shift(i, j, k, c, -1)
+                    ia, ja, ka = _shift(i, j, k, a, -1)
+                    ib, jb, kb = _shift(ic, jc, kc, a, -1)
+                    edges[i, j, k, m] = 0.25 * (
+                        _cell(phi, i, j, k)
+                        + _cell(phi, ic, jc, kc)
+                        + _cell(phi, ia, ja, ka)
+                        + _cell(phi, ib, jb, kb)
+                    )
+
+
 @njit(cache=True, inline="always")
-def _phi_edge(phi, i, j, k, c, a):
-    """Porosity of the edge half a cell along +a from face (i,j,k) of component c (a != c): the
-    mean of the four cells around it."""
-    ia, ja, ka = _shift(i, j, k, a, 1)
-    ic, jc, kc = _shift(i, j, k, c, -1)
-    iac, jac, kac = _shift(ia, ja, ka, c, -1)
-    return 0.25 * (
-        _cell(phi, i, j, k) + _cell(phi, ia, ja, ka) + _cell(phi, ic, jc, kc) + _cell(phi, iac, jac, kac)
-    )
+def _edge(edges, i, j, k, c, a):
+    """Porosity of the edge half a cell along +a from face (i,j,k) of component c (a != c), from
+    `edge_porosity`: the edge along the third axis at index (i,j,k) + a."""
+    i1, j1, k1 = _shift(i, j, k, a, 1)
+    return edges[_wrap(i1, edges.shape[0]), _wrap(j1, edges.shape[1]), k1, 3 - c - a]
 
 
 @njit(cache=True, inline="always")
 def _is_face(k, c, nz, p_kind):
     """Whether (i,j,k) of component c is a face with a momentum balance: not the unused layer
-    k = nz of x and y, not a no-flow z boundary."""
+    k = nz of x and y, not a no-flow or prescribed-velocity z boundary."""
     if c < 2:
         return k < nz
     if k == 0:
@@ -207,8 +232,9 @@ def _is_face(k, c, nz, p_kind):
 
 @njit(cache=True, parallel=True)
 def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
-    """grad_p of every cell: the mean of the compact gradients of its two faces of each
-    component (central differences with the pressure ghosts) [Pa/m]; what the particles feel."""
+    """grad_p of every cell, what the particles feel: central differences with the pressure
+    ghosts [Pa/m], the mean of the compact gradients of its two faces of each component (at a no-flow
+    or prescribed-velocity z boundary the ghost extrapolates: the gradient of the face inside)."""
     nx, ny, nz = p.shape
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
@@ -222,30 +248,55 @@ def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
                     ) / (2.0 * spacing[a])
 
 
+@njit(cache=True, parallel=True, error_model="numpy")
+def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear):
+    """The viscous stresses / viscosity where the momentum balances of the faces need them, each
+    computed once: normal[i,j,k+1,c] = phi (d_c v_c) at the centre of cell (i,j,k) (k = -1 .. nz,
+    the z ghosts included), between its faces of component c; shear[i,j,k,m] = phi_edge (d_a v_c
+    + d_c v_a) at the edge of `edge_porosity` along m, c and a the other two axes."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(-1, nz + 1):
+                for c in range(3):
+                    i1, j1, k1 = _shift(i, j, k, c, 1)
+                    normal[i, j, k + 1, c] = _cell(phi, i, j, k) * (
+                        _face(v_face, i1, j1, k1, c, bc_sign) - _face(v_face, i, j, k, c, bc_sign)
+                    )
+                if k < 0:
+                    continue
+                for m in range(3):
+                    c = 1 if m == 0 else 0
+                    a = 1 if m == 2 else 2
+                    ia, ja, ka = _shift(i, j, k, a, -1)
+                    ic, jc, kc = _shift(i, j, k, c, -1)
+                    uc = _face(v_face, i, j, k, c, bc_sign)
+                    ua = _face(v_face, i, j, k, a, bc_sign)
+                    shear[i, j, k, m] = edges[i, j, k, m] * (
+                        (uc - _face(v_face, ia, ja, ka, c, bc_sign)) / spacing[a]
+                        + (ua - _face(v_face, ic, jc, kc, a, bc_sign)) / spacing[c]
+                    )
+
+
 @njit(cache=True, inline="always")
-def _viscous(u, phi, i, j, k, c, spacing, bc_sign):
-    """div(phi (grad v + grad v^T))_c / viscosity at face (i,j,k) of component c: the normal
-    stress at the cell centres either side, the shear stresses at the four edges around."""
-    uc = _face(u, i, j, k, c, bc_sign)
+def _viscous(normal, shear, i, j, k, c, spacing):
+    """div(phi (grad v + grad v^T))_c / viscosity at face (i,j,k) of component c, from the
+    stresses of `viscous_stresses`: the normal stress at the cell centres either side, the shear
+    stresses at the four edges around."""
+    nx, ny = shear.shape[0], shear.shape[1]
     total = 0.0
     for a in range(3):
-        i1, j1, k1 = _shift(i, j, k, a, 1)
-        i0, j0, k0 = _shift(i, j, k, a, -1)
         if a == c:
-            up = _cell(phi, i, j, k) * (_face(u, i1, j1, k1, c, bc_sign) - uc)
-            dn = _cell(phi, i0, j0, k0) * (uc - _face(u, i0, j0, k0, c, bc_sign))
+            i0, j0, k0 = _shift(i, j, k, c, -1)
+            up = normal[i, j, k + 1, c]
+            dn = normal[_wrap(i0, nx), _wrap(j0, ny), k0 + 1, c]
             total += 2.0 * (up - dn) / (spacing[a] * spacing[a])
         else:
-            ic, jc, kc = _shift(i, j, k, c, -1)
-            i1c, j1c, k1c = _shift(i1, j1, k1, c, -1)
-            shear_up = (_face(u, i1, j1, k1, c, bc_sign) - uc) / spacing[a] + (
-                _face(u, i1, j1, k1, a, bc_sign) - _face(u, i1c, j1c, k1c, a, bc_sign)
-            ) / spacing[c]
-            shear_dn = (uc - _face(u, i0, j0, k0, c, bc_sign)) / spacing[a] + (
-                _face(u, i, j, k, a, bc_sign) - _face(u, ic, jc, kc, a, bc_sign)
-            ) / spacing[c]
-            up = _phi_edge(phi, i, j, k, c, a) * shear_up
-            dn = _phi_edge(phi, i0, j0, k0, c, a) * shear_dn
+            i1, j1, k1 = _shift(i, j, k, a, 1)
+            m = 3 - c - a
+            up = shear[_wrap(i1, nx), _wrap(j1, ny), k1, m]
+            dn = shear[i, j, k, m]
             total += (up - dn) / spacing[a]
     return total
 
@@ -262,56 +313,75 @@ def _limited_face_value(upwind_upwind, upwind, downwind):
     return upwind
 
 
+@njit(cache=True, parallel=True, error_model="numpy")
+def advective_fluxes(v_face, phi, edges, bc_sign, flux):
+    """flux[i,j,k,c,a] = phi u v_c through the side of the control volume of face (i,j,k) of
+    component c half a cell towards -a (module docstring): the transport phi u there (phi of the
+    cell centre for a = c, of the edge otherwise; u the mean of the two faces of component a
+    nearest) times v_c reconstructed from the upwind face with van Leer's limited slope. Each
+    side is the -a side of one face and the +a side of the one before it: computed once here, so
+    that `predict` takes the divergence. Layers k = 0 .. nz + 1 (the +z side of the top faces)."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+        for j in range(ny):
+            for k in range(nz + 2):
+                for c in range(3):
+                    uc = _face(v_face, i, j, k, c, bc_sign)
+                    for a in range(3):
+                        if k > nz and a != 2:  # beyond the +z side of the top faces
+                            flux[i, j, k, c, a] = 0.0
+                            continue
+                        i0, j0, k0 = _shift(i, j, k, a, -1)
+                        west = _face(v_face, i0, j0, k0, c, bc_sign)
+                        if a == c:
+                            transport = _cell(phi, i0, j0, k0) * 0.5 * (west + uc)
+                        else:
+                            ic, jc, kc = _shift(i, j, k, c, -1)
+                            transport = (
+                                edges[i, j, k, 3 - c - a]
+                                * 0.5
+                                * (_face(v_face, i, j, k, a, bc_sign) + _face(v_face, ic, jc, kc, a, bc_sign))
+                            )
+                        # (far upwind, upwind, downwind) of the side; one call site each (compile time)
+                        if a == 2 and c != 2 and (k == 0 or k == nz):
+                            # a side on a z boundary carries the boundary's own value, the mean
+                            # of the faces either side (0 at a no-slip face, through which a
+                            # prescribed or open flow brings no tangential velocity)
+                            flux[i, j, k, c, a] = transport * 0.5 * (west + uc)
+                            continue
+                        if transport > 0.0:
+                            im, jm, km = _far(i, j, k, a, -1, nx, ny)
+                            value = _limited_face_value(_face(v_face, im, jm, km, c, bc_sign), west, uc)
+                        else:
+                            i1, j1, k1 = _shift(i, j, k, a, 1)
+                            value = _limited_face_value(_face(v_face, i1, j1, k1, c, bc_sign), uc, west)
+                        flux[i, j, k, c, a] = transport * value
+
+
 @njit(cache=True, inline="always")
-def _advection(u, phi, i, j, k, c, spacing, bc_sign):
-    """div(phi v v_c) over the control volume of face (i,j,k) of component c: through each side
-    the flux phi u carrying the limited upwind-biased v_c (module docstring)."""
-    nx, ny = u.shape[0], u.shape[1]
-    uc = _face(u, i, j, k, c, bc_sign)
-    total = 0.0
-    for a in range(3):
-        i1, j1, k1 = _shift(i, j, k, a, 1)
-        i0, j0, k0 = _shift(i, j, k, a, -1)
-        if a == c:
-            flux_up = _cell(phi, i, j, k) * 0.5 * (uc + _face(u, i1, j1, k1, c, bc_sign))
-            flux_dn = _cell(phi, i0, j0, k0) * 0.5 * (_face(u, i0, j0, k0, c, bc_sign) + uc)
-        else:
-            ic, jc, kc = _shift(i, j, k, c, -1)
-            i1c, j1c, k1c = _shift(i1, j1, k1, c, -1)
-            flux_up = (
-                _phi_edge(phi, i, j, k, c, a)
-                * 0.5
-                * (_face(u, i1, j1, k1, a, bc_sign) + _face(u, i1c, j1c, k1c, a, bc_sign))
-            )
-            flux_dn = (
-                _phi_edge(phi, i0, j0, k0, c, a)
-                * 0.5
-                * (_face(u, i, j, k, a, bc_sign) + _face(u, ic, jc, kc, a, bc_sign))
-            )
-        east = _face(u, i1, j1, k1, c, bc_sign)
-        west = _face(u, i0, j0, k0, c, bc_sign)
-        # (far upwind, upwind, downwind) of each side; one call site each (compile time)
-        if flux_up > 0.0:
-            uu, up_, d = west, uc, east
-        else:
-            i2, j2, k2 = _far(i, j, k, a, 1, nx, ny)
-            uu, up_, d = _face(u, i2, j2, k2, c, bc_sign), east, uc
-        value_up = _limited_face_value(uu, up_, d)
-        if flux_dn > 0.0:
-            im, jm, km = _far(i, j, k, a, -1, nx, ny)
-            uu, up_, d = _face(u, im, jm, km, c, bc_sign), west, uc
-        else:
-            uu, up_, d = east, uc, west
-        value_dn = _limited_face_value(uu, up_, d)
-        total += (flux_up * value_up - flux_dn * value_dn) / spacing[a]
+def _advection(flux, i, j, k, c, spacing):
+    """div(phi v v_c) over the control volume of face (i,j,k) of component c from the side
+    fluxes of `advective_fluxes`."""
+    nx, ny = flux.shape[0], flux.shape[1]
+    i1 = i + 1 if i + 1 < nx else 0
+    j1 = j + 1 if j + 1 < ny else 0
+    total = (flux[i1, j, k, c, 0] - flux[i, j, k, c, 0]) / spacing[0]
+    total += (flux[i, j1, k, c, 1] - flux[i, j, k, c, 1]) / spacing[1]
+    total += (flux[i, j, k + 1, c, 2] - flux[i, j, k, c, 2]) / spacing[2]
     return total
 
 
-@njit(cache=True, parallel=True)
+# error_model="numpy": a division by zero gives inf or nan (caught by the fluid's checks) instead
+# of a Python exception, which spares a test on every division of the stencils
+@njit(cache=True, parallel=True, error_model="numpy")
 def predict(
     v_face,
     p,
     phi,
+    normal,
+    shear,
+    flux,
     dphi,
     f_i,
     k_drag,
@@ -365,8 +435,8 @@ def predict(
                     implicit = dt * coefficient * inv
                     uc = v_face[i, j, k, c]
                     rate = (
-                        mu * inv * _viscous(v_face, phi, i, j, k, c, spacing, bc_sign)
-                        - _advection(v_face, phi, i, j, k, c, spacing, bc_sign) / ph
+                        mu * inv * _viscous(normal, shear, i, j, k, c, spacing)
+                        - _advection(flux, i, j, k, c, spacing) / ph
                         - beta * p_factor * grad
                         + acceleration[i, j, k, c]
                         - inv * force
@@ -458,14 +528,15 @@ def correct(v_star, eps, phi, mobility, spacing, p_kind, eps_bound, rho, beta, d
 
 
 @njit(cache=True, parallel=True)
-def cell_velocity(v_face, v_old, phi, f_i, k_drag, v, f_exchange):
+def cell_velocity(v_face, v_old, phi, f_i, k_drag, p_kind, v, f_exchange):
     """The cell-centred interstitial velocity v = mean of the fluxes phi_f v_f through the cell's
     two faces of each component / phi: the flux a cell carries, which is what its particles feel
     (a plain mean of the face velocities would understate it beside a porosity jump); and what
     the faces took of the cell's drag in the step from v_old to v_face, f_exchange = f_i +
-    k_drag (mean over the two faces of v_new - v_old) [N/m^3] (each face takes the mean of its
-    two cells' f_i + k_drag (v_new - v_old), so these sum to what the fluid received, with the
-    opposite sign; a no-flow face, fixed, passes its share to the wall)."""
+    k_drag (mean over the two faces of v_new - v_old) [N/m^3]: each face with a momentum balance
+    takes the mean of its two cells' f_i + k_drag (v_new - v_old), so these sum to what the fluid
+    received, with the opposite sign. A z boundary face without one (no flow, prescribed
+    velocity) passes its half of the boundary cell's f_i to the boundary, and no implicit part."""
     nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
@@ -481,14 +552,16 @@ def cell_velocity(v_face, v_old, phi, f_i, k_drag, v, f_exchange):
                         _phi_face(phi, i, j, k, c) * v_face[i, j, k, c]
                         + _phi_face(phi, i2, j2, k2, c) * v_face[i2, j2, k2, c]
                     )
-                    change = (
-                        v_face[i, j, k, c] - v_old[i, j, k, c] + v_face[i2, j2, k2, c] - v_old[i2, j2, k2, c]
-                    )
+                    change = 0.0
+                    if _is_face(k, c, nz, p_kind):
+                        change += v_face[i, j, k, c] - v_old[i, j, k, c]
+                    if _is_face(k2, c, nz, p_kind):
+                        change += v_face[i2, j2, k2, c] - v_old[i2, j2, k2, c]
                     f_exchange[i, j, k, c] = f_i[i, j, k, c] + kd * change
 
 
 @njit(cache=True, inline="always")
-def _grid_advection(u, phi, i, j, k, c, stretch, bc_sign):
+def _grid_advection(u, phi, edges, i, j, k, c, stretch, bc_sign):
     """The moving grid's share of the momentum rate of face (i,j,k), component c (module
     docstring), v_up and v_dn from the side the flux relative to the grid comes from (above when
     the grid stretches, s > 0)."""
@@ -500,8 +573,8 @@ def _grid_advection(u, phi, i, j, k, c, stretch, bc_sign):
         phi_dn = _cell(phi, i, j, k - 1)
     else:
         zeta_up, zeta_dn = k + 1.0, 1.0 * k
-        phi_up = _phi_edge(phi, i, j, k, c, 2)
-        phi_dn = _phi_edge(phi, i, j, k - 1, c, 2)
+        phi_up = _edge(edges, i, j, k, c, 2)
+        phi_dn = _edge(edges, i, j, k - 1, c, 2)
     if stretch > 0.0:
         v_up = _face(u, i, j, k + 1, c, bc_sign)
         v_dn = uc
@@ -512,7 +585,7 @@ def _grid_advection(u, phi, i, j, k, c, stretch, bc_sign):
 
 
 @njit(cache=True, parallel=True)
-def add_grid_motion(v_face, phi, k_drag, bc_sign, p_kind, rho, dt, stretch, v_star):
+def add_grid_motion(v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretch, v_star):
     """v* += dt D_f (the moving grid's momentum rate) after `predict` (module docstring), from
     the old face velocities."""
     nx, ny, nz = phi.shape
@@ -527,7 +600,9 @@ def add_grid_motion(v_face, phi, k_drag, bc_sign, p_kind, rho, dt, stretch, v_st
                     ph = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
                     coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
                     d = 1.0 / (1.0 + dt * coefficient / (rho * ph))
-                    v_star[i, j, k, c] += dt * d * _grid_advection(v_face, phi, i, j, k, c, stretch, bc_sign)
+                    v_star[i, j, k, c] += (
+                        dt * d * _grid_advection(v_face, phi, edges, i, j, k, c, stretch, bc_sign)
+                    )
 
 
 @njit(cache=True, parallel=True)

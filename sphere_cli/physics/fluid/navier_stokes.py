@@ -25,9 +25,11 @@ from ...errors import NumericalError
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
     add_grid_source,
+    advective_fluxes,
     cell_velocity,
     continuity_error,
     correct,
+    edge_porosity,
     face_coefficients,
     first_unstable,
     max_courant,
@@ -35,9 +37,11 @@ from ...kernels.fluid.navier_stokes import (
     pressure_gradient,
     pressure_rhs,
     top_outflow,
+    viscous_stresses,
 )
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
 from .drag import FluidParticleDrag
+from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .grid import FluidGrid, fluid_grid
 from .poisson import PoissonResult, PoissonSolver
 from .porosity import Porosity
@@ -49,18 +53,22 @@ class NavierStokesState:
     face is which): the velocity on the cell faces, everything else at the cell centres."""
 
     v_face: np.ndarray  # (nx,ny,nz+1,3) [m/s] interstitial fluid velocity, component c on the c faces
-    v: np.ndarray  # (nx,ny,nz,3) [m/s] its cell-centred value (mean of each cell's two faces)
+    v: np.ndarray  # (nx,ny,nz,3) [m/s] its cell-centred value (the faces' mean flux / phi)
     p: np.ndarray  # (nx,ny,nz) [Pa] pressure
     grad_p: np.ndarray  # (nx,ny,nz,3) [Pa/m] gradient of p at the cell centres (central differences)
     porosity: np.ndarray  # (nx,ny,nz) [-]
     porosity_rate: np.ndarray  # (nx,ny,nz) [1/s] d porosity/dt
-    f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles at the old fluid v
+    f_i: np.ndarray  # (nx,ny,nz,3) [N/m^3] force density on the particles the next step takes
     k_drag: np.ndarray  # (nx,ny,nz) [kg/(m^3 s)] its derivative with respect to the fluid v
     f_exchange: np.ndarray  # (nx,ny,nz,3) [N/m^3] f_i + k_drag (v_new - v_old) of the last step
     acceleration: np.ndarray  # (nx,ny,nz+1,3) [m/s^2] body acceleration on the faces (gravity)
     # scratch of the fluid step (not state)
     v_star: np.ndarray  # (nx,ny,nz+1,3)
     v_old: np.ndarray  # (nx,ny,nz+1,3) the face velocities before the correction
+    edges: np.ndarray  # (nx,ny,nz+1,3) the porosity of the cell edges
+    flux: np.ndarray  # (nx,ny,nz+2,3,3) the advective fluxes through the faces' control volumes
+    normal: np.ndarray  # (nx,ny,nz+2,3) the viscous normal stresses at the cell centres
+    shear: np.ndarray  # (nx,ny,nz+1,3) the viscous shear stresses at the edges
     mobility: np.ndarray  # (nx,ny,nz+1,3)
     rhs: np.ndarray
     eps: np.ndarray
@@ -160,6 +168,10 @@ class NavierStokesSolver:
             acceleration=acceleration,
             v_star=np.zeros(faces),
             v_old=np.zeros(faces),
+            edges=np.zeros(faces),
+            flux=np.zeros((shape[0], shape[1], shape[2] + 2, 3, 3)),
+            normal=np.zeros((shape[0], shape[1], shape[2] + 2, 3)),
+            shear=np.zeros(faces),
             mobility=np.zeros(faces),
             rhs=np.zeros(shape),
             eps=np.zeros(shape),
@@ -196,7 +208,12 @@ class NavierStokesSolver:
             if self.p_kind[row] != 1:  # a no-flow or prescribed-velocity face keeps its value
                 fs.v_face[:, :, k, 2] = self.inflow[row] / fs.porosity[:, :, 0 if row == 0 else nz - 1]
         np.copyto(fs.v_old, fs.v_face)
-        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, fs.v, fs.f_exchange)
+        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, self.p_kind, fs.v, fs.f_exchange)
+
+    def update_pressure_gradient(self, fs: NavierStokesState, time: float) -> None:
+        """fs.grad_p from fs.p, with the boundary pressures at `time` [s] (after setting fs.p)."""
+        self.boundary_pressure(time, self.p_bound)
+        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
 
     def resize(self, height: float) -> None:
         """Stretch the grid along z to `height` [m] (a grid following the top wall)."""
@@ -235,14 +252,26 @@ class NavierStokesSolver:
         old = self.boundary_pressure(time, self.p_old)
         # (V_new - V_old) / (V_new dt) of every cell of a grid following the top wall
         stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
+        edge_porosity(fs.porosity, fs.edges)
+        advective_fluxes(fs.v_face, fs.porosity, fs.edges, self.bc_sign, fs.flux)
+        viscous_stresses(fs.v_face, fs.porosity, fs.edges, self.spacing, self.bc_sign, fs.normal, fs.shear)
         predict(
-            fs.v_face, fs.p, fs.porosity, fs.porosity_rate, fs.f_i, fs.k_drag, fs.acceleration, self.spacing,
-            self.bc_sign, self.p_kind, old, rho, self.mu, beta, solid, dt, self.inflow, fs.v_star,
-            fs.mobility,
+            fs.v_face, fs.p, fs.porosity, fs.normal, fs.shear, fs.flux, fs.porosity_rate, fs.f_i, fs.k_drag,
+            fs.acceleration, self.spacing, self.bc_sign, self.p_kind, old, rho, self.mu, beta, solid, dt,
+            self.inflow, fs.v_star, fs.mobility,
         )  # fmt: skip
         if stretch != 0.0:
             add_grid_motion(
-                fs.v_face, fs.porosity, fs.k_drag, self.bc_sign, self.p_kind, rho, dt, stretch, fs.v_star
+                fs.v_face,
+                fs.porosity,
+                fs.edges,
+                fs.k_drag,
+                self.bc_sign,
+                self.p_kind,
+                rho,
+                dt,
+                stretch,
+                fs.v_star,
             )
         pressure_rhs(fs.v_star, fs.porosity, fs.porosity_rate, self.spacing, rho, dt, fs.rhs)
         if stretch != 0.0:
@@ -274,7 +303,7 @@ class NavierStokesSolver:
         if self.follows:
             fs.outflow += dt * top_outflow(fs.v_face, fs.porosity, self.spacing, stretch)
             fs.height = self.height
-        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, fs.v, fs.f_exchange)
+        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, self.p_kind, fs.v, fs.f_exchange)
         pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
         fs.steps += 1
         return result
@@ -313,7 +342,8 @@ class NavierStokesSolver:
 
     def continuity_error(self, fs: NavierStokesState, out: np.ndarray | None = None) -> np.ndarray:
         """dphi + div(phi_f v_f) of every cell after the last step [1/s] (zero up to the
-        pressure solver's tolerance)."""
+        pressure solver's tolerance on a fixed grid; a grid following the top wall adds its own
+        source, kernels/fluid/navier_stokes.py)."""
         out = np.zeros(self.grid.shape) if out is None else out
         continuity_error(fs.v_face, fs.porosity, fs.porosity_rate, self.spacing, out)
         return out
@@ -422,8 +452,25 @@ class NavierStokes(FluidModule):
         )
         self.fs = self.solver.allocate()
         state.fluid = self.fs
+        self.loaded = loaded
+        if cfg.body_force is not None:
+            self._add_body_force(cfg.body_force)
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
+
+    def _add_body_force(self, body) -> None:
+        """Adds the body-force field of the case to the faces' acceleration (gravity)."""
+        key = ("fluid", "body_force")
+        if body.file is not None:
+            fields = read_face_fields(body.file, "acceleration", self.solver, (*key, "file"), self.loaded)
+        else:
+            fields = dict(
+                enumerate(
+                    face_expressions(self.solver, body.acceleration, (*key, "acceleration"), self.loaded)
+                )
+            )
+        for c, value in fields.items():
+            self.fs.acceleration[:, :, : face_shape(self._grid, c)[2], c] += value
 
     def fluid_step_limit(self) -> tuple[float, str]:
         """The fluid step's own limit [s] and what sets it."""
@@ -448,11 +495,30 @@ class NavierStokes(FluidModule):
         return limit, reason
 
     def initialize(self, state) -> None:
-        """Porosity of the initial packing (no change yet), fluid at rest, hydrostatic pressure."""
+        """Porosity of the initial packing (no change yet); the fluid at rest under the
+        hydrostatic pressure, or the initial fields of [fluid.initial]."""
         fs = self.fs
         self._measure_porosity(state)
         fs.porosity_rate[...] = 0.0
         self.solver.initial_pressure(fs, state.clock.time)
+        initial, key = self.config.initial, ("fluid", "initial")
+        velocity, pressure = None, None
+        if initial.file is not None:
+            shapes = {f"velocity_{'xyz'[c]}": face_shape(self._grid, c) for c in range(3)}
+            shapes["pressure"] = tuple(self._grid.shape)
+            found = read_grid_file(initial.file, shapes, (*key, "file"), self.loaded, False)
+            if any(name.startswith("velocity") for name in found):
+                velocity = [found.get(f"velocity_{'xyz'[c]}", 0.0) for c in range(3)]
+            pressure = found.get("pressure")
+        if initial.velocity is not None:
+            velocity = face_expressions(self.solver, initial.velocity, (*key, "velocity"), self.loaded)
+        if initial.pressure is not None:
+            pressure = cell_expression(self.solver, initial.pressure, (*key, "pressure"), self.loaded)
+        if velocity is not None:
+            self.solver.set_velocity(fs, velocity)
+        if pressure is not None:
+            fs.p[...] = pressure
+            self.solver.update_pressure_gradient(fs, state.clock.time)
 
     def forces(self, state, spring_dt: float | None = None) -> None:
         self.drag.forces(state, self.fs, spring_dt)
@@ -604,7 +670,7 @@ def _top_wall(loaded, state) -> int:
     if not isinstance(cfg.top, PressureBoundary):
         raise loaded.error(
             ("fluid", "top", "type"),
-            '"no-flow" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be able to '
-            'leave or enter through the moving top; use type = "pressure"',
+            f'"{cfg.top.type}" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be '
+            'free to leave or enter through the moving top; use type = "pressure"',
         )
     return faces.index("z+")

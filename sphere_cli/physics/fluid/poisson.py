@@ -274,18 +274,19 @@ class PoissonSolver:
             shift(self.rhs, mean_removed)
             column_squares(self.rhs, self.part_a)
         rhs_norm = math.sqrt(ordered_sum(self.part_a))
-        if rhs_norm == 0.0:
+        if rhs_norm == 0.0 and not self.rhs.any():
             x[:] = 0.0
             return PoissonResult(0, 0.0, True, mean_removed)
         # a right-hand side far from unit size (an incremental pressure that has settled decays
-        # towards 1e-300) is scaled by a power of two, exactly, so that the iteration's sums of
-        # squares neither underflow nor overflow
-        exponent = math.frexp(rhs_norm)[1]
-        rescale = abs(exponent) > RESCALE_EXPONENT
+        # towards 1e-300) is scaled by a power of two, exactly, taken from its largest value, so
+        # that the iteration's sums of squares neither underflow nor overflow
+        rescale = not (2.0**-RESCALE_EXPONENT <= rhs_norm <= 2.0**RESCALE_EXPONENT)
         if rescale:
+            exponent = math.frexp(float(np.abs(self.rhs).max()))[1]
             self.rhs *= 2.0**-exponent
             x *= 2.0**-exponent
-            rhs_norm = math.ldexp(rhs_norm, -exponent)
+            column_squares(self.rhs, self.part_a)
+            rhs_norm = math.sqrt(ordered_sum(self.part_a))
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
             iterations, res = self._pcg(x, c, ax, ay, az, singular, scale)
