@@ -6,15 +6,18 @@ seconds, the rule of every span of time in a case) with the fluid held, then the
 over the same time with the particles where they are then. Each model has its own default.
 
 Boundaries: `type = "pressure"` holds the face at pressure + amplitude sin(2 pi t / period +
-phase); `type = "no-flow"` lets no fluid through it.
+phase), or at the pressure of a time series read from a file (`series`, linear between its
+samples); `type = "no-flow"` lets no fluid through it.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, model_validator
+import numpy as np
+from pydantic import Field, PrivateAttr, model_validator
 
 from .base import Count, Real, Strict
 
@@ -64,18 +67,73 @@ class PressureBoundary(Strict):
         None, gt=0, description="Period of the modulation; required when amplitude > 0 [s]."
     )
     phase: Real = Field(0.0, description="Phase of the modulation at t = 0 [rad].")
+    series: str | None = Field(
+        None,
+        description=(
+            "A CSV file (relative paths from the case file's folder) of two columns, time [s] and "
+            "pressure [Pa], one sample a line (a header line and text after # are skipped), times "
+            "increasing: the face's pressure is linear between the samples and holds the first "
+            "or last value outside them. Exclusive with pressure, amplitude, period and phase."
+        ),
+    )
+    _times: np.ndarray | None = PrivateAttr(None)
+    _pressures: np.ndarray | None = PrivateAttr(None)
 
     @model_validator(mode="after")
     def _period_given(self):
         if self.amplitude > 0 and self.period is None:
             raise ValueError("a modulation (amplitude > 0) needs its period [s]")
+        if self.series is not None and self.model_fields_set & {"pressure", "amplitude", "period", "phase"}:
+            raise ValueError(
+                "a pressure series replaces pressure, amplitude, period and phase: give one or the other"
+            )
         return self
 
     def value(self, time: float) -> float:
         """The pressure on the face at `time` [s] -> [Pa]."""
+        if self.series is not None:
+            if self._times is None:
+                raise RuntimeError("the pressure series was not read (read_series)")
+            return float(np.interp(time, self._times, self._pressures))
         if self.amplitude == 0.0:
             return self.pressure
         return self.pressure + self.amplitude * math.sin(2.0 * math.pi * time / self.period + self.phase)
+
+    def read_series(self, base_dir: Path) -> str | None:
+        """Read the `series` file (relative to base_dir); what is wrong with it, or None."""
+        path = Path(self.series)
+        if not path.is_absolute():
+            path = base_dir / path
+        try:
+            lines = path.read_text(encoding="utf-8").splitlines()
+        except FileNotFoundError:
+            return f"file not found ({path})"
+        except (OSError, ValueError) as exc:
+            return f"{path}: not a readable text file ({exc})"
+        rows = []
+        for number, line in enumerate(lines, start=1):
+            fields = [f.strip() for f in line.split("#")[0].split(",")]
+            if fields == [""]:
+                continue
+            try:
+                if len(fields) != 2:
+                    raise ValueError
+                rows.append((float(fields[0]), float(fields[1])))
+            except ValueError:
+                if not rows and number == 1:
+                    continue  # a header
+                return (
+                    f"{path}:{number}: expected two numbers, time [s] and pressure [Pa], got {line.strip()!r}"
+                )
+        data = np.array(rows, dtype=np.float64).reshape(-1, 2)
+        if len(data) < 1:
+            return f"{path}: no samples (two numbers a line: time [s], pressure [Pa])"
+        if not np.isfinite(data).all():
+            return f"{path}: a time or pressure is not finite"
+        if np.any(np.diff(data[:, 0]) <= 0):
+            return f"{path}: the times must increase from one line to the next"
+        self._times, self._pressures = data[:, 0].copy(), data[:, 1].copy()
+        return None
 
 
 # case keys of earlier versions -> the key that replaces them (an old key is refused by name)

@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from ..config.fluid_common import PressureBoundary
+from ..errors import CaseError, MissingInputError
 from .module import Module
 
 # model tag -> "module:class", imported on demand
@@ -42,8 +44,17 @@ class FluidModule(Module):
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate
-        its arrays into a container set as state.fluid."""
+        its arrays into a container set as state.fluid; reads the pressure series of its
+        boundaries (a missing file exits 66, a malformed one 65, naming the key)."""
         self.loaded = loaded
+        fluid = loaded.case.fluid
+        for face in ("bottom", "top"):
+            boundary = getattr(fluid, face, None)
+            if isinstance(boundary, PressureBoundary) and boundary.series is not None:
+                problem = boundary.read_series(loaded.base_dir)
+                if problem is not None:
+                    kind = MissingInputError if problem.startswith("file not found") else CaseError
+                    raise kind(loaded.describe(("fluid", face, "series"), problem))
 
     def start(self, state) -> None:
         """Called once state.clock.dt is known, for a new run and a resumed one alike: sets

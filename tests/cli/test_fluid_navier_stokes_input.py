@@ -223,3 +223,36 @@ def test_an_initial_field_file_that_is_missing_or_misshapen_is_refused(tmp_path)
         f["velocity_z"] = [[[0.0] * 8] * 4] * 4  # the z faces are (4, 4, 9)
     result = _run(tmp_path, text)
     assert_clean_error(result, 65, "fluid.initial.file", "'velocity_z'", "(4, 4, 8)", "(4, 4, 9)")
+
+
+@pytest.mark.parametrize(
+    ("content", "code", "fragments"),
+    [
+        (None, 66, ["file not found"]),
+        ("t,p\n0.0,1.0\n0.1\n", 65, ["top.csv:3", "expected two numbers"]),
+        ("0.0,1.0\n0.0,2.0\n", 65, ["times must increase"]),
+    ],
+    ids=["missing", "one-column", "not-increasing"],
+)
+def test_a_bad_pressure_series_is_refused(tmp_path, content, code, fragments):
+    """fluid.top.series: a missing file exits 66, a malformed one 65, naming the key."""
+    if content is not None:
+        (tmp_path / "top.csv").write_text(content)
+    text = edit(
+        FLUID,
+        'top = { type = "pressure", pressure = 0.0 }',
+        'top = { type = "pressure", series = "top.csv" }',
+    )
+    result = _run(tmp_path, text)
+    assert_clean_error(result, code, "fluid.top.series", *fragments)
+
+
+def test_a_pressure_series_excludes_a_constant_pressure(tmp_path):
+    text = edit(
+        FLUID,
+        'top = { type = "pressure", pressure = 0.0 }',
+        'top = { type = "pressure", pressure = 1.0, series = "t.csv" }',
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", tmp_path / "case.toml")
+    assert_clean_error(result, 65, "fluid.top", "replaces pressure")

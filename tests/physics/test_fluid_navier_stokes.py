@@ -114,6 +114,28 @@ def test_hydrostatic_pressure_follows_a_modulated_top():
     assert np.abs(fs.v).max() < 1e-9
 
 
+def test_hydrostatic_pressure_follows_a_top_pressure_series(tmp_path):
+    """A prescribed top pressure given as a time series (fluid.top.series, a CSV of time and
+    pressure): linear between the samples and held beyond the last, the whole hydrostatic column
+    follows it at every step, p = p_t(t) + rho g (H - z)."""
+    (tmp_path / "top.csv").write_text("t,p\n0.0, 0.0\n0.02, 300.0  # rising\n0.05, -100.0\n")
+    n, height = 8, 0.08
+    grid = _grid((3, 3, n), (0.03, 0.03, height))
+    solver = _solver(
+        grid, (0.0, 0.0, -G), top={"type": "pressure", "series": "top.csv"}, solver={"tolerance": HYDRO_TOL}
+    )
+    assert solver.config.top.read_series(tmp_path) is None
+    fs = solver.allocate()
+    dt = 1e-3
+    for step in range(80):
+        solver.step(fs, step * dt, dt)
+        t = (step + 1) * dt
+        p_top = float(np.interp(t, [0.0, 0.02, 0.05], [0.0, 300.0, -100.0]))
+        exact = p_top + RHO * G * (height - grid.centres(2))
+        assert np.abs(fs.p - exact[None, None, :]).max() <= 1e-9 * RHO * G * height, step
+    assert fs.p[0, 0, -1] == pytest.approx(-100.0 + RHO * G * 0.5 * height / n, rel=1e-9)
+
+
 # ------------------------------------------------------------------------------- shear wave
 
 NU = 1e-3  # m^2/s, mu = 1 Pa s at rho = 1000

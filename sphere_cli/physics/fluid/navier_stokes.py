@@ -392,6 +392,8 @@ class NavierStokesSolver:
                 text = f"superficial velocity {self.inflow[0 if name == 'bottom' else 1]:g} m/s along +z"
             elif isinstance(b, NoFlowBoundary):
                 text = "no flow"
+            elif b.series is not None:
+                text = f"pressure series {b.series}"
             else:
                 text = f"pressure {b.pressure:g} Pa"
             if isinstance(b, PressureBoundary) and b.amplitude > 0:
