@@ -27,6 +27,16 @@ class DragConfig(Strict):
             "velocity and porosity of its cell [-]."
         ),
     )
+    averaging: Literal["particle", "cell"] = Field(
+        "particle",
+        description=(
+            '"particle": each particle\'s drag from its own diameter and velocity relative to its '
+            'cell\'s fluid; "cell": the cell-averaged drag of the sphere documentation, the force '
+            "(1 - phi) k(phi, d, |u - v|) (u - v) of a cell from the mean diameter d and velocity v "
+            "of its particles (lens-volume weighted, measured with the porosity at each fluid "
+            "step), shared among the particles whose centres lie in it by their volumes [-]."
+        ),
+    )
     pressure_force: Flag = Field(
         True,
         description=(

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 from sphere_cli import api
 from sphere_cli.config.load import load_case
@@ -54,8 +55,12 @@ def _final_state(run_dir: Path) -> dict:
     return read_checkpoint(list_checkpoints(run_dir / "checkpoints")[-1]).arrays
 
 
-def test_fluid_resume_is_bitwise_identical(tmp_path, write_case):
-    case = write_case(CASE)
+@pytest.mark.parametrize("averaging", ["particle", "cell"])
+def test_fluid_resume_is_bitwise_identical(tmp_path, write_case, averaging):
+    """Both drag averagings: the cell-averaged drag's means and shares are in the checkpoint."""
+    case = write_case(
+        CASE.replace("[fluid.coupling]", f'[fluid.drag]\naveraging = "{averaging}"\n[fluid.coupling]')
+    )
     dt = build_scene(load_case(case)).state.clock.dt
     whole = api.run(case, tmp_path / "whole", until=STEPS * dt)
     api.run(case, tmp_path / "split", until=SPLIT * dt)

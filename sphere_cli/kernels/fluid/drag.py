@@ -107,6 +107,9 @@ def particle_drag(
     grad_p,
     dt,
     initial,
+    cell_share,
+    cell_diameter,
+    cell_velocity,
     force,
     f_other,
     coef,
@@ -116,19 +119,33 @@ def particle_drag(
     to `force` (which holds every other force); keep the non-drag force in f_other and K in coef
     for the kick. `initial` (the forces of the initial state): also keep the drag in f_drag, for
     the first half kick (later the kick sets it). Returns the number of particles in cells below
-    the porosity floor."""
+    the porosity floor.
+
+    The cell-averaged drag (cell_share (C,) not empty): K = V cell_share k(phi, d_c, |u - v_c|)
+    with the cell's mean diameter d_c = cell_diameter [m] and velocity v_c = cell_velocity [m/s],
+    cell_share = (1 - phi) V_cell / (the volume of the particles centred in it), so that the
+    cell's particles together receive (1 - phi) V_cell k (u - v_c) (by their volume-weighted mean
+    velocity); a cell no particle reaches (d_c = 0) falls back to the particle's own."""
     half = 0.5 * dt
     below = 0
+    averaged = cell_share.shape[0] > 0
     for i in prange(vel.shape[0]):
         c = cell_of[i]
         if phi[c] < floor:
             below += 1
         d = 2.0 * radius[i]
         volume = math.pi / 6.0 * d * d * d
-        w0 = u[c, 0] - vel[i, 0]
-        w1 = u[c, 1] - vel[i, 1]
-        w2 = u[c, 2] - vel[i, 2]
-        k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
+        if averaged and cell_diameter[c] > 0.0:
+            w0 = u[c, 0] - cell_velocity[c, 0]
+            w1 = u[c, 1] - cell_velocity[c, 1]
+            w2 = u[c, 2] - cell_velocity[c, 2]
+            w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            k = volume * cell_share[c] * drag_rate(law, phi[c], cell_diameter[c], w, rho, mu, floor)
+        else:
+            w0 = u[c, 0] - vel[i, 0]
+            w1 = u[c, 1] - vel[i, 1]
+            w2 = u[c, 2] - vel[i, 2]
+            k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
         coef[i] = k
         g = phi1(k * inv_mass[i] * half)
         for a in range(3):
@@ -186,14 +203,15 @@ def exchange(
     f_i_coef,
     f_exchange,
     predicted,
+    solid,
 ):
     """Per cell, in particle order (module docstring, "Momentum exchange"): `predicted` = the drag
     its particles will receive over the next fluid interval at the fluid velocity u now, sum
     (phi1 K (u - v) + (phi1 - 1) F_o) / cell volume; f_i = that, plus the drag impulses received
     over the last interval / (fluid_dt cell volume) less what the last fluid step took for them
     (its implicit part f_exchange - f_i and the old `predicted`), plus -V grad(p) / cell volume if
-    pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt). The
-    impulses are reset to zero."""
+    pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt); solid
+    the volume of the particles centred in each cell [m^3]. The impulses are reset to zero."""
     inv_dt = 1.0 / fluid_dt
     for c in prange(f_i_coef.shape[0]):
         r0 = r1 = r2 = 0.0  # drag impulses received
@@ -226,6 +244,7 @@ def exchange(
             c, 2, r2, e2, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
         )
         f_i_coef[c] = sk * inv_cell_volume
+        solid[c] = sv
 
 
 @njit(cache=True, inline="always")

@@ -69,6 +69,13 @@ class FluidParticleDrag:
         self.f_drag = np.zeros((n, 3))  # drag for the next first half kick [N]
         self.impulse = np.zeros((n, 3))  # drag impulse since the last fluid step [N s]
         self.predicted = np.zeros((cells, 3))  # drag expected over that interval [N/m^3]
+        self.solid = np.zeros(cells)  # volume of the particles centred in each cell [m^3]
+        # the cell-averaged drag's per-cell means, measured with the porosity at each fluid step
+        # (empty with the per-particle drag): (1 - phi) V_cell / solid, diameter [m], velocity [m/s]
+        self.averaged = config.averaging == "cell"
+        self.cell_share = np.zeros(cells if self.averaged else 0)
+        self.cell_diameter = np.zeros(cells if self.averaged else 0)
+        self.cell_velocity = np.zeros((cells if self.averaged else 0, 3))
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
@@ -99,6 +106,9 @@ class FluidParticleDrag:
             fs.grad_p.reshape(-1, 3),
             state.clock.dt,
             spring_dt == 0.0,
+            self.cell_share,
+            self.cell_diameter,
+            self.cell_velocity,
             p.force,
             self.f_other,
             self.coef,
@@ -146,8 +156,35 @@ class FluidParticleDrag:
             self.start, self.order, self.impulse, self.coef, p.inv_mass, self.f_other, p.vel, p.radius,
             fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3), self.pressure_exchanged, fluid_dt,
             self.inv_cell_volume, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3),
-            self.predicted,
+            self.predicted, self.solid,
         )  # fmt: skip
+        if self.averaged:
+            self._share(fs.porosity.reshape(-1))
+
+    def measure_cell_means(self, state: State, porosity, phi) -> None:
+        """The cell-averaged drag's means (the porosity estimate's lens-weighted mean diameter and
+        velocity of each cell) with phi, the porosity of each cell; at a fluid step, before
+        fluid_forcing; at the start of a run also the particles' volume per cell and the share."""
+        porosity.measure(
+            state.particles,
+            phi,
+            self.cell_velocity.reshape(*self.shape, 3),
+            self.cell_diameter.reshape(self.shape),
+        )
+
+    def start_cell_means(self, state: State, phi) -> None:
+        """The volume of the particles centred in each cell, and the shares, before the first
+        fluid step (fluid_forcing keeps them afterwards)."""
+        p = state.particles
+        bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
+        volume = math.pi / 6.0 * (2.0 * p.radius) ** 3
+        self.solid[:] = np.bincount(self.cell_of, weights=volume, minlength=self.solid.size)
+        self._share(phi.reshape(-1))
+
+    def _share(self, phi) -> None:
+        """cell_share = (1 - phi) V_cell / solid (large where no particle is centred: unused)."""
+        np.maximum(self.solid, np.finfo(np.float64).tiny, out=self.cell_share)
+        np.divide((1.0 - phi) / self.inv_cell_volume, self.cell_share, out=self.cell_share)
 
     def fluid_force(self, state: State, fs) -> np.ndarray:
         """Total force of the fluid on all particles (drag and pressure-gradient force) [N]."""
@@ -160,12 +197,19 @@ class FluidParticleDrag:
     def prognostic_state(self) -> dict[str, np.ndarray]:
         """What a bitwise restart needs: the drag of the next first half kick, the impulses not
         yet handed to the fluid and the drag the fluid took ahead for them."""
-        return {"force": self.f_drag, "impulse": self.impulse, "predicted": self.predicted}
+        arrays = {"force": self.f_drag, "impulse": self.impulse, "predicted": self.predicted}
+        if self.averaged:
+            arrays.update(share=self.cell_share, diameter=self.cell_diameter, velocity=self.cell_velocity)
+        return arrays
 
     def restore(self, arrays: dict) -> None:
         self.f_drag[...] = arrays["force"]
         self.impulse[...] = arrays["impulse"]
         self.predicted[...] = arrays["predicted"]
+        if self.averaged:
+            self.cell_share[...] = arrays["share"]
+            self.cell_diameter[...] = arrays["diameter"]
+            self.cell_velocity[...] = arrays["velocity"]
 
     @staticmethod
     def dt_limit() -> tuple[float, str]:

@@ -501,6 +501,8 @@ class NavierStokes(FluidModule):
         hydrostatic pressure, or the initial fields of [fluid.initial]."""
         fs = self.fs
         self._measure_porosity(state)
+        if self.drag.averaged:
+            self.drag.start_cell_means(state, fs.porosity)
         fs.porosity_rate[...] = 0.0
         self.solver.initial_pressure(fs, state.clock.time)
         initial, key = self.config.initial, ("fluid", "initial")
@@ -581,7 +583,10 @@ class NavierStokes(FluidModule):
         """fs.porosity from the particles where they are now, floored at fluid.drag.porosity_floor:
         the fluid divides by phi, and the drag correlations take the same floor."""
         fs = self.fs
-        self.porosity.measure(state.particles, fs.porosity)
+        if self.drag.averaged:
+            self.drag.measure_cell_means(state, self.porosity, fs.porosity)
+        else:
+            self.porosity.measure(state.particles, fs.porosity)
         if fs.porosity.min() >= self.floor:
             return
         if not self.warned:
