@@ -535,12 +535,13 @@ class NavierStokes(FluidModule):
         fs = self.fs
         if self.top_wall is not None:
             self._follow_wall(state)
-        # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
-        np.copyto(fs.porosity_rate, fs.porosity)
-        self._measure_porosity(state)
-        np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
-        fs.porosity_rate *= 1.0 / self.fluid_dt
-        self.drag.fluid_forcing(state, fs, self.fluid_dt)
+        if state.particles.count:  # without particles the porosity stays 1 and nothing is exchanged
+            # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
+            np.copyto(fs.porosity_rate, fs.porosity)
+            self._measure_porosity(state)
+            np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
+            fs.porosity_rate *= 1.0 / self.fluid_dt
+            self.drag.fluid_forcing(state, fs, self.fluid_dt)
         self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
 
     def _wall_height(self, state) -> float:
@@ -631,12 +632,9 @@ class NavierStokes(FluidModule):
 
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
         fs = self.fs
-        fields = {
-            "pressure": (fs.p, "Pa"),
-            "velocity": (fs.v, "m s-1"),
-            "porosity": (fs.porosity, "1"),
-            "interaction_force": (fs.f_exchange, "N m-3"),
-        }
+        fields = {"pressure": (fs.p, "Pa"), "velocity": (fs.v, "m s-1")}
+        if state.particles.count:  # without particles: porosity 1, no interaction, not written
+            fields.update(porosity=(fs.porosity, "1"), interaction_force=(fs.f_exchange, "N m-3"))
         if self.top_wall is not None:
             fields[MOVING_GRID_SPACING] = (self._grid.spacing, "m")
         return fields
