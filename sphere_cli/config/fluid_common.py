@@ -83,7 +83,11 @@ class PressureBoundary(Strict):
     def _period_given(self):
         if self.amplitude > 0 and self.period is None:
             raise ValueError("a modulation (amplitude > 0) needs its period [s]")
-        if self.series is not None and self.model_fields_set & {"pressure", "amplitude", "period", "phase"}:
+        # values, not keys: a resolved case (defaults written out) must validate again
+        modulated = (
+            self.pressure != 0.0 or self.amplitude != 0.0 or self.period is not None or self.phase != 0.0
+        )
+        if self.series is not None and modulated:
             raise ValueError(
                 "a pressure series replaces pressure, amplitude, period and phase: give one or the other"
             )

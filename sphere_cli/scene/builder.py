@@ -323,6 +323,8 @@ def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason:
         dt, how = limit, f"{reason}, one step a fluid step"
     else:
         dt, how = AUTO_SHARE * limit, f"{AUTO_SHARE:g} x {reason}"
+    if dt > sim.duration:  # a single step longer than the run would overshoot its end
+        dt, how = float(sim.duration), "simulation.duration, below the fluid's limit"
     _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({how}): ')
     steps = sim.duration / dt
     if steps > MANY_STEPS:

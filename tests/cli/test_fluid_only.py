@@ -295,3 +295,10 @@ def test_auto_dt_without_any_limit_is_refused(tmp_path):
     out = tmp_path / "interval"
     assert_clean_error(sphere_inproc("run", case, "-o", out), 0)
     assert read_checkpoint(list_checkpoints(out / "checkpoints")[-1]).dt == 0.002  # one step a fluid step
+
+
+def test_auto_dt_longer_than_the_run_is_the_run():
+    """dt = "auto" of a fluid alone is 0.9 x its limit (0.70 s for the column at rest); a run of
+    0.1 s takes one step of 0.1 s, ending at its duration instead of overshooting it."""
+    scene = build_scene(parse_case(edit(NAVIER_STOKES, "duration = 3.0", "duration = 0.1")))
+    assert scene.state.clock.dt == 0.1
