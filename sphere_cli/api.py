@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time as wallclock
@@ -58,7 +59,10 @@ def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
         return loaded
     sim = loaded.case.simulation.model_copy(update={"duration": until})
     return LoadedCase(
-        case=loaded.case.model_copy(update={"simulation": sim}), text=loaded.text, path=loaded.path
+        case=loaded.case.model_copy(update={"simulation": sim}),
+        text=loaded.text,
+        path=loaded.path,
+        origin=loaded.origin,
     )
 
 
@@ -212,7 +216,7 @@ def resume(
 
 
 def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, show_progress) -> RunResult:
-    loaded = _with_duration(load_case(rundir.case), until)
+    loaded = _with_duration(dataclasses.replace(load_case(rundir.case), origin=rundir.case_origin()), until)
     set_threads(loaded.case)
     if rundir.xdmf.exists() and not rundir.xdmf.is_file():
         raise OutputError(f"{rundir.xdmf}: is not a file; remove or rename it, then resume again")

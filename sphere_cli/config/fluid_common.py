@@ -109,12 +109,12 @@ class PressureBoundary(Strict):
         if not path.is_absolute():
             path = base_dir / path
         try:
-            lines = path.read_text(encoding="utf-8").splitlines()
+            lines = path.read_text(encoding="utf-8-sig").splitlines()
         except FileNotFoundError:
             return f"file not found ({path})"
         except (OSError, ValueError) as exc:
             return f"{path}: not a readable text file ({exc})"
-        rows = []
+        rows, header_allowed = [], True
         for number, line in enumerate(lines, start=1):
             fields = [f.strip() for f in line.split("#")[0].split(",")]
             if fields == [""]:
@@ -124,11 +124,13 @@ class PressureBoundary(Strict):
                     raise ValueError
                 rows.append((float(fields[0]), float(fields[1])))
             except ValueError:
-                if not rows and number == 1:
-                    continue  # a header
+                if header_allowed:  # the first line not blank or a comment may name the columns
+                    header_allowed = False
+                    continue
                 return (
                     f"{path}:{number}: expected two numbers, time [s] and pressure [Pa], got {line.strip()!r}"
                 )
+            header_allowed = False
         data = np.array(rows, dtype=np.float64).reshape(-1, 2)
         if len(data) < 1:
             return f"{path}: no samples (two numbers a line: time [s], pressure [Pa])"

@@ -44,9 +44,14 @@ class LoadedCase:
     case: Case
     text: str
     path: Path | None
+    # the case file a run was started from, when this is the run directory's copy: its folder
+    # resolves the case's relative paths (pressure series, field files) on resume
+    origin: Path | None = None
 
     @property
     def base_dir(self) -> Path:
+        if self.origin is not None:
+            return self.origin.parent
         return self.path.parent if self.path is not None else Path.cwd()
 
     def describe(self, loc: tuple, message: str) -> str:

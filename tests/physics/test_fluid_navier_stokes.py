@@ -118,7 +118,9 @@ def test_hydrostatic_pressure_follows_a_top_pressure_series(tmp_path):
     """A prescribed top pressure given as a time series (fluid.top.series, a CSV of time and
     pressure): linear between the samples and held beyond the last, the whole hydrostatic column
     follows it at every step, p = p_t(t) + rho g (H - z)."""
-    (tmp_path / "top.csv").write_text("t,p\n0.0, 0.0\n0.02, 300.0  # rising\n0.05, -100.0\n")
+    # a byte-order mark, a comment line before the header, a comment after a sample
+    text = "# top pressure of the column\nt,p\n0.0, 0.0\n0.02, 300.0  # rising\n0.05, -100.0\n"
+    (tmp_path / "top.csv").write_text(text, encoding="utf-8-sig")
     n, height = 8, 0.08
     grid = _grid((3, 3, n), (0.03, 0.03, height))
     solver = _solver(

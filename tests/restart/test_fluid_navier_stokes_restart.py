@@ -110,3 +110,25 @@ def test_a_checkpoint_of_the_collocated_grid_is_refused(tmp_path, write_case):
     assert result.returncode == 78, result.stderr
     assert "collocated grid" in result.stderr and "Traceback" not in result.stderr
     assert "format 3" in result.stderr and "format 4" in result.stderr
+
+
+def test_resume_finds_the_files_of_the_case_folder(tmp_path):
+    """A case whose top pressure is a series in a file next to it (a relative path), run into a
+    run directory elsewhere: `resume` reads the run's copy of the case but resolves the path
+    from the folder of the case it was started from, and continues bitwise."""
+    folder = tmp_path / "case"
+    folder.mkdir()
+    (folder / "top.csv").write_text("t,p\n0.0,0.0\n10.0,50.0\n")
+    case = folder / "case.toml"
+    case.write_text(
+        "[simulation]\nduration = 5.0\ndt = 0.5\n[domain]\nupper = [0.01, 0.01, 0.02]\n"
+        'periodic = [true, true, false]\n[fluid]\nmodel = "navier-stokes"\ngrid = { cells = [2, 2, 4] }\n'
+        'top = { type = "pressure", series = "top.csv" }\n[output]\ncheckpoints = { every_steps = 2 }\n'
+    )
+    whole = api.run(case, tmp_path / "whole")
+    api.run(case, tmp_path / "split", until=2.0)
+    split = api.resume(tmp_path / "split")
+    assert whole.step == split.step == 10
+    a, b = _final_state(tmp_path / "whole"), _final_state(tmp_path / "split")
+    for name in a["fluid"]:
+        assert np.array_equal(a["fluid"][name], b["fluid"][name]), name

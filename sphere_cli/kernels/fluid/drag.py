@@ -125,7 +125,8 @@ def particle_drag(
     with the cell's mean diameter d_c = cell_diameter [m] and velocity v_c = cell_velocity [m/s],
     cell_share = (1 - phi) V_cell / (the volume of the particles centred in it), so that the
     cell's particles together receive (1 - phi) V_cell k (u - v_c) (by their volume-weighted mean
-    velocity); a cell no particle reaches (d_c = 0) falls back to the particle's own."""
+    velocity); a cell no particle reaches (d_c = 0), or where none was centred at the last fluid
+    step (cell_share 0: a particle that has just moved in), falls back to the particle's own."""
     half = 0.5 * dt
     below = 0
     averaged = cell_share.shape[0] > 0
@@ -135,7 +136,7 @@ def particle_drag(
             below += 1
         d = 2.0 * radius[i]
         volume = math.pi / 6.0 * d * d * d
-        if averaged and cell_diameter[c] > 0.0:
+        if averaged and cell_diameter[c] > 0.0 and cell_share[c] > 0.0:
             w0 = u[c, 0] - cell_velocity[c, 0]
             w1 = u[c, 1] - cell_velocity[c, 1]
             w2 = u[c, 2] - cell_velocity[c, 2]
@@ -260,6 +261,15 @@ def _settle(
     f_i[c, a] = predicted[c, a] + received * inv_dt * inv_cell_volume - took
     if pressure_exchanged:
         f_i[c, a] -= solid * grad_p[c, a] * inv_cell_volume
+
+
+@njit(cache=True, parallel=True)
+def cell_shares(phi, solid, inv_cell_volume, share):
+    """share = (1 - phi) V_cell / solid of every cell, the cell-averaged drag's share of a
+    particle's volume (solid [m^3] the volume of the particles centred in the cell); 0 where none
+    is."""
+    for c in prange(share.shape[0]):
+        share[c] = (1.0 - phi[c]) / (inv_cell_volume * solid[c]) if solid[c] > 0.0 else 0.0
 
 
 @njit(cache=True, parallel=True)

@@ -72,7 +72,8 @@ relative flux through the top face, which must be open (prescribed pressure).
 
 Arguments: v_face, v_star, mobility, acceleration (nx,ny,nz+1,3) [m/s, m/s, -, m/s^2] on the
 faces; edges (nx,ny,nz+1,3) [-] the edge porosities of `edge_porosity`; normal (nx,ny,nz+2,3)
-and shear (nx,ny,nz+1,3) [1/s] the viscous stresses of `viscous_stresses`; flux
+[m/s] and shear (nx,ny,nz+1,3) [1/s] the viscous stresses of `viscous_stresses` (phi times the
+velocity difference across a cell, and phi times the shear rate at an edge); flux
 (nx,ny,nz+2,3,3) [m^2/s^2] the advective fluxes of `advective_fluxes`; v, f_i, f_exchange, grad_p (nx,ny,nz,3)
 [m/s, N/m^3, N/m^3, Pa/m] at the cell centres (v from the fluxes of the cell's faces,
 `cell_velocity`); p, eps, phi, dphi, k_drag, rhs (nx,ny,nz) [Pa, Pa, -, 1/s, kg/(m^3 s),
@@ -329,7 +330,7 @@ def advective_fluxes(v_face, phi, edges, bc_sign, flux):
                 for c in range(3):
                     uc = _face(v_face, i, j, k, c, bc_sign)
                     for a in range(3):
-                        if k > nz and a != 2:  # beyond the +z side of the top faces
+                        if k > nz and (a != 2 or c != 2):  # beyond the +z side of the top z faces
                             flux[i, j, k, c, a] = 0.0
                             continue
                         i0, j0, k0 = _shift(i, j, k, a, -1)

@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 
 from ...config.drag import DragConfig
-from ...kernels.fluid.drag import DI_FELICE, GIDASPOW, drag_kick, exchange, particle_drag
+from ...kernels.fluid.drag import DI_FELICE, GIDASPOW, cell_shares, drag_kick, exchange, particle_drag
 from ...kernels.fluid.porosity import bin_particles
 from ...kernels.neighbors import counting_sort
 from ...state import State
@@ -164,7 +164,7 @@ class FluidParticleDrag:
     def measure_cell_means(self, state: State, porosity, phi) -> None:
         """The cell-averaged drag's means (the porosity estimate's lens-weighted mean diameter and
         velocity of each cell) with phi, the porosity of each cell; at a fluid step, before
-        fluid_forcing; at the start of a run also the particles' volume per cell and the share."""
+        fluid_forcing (which then takes the particles' volume per cell and the shares)."""
         porosity.measure(
             state.particles,
             phi,
@@ -182,9 +182,8 @@ class FluidParticleDrag:
         self._share(phi.reshape(-1))
 
     def _share(self, phi) -> None:
-        """cell_share = (1 - phi) V_cell / solid (large where no particle is centred: unused)."""
-        np.maximum(self.solid, np.finfo(np.float64).tiny, out=self.cell_share)
-        np.divide((1.0 - phi) / self.inv_cell_volume, self.cell_share, out=self.cell_share)
+        """cell_share = (1 - phi) V_cell / solid (0 where no particle is centred)."""
+        cell_shares(phi, self.solid, self.inv_cell_volume, self.cell_share)
 
     def fluid_force(self, state: State, fs) -> np.ndarray:
         """Total force of the fluid on all particles (drag and pressure-gradient force) [N]."""

@@ -283,8 +283,8 @@ class PoissonSolver:
         rescale = not (2.0**-RESCALE_EXPONENT <= rhs_norm <= 2.0**RESCALE_EXPONENT)
         if rescale:
             exponent = math.frexp(float(np.abs(self.rhs).max()))[1]
-            self.rhs *= 2.0**-exponent
-            x *= 2.0**-exponent
+            np.ldexp(self.rhs, -exponent, out=self.rhs)
+            np.ldexp(x, -exponent, out=x)
             column_squares(self.rhs, self.part_a)
             rhs_norm = math.sqrt(ordered_sum(self.part_a))
         scale = 1.0 / max(rhs_norm, TINY)
@@ -295,7 +295,7 @@ class PoissonSolver:
         if singular:
             shift(x, self._mean(x))
         if rescale:
-            x *= 2.0**exponent
+            np.ldexp(x, exponent, out=x)
         return PoissonResult(iterations, res, res <= self.tolerance, mean_removed)
 
     # -- helpers -----------------------------------------------------------------------------
