@@ -81,7 +81,7 @@ def test_stokes_settling_two_way(tmp_path):
     sphere drags the fluid of its own cell along, so it falls a little faster, never slower).
     Measured: 6.1 % faster (0.65 % on the collocated grid, whose cell velocity was decoupled from
     the forcing by the odd-even mode). Left alone, the excess keeps growing while the sphere's
-    own wake spreads through the box, to +15.6 % after 0.15 s (12 tau_p x 10): the particle
+    own wake spreads through the box, to +15.6 % after 0.15 s (120 tau_p): the particle
     feels its cell's velocity, which holds its own reaction (the self-induced velocity of
     unresolved coupling, issue 22 defect 3, not corrected yet)."""
     d = 2e-3
