@@ -145,13 +145,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         vel_pred=vel.copy(),
         angvel_pred=angvel.copy(),
     )
-    dom = case.domain
-    box = Box(
-        lower=np.array(dom.lower, dtype=np.float64),
-        upper=np.array(dom.upper, dtype=np.float64),
-        periodic=np.array(dom.periodic, dtype=np.uint8),
-        body_acc=np.array(dom.gravity, dtype=np.float64),
-    )
+    box = _box(case)
     if restart is not None:
         # which particles are free decides the walls' default masses (and so dt): take it now
         particles.inv_mass[:] = restart.arrays["particles"]["inv_mass"]
@@ -253,18 +247,23 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     return scene
 
 
-def _build_fluid_only(loaded: LoadedCase, restart=None) -> Scene:
-    """The scene of a case without particles: the fluid alone. No particle arrays but empty
-    ones (the fluid reads them), no motion, neighbour search or contacts, and dt from the
-    fluid's limits (_fluid_only_dt)."""
-    case = loaded.case
+def _box(case: Case) -> Box:
+    """The domain box of the case: its corners [m], periodic axes and body acceleration [m/s^2]."""
     dom = case.domain
-    box = Box(
+    return Box(
         lower=np.array(dom.lower, dtype=np.float64),
         upper=np.array(dom.upper, dtype=np.float64),
         periodic=np.array(dom.periodic, dtype=np.uint8),
         body_acc=np.array(dom.gravity, dtype=np.float64),
     )
+
+
+def _build_fluid_only(loaded: LoadedCase, restart=None) -> Scene:
+    """The scene of a case without particles: the fluid alone. No particle arrays but empty
+    ones (the fluid reads them), no motion, neighbour search or contacts, and dt from the
+    fluid's limits (_fluid_only_dt)."""
+    case = loaded.case
+    box = _box(case)
     none3, none = np.zeros((0, 3)), np.zeros(0)
     particles = Particles(
         pos=none3, vel=none3, angvel=none3, force=none3, torque=none3, radius=none, mass=none,
