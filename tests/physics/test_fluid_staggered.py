@@ -372,3 +372,23 @@ def test_a_taylor_green_vortex_set_up_in_the_case_file_decays_at_its_rate(tmp_pa
     rate = -math.log(measured) / elapsed
     assert rate == pytest.approx(2 * nu * k * k, rel=0.01)
     assert solver.grid.shape == (16, 16, 2)
+
+
+@pytest.mark.parametrize(("no_slip", "carried"), [(True, 0.0), (False, 1.0)])
+def test_an_inflow_brings_the_boundary_s_tangential_velocity(no_slip, carried):
+    """Fluid entering through a prescribed-velocity bottom carries the boundary's own tangential
+    velocity into the x faces above it: 0 through a no-slip face (not the mirrored ghost -u, which
+    would double the deficit), the flow's own u through a free-slip one. The advective flux
+    through the bottom side of the lowest x faces is phi u_z (the transport) times that value."""
+    from sphere_cli.kernels.fluid.navier_stokes import advective_fluxes, edge_porosity
+
+    inflow, drift = 0.01, 0.05  # m/s
+    solver = _solver(
+        (3, 2, 4), (0.03, 0.02, 0.04),
+        bottom={"type": "velocity", "velocity": inflow, "no_slip": no_slip}, top={"type": "pressure"},
+    )  # fmt: skip
+    fs = solver.allocate()
+    solver.set_velocity(fs, (drift, 0.0, inflow))
+    edge_porosity(fs.porosity, fs.edges)
+    advective_fluxes(fs.v_face, fs.porosity, fs.edges, solver.bc_sign, fs.flux)
+    np.testing.assert_allclose(fs.flux[:, :, 0, 0, 2], inflow * carried * drift, rtol=1e-14)
