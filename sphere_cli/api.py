@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict
+from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict, run_record
 from .config.schema import NON_PHYSICS_KEYS, Case
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
@@ -188,7 +188,7 @@ def _starting(rundir: RunDirectory, show_progress: bool) -> None:
 def start_output(scene, rundir: RunDirectory, loaded: LoadedCase, log) -> RunOutput:
     """A new trajectory with the starting frame, and the first checkpoint (from then on the run
     can be resumed)."""
-    resolved = resolved_dict(loaded.case)
+    resolved = run_record(loaded)
     phash = physics_hash(resolved)
     output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
     output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
@@ -236,7 +236,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
         return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
     if ck is None:
         raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
-    resolved = resolved_dict(loaded.case)
+    resolved = run_record(loaded)
     phash = physics_hash(resolved)
     if phash != ck.physics_hash:
         changed = ", ".join(_changed_keys(ck.resolved, resolved)) or "(unknown)"

@@ -281,6 +281,30 @@ def resolved_dict(case: Case) -> dict:
     return case.model_dump(mode="json")
 
 
+# keys of files a run reads again when it resumes (the initial state's files it does not)
+RESUMED_FILES = (("fluid", "bottom", "series"), ("fluid", "top", "series"), ("fluid", "body_force", "file"))
+
+
+def run_record(loaded: LoadedCase) -> dict:
+    """What a run records of its case (trajectory and checkpoints) and hashes for the physics:
+    the resolved case, and under "input_files" the SHA-256 of each file it reads again on resume
+    (a pressure series, a body-force field), so that an edited file is refused like an edited key.
+    A file that cannot be read is left out (building the scene names it)."""
+    record = resolved_dict(loaded.case)
+    files = {}
+    for key in RESUMED_FILES:
+        name = _value_at(record, key)
+        if isinstance(name, str):
+            path = Path(name) if Path(name).is_absolute() else loaded.base_dir / name
+            try:
+                files[".".join(key)] = hashlib.sha256(path.read_bytes()).hexdigest()
+            except OSError:
+                continue
+    if files:
+        record["input_files"] = files
+    return record
+
+
 def physics_hash(resolved: dict) -> str:
     """SHA-256 of the part of the case that changes the physics (output, duration excluded)."""
     physics = copy.deepcopy(resolved)

@@ -132,3 +132,22 @@ def test_resume_finds_the_files_of_the_case_folder(tmp_path):
     a, b = _final_state(tmp_path / "whole"), _final_state(tmp_path / "split")
     for name in a["fluid"]:
         assert np.array_equal(a["fluid"][name], b["fluid"][name]), name
+
+
+def test_resume_refuses_an_edited_series_file(tmp_path):
+    """The run records the SHA-256 of the files it reads again on resume (here the top pressure
+    series) with its case: a series edited after the run started is refused like an edited key
+    (exit 78, naming the file's key), not read as if it had always been so."""
+    from sphere_cli.errors import ResumeRefused
+
+    (tmp_path / "top.csv").write_text("t,p\n0.0,0.0\n10.0,50.0\n")
+    case = tmp_path / "case.toml"
+    case.write_text(
+        "[simulation]\nduration = 5.0\ndt = 0.5\n[domain]\nupper = [0.01, 0.01, 0.02]\n"
+        'periodic = [true, true, false]\n[fluid]\nmodel = "navier-stokes"\ngrid = { cells = [2, 2, 4] }\n'
+        'top = { type = "pressure", series = "top.csv" }\n[output]\ncheckpoints = { every_steps = 2 }\n'
+    )
+    api.run(case, tmp_path / "run", until=2.0)
+    (tmp_path / "top.csv").write_text("t,p\n0.0,0.0\n10.0,80.0\n")
+    with pytest.raises(ResumeRefused, match="input_files.fluid.top.series"):
+        api.resume(tmp_path / "run")
