@@ -70,8 +70,8 @@ class PressureBoundary(Strict):
     series: str | None = Field(
         None,
         description=(
-            "A CSV file (relative paths from the case file's folder) of two columns, time [s] and "
-            "pressure [Pa], one sample a line (a header line and text after # are skipped), times "
+            "A CSV file (relative paths from the case file's folder) of two columns, time in s and "
+            "pressure in Pa, one sample a line (a header line and text after # are skipped), times "
             "increasing: the face's pressure is linear between the samples and holds the first "
             "or last value outside them. Exclusive with pressure, amplitude, period and phase."
         ),

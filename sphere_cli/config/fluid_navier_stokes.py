@@ -127,7 +127,7 @@ class InitialFluidFields(Strict):
             "HDF5 file (relative paths from the case file's folder) with any of the datasets "
             "velocity_x (nx, ny, nz) on the x faces (face i at x = i dx), velocity_y (nx, ny, nz) on "
             "the y faces, velocity_z (nx, ny, nz+1) on the z faces (face k at z = k dz, 0 the "
-            "bottom) [m/s] and pressure (nx, ny, nz) at the cell centres [Pa], x, y, z of the "
+            "bottom), in m/s, and pressure (nx, ny, nz) at the cell centres, in Pa, x, y, z of the "
             "fluid grid from its lower corner. Exclusive with velocity and pressure."
         ),
     )
@@ -157,7 +157,7 @@ class BodyForceField(Strict):
         description=(
             "HDF5 file (relative paths from the case file's folder) with the datasets "
             "acceleration_x (nx, ny, nz), acceleration_y (nx, ny, nz), acceleration_z (nx, ny, nz+1) "
-            "on the faces, as fluid.initial.file's velocity [m/s^2]. Exclusive with acceleration."
+            "on the faces, as fluid.initial.file's velocity, in m/s^2. Exclusive with acceleration."
         ),
     )
 
