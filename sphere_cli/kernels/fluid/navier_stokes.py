@@ -424,7 +424,7 @@ def predict(
                         mobility[i, j, k, c] = 0.0
                         continue
                     i0, j0, k0 = _shift(i, j, k, c, -1)
-                    ph = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
+                    ph = _phi_face(phi, i, j, k, c)
                     rate_phi = 0.5 * (_cell(dphi, i, j, k) + _cell(dphi, i0, j0, k0))
                     force = 0.5 * (_cell_vec(f_i, i, j, k, c) + _cell_vec(f_i, i0, j0, k0, c))
                     coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
@@ -598,7 +598,7 @@ def add_grid_motion(v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretc
                     if not _is_face(k, c, nz, p_kind):
                         continue
                     i0, j0, k0 = _shift(i, j, k, c, -1)
-                    ph = 0.5 * (_cell(phi, i, j, k) + _cell(phi, i0, j0, k0))
+                    ph = _phi_face(phi, i, j, k, c)
                     coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
                     d = 1.0 / (1.0 + dt * coefficient / (rho * ph))
                     v_star[i, j, k, c] += (
