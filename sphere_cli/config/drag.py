@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .base import Flag, Real, Strict
 
@@ -54,3 +54,24 @@ class DragConfig(Strict):
             "as porosity -> 0); a warning names the first cell where it happens [-]."
         ),
     )
+    self_induced: Literal["subtract", "keep"] = Field(
+        "subtract",
+        description=(
+            '"subtract": each particle feels its cell\'s fluid velocity less its own disturbance of '
+            "it (the self-induced velocity of a particle smaller than its cell, estimated from the "
+            "grid's response to its drag and screened by the other particles of the cell), so that "
+            "a sphere settling alone reaches its terminal velocity on any cell size; "
+            '"keep": the cell\'s velocity as it is. Per-particle drag only (averaging = '
+            '"particle") [-].'
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _self_induced_needs_particle_drag(self):
+        asked = "self_induced" in self.model_fields_set and self.self_induced == "subtract"
+        if asked and self.averaging == "cell":
+            raise ValueError(
+                'self_induced = "subtract" needs averaging = "particle": the cell-averaged drag is '
+                "a closure on the cell's mean velocities, which already hold every particle's share"
+            )
+        return self

@@ -25,8 +25,9 @@ from ..errors import OutputError, ResumeRefused
 from .atomic import publish
 
 # 2: with the digest; 3: one fluid vocabulary, no springs without friction; 4: the Navier-Stokes
-# velocity on the faces of a staggered grid (3 held it at the cell centres)
-FORMAT = 4
+# velocity on the faces of a staggered grid (3 held it at the cell centres); 5: the self-induced
+# velocity of each particle with the Navier-Stokes drag
+FORMAT = 5
 NAME = re.compile(r"^ckpt-(\d{12})\.h5$")
 
 

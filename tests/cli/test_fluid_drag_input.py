@@ -52,6 +52,22 @@ ERRORS = [
         [],
     ),
     (
+        "self-induced-value",
+        "porosity_floor = 0.1",
+        'porosity_floor = 0.1\nself_induced = "remove"',
+        "fluid.drag.self_induced",
+        "self_induced",
+        ["subtract", "keep"],
+    ),
+    (
+        "self-induced-with-cell-averaging",
+        "porosity_floor = 0.1",
+        'porosity_floor = 0.1\naveraging = "cell"\nself_induced = "subtract"',
+        "fluid.drag",
+        "[fluid.drag]",
+        ['averaging = "particle"'],
+    ),
+    (
         "typo",
         "pressure_force = true",
         "pressure_forces = true",
@@ -78,5 +94,5 @@ def test_drag_defaults_in_the_resolved_case(tmp_path):
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("validate", tmp_path / "case.toml")
     assert result.code == 0, result.stderr
-    for fragment in ("gidaspow", "pressure_force", "porosity_floor"):
+    for fragment in ("gidaspow", "pressure_force", "porosity_floor", "self_induced", "subtract"):
         assert fragment in result.stdout

@@ -40,8 +40,9 @@ def fluid_state(shape, spacing, origin=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), phi=1
 
 
 def drag_module(scene, fs, rho=GLYCERIN, mu=MU, formulation_b=False, **config):
+    # the fluid is held fixed, so its velocity holds no disturbance of the particles to subtract
     drag = FluidParticleDrag(
-        DragConfig(**config),
+        DragConfig(**{"self_induced": "keep", **config}),
         rho,
         mu,
         fs.grid,

@@ -12,7 +12,7 @@ import pytest
 
 from sphere_cli import api
 from sphere_cli.config.load import load_case
-from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.io.checkpoint import FORMAT, list_checkpoints, read_checkpoint
 from sphere_cli.scene.builder import build_scene
 
 CASE = """
@@ -109,7 +109,7 @@ def test_a_checkpoint_of_the_collocated_grid_is_refused(tmp_path, write_case):
     )
     assert result.returncode == 78, result.stderr
     assert "collocated grid" in result.stderr and "Traceback" not in result.stderr
-    assert "format 3" in result.stderr and "format 4" in result.stderr
+    assert "format 3" in result.stderr and f"format {FORMAT}" in result.stderr
 
 
 def test_resume_finds_the_files_of_the_case_folder(tmp_path):

@@ -110,6 +110,7 @@ def particle_drag(
     cell_share,
     cell_diameter,
     cell_velocity,
+    disturbance,
     force,
     f_other,
     coef,
@@ -126,10 +127,14 @@ def particle_drag(
     cell_share = (1 - phi) V_cell / (the volume of the particles centred in it), so that the
     cell's particles together receive (1 - phi) V_cell k (u - v_c) (by their volume-weighted mean
     velocity); a cell no particle reaches (d_c = 0), or where none was centred at the last fluid
-    step (cell_share 0: a particle that has just moved in), falls back to the particle's own."""
+    step (cell_share 0: a particle that has just moved in), falls back to the particle's own.
+    disturbance (N,3,MODES) [m/s] (or empty): the bands of each particle's self-induced velocity
+    u' (physics/fluid/self_induced.py), which it does not feel: it sees the fluid velocity u -
+    u', u' the sum over the bands."""
     half = 0.5 * dt
     below = 0
     averaged = cell_share.shape[0] > 0
+    corrected = disturbance.shape[0] > 0
     for i in prange(vel.shape[0]):
         c = cell_of[i]
         if phi[c] < floor:
@@ -143,9 +148,9 @@ def particle_drag(
             w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
             k = volume * cell_share[c] * drag_rate(law, phi[c], cell_diameter[c], w, rho, mu, floor)
         else:
-            w0 = u[c, 0] - vel[i, 0]
-            w1 = u[c, 1] - vel[i, 1]
-            w2 = u[c, 2] - vel[i, 2]
+            w0 = _seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]
+            w1 = _seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]
+            w2 = _seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]
             k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
         coef[i] = k
         g = phi1(k * inv_mass[i] * half)
@@ -153,7 +158,7 @@ def particle_drag(
             fo = force[i, a]
             if pressure_force:
                 fo -= volume * grad_p[c, a]
-            fd = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo
+            fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
             f_other[i, a] = fo
             if initial:
                 f_drag[i, a] = fd
@@ -163,26 +168,63 @@ def particle_drag(
 
 @njit(cache=True, parallel=True)
 def drag_kick(
-    vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse
-):
-    """Second half kick, exact for the drag at frozen K, u and other forces (see the module
+    vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse,
+    disturbance, k_drag, cell_volume, weight, rate, band_decay, mu, nu,
+):  # fmt: skip
+    """Second half kick, exact for the drag at frozen K, u - u' and other forces (see the module
     docstring); then the drag force that makes the next first half kick exact too. The drag
-    impulse of both half kicks of this step is added to `impulse`."""
+    impulse of both half kicks of this step is added to `impulse`.
+
+    With `disturbance` (N,3,MODES) not empty, each band j of each particle's self-induced
+    velocity then follows the mean drag F of the step over dt (physics/fluid/self_induced.py),
+    exactly for F held: with the band's weight W = weight[c, j] [1/m] and rate lambda = rate[c, j]
+    [1/m^2], the other particles' drag coefficients S = k_drag V_cell - K (k_drag [kg/(m^3 s)] of
+    the last fluid step, flattened), kappa^2 = S/(mu V_cell), s = lambda/(lambda + kappa^2):
+        u'_j <- u'_inf + (u'_j - u'_inf) exp(-nu (lambda + kappa^2) dt),
+        u'_inf = -W s^2 F/mu;  mu [Pa s], nu [m^2/s] of the fluid; band_decay[c, j] =
+    exp(-nu lambda dt), the decay of a band without screening over this dt."""
     half = 0.5 * dt
+    corrected = disturbance.shape[0] > 0
     for i in prange(vel.shape[0]):
         c = cell_of[i]
         k = coef[i]
         im = inv_mass[i]
         g = phi1(k * im * half)
+        screening = 0.0
+        screen_decay = 1.0
+        if corrected:
+            screening = max(k_drag[c] * cell_volume - k, 0.0) / (mu * cell_volume)
+            if screening > 0.0:
+                screen_decay = math.exp(-nu * screening * dt)
         for a in range(3):
             fo = f_other[i, a]
-            now = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo  # drag of this half kick
-            impulse[i, a] += half * (f_drag[i, a] + now)
+            now = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+            mean_drag = 0.5 * (f_drag[i, a] + now)  # over the step: this half kick's and the first's
+            impulse[i, a] += dt * mean_drag
             vel[i, a] += half * (fo + now) * im
-            fd = g * k * (u[c, a] - vel[i, a]) + (g - 1.0) * fo
+            fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
             f_drag[i, a] = fd
             force[i, a] = fo + fd
             angvel[i, a] += half * torque[i, a] * inv_inertia[i]
+            if corrected:
+                mobility = mean_drag / mu
+                for j in range(disturbance.shape[2]):
+                    share = rate[a, j] / (rate[a, j] + screening)
+                    target = -weight[a, j] * share * share * mobility
+                    decay = band_decay[a, j] * screen_decay
+                    disturbance[i, a, j] = target + (disturbance[i, a, j] - target) * decay
+
+
+@njit(cache=True, inline="always")
+def _seen(u, c, disturbance, i, a, corrected):
+    """Component a of the fluid velocity particle i feels in its cell c: the cell's, less the
+    particle's own disturbance of it where `corrected`."""
+    if corrected:
+        own = 0.0
+        for j in range(disturbance.shape[2]):
+            own += disturbance[i, a, j]
+        return u[c, a] - own
+    return u[c, a]
 
 
 @njit(cache=True, parallel=True)
@@ -200,6 +242,7 @@ def exchange(
     pressure_exchanged,
     fluid_dt,
     inv_cell_volume,
+    disturbance,
     f_i,
     f_i_coef,
     f_exchange,
@@ -212,8 +255,10 @@ def exchange(
     over the last interval / (fluid_dt cell volume) less what the last fluid step took for them
     (its implicit part f_exchange - f_i and the old `predicted`), plus -V grad(p) / cell volume if
     pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt); solid
-    the volume of the particles centred in each cell [m^3]. The impulses are reset to zero."""
+    the volume of the particles centred in each cell [m^3]. The impulses are reset to zero. With
+    disturbance (N,3,MODES) not empty the particles feel u - u' (`particle_drag`)."""
     inv_dt = 1.0 / fluid_dt
+    corrected = disturbance.shape[0] > 0
     for c in prange(f_i_coef.shape[0]):
         r0 = r1 = r2 = 0.0  # drag impulses received
         e0 = e1 = e2 = 0.0  # drag expected over the next interval
@@ -230,9 +275,9 @@ def exchange(
             impulse[i, 0] = 0.0
             impulse[i, 1] = 0.0
             impulse[i, 2] = 0.0
-            e0 += k * (u[c, 0] - vel[i, 0]) + (g - 1.0) * f_other[i, 0]
-            e1 += k * (u[c, 1] - vel[i, 1]) + (g - 1.0) * f_other[i, 1]
-            e2 += k * (u[c, 2] - vel[i, 2]) + (g - 1.0) * f_other[i, 2]
+            e0 += k * (_seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]) + (g - 1.0) * f_other[i, 0]
+            e1 += k * (_seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]) + (g - 1.0) * f_other[i, 1]
+            e2 += k * (_seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]) + (g - 1.0) * f_other[i, 2]
             d = 2.0 * radius[i]
             sv += math.pi / 6.0 * d * d * d
         _settle(

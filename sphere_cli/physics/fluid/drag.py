@@ -31,6 +31,7 @@ from ...kernels.fluid.drag import DI_FELICE, GIDASPOW, cell_shares, drag_kick, e
 from ...kernels.fluid.porosity import bin_particles
 from ...kernels.neighbors import counting_sort
 from ...state import State
+from .self_induced import MODES, lattice_modes
 
 LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
 
@@ -76,6 +77,16 @@ class FluidParticleDrag:
         self.cell_share = np.zeros(cells if self.averaged else 0)
         self.cell_diameter = np.zeros(cells if self.averaged else 0)
         self.cell_velocity = np.zeros((cells if self.averaged else 0, 3))
+        # the bands of each particle's self-induced velocity u' [m/s] (physics/fluid/
+        # self_induced.py), empty when it is kept; the grid's band weights [1/m] and rates [1/m^2]
+        # per component, for the spacing they were computed for
+        self.corrected = config.self_induced == "subtract" and not self.averaged
+        self.disturbance = np.zeros((n if self.corrected else 0, 3, MODES))
+        self.band_weight = np.zeros((3, MODES))
+        self.band_rate = np.zeros((3, MODES))
+        self.band_decay = np.zeros((3, MODES))  # exp(-nu rate dt) for this dt
+        self.response_spacing = np.zeros(3)
+        self.decay_dt = 0.0
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
@@ -109,6 +120,7 @@ class FluidParticleDrag:
             self.cell_share,
             self.cell_diameter,
             self.cell_velocity,
+            self.disturbance,
             p.force,
             self.f_other,
             self.coef,
@@ -127,8 +139,11 @@ class FluidParticleDrag:
             )
 
     def kick(self, state: State, fs) -> None:
-        """Second half kick of the particles with the drag of the last forces() call."""
+        """Second half kick of the particles with the drag of the last forces() call; then each
+        particle's self-induced velocity follows the drag of the step."""
         p = state.particles
+        if self.corrected:
+            self._follow_grid(state.clock.dt)
         drag_kick(
             p.vel,
             p.angvel,
@@ -143,7 +158,27 @@ class FluidParticleDrag:
             p.force,
             self.f_drag,
             self.impulse,
+            self.disturbance,
+            fs.k_drag.reshape(-1),
+            1.0 / self.inv_cell_volume,
+            self.band_weight,
+            self.band_rate,
+            self.band_decay,
+            self.viscosity,
+            self.viscosity / self.density,
         )
+
+    def _follow_grid(self, dt: float) -> None:
+        """The grid's response bands for its cells now (they change when the grid follows the top
+        wall; recomputed when a spacing has moved by 1 % since the last time) and their decay over
+        dt [s]."""
+        moved = np.any(np.abs(self.spacing - self.response_spacing) > 0.01 * self.spacing)
+        if moved:
+            self.band_weight[:], self.band_rate[:] = lattice_modes(self.spacing)
+            self.response_spacing[:] = self.spacing
+        if moved or dt != self.decay_dt:
+            np.exp(self.band_rate * (-self.viscosity / self.density * dt), out=self.band_decay)
+            self.decay_dt = dt
 
     def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
         """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (also the time since the
@@ -155,8 +190,8 @@ class FluidParticleDrag:
         exchange(
             self.start, self.order, self.impulse, self.coef, p.inv_mass, self.f_other, p.vel, p.radius,
             fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3), self.pressure_exchanged, fluid_dt,
-            self.inv_cell_volume, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3),
-            self.predicted, self.solid,
+            self.inv_cell_volume, self.disturbance, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1),
+            fs.f_exchange.reshape(-1, 3), self.predicted, self.solid,
         )  # fmt: skip
         if self.averaged:
             self._share(fs.porosity.reshape(-1))
@@ -197,6 +232,8 @@ class FluidParticleDrag:
         """What a bitwise restart needs: the drag of the next first half kick, the impulses not
         yet handed to the fluid and the drag the fluid took ahead for them."""
         arrays = {"force": self.f_drag, "impulse": self.impulse, "predicted": self.predicted}
+        if self.corrected:
+            arrays["self_induced"] = self.disturbance
         if self.averaged:
             arrays.update(share=self.cell_share, diameter=self.cell_diameter, velocity=self.cell_velocity)
         return arrays
@@ -205,6 +242,8 @@ class FluidParticleDrag:
         self.f_drag[...] = arrays["force"]
         self.impulse[...] = arrays["impulse"]
         self.predicted[...] = arrays["predicted"]
+        if self.corrected:
+            self.disturbance[...] = arrays["self_induced"]
         if self.averaged:
             self.cell_share[...] = arrays["share"]
             self.cell_diameter[...] = arrays["diameter"]
