@@ -21,7 +21,7 @@ from restart_support import CASE, assert_same_state, final_state, frames, step_d
 from sphere_cli import api
 from sphere_cli.config.load import load_case
 from sphere_cli.errors import ResumeRefused
-from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.io.checkpoint import FORMAT, list_checkpoints, read_checkpoint
 from sphere_cli.scene.builder import build_scene
 
 CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
@@ -242,5 +242,5 @@ def test_a_checkpoint_of_an_older_format_is_refused(tmp_path: Path):
     newest = list_checkpoints(tmp_path / "run" / "checkpoints")[-1]
     with h5py.File(newest, "r+") as f:
         f.attrs["format"] = 2
-    with pytest.raises(ResumeRefused, match="checkpoint format 2, this version reads format 4"):
+    with pytest.raises(ResumeRefused, match=f"checkpoint format 2, this version reads format {FORMAT}"):
         read_checkpoint(newest)

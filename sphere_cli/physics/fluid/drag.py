@@ -86,6 +86,7 @@ class FluidParticleDrag:
         self.band_rate = np.zeros((3, MODES))
         self.band_decay = np.zeros((3, MODES))  # exp(-nu rate dt) for this dt
         self.response_spacing = np.zeros(3)
+        self.case_spacing = self.spacing.copy()  # the grid's cells as the case gives them [m]
         self.decay_dt = 0.0
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
@@ -169,13 +170,16 @@ class FluidParticleDrag:
         )
 
     def _follow_grid(self, dt: float) -> None:
-        """The grid's response bands for its cells now (they change when the grid follows the top
-        wall; recomputed when a spacing has moved by 1 % since the last time) and their decay over
-        dt [s]."""
-        moved = np.any(np.abs(self.spacing - self.response_spacing) > 0.01 * self.spacing)
+        """The grid's response bands for its cells now and their decay over dt [s]. The cells
+        change when the grid follows the top wall: the bands are those of the spacing rounded to
+        a step of 1 % (in its logarithm) from the case's own, a function of the spacing alone, so
+        that a resumed run takes the same bands as the run it continues."""
+        steps = np.round(np.log(self.spacing / self.case_spacing) * 100.0)
+        rounded = self.case_spacing * np.exp(steps / 100.0)
+        moved = np.any(rounded != self.response_spacing)
         if moved:
-            self.band_weight[:], self.band_rate[:] = lattice_modes(self.spacing)
-            self.response_spacing[:] = self.spacing
+            self.band_weight[:], self.band_rate[:] = lattice_modes(rounded)
+            self.response_spacing[:] = rounded
         if moved or dt != self.decay_dt:
             np.exp(self.band_rate * (-self.viscosity / self.density * dt), out=self.band_decay)
             self.decay_dt = dt
