@@ -170,6 +170,45 @@ class BodyForceField(Strict):
         return self
 
 
+class FixedBed(Strict):
+    """A porous bed held in place, given by its porosity instead of by particles (a case without
+    particles): the fluid takes the cell-averaged drag of fluid.drag.law on it, implicitly."""
+
+    porosity: Real | ExpressionText | None = Field(
+        None,
+        description=(
+            "Porosity of the bed's cells: a number, or an expression of x, y, z [m] at the cell "
+            'centres (the syntax of fluid.initial.velocity), e.g. "0.4 + 0.1*sin(2*pi*x/0.01)"; '
+            "between fluid.drag.porosity_floor and 1 [-]."
+        ),
+    )
+    file: str | None = Field(
+        None,
+        description=(
+            "HDF5 file (relative paths from the case file's folder) with the dataset porosity "
+            "(nx, ny, nz) at the cell centres, between fluid.drag.porosity_floor and 1. Exclusive "
+            "with porosity."
+        ),
+    )
+    diameter: Real = Field(gt=0, description="Grain diameter d of the bed, for the drag law [m].")
+    lower: Real | None = Field(
+        None, description="The bed holds the cells whose centre is at or above this z (default: all) [m]."
+    )
+    upper: Real | None = Field(
+        None, description="... and at or below this z (default: all); elsewhere the porosity is 1 [m]."
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if (self.porosity is None) == (self.file is None):
+            raise ValueError(
+                "give the bed's porosity either as porosity (a number or an expression) or as a file"
+            )
+        if self.lower is not None and self.upper is not None and not self.lower < self.upper:
+            raise ValueError(f"lower = {self.lower} must be below upper = {self.upper}")
+        return self
+
+
 class NavierStokesFluid(Strict):
     """A Newtonian fluid filling the pores: porous Navier-Stokes on the fluid grid, x and y
     periodic, z bounded by the bottom and top boundaries."""
@@ -219,6 +258,10 @@ class NavierStokesFluid(Strict):
     )
     body_force: BodyForceField | None = Field(
         None, description="A body acceleration field on the fluid besides gravity (default: none)."
+    )
+    bed: FixedBed | None = Field(
+        None,
+        description="A porous bed held in place, given by its porosity (a case without particles).",
     )
     max_speed: Real | None = Field(
         None,

@@ -282,7 +282,12 @@ def resolved_dict(case: Case) -> dict:
 
 
 # keys of files a run reads again when it resumes (the initial state's files it does not)
-RESUMED_FILES = (("fluid", "bottom", "series"), ("fluid", "top", "series"), ("fluid", "body_force", "file"))
+RESUMED_FILES = (
+    ("fluid", "bottom", "series"),
+    ("fluid", "top", "series"),
+    ("fluid", "body_force", "file"),
+    ("fluid", "bed", "file"),
+)
 
 
 def run_record(loaded: LoadedCase) -> dict:

@@ -42,6 +42,7 @@ from ...kernels.fluid.navier_stokes import (
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
+from .fixed_bed import FixedBed
 from .grid import FluidGrid, fluid_grid
 from .poisson import PoissonResult, PoissonSolver
 from .porosity import Porosity
@@ -459,6 +460,21 @@ class NavierStokes(FluidModule):
             self._add_body_force(cfg.body_force)
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
+        self.bed = None  # a bed of imposed porosity ([fluid.bed], without particles)
+        if cfg.bed is not None:
+            if state.particles.count:
+                raise loaded.error(
+                    ("fluid", "bed"),
+                    "a bed of imposed porosity is for a case without particles (no [particles] or "
+                    "count = 0); with particles the porosity comes from them",
+                )
+            if self.top_wall is not None:
+                raise loaded.error(
+                    ("fluid", "bed"),
+                    "a bed of imposed porosity cannot follow a moving grid (fluid.grid.follow_top_wall)",
+                )
+            exchanged = self.drag.pressure_exchanged
+            self.bed = FixedBed(cfg.bed, self.solver, cfg.drag, cfg.density, cfg.viscosity, exchanged, loaded)
 
     def _add_body_force(self, body) -> None:
         """Adds the body-force field of the case to the faces' acceleration (gravity)."""
@@ -501,6 +517,8 @@ class NavierStokes(FluidModule):
         hydrostatic pressure, or the initial fields of [fluid.initial]."""
         fs = self.fs
         self._measure_porosity(state)
+        if self.bed is not None:
+            self.bed.impose(fs)
         if self.drag.averaged:
             self.drag.start_cell_means(state, fs.porosity)
         fs.porosity_rate[...] = 0.0
@@ -542,6 +560,8 @@ class NavierStokes(FluidModule):
             np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
             fs.porosity_rate *= 1.0 / self.fluid_dt
             self.drag.fluid_forcing(state, fs, self.fluid_dt)
+        elif self.bed is not None:
+            self.bed.forcing(fs)
         self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
 
     def _wall_height(self, state) -> float:
@@ -633,7 +653,7 @@ class NavierStokes(FluidModule):
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
         fs = self.fs
         fields = {"pressure": (fs.p, "Pa"), "velocity": (fs.v, "m s-1")}
-        if state.particles.count:  # without particles: porosity 1, no interaction, not written
+        if state.particles.count or self.bed is not None:  # else porosity 1, no interaction: not written
             fields.update(porosity=(fs.porosity, "1"), interaction_force=(fs.f_exchange, "N m-3"))
         if self.top_wall is not None:
             fields[MOVING_GRID_SPACING] = (self._grid.spacing, "m")
