@@ -136,3 +136,59 @@ def test_only_the_selected_materials_feel_the_fluid():
     assert np.all(p.vel[steel, 0] == 0.0)
     np.testing.assert_allclose(p.vel[steel, 2], -9.81 * steps * 1.0e-5, rtol=1e-12)
     assert np.all(p.vel[glass, 2] > -9.81 * steps * 1.0e-5 * (1 - 1000 / 2500) * 1.0001)
+
+
+ROUGH_BED = """
+[simulation]
+duration = 1.0
+dt = 1.0e-5
+stability = "contact"
+[domain]
+upper = [0.012, 0.012, 0.02]
+periodic = [true, true, false]
+gravity = [0.5, 0.0, -9.8]
+[particles]
+density = 2500.0
+placement = {{ method = "file", path = "rough.csv" }}
+[contact]
+normal_stiffness = 1.0e4
+[fluid]
+model = "vans1d"
+surface = 0.02
+cells = 40
+flow = {{ kind = "solved", initial = "steady", mixing_length = "{mixing}" }}
+"""
+
+
+def rough_bed(tmp_path, fixed: int, mixing: str = "prandtl"):
+    """A square layer of 16 touching spheres of radius 1.5 mm on the floor (centres at z = 1.5 mm)
+    under a slope-driven flow; `fixed` = 1: held in place (the rough bed), 0: free."""
+    r = 1.5e-3
+    rows = ["x,y,z,r,fixed"]
+    for i in range(4):
+        rows += [f"{(2 * i + 1) * r!r},{(2 * j + 1) * r!r},{r!r},{r!r},{fixed}" for j in range(4)]
+    (tmp_path / "rough.csv").write_text("\n".join(rows) + "\n")
+    return build_scene(parse_case(ROUGH_BED.format(mixing=mixing), tmp_path / "case.toml"))
+
+
+def test_a_fixed_rough_bed_is_seen_by_the_fluid(tmp_path):
+    """Fixed spheres (zero inverse mass) are in the solid profiles the fluid sees, as in YADE's
+    HydroForceEngine (they were left out, so a fixed rough layer had solid fraction 0): the
+    layer through their centres holds their exact slice volume (pi/4 of its area at the centre
+    plane, less over the layer's 0.5 mm), the fluid takes their drag, and the steady flow is
+    slowed there exactly as over the same layer of free spheres at rest. The fixed spheres receive
+    no force from the fluid."""
+    fixed = rough_bed(tmp_path, 1)
+    free = rough_bed(tmp_path, 0)
+    r, dz = 1.5e-3, 0.5e-3
+    k = 2  # layer [1.0, 1.5] mm
+    slice_fraction = math.pi * (r * r * dz - ((0.0) ** 3 - (-dz) ** 3) / 3) / ((2 * r) ** 2 * dz)
+    for scene in (fixed, free):
+        prof = scene.state.fluid.profiles
+        assert prof.solid_fraction[k] == pytest.approx(slice_fraction, rel=1e-12)
+        assert prof.exchange_coefficient[k] > 0.0
+    np.testing.assert_array_equal(fixed.state.fluid.column.u, free.state.fluid.column.u)
+    u = fixed.state.fluid.column.u
+    assert u[k] < 0.5 * u[8]  # slowed inside the layer against just above it (z = 4.25 mm)
+    advance(fixed, 10)
+    assert np.all(fixed.state.particles.vel == 0.0)

@@ -96,6 +96,7 @@ class Vans1dState:
     profiles: LayerProfiles  # solid profiles of the last coupling
     stress: np.ndarray  # (n+1,) fluid shear stress at the faces [Pa] (diagnostic)
     selected: np.ndarray  # (N,) uint8: 1 = feels the fluid
+    counted: np.ndarray  # (N,) uint8: 1 = in the solid profiles the fluid sees (every particle)
     drag_coef: np.ndarray  # (N,) K_p of the last force evaluation [kg/s]
     drag_x: np.ndarray  # (N,) streamwise drag of the last force evaluation [N]
 
@@ -140,6 +141,7 @@ class Vans1d(FluidModule):
             profiles=LayerProfiles.zeros(cfg.cells),
             stress=np.zeros(cfg.cells + 1),
             selected=selected,
+            counted=np.ones(p.count, dtype=np.uint8),
             drag_coef=np.zeros(p.count),
             drag_x=np.zeros(p.count),
         )
@@ -238,15 +240,18 @@ class Vans1d(FluidModule):
             )  # fmt: skip
 
     def _average(self, state) -> None:
-        """Solid profiles of the current particles, the drag evaluated with the current fluid."""
+        """Solid profiles of the current particles, the drag evaluated with the current fluid.
+        Every particle is in them, as in YADE's HydroForceEngine: a fixed rough bed or particles
+        of materials that do not feel the fluid hold its solid fraction and take its drag (at their
+        own velocity, zero when fixed), though only the selected mobile ones receive forces."""
         p, f = state.particles, state.fluid
         col, cfg = f.column, self.cfg
         drag_coefficients(
-            p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
+            p.pos, p.vel, p.radius, f.counted, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             f.drag_coef, f.drag_x,
         )  # fmt: skip
-        f.profiles.average(p.pos, p.vel, p.radius, f.selected, f.drag_coef, f.drag_x, col.faces, self.area)
+        f.profiles.average(p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x, col.faces, self.area)
         col.update_mixing_length(f.profiles.solid_fraction)
 
     def _steady_start(self, state, tol: float = 1e-9, max_rounds: int = 20000) -> None:
