@@ -53,6 +53,14 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
         problems += wall_motion_problems(wall, ("walls", i))
     problems += _stage_problems(case, seen)
     problems += _group_problems(case)
+    if getattr(case.fluid, "bed", None) is not None:
+        problems.append(
+            (
+                ("fluid", "bed"),
+                "a bed of imposed porosity is for a case without particles (no [particles] or "
+                "count = 0); with particles the porosity comes from them",
+            )
+        )
 
     placement = case.particles.placement
     if not isinstance(placement, FilePlacement):  # a file's radii are checked once read

@@ -61,15 +61,22 @@ class DragConfig(Strict):
             "it (the self-induced velocity of a particle smaller than its cell, estimated from the "
             "grid's response to its drag and screened by the other particles of the cell), so that "
             "a sphere settling alone reaches its terminal velocity on any cell size; "
-            '"keep": the cell\'s velocity as it is. Per-particle drag only (averaging = '
-            '"particle") [-].'
+            '"keep": the cell\'s velocity as it is. Default "subtract" with averaging = '
+            '"particle", "keep" with "cell" (a closure on the cell means, which hold every '
+            "particle's share) [-]."
         ),
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _default_by_averaging(cls, data):
+        if isinstance(data, dict) and "self_induced" not in data:
+            data = {**data, "self_induced": "keep" if data.get("averaging") == "cell" else "subtract"}
+        return data
+
     @model_validator(mode="after")
     def _self_induced_needs_particle_drag(self):
-        asked = "self_induced" in self.model_fields_set and self.self_induced == "subtract"
-        if asked and self.averaging == "cell":
+        if self.averaging == "cell" and self.self_induced == "subtract":
             raise ValueError(
                 'self_induced = "subtract" needs averaging = "particle": the cell-averaged drag is '
                 "a closure on the cell's mean velocities, which already hold every particle's share"

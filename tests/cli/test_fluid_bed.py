@@ -132,5 +132,6 @@ def test_a_bed_with_particles_is_refused(tmp_path):
         '[contact]\nmodel = "linear"\nnormal_stiffness = 1e3\n\n[fluid]\n',
     )
     (tmp_path / "case.toml").write_text(text)
-    result = sphere_inproc("run", tmp_path / "case.toml", "--output", tmp_path / "run")
-    assert_clean_error(result, 65, "fluid.bed", "without particles")
+    for args in (("validate",), ("run", "--output", tmp_path / "run")):
+        result = sphere_inproc(args[0], tmp_path / "case.toml", *args[1:])
+        assert_clean_error(result, 65, "fluid.bed", "without particles")

@@ -64,3 +64,53 @@ def test_bands_follow_the_slow_approach_of_diffusion():
     assert np.max(np.abs(np.array(bands) - lattice)) < 0.015
     assert lattice[3] == pytest.approx(0.75, abs=0.01)
     assert lattice[5] == pytest.approx(0.93, abs=0.01)
+
+
+def _kick_until_steady(coef, u_cell, spacing=1e-3, mu=1e-3, rho=1e3, steps=4000):
+    """Particles held in place (1/m = 0) in one cubic cell whose fluid moves at u_cell along x,
+    each with drag coefficient coef [kg/s], through drag_kick's self-induced bands for `steps`
+    steps of 0.05 dx^2/nu (200 dx^2/nu in all): their drag along x and their u' (summed over
+    the bands)."""
+    from sphere_cli.kernels.fluid.drag import cell_coefficients, drag_kick
+    from sphere_cli.physics.fluid.self_induced import MODES
+
+    n = len(coef)
+    coef = np.asarray(coef, float)
+    zeros = np.zeros((n, 3))
+    cell_of = np.zeros(n, dtype=np.int64)
+    u = np.array([[u_cell, 0.0, 0.0]])
+    weight, rate = lattice_modes((spacing,) * 3)
+    nu = mu / rho
+    dt = 0.05 * spacing**2 / nu
+    decay = np.exp(-nu * rate * dt)
+    f_drag = coef[:, None] * np.array([u_cell, 0.0, 0.0])
+    disturbance = np.zeros((n, 3, MODES))
+    cell_coef = np.zeros(1)
+    cell_coefficients(cell_of, coef, cell_coef)
+    for _ in range(steps):
+        drag_kick(
+            zeros.copy(), zeros.copy(), zeros, np.zeros(n), np.zeros(n), cell_of, u, coef, zeros, dt,
+            zeros.copy(), f_drag, zeros.copy(), disturbance, cell_coef, spacing**3, weight, rate, decay,
+            mu, nu,
+        )  # fmt: skip
+    return f_drag[:, 0], disturbance[:, 0].sum(axis=1)
+
+
+def test_a_lone_particle_takes_back_its_own_wake_and_a_crowded_one_does_not():
+    """Alone in its cell, a particle's u' reaches -alpha F/mu (to the 2 % of the band model's slow
+    tail left after 200 dx^2/nu), so its drag is K u/(1 - K alpha/mu); among 63 others of the
+    same K (a bed: their drag screens the cell's fluid, kappa^2 = 63 K/(mu V) = 150/dx^2, above
+    every band's rate) its u' is 1.8e-4 of u (alone: 0.43 of it), and the drag K u to 2e-4. A
+    particle whose loop gain K alpha/mu would exceed 1/2 (one nearly as wide as its cell) is
+    capped there: its drag stays finite, at most 2 K u."""
+    mu, dx, u_cell = 1e-3, 1e-3, 1e-2
+    alpha = lattice_modes((dx,) * 3)[0][0].sum()
+    k = 0.3 * mu / alpha  # loop gain 0.3
+    drag, own = _kick_until_steady([k], u_cell, dx, mu)
+    assert own[0] == pytest.approx(-alpha * drag[0] / mu, rel=0.02)
+    assert drag[0] == pytest.approx(k * u_cell / (1 - 0.3), rel=0.02)
+    drag, own = _kick_until_steady([k] * 64, u_cell, dx, mu)
+    assert np.abs(own).max() < 5e-4 * u_cell
+    assert drag == pytest.approx(k * u_cell, rel=5e-4)
+    drag, own = _kick_until_steady([3.0 * mu / alpha], u_cell, dx, mu)
+    assert np.isfinite(drag[0]) and drag[0] <= 2.0 * 3.0 * mu / alpha * u_cell * (1 + 1e-9)

@@ -60,6 +60,7 @@ from numba import njit, prange
 GIDASPOW = 0
 DI_FELICE = 1
 ERGUN_POROSITY = 0.8  # Gidaspow: Ergun at or below, Wen-Yu above
+GAIN_CAP = 0.5  # largest share of its own drag a particle's self-induced velocity may take back
 
 
 @njit(cache=True, inline="always")
@@ -169,7 +170,7 @@ def particle_drag(
 @njit(cache=True, parallel=True)
 def drag_kick(
     vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse,
-    disturbance, k_drag, cell_volume, weight, rate, band_decay, mu, nu,
+    disturbance, cell_coef, cell_volume, weight, rate, band_decay, mu, nu,
 ):  # fmt: skip
     """Second half kick, exact for the drag at frozen K, u - u' and other forces (see the module
     docstring); then the drag force that makes the next first half kick exact too. The drag
@@ -177,12 +178,16 @@ def drag_kick(
 
     With `disturbance` (N,3,MODES) not empty, each band j of each particle's self-induced
     velocity then follows the mean drag F of the step over dt (physics/fluid/self_induced.py),
-    exactly for F held: with the band's weight W = weight[c, j] [1/m] and rate lambda = rate[c, j]
-    [1/m^2], the other particles' drag coefficients S = k_drag V_cell - K (k_drag [kg/(m^3 s)] of
-    the last fluid step, flattened), kappa^2 = S/(mu V_cell), s = lambda/(lambda + kappa^2):
+    exactly for F held: for component a, with the band's weight W = weight[a, j] [1/m] and rate
+    lambda = rate[a, j] [1/m^2], the other particles' drag coefficients S = cell_coef[cell] - K
+    (cell_coef (C,) [kg/s] the sum of K over the particles of each cell, `cell_coefficients`),
+    kappa^2 = S/(mu V_cell), s = lambda/(lambda + kappa^2):
         u'_j <- u'_inf + (u'_j - u'_inf) exp(-nu (lambda + kappa^2) dt),
-        u'_inf = -W s^2 F/mu;  mu [Pa s], nu [m^2/s] of the fluid; band_decay[c, j] =
-    exp(-nu lambda dt), the decay of a band without screening over this dt."""
+        u'_inf = -c W s^2 F/mu;  mu [Pa s], nu [m^2/s] of the fluid; band_decay[a, j] =
+    exp(-nu lambda dt), the decay of a band without screening over this dt. c = 1, or less where
+    the particle's own loop gain G = K sum_j W s^2/mu (the share of its drag it would take back
+    from its own wake) exceeds GAIN_CAP: c = GAIN_CAP/G keeps the corrected drag K/(1 - c G)
+    bounded for particles nearly as wide as their cell."""
     half = 0.5 * dt
     corrected = disturbance.shape[0] > 0
     for i in prange(vel.shape[0]):
@@ -193,7 +198,7 @@ def drag_kick(
         screening = 0.0
         screen_decay = 1.0
         if corrected:
-            screening = max(k_drag[c] * cell_volume - k, 0.0) / (mu * cell_volume)
+            screening = max(cell_coef[c] - k, 0.0) / (mu * cell_volume)
             if screening > 0.0:
                 screen_decay = math.exp(-nu * screening * dt)
         for a in range(3):
@@ -207,12 +212,29 @@ def drag_kick(
             force[i, a] = fo + fd
             angvel[i, a] += half * torque[i, a] * inv_inertia[i]
             if corrected:
+                gain = 0.0
+                for j in range(disturbance.shape[2]):
+                    share = rate[a, j] / (rate[a, j] + screening)
+                    gain += weight[a, j] * share * share
+                gain *= k / mu
                 mobility = mean_drag / mu
+                if gain > GAIN_CAP:
+                    mobility *= GAIN_CAP / gain
                 for j in range(disturbance.shape[2]):
                     share = rate[a, j] / (rate[a, j] + screening)
                     target = -weight[a, j] * share * share * mobility
                     decay = band_decay[a, j] * screen_decay
                     disturbance[i, a, j] = target + (disturbance[i, a, j] - target) * decay
+
+
+@njit(cache=True)
+def cell_coefficients(cell_of, coef, out):
+    """out (C,) = the sum of the drag coefficients coef (N,) [kg/s] of the particles of each cell,
+    in particle order (serial: independent of the thread count)."""
+    for c in range(out.shape[0]):
+        out[c] = 0.0
+    for i in range(coef.shape[0]):
+        out[cell_of[i]] += coef[i]
 
 
 @njit(cache=True, inline="always")

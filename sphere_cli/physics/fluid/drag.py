@@ -27,7 +27,15 @@ import warnings
 import numpy as np
 
 from ...config.drag import DragConfig
-from ...kernels.fluid.drag import DI_FELICE, GIDASPOW, cell_shares, drag_kick, exchange, particle_drag
+from ...kernels.fluid.drag import (
+    DI_FELICE,
+    GIDASPOW,
+    cell_coefficients,
+    cell_shares,
+    drag_kick,
+    exchange,
+    particle_drag,
+)
 from ...kernels.fluid.porosity import bin_particles
 from ...kernels.neighbors import counting_sort
 from ...state import State
@@ -85,6 +93,7 @@ class FluidParticleDrag:
         self.band_weight = np.zeros((3, MODES))
         self.band_rate = np.zeros((3, MODES))
         self.band_decay = np.zeros((3, MODES))  # exp(-nu rate dt) for this dt
+        self.cell_coef = np.zeros(cells if self.corrected else 0)  # sum of K per cell [kg/s]
         self.response_spacing = np.zeros(3)
         self.case_spacing = self.spacing.copy()  # the grid's cells as the case gives them [m]
         self.decay_dt = 0.0
@@ -145,6 +154,7 @@ class FluidParticleDrag:
         p = state.particles
         if self.corrected:
             self._follow_grid(state.clock.dt)
+            cell_coefficients(self.cell_of, self.coef, self.cell_coef)
         drag_kick(
             p.vel,
             p.angvel,
@@ -160,7 +170,7 @@ class FluidParticleDrag:
             self.f_drag,
             self.impulse,
             self.disturbance,
-            fs.k_drag.reshape(-1),
+            self.cell_coef,
             1.0 / self.inv_cell_volume,
             self.band_weight,
             self.band_rate,

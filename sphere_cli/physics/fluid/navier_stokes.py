@@ -461,18 +461,7 @@ class NavierStokes(FluidModule):
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
         self.bed = None  # a bed of imposed porosity ([fluid.bed], without particles)
-        if cfg.bed is not None:
-            if state.particles.count:
-                raise loaded.error(
-                    ("fluid", "bed"),
-                    "a bed of imposed porosity is for a case without particles (no [particles] or "
-                    "count = 0); with particles the porosity comes from them",
-                )
-            if self.top_wall is not None:
-                raise loaded.error(
-                    ("fluid", "bed"),
-                    "a bed of imposed porosity cannot follow a moving grid (fluid.grid.follow_top_wall)",
-                )
+        if cfg.bed is not None:  # a case without particles (config/consistency.py), so a fixed grid
             exchanged = self.drag.pressure_exchanged
             self.bed = FixedBed(cfg.bed, self.solver, cfg.drag, cfg.density, cfg.viscosity, exchanged, loaded)
 

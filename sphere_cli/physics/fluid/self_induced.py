@@ -33,13 +33,19 @@ Dynamics. Each particle carries the disturbance of each band, driven by its drag
     du'_j/dt = -nu (lambda_j + kappa^2) (u'_j + W_j s_j^2 F / mu),
     s_j = lambda_j / (lambda_j + kappa^2),   kappa^2 = S / (mu V_cell),
 S = sum K_q the drag coefficients of the other particles of the cell [kg/s]: they resist the
-fluid's motion (Brinkman screening: each band decays faster by S/(rho V_cell)). The response is
+fluid's motion (Brinkman screening: each band decays faster by S/(rho V_cell)); S is the sum of
+the current K of the cell's particles less the particle's own. The response is
 that of clear fluid: the porosity of the particle's cell, lowered by the particle itself, is not
 what its wake spreads through (taking it, 1/phi, overcorrects a sphere of half the cell by 8 %). The factor
 s_j is squared so that a particle alone in its cell (s = 1) sees the whole response of the
 grid, while in a cell of N particles (a bed, where the laws are closures on the cell's mean
-velocity, which rightly holds every particle's share) the correction falls as 1/N^2: that blend
-is a modelling choice, not derived.
+velocity, which rightly holds every particle's share) the correction falls as s_j^2, as 1/N^2
+once the others' drag dominates (kappa^2 above the bands' rates): that blend is a modelling
+choice, not derived. A particle nearly as wide as its cell would take back more than half of
+its own drag (loop gain K sum W s^2/mu > 1/2, about d/dx > 0.4 alone): its correction is scaled
+down to that half (kernels/fluid/drag.py, GAIN_CAP), so the drag stays bounded. The quadrature
+is meant for cells of aspect ratio up to about 10 (flatter cells put most of alpha into the
+unresolved band).
 """
 
 from __future__ import annotations
