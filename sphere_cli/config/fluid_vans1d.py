@@ -37,6 +37,16 @@ class SolvedFlow(Strict):
             "shear stress; 26 is the classic value; 0 = no damping [-]."
         ),
     )
+    viscous_sublayer: Real = Field(
+        0.0,
+        ge=0,
+        description=(
+            "YADE's viscous sublayer (HydroForceEngine viscousSubLayer): no eddy viscosity below "
+            "the height z+ nu/u* above the floor, with this z+ and u* = sqrt(|S| H/rho_f) the "
+            "friction velocity of the driving S = rho_f g_x - dp/dx over the depth H; 11.3 is "
+            "YADE's value; 0 = none. Exclusive with van_driest [-]."
+        ),
+    )
     top: Literal["free-surface", "no-slip"] = Field(
         "free-surface",
         description=(
@@ -66,6 +76,15 @@ class SolvedFlow(Strict):
             "(particles held fixed while it is found) [-]."
         ),
     )
+
+    @model_validator(mode="after")
+    def _one_sublayer_treatment(self):
+        if self.van_driest > 0.0 and self.viscous_sublayer > 0.0:
+            raise ValueError(
+                "van_driest and viscous_sublayer are two treatments of the same viscous sublayer: "
+                "give one of them (the other 0)"
+            )
+        return self
 
     @model_validator(mode="after")
     def _lid_is_laminar(self):

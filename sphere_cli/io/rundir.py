@@ -25,6 +25,8 @@ import logging
 import os
 import re
 import shutil
+import sys
+import warnings
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -62,6 +64,7 @@ class RunDirectory:
         # the old run moved aside by --overwrite, kept until the new run's first checkpoint
         self.replaced: Path | None = None
         self.created = False  # prepare_new made the directory itself
+        self._echo: _WarningsToLog | None = None
 
     def is_run(self) -> bool:
         return self.case.is_file()
@@ -231,9 +234,14 @@ class RunDirectory:
                 raise OutputError(f"{self.log_path}: cannot open the log ({exc})") from None
             handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
             log.addHandler(handler)
+        if self._echo is None:
+            self._echo = _WarningsToLog(log)
         return log
 
     def close_logger(self) -> None:
+        if self._echo is not None:
+            self._echo.detach()
+            self._echo = None
         log = logging.getLogger(f"sphere.run.{self.path.resolve()}")
         for handler in list(log.handlers):
             handler.close()
@@ -245,6 +253,34 @@ class RunDirectory:
             write_text_atomic(self.status_path, json.dumps(info, indent=2) + "\n")
         except OSError as exc:
             raise OutputError(f"{self.status_path}: cannot write status ({exc})") from None
+
+
+class _WarningsToLog(logging.Handler):
+    """While a run's log is open, every warning reaches run.log as well as stderr: Python
+    warnings (warnings.warn, e.g. the drag's porosity floor) and the records of the library's
+    loggers (`sphere.*`, e.g. the porosity clamp), which otherwise print to stderr only."""
+
+    def __init__(self, run_log: logging.Logger):
+        super().__init__(logging.WARNING)
+        self.run_log = run_log
+        self.library = logging.getLogger("sphere")
+        self.library.addHandler(self)
+        self.shown = warnings.showwarning
+        warnings.showwarning = self._show
+
+    def emit(self, record) -> None:
+        message = record.getMessage()
+        print(message, file=sys.stderr)
+        self.run_log.log(record.levelno, "%s", message)
+
+    def _show(self, message, category, filename, lineno, file=None, line=None) -> None:
+        self.shown(message, category, filename, lineno, file, line)
+        self.run_log.warning("%s: %s", category.__name__, message)
+
+    def detach(self) -> None:
+        self.library.removeHandler(self)
+        if warnings.showwarning == self._show:
+            warnings.showwarning = self.shown
 
 
 class _LogFile(logging.FileHandler):

@@ -3,8 +3,10 @@ no traceback (design guide section 6)."""
 
 from __future__ import annotations
 
+import warnings
+
 import pytest
-from cli_test_support import assert_clean_error, edit, line_of, sphere_inproc
+from cli_test_support import assert_clean_error, edit, line_of, sphere, sphere_inproc
 
 CASE = """\
 [simulation]
@@ -136,3 +138,60 @@ def test_runaway_drag_is_caught_and_named(tmp_path):
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 70, "drag relaxation time", "particle")
+
+
+def test_both_sublayer_treatments_are_refused(tmp_path):
+    """van_driest and viscous_sublayer treat the same sublayer: giving both is refused, naming the
+    key and its line."""
+    text = edit(
+        CASE,
+        'mixing_length = "li-sawamoto" }',
+        'mixing_length = "li-sawamoto", van_driest = 26.0, viscous_sublayer = 11.3 }',
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", tmp_path / "case.toml")
+    assert_clean_error(result, 65, "fluid.flow", "van_driest and viscous_sublayer")
+
+
+CLEAR_WATER = """\
+[simulation]
+duration = 0.002
+[domain]
+upper = [0.01, 0.01, 0.1]
+periodic = [true, true, false]
+gravity = [0.490296, 0.0, -9.797740]
+[fluid]
+model = "vans1d"
+surface = 0.1
+cells = 100
+stretching = 1.0e4
+flow = {{ kind = "solved", mixing_length = "prandtl"{extra} }}
+"""
+
+
+@pytest.mark.parametrize(
+    ("extra", "warned"), [("", True), (", viscous_sublayer = 11.3", False), (", van_driest = 26.0", False)]
+)
+def test_a_smooth_floor_without_a_sublayer_treatment_is_warned(tmp_path, extra, warned):
+    """Prandtl's mixing length over a clear floor reaches the floor (log-law intercept -1.2): the
+    run warns, naming both treatments, in run.log (as every warning) and on stderr; with either
+    treatment there is no warning."""
+    (tmp_path / "case.toml").write_text(CLEAR_WATER.format(extra=extra))
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        result = sphere_inproc("run", tmp_path / "case.toml", "--output", tmp_path / "run")
+    assert result.code == 0, result.stderr
+    log = (tmp_path / "run" / "run.log").read_text()
+    assert ("has no viscous-sublayer treatment" in log) == warned, log
+    if warned:
+        assert "van_driest = 26" in log and "viscous_sublayer = 11.3" in log
+
+
+def test_warnings_reach_stderr_and_run_log_in_a_real_run(tmp_path):
+    """The real CLI in its own interpreter: the warning is printed on stderr and written to
+    run.log."""
+    (tmp_path / "case.toml").write_text(CLEAR_WATER.format(extra=""))
+    result = sphere("run", tmp_path / "case.toml", "--output", tmp_path / "run")
+    assert result.code == 0, result.stderr
+    assert "has no viscous-sublayer treatment" in result.stderr
+    assert "RuntimeWarning: " in (tmp_path / "run" / "run.log").read_text()

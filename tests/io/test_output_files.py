@@ -110,3 +110,28 @@ def test_status_and_log(run_dir: Path):
     log = (run_dir / "run.log").read_text()
     assert "done at step" in log and "checkpoint" in log
     assert (run_dir / "case.toml").read_text() == textwrap.dedent(CASE)
+
+
+def test_every_warning_of_a_run_reaches_run_log(tmp_path, capsys):
+    """While a run's log is open, the library's logged warnings (e.g. the porosity clamp,
+    `sphere.fluid.*`) and Python warnings both reach run.log and stderr; closing the log detaches
+    both routes."""
+    import logging
+    import warnings
+
+    from sphere_cli.io.rundir import RunDirectory
+
+    rundir = RunDirectory(tmp_path / "run")
+    rundir.path.mkdir()
+    rundir.logger()
+    logging.getLogger("sphere.fluid.porosity").warning("porosity below 0 clamped to 0 in %d cells", 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.warn("the drag uses the floor there", RuntimeWarning, stacklevel=1)
+    rundir.close_logger()
+    logging.getLogger("sphere.fluid.porosity").warning("after the run")
+    log = rundir.log_path.read_text()
+    assert "WARNING porosity below 0 clamped to 0 in 3 cells" in log
+    assert "WARNING RuntimeWarning: the drag uses the floor there" in log
+    assert "after the run" not in log
+    assert "porosity below 0 clamped to 0 in 3 cells" in capsys.readouterr().err

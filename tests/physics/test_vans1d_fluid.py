@@ -98,6 +98,29 @@ def test_van_driest_damping_exact_solution():
     assert np.all((5.0 < intercept) & (intercept < 5.5))
 
 
+def test_viscous_sublayer_exact_solution():
+    """YADE's viscous sublayer (fluid.flow.viscous_sublayer): Prandtl's mixing length with no eddy
+    viscosity below z+ = 11.3, against the exact solution of that form (the jump of l at
+    delta = 11.3 nu/u* a node of its quadrature). The cut falls at the faces below delta, up to
+    one layer from it, so the error does not fall smoothly: below 1 % of the surface velocity at
+    50-400 layers (stretched x1e4), 0.28 % at 400; the sublayer itself moves the profile by 23 %
+    of it."""
+    delta = 11.3 * exact.NU / exact.U_STAR
+    for cells in (50, 100, 200, 400):
+        column = FluidColumn.regular(
+            0.0, exact.DEPTH, cells, 1e4, rho=RHO, nu=exact.NU, mixing="prandtl", sublayer=delta
+        )
+        zero = np.zeros(cells)
+        steady(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        assert np.all(column.mixing[: column.sublayer_faces] == 0.0)
+        assert column.faces[column.sublayer_faces] >= delta > column.faces[column.sublayer_faces - 1]
+        u = exact.free_surface_velocity("prandtl", column.centres, sublayer=delta)
+        error = np.abs(column.u - u).max() / u.max()
+        assert error < (0.01 if cells < 400 else 0.004), (cells, error)
+    without = exact.free_surface_velocity("prandtl", column.centres)
+    assert np.abs(without - u).max() > 0.2 * u.max()
+
+
 def test_parabolic_exact_solution_is_the_log_law():
     """Validation C: with l = kappa z sqrt(1 - z/h) the profile is the log law over the whole depth
     above the sublayer, u(z2) - u(z1) = u*/kappa ln(z2/z1); with Prandtl's l = kappa z it is not

@@ -20,8 +20,9 @@ KAPPA = 0.41
 U_STAR = float(np.sqrt(G * np.sin(SLOPE) * DEPTH))  # 0.2214 m/s
 
 
-def mixing_length(kind: str, s, depth=DEPTH, kappa=KAPPA, a_plus=0.0, u_star=U_STAR, nu=NU):
-    """Prandtl or parabolic mixing length, damped by van Driest's factor when a_plus > 0."""
+def mixing_length(kind: str, s, depth=DEPTH, kappa=KAPPA, a_plus=0.0, u_star=U_STAR, nu=NU, sublayer=0.0):
+    """Prandtl or parabolic mixing length, damped by van Driest's factor when a_plus > 0, and zero
+    below the height `sublayer` [m] (YADE's viscous sublayer)."""
     s = np.asarray(s, dtype=float)
     if kind == "prandtl":
         ell = kappa * s
@@ -31,25 +32,28 @@ def mixing_length(kind: str, s, depth=DEPTH, kappa=KAPPA, a_plus=0.0, u_star=U_S
         raise ValueError(kind)
     if a_plus > 0.0:
         ell = ell * (1.0 - np.exp(-ell / kappa * u_star / (a_plus * nu)))
-    return ell
+    return np.where(s < sublayer, 0.0, ell)
 
 
-def velocity_gradient(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0):
+def velocity_gradient(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0, sublayer=0.0):
     tau = u_star**2 * (1.0 - np.asarray(s, dtype=float) / depth)
-    ell = mixing_length(kind, s, depth, a_plus=a_plus, u_star=u_star, nu=nu)
+    ell = mixing_length(kind, s, depth, a_plus=a_plus, u_star=u_star, nu=nu, sublayer=sublayer)
     return 2.0 * tau / (nu + np.sqrt(nu * nu + 4.0 * ell * ell * tau))
 
 
-def free_surface_velocity(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0) -> np.ndarray:
+def free_surface_velocity(kind: str, s, u_star=U_STAR, depth=DEPTH, nu=NU, a_plus=0.0, sublayer=0.0):
     """u(s) of the steady turbulent free-surface flow of the mixing-length model `kind` (with
-    van Driest's damping of constant a_plus when it is > 0)."""
+    van Driest's damping of constant a_plus when it is > 0, no eddy viscosity below `sublayer`;
+    its jump is a node of the quadrature)."""
     x, w = np.polynomial.legendre.leggauss(12)
     nodes = np.concatenate([[0.0], np.geomspace(1e-10 * depth, depth, 3000)])
+    if sublayer > 0.0:
+        nodes = np.unique(np.concatenate([nodes, [sublayer]]))
 
     def integral(a, b):
         mid, half = 0.5 * (a + b), 0.5 * (b - a)
         pts = mid[:, None] + half[:, None] * x[None, :]
-        return half * (velocity_gradient(kind, pts, u_star, depth, nu, a_plus) @ w)
+        return half * (velocity_gradient(kind, pts, u_star, depth, nu, a_plus, sublayer) @ w)
 
     cumulative = np.concatenate([[0.0], np.cumsum(integral(nodes[:-1], nodes[1:]))])
     s = np.asarray(s, dtype=float)

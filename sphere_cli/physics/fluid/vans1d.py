@@ -11,6 +11,7 @@ own implicit steps (kernels/fluid/vans1d.py), or, for a prescribed flow, left as
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,10 @@ class FluidColumn:
         packed_solid_fraction: float = 0.61,
         top_no_slip: bool = False,
         van_driest: float = 0.0,
+        sublayer: float = 0.0,
     ):
+        """sublayer [m]: no eddy viscosity at the faces below this height above the floor
+        (YADE's viscous sublayer); 0 = none."""
         self.faces = np.ascontiguousarray(faces, dtype=np.float64)
         self.centres = 0.5 * (self.faces[1:] + self.faces[:-1])
         n = self.centres.size
@@ -52,6 +56,7 @@ class FluidColumn:
         self.kappa, self.packed_solid_fraction = float(kappa), float(packed_solid_fraction)
         self.top_no_slip = bool(top_no_slip)
         self.van_driest = float(van_driest)
+        self.sublayer_faces = int(np.count_nonzero(self.faces - self.faces[0] < float(sublayer)))
         self.u = np.zeros(n)
         self.mixing = np.zeros(n + 1)  # mixing length at the faces [m]
         self.damped = np.zeros(n + 1)  # the same, damped near the wall (van Driest) [m]
@@ -69,6 +74,7 @@ class FluidColumn:
 
     def update_mixing_length(self, solid: np.ndarray) -> None:
         mixing_length(self.faces, solid, self.kind, self.kappa, self.packed_solid_fraction, self.mixing)
+        self.mixing[: self.sublayer_faces] = 0.0
         damp_mixing_length(self.mixing, self.kappa, self.van_driest, self.u_star[0], self.nu, self.damped)
 
     def advance(self, solid, vel_p, exchange, source: float, dt: float, steps: int) -> None:
@@ -131,6 +137,7 @@ class Vans1d(FluidModule):
             packed_solid_fraction=cfg.packed_solid_fraction,
             top_no_slip=solved and flow.top == "no-slip",
             van_driest=flow.van_driest if solved else 0.0,
+            sublayer=self._sublayer_height(cfg, box) if solved else 0.0,
         )
         self.solved = solved
         self.area = float(box.length[0] * box.length[1])
@@ -184,6 +191,18 @@ class Vans1d(FluidModule):
                 f"{unknown}: no particle is made of it (particles.material names {names or 'none'})",
             )
 
+    @staticmethod
+    def _sublayer_height(cfg, box) -> float:
+        """z+ nu/u* of fluid.flow.viscous_sublayer [m], u* = sqrt(|S| H/rho) from the driving S
+        over the depth H (0 without a sublayer or a driving)."""
+        flow = cfg.flow
+        driving = cfg.density * float(box.body_acc[0]) - flow.pressure_gradient
+        depth = cfg.surface - float(box.lower[2])
+        u_star = math.sqrt(abs(driving) * depth / cfg.density)
+        if flow.viscous_sublayer == 0.0 or u_star == 0.0:
+            return 0.0
+        return flow.viscous_sublayer * cfg.viscosity / u_star
+
     def dt_limit(self) -> tuple[float, str]:
         return min(self._dt_limit, self.coupling_limit(), key=lambda limit: limit[0])
 
@@ -214,8 +233,26 @@ class Vans1d(FluidModule):
 
     def initialize(self, state) -> None:
         self._average(state)
+        self._warn_smooth_floor(state)
         if self.solved and self.cfg.flow.initial == "steady":
             self._steady_start(state)
+
+    def _warn_smooth_floor(self, state) -> None:
+        """A turbulent flow over a clear (smooth) floor with neither sublayer treatment: the
+        eddy viscosity reaches the floor, over-mixing the buffer layer (log-law intercept
+        B = -1.2 instead of about 5)."""
+        flow = self.cfg.flow
+        if not self.solved or flow.mixing_length == "none" or flow.van_driest or flow.viscous_sublayer:
+            return
+        if state.fluid.profiles.solid_fraction[0] > 0.0:
+            return  # a bed on the floor: its drag, not a viscous sublayer, holds the flow back
+        warnings.warn(
+            f'fluid.flow.mixing_length = "{flow.mixing_length}" over a smooth floor (no particle in '
+            "the lowest layer) has no viscous-sublayer treatment: the eddy viscosity reaches the "
+            "floor; set fluid.flow.van_driest = 26 or fluid.flow.viscous_sublayer = 11.3",
+            RuntimeWarning,
+            stacklevel=2,
+        )
 
     # ---------------------------------------------------------------- every step
 
