@@ -12,6 +12,7 @@ diffusion time H^2/D ~ 1e-9 s is far below the step, so that is the steady state
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import textwrap
@@ -245,3 +246,51 @@ bottom = { type = "no-flow" }"""
             assert start - walls.coord[top] == pytest.approx(final, rel=0.01)
             assert np.max(np.abs(scene.fluid.pore.state.pressure)) < 0.01 * sigma
     assert settlements["wet"] < 0.7 * settlements["dry"]  # the dry wall is already there (overshooting)
+
+
+FIXED_LIGHT = """
+[simulation]
+duration = 0.001
+dt = "auto"
+[domain]
+upper = [0.004, 0.004, 0.01]
+periodic = [true, true, false]
+[[materials]]
+name = "sand"
+density = 2650.0
+[[materials]]
+name = "cork"
+density = 240.0
+[particles]
+material = ["sand", "cork"]
+placement = { method = "file", path = "bed.csv" }
+[contact]
+model = "linear"
+normal_stiffness = 1.0e3
+[[walls]]
+face = "z-"
+[fluid]
+model = "darcy"
+density = 1000.0
+grid = { cells = [2, 2, 5] }
+permeability = { model = "constant", value = 1.0e-9 }
+"""
+
+
+@pytest.mark.parametrize("sand_fixed", [0, 1])
+def test_the_coupling_limit_counts_only_particles_that_move(tmp_path, sand_fixed):
+    """Fixed cork spheres (240 kg/m^3) under free sand (2650): the explicit coupling's limit
+    0.2 rho_s k/mu takes rho_s of the sand, the lightest particles that move (the fixed ones are
+    pushed but do not answer), not the cork's, which would make dt 11 times smaller. With the
+    sand fixed as well nothing answers, and the coupling sets no limit."""
+    rows = ["x,y,z,r,material,fixed"]
+    rows += [f"{x},{y},0.0005,0.0005,cork,1" for x in (0.001, 0.003) for y in (0.001, 0.003)]
+    rows += [f"{x},{y},0.0025,0.0005,sand,{sand_fixed}" for x in (0.001, 0.003) for y in (0.001, 0.003)]
+    (tmp_path / "bed.csv").write_text("\n".join(rows) + "\n")
+    scene = build_scene(parse_case(FIXED_LIGHT, tmp_path / "case.toml"))
+    limit, reason = scene.fluid.fluid_step_limit()
+    if sand_fixed:
+        assert limit == math.inf and "no particle moves" in reason
+    else:
+        assert limit == pytest.approx(0.2 * 2650.0 * 1.0e-9 / 1.0e-3, rel=1e-9)
+        assert "2650 kg/m^3" in reason

@@ -62,8 +62,10 @@ class Darcy(FluidModule):
         # (config/consistency.py)
         self.alone = particles.count == 0
         self.mean_diameter = 0.0 if self.alone else 2.0 * float(np.mean(particles.radius))
-        volume = 4.0 / 3.0 * np.pi * particles.radius**3
-        self.lightest_density = math.inf if self.alone else float(np.min(particles.mass / volume))
+        # the coupling's limit is set by the particles that move (fixed ones take no push back)
+        moving = particles.inv_mass > 0.0
+        volume = 4.0 / 3.0 * np.pi * particles.radius[moving] ** 3
+        self.lightest_density = float(np.min(particles.mass[moving] / volume)) if moving.any() else math.inf
         self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0 or None)
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
@@ -80,12 +82,15 @@ class Darcy(FluidModule):
         on a settling bed (tests/physics/test_darcy_coupled.py): stable with a fluid step of
         0.3 rho_s k / mu, blowing up at 0.5; the limit is COUPLING_FRACTION of it, with k at
         the densest sphere packing (phi = 0.26, or porosity_min if higher; the constant k
-        otherwise) and rho_s the lightest particle density."""
+        otherwise) and rho_s the lightest density of the particles that move (fixed ones are
+        pushed but do not answer)."""
         if self.alone:
             return (
                 math.inf,
                 "no particles to couple to, and the implicit pore-pressure step is stable at any step",
             )
+        if math.isinf(self.lightest_density):
+            return math.inf, "no particle moves: the pore pressure pushes on nothing that answers"
         config = self.pore.config
         phi = max(config.porosity_min, DENSEST_POROSITY)
         if self.pore.kc is None:
