@@ -54,6 +54,13 @@ class SolvedFlow(Strict):
             'channel between two walls; laminar only, mixing_length = "none") [-].'
         ),
     )
+    top_velocity: Real = Field(
+        0.0,
+        description=(
+            'Streamwise velocity of the lid with top = "no-slip" (a plane Couette flow when there '
+            "is no other driving; YADE's uTop) [m/s]."
+        ),
+    )
     pressure_gradient: Real = Field(
         0.0,
         description=(
@@ -84,6 +91,12 @@ class SolvedFlow(Strict):
                 "van_driest and viscous_sublayer are two treatments of the same viscous sublayer: "
                 "give one of them (the other 0)"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _a_lid_to_move(self):
+        if self.top_velocity != 0.0 and self.top != "no-slip":
+            raise ValueError('top_velocity moves a lid: it needs top = "no-slip"')
         return self
 
     @model_validator(mode="after")

@@ -97,6 +97,14 @@ ERRORS = [
         ["sand"],
     ),
     ("few-cells", "cells = 20", "cells = 1", "fluid.cells", "cells", ["greater than or equal to 2"]),
+    (
+        "lid-velocity-without-a-lid",
+        'mixing_length = "li-sawamoto" }',
+        'mixing_length = "li-sawamoto", top_velocity = 0.5 }',
+        "fluid.flow",
+        "flow =",
+        ['top = "no-slip"'],
+    ),
 ]
 
 

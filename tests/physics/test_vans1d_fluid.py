@@ -52,6 +52,26 @@ def test_laminar_channel_parabola(stretching):
         assert abs(order - 2.0) < 0.15, errors
 
 
+def test_couette_poiseuille_under_a_moving_lid():
+    """A lid moving at U = 2 m/s over the pressure-driven channel of the test above (YADE's uTop):
+    u = (-dp/dx)/(2 mu) z (h - z) + U z/h, the sum of the two exact solutions; error at 100 layers
+    within 0.5 % of the largest velocity, order 2 (the lid's value enters the top face's flux)."""
+    errors = []
+    for cells in (25, 50, 100):
+        column = FluidColumn.regular(
+            0.0, 1.0, cells, 4.0, rho=RHO, nu=1e-6, top_no_slip=True, lid_velocity=2.0
+        )
+        zero = np.zeros(cells)
+        column.update_mixing_length(zero)
+        column.advance(zero, zero, zero, 0.1, 1e12, 2)
+        z = column.centres
+        exact_u = 0.1 / (2 * 1e-3) * z * (1 - z) + 2.0 * z
+        errors.append(np.abs(column.u - exact_u).max() / exact_u.max())
+    assert errors[-1] < 0.005
+    for order in observed_orders(errors):
+        assert abs(order - 2.0) < 0.15, errors
+
+
 @pytest.mark.parametrize("kind", ["prandtl", "parabolic"])
 def test_turbulent_free_surface_exact_solution(kind):
     """Free-surface flow down a 0.05 rad slope, h = 0.1 m, nu = 1e-6 m^2/s, kappa = 0.41,

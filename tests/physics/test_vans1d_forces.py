@@ -27,7 +27,7 @@ def forces(z, vel, u_of_z, solid=0.0, full=False, lift=0.0, top=0.02, exponent=3
     coef, drag_x = np.zeros(1), np.zeros(1)
     profile_forces(
         pos, np.array([vel], dtype=float), np.array([R]), np.ones(1, np.uint8), faces, centres, u,
-        np.full(centres.size, solid), False, RHO, NU, exponent, 0.61, GRAVITY, full, lift, force, coef,
+        np.full(centres.size, solid), False, 0.0, RHO, NU, exponent, 0.61, GRAVITY, full, lift, force, coef,
         drag_x,
     )  # fmt: skip
     return force[0], coef[0], drag_x[0], (faces, centres, u)
@@ -75,16 +75,18 @@ def test_lift_in_a_linear_shear():
 
 def test_profile_boundaries():
     """u vanishes at the no-slip bottom (linearly from the first centre), is constant above the
-    last centre under a free surface and vanishes at a no-slip lid."""
+    last centre under a free surface and goes linearly to the velocity of a no-slip lid."""
     faces = layer_faces(0.0, 1.0, 4)
     centres = 0.5 * (faces[1:] + faces[:-1])
     u = np.array([1.0, 2.0, 3.0, 4.0])
-    assert fluid_velocity_at(faces, centres, u, False, 0.0) == 0.0
-    assert fluid_velocity_at(faces, centres, u, False, 0.0625) == pytest.approx(0.5)
-    assert fluid_velocity_at(faces, centres, u, False, 0.5) == pytest.approx(2.5)
-    assert fluid_velocity_at(faces, centres, u, False, 0.95) == 4.0
-    assert fluid_velocity_at(faces, centres, u, True, 0.9375) == pytest.approx(2.0)
-    assert fluid_velocity_at(faces, centres, u, True, 1.0) == 0.0
+    assert fluid_velocity_at(faces, centres, u, False, 0.0, 0.0) == 0.0
+    assert fluid_velocity_at(faces, centres, u, False, 0.0, 0.0625) == pytest.approx(0.5)
+    assert fluid_velocity_at(faces, centres, u, False, 0.0, 0.5) == pytest.approx(2.5)
+    assert fluid_velocity_at(faces, centres, u, False, 0.0, 0.95) == 4.0
+    assert fluid_velocity_at(faces, centres, u, True, 0.0, 0.9375) == pytest.approx(2.0)
+    assert fluid_velocity_at(faces, centres, u, True, 0.0, 1.0) == 0.0
+    assert fluid_velocity_at(faces, centres, u, True, 0.5, 1.0) == 0.5  # a lid moving at 0.5 m/s
+    assert fluid_velocity_at(faces, centres, u, True, 0.5, 0.9375) == pytest.approx(2.25)
 
 
 def test_forces_do_not_depend_on_the_thread_count():
@@ -104,7 +106,7 @@ def test_forces_do_not_depend_on_the_thread_count():
         numba.set_num_threads(threads)
         force, coef, drag_x = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
         profile_forces(
-            pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, solid, False, RHO, NU, 3.1, 0.61,
+            pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, solid, False, 0.0, RHO, NU, 3.1, 0.61,
             GRAVITY, True, 0.2, force, coef, drag_x,
         )  # fmt: skip
         results.append((force, coef, drag_x))

@@ -14,7 +14,8 @@ u goes linearly to 0 at the bottom (no-slip); above the last centre it is consta
 or goes linearly to 0 at the lid (no-slip top). solid is constant beyond the end centres.
 
 Arguments: pos, vel (N,3) [m, m/s]; radius (N,) [m]; selected (N,) uint8; faces (n+1,) [m];
-centres (n,) [m]; u (n,) [m/s]; solid (n,) [-]; top_no_slip (bool); rho [kg/m^3]; nu [m^2/s];
+centres (n,) [m]; u (n,) [m/s]; solid (n,) [-]; top_no_slip (bool); lid_velocity [m/s] of a
+no-slip lid; rho [kg/m^3]; nu [m^2/s];
 exponent n [-]; solid_max [-]; gravity (3,) [m/s^2]; buoyancy_full (bool); lift_coef [-];
 force (N,3) [N] (added to); drag_coef (N,) [kg/s] and drag_x (N,) [N] (written).
 """
@@ -47,24 +48,26 @@ def bracket(centres, z):
 
 
 @njit(cache=True, inline="always")
-def _velocity(faces, centres, u, top_no_slip, z, lo, hi, w):
-    """u(z) given z's bracket, with the boundary conditions: 0 at and below the bottom, and at
-    a no-slip lid."""
+def _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w):
+    """u(z) given z's bracket, with the boundary conditions: 0 at and below the bottom, and
+    lid_velocity [m/s] at and above a no-slip lid."""
     n = centres.shape[0]
     if z < centres[0]:
         bottom = faces[0]
         return u[0] * (z - bottom) / (centres[0] - bottom) if z > bottom else 0.0
     if z > centres[n - 1] and top_no_slip:
         top = faces[n]
-        return u[n - 1] * (top - z) / (top - centres[n - 1]) if z < top else 0.0
+        if z >= top:
+            return lid_velocity
+        return u[n - 1] + (lid_velocity - u[n - 1]) * (z - centres[n - 1]) / (top - centres[n - 1])
     return (1.0 - w) * u[lo] + w * u[hi]
 
 
 @njit(cache=True)
-def fluid_velocity_at(faces, centres, u, top_no_slip, z):
+def fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z):
     """u(z) with the boundary conditions (see _velocity)."""
     lo, hi, w = bracket(centres, z)
-    return _velocity(faces, centres, u, top_no_slip, z, lo, hi, w)
+    return _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w)
 
 
 @njit(cache=True, inline="always")
@@ -84,6 +87,7 @@ def profile_forces(
     u,
     solid,
     top_no_slip,
+    lid_velocity,
     rho,
     nu,
     exponent,
@@ -110,7 +114,7 @@ def profile_forces(
             continue
         frac = submerged / volume
         lo, hi, w = bracket(centres, z)
-        ur = _velocity(faces, centres, u, top_no_slip, z, lo, hi, w) - vel[i, 0]
+        ur = _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w) - vel[i, 0]
         vr = -vel[i, 1]
         wr = -vel[i, 2]
         speed = math.sqrt(ur * ur + vr * vr + wr * wr)
@@ -126,8 +130,8 @@ def profile_forces(
             force[i, 1] -= rho * submerged * gravity[1]
         force[i, 2] -= rho * submerged * gravity[2]
         if lift_coef > 0.0:
-            u_top = fluid_velocity_at(faces, centres, u, top_no_slip, z + r) - vel[i, 0]
-            u_bottom = fluid_velocity_at(faces, centres, u, top_no_slip, z - r) - vel[i, 0]
+            u_top = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z + r) - vel[i, 0]
+            u_bottom = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z - r) - vel[i, 0]
             force[i, 2] += (
                 frac * 0.5 * rho * lift_coef * math.pi * r * r * (u_top * u_top - u_bottom * u_bottom)
             )
@@ -144,6 +148,7 @@ def drag_coefficients(
     u,
     solid,
     top_no_slip,
+    lid_velocity,
     rho,
     nu,
     exponent,
@@ -166,7 +171,7 @@ def drag_coefficients(
             continue
         frac = submerged / (4.0 / 3.0 * math.pi * r * r * r)
         lo, hi, w = bracket(centres, z)
-        ur = _velocity(faces, centres, u, top_no_slip, z, lo, hi, w) - vel[i, 0]
+        ur = _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w) - vel[i, 0]
         speed = math.sqrt(ur * ur + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
         solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
         k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)

@@ -10,8 +10,9 @@ viscosity of a mixing length l: nu_t = l^2 |du/dz|.
 Finite volumes on layers [z_k, z_k+1] (regular or stretched), u at the layer centres, fluxes at
 the faces with the central gradient (second order on a smoothly stretched mesh). Bottom: no-slip
 (u = 0 at the first face, one-sided gradient over the half layer). Top: free surface (no flux)
-or no-slip lid. Implicit Euler in time with nu_t from the previous step (Picard), so the step is
-not bound by the diffusion limit: each step is one tridiagonal solve (Thomas algorithm).
+or no-slip lid moving at lid_velocity (YADE's uTop). Implicit Euler in time with nu_t from the
+previous step (Picard), so the step is not bound by the diffusion limit: each step is one
+tridiagonal solve (Thomas algorithm).
 
 Mixing lengths at the faces (s = z - z_0 height above the bottom, H the depth):
   0 "none"        l = 0 (laminar)
@@ -25,7 +26,8 @@ no damping). The solve uses the damped length `damped`, kept equal to damp(mixin
 
 Arguments: faces (n+1,) [m]; centres (n,) [m]; u (n,) [m/s] (advanced in place); solid, vel_p,
 exchange (n,) [-, m/s, kg/(m^3 s)]; mixing, damped (n+1,) [m]; kappa [-]; a_plus [-]; u_star (1,)
-[m/s] (updated in place); rho [kg/m^3]; nu [m^2/s]; source S [N/m^3]; top_no_slip (bool); dt [s];
+[m/s] (updated in place); rho [kg/m^3]; nu [m^2/s]; source S [N/m^3]; top_no_slip (bool);
+lid_velocity [m/s]; dt [s];
 scratch arrays of n+1 (coef) and n (lower, diag, upper, rhs, work).
 """
 
@@ -66,7 +68,7 @@ def damp_mixing_length(mixing, kappa, a_plus, u_star, nu, out):
 
 
 @njit(cache=True)
-def face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, coef):
+def face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, lid_velocity, coef):
     """rho (1-solid) (nu + nu_t) / h at each face, h the distance between the values it links."""
     n = centres.shape[0]
     h = centres[0] - faces[0]
@@ -79,7 +81,7 @@ def face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, co
         coef[f] = rho * eps * (nu + mixing[f] * mixing[f] * abs(grad)) / h
     if top_no_slip:
         h = faces[n] - centres[n - 1]
-        grad = -u[n - 1] / h
+        grad = (lid_velocity - u[n - 1]) / h
         coef[n] = rho * (1.0 - solid[n - 1]) * (nu + mixing[n] * mixing[n] * abs(grad)) / h
     else:
         coef[n] = 0.0
@@ -116,6 +118,7 @@ def advance_fluid(
     nu,
     source,
     top_no_slip,
+    lid_velocity,
     dt,
     steps,
     coef,
@@ -128,7 +131,7 @@ def advance_fluid(
     """`steps` implicit Euler steps of dt with solid, vel_p, exchange held fixed."""
     n = centres.shape[0]
     for _ in range(steps):
-        face_coefficients(faces, centres, u, solid, damped, rho, nu, top_no_slip, coef)
+        face_coefficients(faces, centres, u, solid, damped, rho, nu, top_no_slip, lid_velocity, coef)
         for k in range(n):
             dz = faces[k + 1] - faces[k]
             eps = 1.0 - solid[k]
@@ -137,9 +140,11 @@ def advance_fluid(
             upper[k] = -coef[k + 1] if k < n - 1 else 0.0
             diag[k] = m + coef[k] + coef[k + 1] + exchange[k] * dz
             rhs[k] = m * u[k] + dz * (eps * source + exchange[k] * vel_p[k])
+        if top_no_slip:
+            rhs[n - 1] += coef[n] * lid_velocity  # the lid's value in the top face's flux
         solve_tridiagonal(lower, diag, upper, rhs, work, u)
         if a_plus > 0.0:
-            shear_stress(faces, centres, u, solid, damped, rho, nu, top_no_slip, coef)
+            shear_stress(faces, centres, u, solid, damped, rho, nu, top_no_slip, lid_velocity, coef)
             largest = 0.0
             for f in range(n + 1):
                 largest = max(largest, coef[f])
@@ -148,11 +153,11 @@ def advance_fluid(
 
 
 @njit(cache=True)
-def shear_stress(faces, centres, u, solid, mixing, rho, nu, top_no_slip, out):
+def shear_stress(faces, centres, u, solid, mixing, rho, nu, top_no_slip, lid_velocity, out):
     """Fluid shear stress rho (1-solid) (nu + nu_t) du/dz at each face [Pa]."""
     n = centres.shape[0]
-    face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, out)
+    face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, lid_velocity, out)
     out[0] *= u[0]
     for f in range(n - 1, 0, -1):
         out[f] *= u[f] - u[f - 1]
-    out[n] *= -u[n - 1] if top_no_slip else 0.0
+    out[n] *= lid_velocity - u[n - 1] if top_no_slip else 0.0

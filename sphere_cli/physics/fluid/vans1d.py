@@ -43,6 +43,7 @@ class FluidColumn:
         kappa: float = 0.41,
         packed_solid_fraction: float = 0.61,
         top_no_slip: bool = False,
+        lid_velocity: float = 0.0,
         van_driest: float = 0.0,
         sublayer: float = 0.0,
     ):
@@ -55,6 +56,7 @@ class FluidColumn:
         self.kind = MIXING_KINDS[mixing]
         self.kappa, self.packed_solid_fraction = float(kappa), float(packed_solid_fraction)
         self.top_no_slip = bool(top_no_slip)
+        self.lid_velocity = float(lid_velocity)  # of the no-slip lid along x [m/s]
         self.van_driest = float(van_driest)
         self.sublayer_faces = int(np.count_nonzero(self.faces - self.faces[0] < float(sublayer)))
         self.u = np.zeros(n)
@@ -82,15 +84,16 @@ class FluidColumn:
         [N/m^3]. The mixing length must be up to date with solid."""
         advance_fluid(
             self.faces, self.centres, self.u, solid, vel_p, exchange, self.mixing, self.damped, self.kappa,
-            self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip, float(dt),
-            int(steps), self._coef, *self._scratch,
+            self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip,
+            self.lid_velocity, float(dt), int(steps), self._coef, *self._scratch,
         )  # fmt: skip
 
     def shear_stress(self, solid: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Fluid shear stress at the n+1 faces [Pa] into `out`."""
         shear_stress(
-            self.faces, self.centres, self.u, solid, self.damped, self.rho, self.nu, self.top_no_slip, out
-        )
+            self.faces, self.centres, self.u, solid, self.damped, self.rho, self.nu, self.top_no_slip,
+            self.lid_velocity, out,
+        )  # fmt: skip
         return out
 
 
@@ -136,6 +139,7 @@ class Vans1d(FluidModule):
             kappa=flow.kappa if solved else 0.41,
             packed_solid_fraction=cfg.packed_solid_fraction,
             top_no_slip=solved and flow.top == "no-slip",
+            lid_velocity=flow.top_velocity if solved else 0.0,
             van_driest=flow.van_driest if solved else 0.0,
             sublayer=self._sublayer_height(cfg, box) if solved else 0.0,
         )
@@ -262,7 +266,7 @@ class Vans1d(FluidModule):
         cfg = self.cfg
         profile_forces(
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
-            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
+            col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
         )  # fmt: skip
 
@@ -285,7 +289,7 @@ class Vans1d(FluidModule):
         col, cfg = f.column, self.cfg
         drag_coefficients(
             p.pos, p.vel, p.radius, f.counted, col.faces, col.centres, col.u, f.profiles.solid_fraction,
-            col.top_no_slip, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
+            col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             f.drag_coef, f.drag_x,
         )  # fmt: skip
         f.profiles.average(p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x, col.faces, self.area)
