@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from .base import Count, Real, Strict
 from .fluid_common import CouplingConfig
@@ -214,3 +214,18 @@ class Vans1dFluid(Strict):
             "every particle [-]."
         ),
     )
+    ids: tuple[int, int] | None = Field(
+        None,
+        description=(
+            "Only the particles of index first..last (both included, 0-based, in placement order: "
+            "a placement file's rows) feel the fluid, as YADE's HydroForceEngine ids; with "
+            "materials, those in both; default: every particle [-]."
+        ),
+    )
+
+    @field_validator("ids")
+    @classmethod
+    def _an_id_range(cls, ids):
+        if ids is not None and not 0 <= ids[0] <= ids[1]:
+            raise ValueError(f"{list(ids)}: expected [first, last] with 0 <= first <= last")
+        return ids

@@ -97,6 +97,7 @@ ERRORS = [
         ["sand"],
     ),
     ("few-cells", "cells = 20", "cells = 1", "fluid.cells", "cells", ["greater than or equal to 2"]),
+    ("ids-reversed", "cells = 20", "cells = 20\nids = [5, 2]", "fluid.ids", "ids", ["first <= last"]),
     (
         "lid-velocity-without-a-lid",
         'mixing_length = "li-sawamoto" }',
@@ -203,3 +204,12 @@ def test_warnings_reach_stderr_and_run_log_in_a_real_run(tmp_path):
     assert result.code == 0, result.stderr
     assert "has no viscous-sublayer treatment" in result.stderr
     assert "RuntimeWarning: " in (tmp_path / "run" / "run.log").read_text()
+
+
+def test_an_id_range_beyond_the_particles_is_refused(tmp_path):
+    """fluid.ids past the last particle is refused when the scene is built, naming the key and the
+    number of particles."""
+    text = edit(CASE, "cells = 20", "cells = 20\nids = [4, 8]")
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", tmp_path / "case.toml", "--output", tmp_path / "run")
+    assert_clean_error(result, 65, "fluid.ids", "8 particles (0 .. 7)")

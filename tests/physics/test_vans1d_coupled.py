@@ -192,3 +192,21 @@ def test_a_fixed_rough_bed_is_seen_by_the_fluid(tmp_path):
     assert u[k] < 0.5 * u[8]  # slowed inside the layer against just above it (z = 4.25 mm)
     advance(fixed, 10)
     assert np.all(fixed.state.particles.vel == 0.0)
+
+
+def test_only_the_particles_of_the_id_range_feel_the_fluid():
+    """fluid.ids = [2, 5] (YADE's ids): in a uniform 0.5 m/s stream particles 2..5 are dragged
+    along x and buoyed; the others fall as in vacuum."""
+    text = ONE_WAY.replace(
+        'flow = { kind = "log-law", friction_velocity = 0.05, bed_level = 0.002, roughness_length = 1.0e-4 }',
+        'flow = { kind = "profile", z = [0.0, 0.02], u = [0.5, 0.5] }\nids = [2, 5]',
+    ).replace("count = 2\n", "count = 8\n")
+    text = text.replace("region_lower = [0.0, 0.0, 0.008]", "region_lower = [0.0, 0.0, 0.004]")
+    scene = build_scene(parse_case(text))
+    p = scene.state.particles
+    steps = 200
+    advance(scene, steps)
+    inside = (np.arange(8) >= 2) & (np.arange(8) <= 5)
+    assert np.all(p.vel[inside, 0] > 0.0)
+    assert np.all(p.vel[~inside, 0] == 0.0)
+    np.testing.assert_allclose(p.vel[~inside, 2], -9.81 * steps * 1.0e-5, rtol=1e-12)

@@ -125,6 +125,15 @@ class Vans1d(FluidModule):
         if cfg.materials:
             names = list(particle_materials(loaded.case))  # material id k is the k-th name
             selected[:] = np.isin(p.material, [names.index(name) for name in cfg.materials])
+        if cfg.ids is not None:
+            first, last = cfg.ids
+            if last >= p.count:
+                raise loaded.error(
+                    ("fluid", "ids"),
+                    f"[{first}, {last}]: the scene has {p.count} particles (0 .. {p.count - 1})",
+                )
+            selected[:first] = 0
+            selected[last + 1 :] = 0
         selected &= (p.inv_mass > 0).astype(np.uint8)
         flow = cfg.flow
         solved = isinstance(flow, SolvedFlow)
