@@ -73,22 +73,25 @@ def render(report: dict, plot_dir: str = "verification") -> str:
         f"compiles the kernels, timed apart); {report['total_s'] / 60:.1f} min in all.",
         f"- Machine: {m['processor']} ({m['platform']}), {m['cpus']} cores ({m['cpus_usable']} usable), "
         "shared with other work, so times are indicative.",
-        f"- Numba threads: {m['threads']} (the scenes hold 1 to 6 particles; results do not depend on "
+        f"- Numba threads: {m['threads']} (the DEM scenes hold 1 to 6 particles, the fluid grids up to "
+        f"64 x 64 x 2 cells; results do not depend on "
         f"the thread count); Python {m['python']}, Numba {m['numba']}, NumPy {m['numpy']}.",
         f"- Result: {verdict}.",
         "",
         "## How to read it",
         "",
         "- Each case runs at a ladder of resolutions: for contacts, time steps per contact duration "
-        "(the closed-form clamped contact time), for free fall, steps per fall. Errors are relative "
+        "(the closed-form clamped contact time), for free fall, steps per fall; for the fluid models "
+        "(group C), layers or cells of the grid. Errors are relative "
         "to the reference unless stated; trajectory norms (L2 = RMS over the steps, Linf = largest) "
         "compare every step with the closed-form history.",
         "- Observed order: the least-squares slope of log(error) against log(resolution) over the "
         "ladder (errors at round-off left out). The formal order is the method's; where a case "
         "enforces an order, it says which errors and the least it accepts.",
         "- Work-precision: error against the time spent stepping (median of the repeats); the "
-        "tables also give the whole run's wall time and the time per particle-step (these scenes "
-        "hold 1 to 6 particles, so per-step overhead dominates: see `sphere bench` for throughput).",
+        "tables also give the whole run's wall time and the time per unit of machine-independent "
+        "work: a particle-step for the DEM (these scenes hold 1 to 6 particles, so per-step overhead "
+        "dominates: see `sphere bench` for throughput), a cell or layer update for the fluids.",
         "- Contact convention: the normal force is clamped at zero (never attractive) and the "
         "dashpot is calibrated for that clamped contact, so a requested e is the realised e.",
         "- The dashpot switches on at the touch, which a fixed step resolves only to half a step: "

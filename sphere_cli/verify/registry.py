@@ -31,6 +31,8 @@ class Outcome:
     values: dict[str, float] = field(default_factory=dict)  # measured quantities, for the tables
     drift: dict[str, float] = field(default_factory=dict)  # conservation drift (relative)
     step_seconds: float = 0.0  # wall time spent inside the time loop [s]
+    work: float = 0.0  # machine-independent cost in work_unit (0: steps x particles)
+    work_unit: str = "particle-step"
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,7 @@ class Tolerance:
 class VerificationCase:
     name: str
     title: str
-    model: str  # contact law it exercises: "linear", "hertz"
+    model: str  # what it exercises: a contact law ("linear", "hertz") or a fluid model
     reference: str  # the analytic or published result, cited
     description: str  # set-up and how the error is measured
     run: Callable[[float], Outcome]
@@ -83,7 +85,7 @@ def register(case: VerificationCase) -> VerificationCase:
 
 def cases() -> dict[str, VerificationCase]:
     """All registered cases (importing the modules that define them)."""
-    from . import dem_cases, hertz_cases  # noqa: F401  (register on import)
+    from . import dem_cases, fluid_cases, hertz_cases  # noqa: F401  (register on import)
 
     return REGISTRY
 

@@ -75,12 +75,12 @@ def case_markdown(record: dict, plot: str | None = None, heading: str = "##") ->
             [record["resolution"], "dt [s]", "steps"]
             + metrics
             + [f"{d} drift" for d in drifts]
-            + ["wall [s] (median)", "stepping [s]", "per particle-step [us]"]
+            + ["wall [s] (median)", "stepping [s]", f"per {rows[0].get('work_unit', 'particle-step')} [us]"]
         )
         lines.append("| " + " | ".join(head) + " |")
         lines.append("|" + "---:|" * len(head))
         for r in rows:
-            per = r["time_per_particle_step_s"]
+            per = r["time_per_work_s"]
             cells = (
                 [fmt(r["resolution"]), fmt(r["dt"]), str(r["steps"])]
                 + [fmt(r["errors"][m]) for m in metrics]

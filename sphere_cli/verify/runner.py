@@ -38,7 +38,7 @@ def observed_order(resolutions, errors, floor: float = 0.0) -> float | None:
 
 def _row(resolution: float, outcome: Outcome, walls: list[float], step_walls: list[float]) -> dict:
     step_s = statistics.median(step_walls)
-    work = outcome.steps * outcome.particles
+    work = outcome.work or outcome.steps * outcome.particles
     return {
         "resolution": resolution,
         "dt": outcome.dt,
@@ -50,7 +50,9 @@ def _row(resolution: float, outcome: Outcome, walls: list[float], step_walls: li
         "wall_s": statistics.median(walls),
         "wall_s_all": walls,
         "step_s": step_s,
-        "time_per_particle_step_s": step_s / work if work else None,
+        "work": work,
+        "work_unit": outcome.work_unit,
+        "time_per_work_s": step_s / work if work else None,
     }
 
 

@@ -15,7 +15,8 @@ import math
 
 import numpy as np
 import pytest
-from darcy_reference import (
+
+from sphere_cli.verify.darcy_reference import (
     COMPRESSIBILITY,
     POROSITY,
     VISCOSITY,

@@ -26,6 +26,7 @@ from sphere_cli.errors import NumericalError
 from sphere_cli.kernels.fluid.drag import GIDASPOW, cell_drag
 from sphere_cli.physics.fluid.grid import FluidGrid
 from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
+from sphere_cli.verify.fluid_cases import taylor_green_rate_error
 
 RHO = 1000.0  # kg/m^3
 
@@ -44,39 +45,11 @@ CLOSED = {"bottom": {"type": "no-flow"}, "top": {"type": "no-flow"}}
 # ------------------------------------------------------------------------------- Taylor-Green
 
 
-def _taylor_green_rate_error(cells: int) -> float:
-    """Relative error of the decay rate of the Taylor-Green vortex (one wavelength L = 1 m on
-    `cells` x `cells` cells, two layers along z between free-slip walls) against 2 nu k^2, over
-    t = 0.1/(2 nu k^2) at dt = 0.25 of the viscous limit. A = 1e-3 m/s, nu = 1e-3 m^2/s: the
-    Reynolds number A L/nu = 1, the vortex's nonlinear term is a pure gradient (balanced by the
-    pressure p = -rho A^2/4 (cos 2kx + cos 2ky)), and the discrete advection's departure from it
-    is O(A dx) against the viscous O(nu k^2)."""
-    nu, amplitude = 1e-3, 1e-3
-    dx = 1.0 / cells
-    solver = _solver((cells, cells, 2), (1.0, 1.0, 2 * dx), viscosity=nu * RHO, **CLOSED)
-    fs = solver.allocate()
-    k = 2 * math.pi
-    x, y, _ = solver.face_coordinates(0)
-    u0 = amplitude * np.sin(k * x) * np.cos(k * y)
-    x, y, _ = solver.face_coordinates(1)
-    v0 = -amplitude * np.cos(k * x) * np.sin(k * y)
-    solver.set_velocity(fs, (u0, v0, 0.0))
-    duration = 0.1 / (2 * nu * k * k)
-    steps = math.ceil(duration / (0.25 * solver.viscous_limit()))
-    dt = duration / steps
-    for step in range(steps):
-        solver.step(fs, step * dt, dt)
-    shape = np.broadcast_to(u0, fs.v_face[..., :-1, 0].shape)
-    measured = float((fs.v_face[..., :-1, 0] * shape).sum() / (shape * shape).sum())
-    assert np.abs(fs.v_face[..., 2]).max() == 0.0
-    return -math.log(measured) / duration / (2 * nu * k * k) - 1.0
-
-
 def test_taylor_green_vortex_decays_at_the_viscous_rate_with_order_two():
     """The 3-point second differences give the rate 2 nu k^2 (1 - (k dx)^2/12): -0.32 % at 32
     cells; forward Euler at a quarter of the viscous limit adds +0.1 %. Within 1 % at 32 cells,
     observed order from 16, 32 and 64 cells >= 1.9."""
-    errors = [_taylor_green_rate_error(n) for n in (16, 32, 64)]
+    errors = [taylor_green_rate_error(n).values["rate_error"] for n in (16, 32, 64)]
     assert abs(errors[1]) < 0.01, errors
     orders = [math.log2(abs(errors[i] / errors[i + 1])) for i in range(2)]
     assert min(orders) >= 1.9, (errors, orders)

@@ -12,22 +12,12 @@ import math
 
 import numpy as np
 import pytest
-import vans1d_exact as exact
 
 from sphere_cli.physics.fluid.vans1d import FluidColumn
+from sphere_cli.verify import vans1d_exact as exact
+from sphere_cli.verify.fluid_cases import steady_profile
 
 RHO = 1000.0
-
-
-def steady(column: FluidColumn, solid, vel_p, exchange, source, dt, chunk=50, tol=1e-13, max_chunks=400):
-    """Implicit steps of dt until the profile changes by less than tol (relative) per chunk."""
-    column.update_mixing_length(solid)
-    for _ in range(max_chunks):
-        before = column.u.copy()
-        column.advance(solid, vel_p, exchange, source, dt, chunk)
-        if np.abs(column.u - before).max() <= tol * max(np.abs(column.u).max(), 1e-300):
-            return column
-    raise AssertionError("no steady state")
 
 
 def observed_orders(errors):
@@ -83,7 +73,7 @@ def test_turbulent_free_surface_exact_solution(kind):
     for cells in (50, 100, 200):
         column = FluidColumn.regular(0.0, exact.DEPTH, cells, 1e4, rho=RHO, nu=exact.NU, mixing=kind)
         zero = np.zeros(cells)
-        steady(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        steady_profile(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
         u = exact.free_surface_velocity(kind, column.centres)
         errors.append(np.abs(column.u - u).max() / u.max())
     assert errors[1] < 0.003
@@ -103,7 +93,7 @@ def test_van_driest_damping_exact_solution():
             0.0, exact.DEPTH, cells, 1e4, rho=RHO, nu=exact.NU, mixing="prandtl", van_driest=26.0
         )
         zero = np.zeros(cells)
-        steady(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        steady_profile(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
         assert column.u_star[0] == pytest.approx(exact.U_STAR, rel=1e-9)
         u = exact.free_surface_velocity("prandtl", column.centres, a_plus=26.0)
         errors.append(np.abs(column.u - u).max() / u.max())
@@ -131,7 +121,7 @@ def test_viscous_sublayer_exact_solution():
             0.0, exact.DEPTH, cells, 1e4, rho=RHO, nu=exact.NU, mixing="prandtl", sublayer=delta
         )
         zero = np.zeros(cells)
-        steady(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        steady_profile(column, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
         assert np.all(column.mixing[: column.sublayer_faces] == 0.0)
         assert column.faces[column.sublayer_faces] >= delta > column.faces[column.sublayer_faces - 1]
         u = exact.free_surface_velocity("prandtl", column.centres, sublayer=delta)

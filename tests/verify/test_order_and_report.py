@@ -105,7 +105,8 @@ def test_verify_json_layout(tmp_path, synthetic):
     assert row["steps"] == 20 and row["particles"] == 2 and row["dt"] == pytest.approx(0.05)
     assert len(row["wall_s_all"]) == 3 and row["wall_s"] == sorted(row["wall_s_all"])[1]
     assert row["step_s"] == pytest.approx(2e-3)
-    assert row["time_per_particle_step_s"] == pytest.approx(2e-3 / 40)
+    assert row["time_per_work_s"] == pytest.approx(2e-3 / 40)
+    assert row["work"] == 40 and row["work_unit"] == "particle-step"
     assert {c["check"] for c in case["checks"]} >= {"order of err >= 1.8", "momentum drift <= 1e-14"}
     assert report["cases"][0]["name"] == "zz-good"
     assert (tmp_path / "zz-good.md").is_file()

@@ -1,5 +1,5 @@
-"""Analytic solutions the Darcy tests compare with, and a small helper that builds the fluid
-alone (physics/pore_pressure.PorePressure) on a column of cells.
+"""Analytic solutions the Darcy tests and `sphere verify` compare with, and a small helper that
+builds the fluid alone (physics/pore_pressure.PorePressure) on a column of cells.
 
 Terzaghi (1943) one-dimensional consolidation, as in Verruijt, Soil Mechanics (2012), ch. 15:
 a layer of height H drained at the top (p = 0), impermeable at the base, initial excess

@@ -1,4 +1,5 @@
-"""Exact steady solutions of the 1D fluid momentum balance (verification group C), for the tests.
+"""Exact steady solutions of the 1D fluid momentum balance (verification group C), for the tests
+and `sphere verify`.
 
 Turbulent free-surface flow with a mixing length l(s) and molecular viscosity nu: the shear stress
 is rho u*^2 (1 - s/H) at height s, so (nu + l^2 |u'|) u' = u*^2 (1 - s/H) and, taking the positive

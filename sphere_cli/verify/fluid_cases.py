@@ -1,0 +1,325 @@
+"""Verification cases of the fluid models alone (group C): each against an analytic solution of
+its own equations, over a ladder of grid resolutions, with the cost in cell (or layer) updates.
+
+- 1D VANS (physics/fluid/vans1d.py FluidColumn): the laminar channel under a moving lid, and
+  turbulent free-surface flow with each treatment of the viscous sublayer (none, van Driest,
+  YADE's cut-off) against the exact solution of that same mixing-length form
+  (vans1d_exact.py), not against the log law by habit.
+- Navier-Stokes (physics/fluid/navier_stokes.py NavierStokesSolver): the decay rate of the
+  Taylor-Green vortex.
+- Darcy (physics/fluid/pore_pressure.py PorePressure): Terzaghi's consolidation
+  (darcy_reference.py).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..config.fluid_navier_stokes import NavierStokesFluid
+from ..physics.fluid.grid import FluidGrid
+from ..physics.fluid.navier_stokes import NavierStokesSolver
+from ..physics.fluid.vans1d import FluidColumn
+from . import vans1d_exact as exact
+from .darcy_reference import COMPRESSIBILITY, POROSITY, VISCOSITY, column, terzaghi_pressure
+from .registry import Outcome, Tolerance, VerificationCase, register
+
+RHO = 1000.0  # water [kg/m^3]
+
+
+def steady_profile(column: FluidColumn, solid, vel_p, exchange, source, dt, chunk=50, tol=1e-13) -> int:
+    """Implicit steps of dt [s] until the profile changes by less than tol (relative) over a
+    chunk of steps; returns the steps taken."""
+    column.update_mixing_length(solid)
+    for rounds in range(1, 401):
+        before = column.u.copy()
+        column.advance(solid, vel_p, exchange, source, dt, chunk)
+        if np.abs(column.u - before).max() <= tol * max(np.abs(column.u).max(), 1e-300):
+            return rounds * chunk
+    raise RuntimeError("the profile did not become steady")
+
+
+# ---------------------------------------------------------------------------------- 1D VANS
+
+LID = 2.0  # m/s
+DPDX = -0.1  # Pa/m
+MU = 1e-3  # Pa s
+
+
+def couette_poiseuille(cells: float) -> Outcome:
+    """Laminar channel h = 1 m between the floor and a lid moving at LID, driven by DPDX: the
+    steady solve (implicit, dt -> infinity) on layers stretched 4x towards the top."""
+    n = int(cells)
+    start = time.perf_counter()
+    col = FluidColumn.regular(0.0, 1.0, n, 4.0, rho=RHO, nu=MU / RHO, top_no_slip=True, lid_velocity=LID)
+    zero = np.zeros(n)
+    col.update_mixing_length(zero)
+    col.advance(zero, zero, zero, -DPDX, 1e12, 2)
+    seconds = time.perf_counter() - start
+    z = col.centres
+    u = -DPDX / (2 * MU) * z * (1 - z) + LID * z
+    error = float(np.abs(col.u - u).max() / u.max())
+    return Outcome(
+        dt=1e12, steps=2, particles=0, errors={"u_linf": error}, values={"u_top_layer": float(col.u[-1])},
+        step_seconds=seconds, work=2 * n, work_unit="layer-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c1-vans1d-laminar-channel",
+        title="C1 1D VANS laminar channel under a moving lid (Couette-Poiseuille)",
+        model="vans1d",
+        reference=(
+            "u = (-dp/dx)/(2 mu) z (h - z) + U z/h, the sum of Poiseuille's and Couette's exact "
+            "solutions (verification group C: 0.5 % at 100 layers)"
+        ),
+        description=(
+            f"h = 1 m, mu = {MU} Pa s, dp/dx = {DPDX} Pa/m, lid at U = {LID} m/s (YADE's uTop), "
+            "layers stretched 4x towards the lid; the steady profile of one implicit solve"
+        ),
+        run=couette_poiseuille,
+        ladder=(25, 50, 100, 200),
+        quick_ladder=(25, 50, 100),
+        resolution="layers",
+        error_labels={"u_linf": "max |u - exact| / max exact"},
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.9,
+        order_note="central fluxes on a smoothly stretched mesh",
+        tolerances=(Tolerance("u_linf", 0.005, 100, source="verification group C"),),
+    )
+)
+
+
+def free_surface(a_plus: float = 0.0, sublayer_plus: float = 0.0):
+    """Steady turbulent free-surface flow down a 0.05 rad slope, depth 0.1 m, Prandtl's mixing
+    length with van Driest's damping (a_plus) or YADE's sublayer cut-off (z+ = sublayer_plus),
+    on layers stretched 1e4x upwards (the sublayer resolved); error against the exact solution
+    of the same form."""
+
+    def run(cells: float) -> Outcome:
+        n = int(cells)
+        sublayer = sublayer_plus * exact.NU / exact.U_STAR
+        start = time.perf_counter()
+        col = FluidColumn.regular(
+            0.0, exact.DEPTH, n, 1e4, rho=RHO, nu=exact.NU, mixing="prandtl", van_driest=a_plus,
+            sublayer=sublayer,
+        )  # fmt: skip
+        zero = np.zeros(n)
+        steps = steady_profile(col, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        seconds = time.perf_counter() - start
+        u = exact.free_surface_velocity("prandtl", col.centres, a_plus=a_plus, sublayer=sublayer)
+        error = float(np.abs(col.u - u).max() / u.max())
+        return Outcome(
+            dt=0.02, steps=steps, particles=0, errors={"u_linf": error},
+            values={"surface_velocity": float(col.u[-1])}, step_seconds=seconds, work=steps * n,
+            work_unit="layer-update",
+        )  # fmt: skip
+
+    return run
+
+
+_TURBULENT = dict(
+    model="vans1d",
+    ladder=(50, 100, 200, 400),
+    quick_ladder=(50, 100),
+    resolution="layers",
+    error_labels={"u_linf": "max |u - exact| / max exact, exact of the same mixing-length form"},
+)
+_EXACT = (
+    "the exact steady solution of the same mixing length, (nu + l^2 |u'|) u' = u*^2 (1 - s/H) "
+    "integrated by Gauss-Legendre to 1e-12 (vans1d_exact.py)"
+)
+_SLOPE = (
+    f"slope 0.05 rad, depth {exact.DEPTH} m, nu = {exact.NU} m^2/s, kappa = {exact.KAPPA}, "
+    f"u* = {exact.U_STAR:.4f} m/s; 1e4x stretched layers from the smooth floor"
+)
+
+register(
+    VerificationCase(
+        name="c1-vans1d-prandtl",
+        title="C1 1D VANS turbulent free-surface flow, Prandtl mixing length, no sublayer treatment",
+        reference=_EXACT + " (verification group C)",
+        description=_SLOPE + "; l = kappa z down to the floor",
+        run=free_surface(),
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.85,
+        order_note="central fluxes, the sublayer resolved by the stretched mesh",
+        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
+        **_TURBULENT,
+    )
+)
+
+register(
+    VerificationCase(
+        name="c1-vans1d-van-driest",
+        title="C1 1D VANS turbulent free-surface flow, van Driest damping (A+ = 26)",
+        reference=_EXACT + ", l damped by 1 - exp(-z+/26) (van Driest 1956)",
+        description=_SLOPE + "; u* from the largest shear stress of the previous step",
+        run=free_surface(a_plus=26.0),
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.85,
+        order_note="central fluxes, the damped sublayer resolved by the stretched mesh",
+        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
+        **_TURBULENT,
+    )
+)
+
+register(
+    VerificationCase(
+        name="c1-vans1d-viscous-sublayer",
+        title="C1 1D VANS turbulent free-surface flow, YADE's viscous sublayer (nu_t = 0 below z+ = 11.3)",
+        reference=_EXACT + ", l = 0 below z+ = 11.3 (YADE HydroForceEngine viscousSubLayer)",
+        description=_SLOPE + "; the cut falls at the faces below 11.3 nu/u*",
+        run=free_surface(sublayer_plus=11.3),
+        order_note=(
+            "not checked: the cut falls at a face, up to one layer from 11.3 nu/u*, so the error "
+            "does not fall smoothly (first order in the face's distance from it)"
+        ),
+        tolerances=(Tolerance("u_linf", 0.01, 50, source="the cut within one layer of its height"),),
+        **_TURBULENT,
+    )
+)
+
+
+# ---------------------------------------------------------------------------------- Navier-Stokes
+
+
+def taylor_green_rate_error(cells: float) -> Outcome:
+    """Relative error of the decay rate of the Taylor-Green vortex (one wavelength L = 1 m on
+    `cells` x `cells` cells, two layers along z between free-slip walls) against 2 nu k^2, over
+    t = 0.1/(2 nu k^2) at dt = 0.25 of the viscous limit. A = 1e-3 m/s, nu = 1e-3 m^2/s: the
+    Reynolds number A L/nu = 1, the vortex's nonlinear term is a pure gradient (balanced by the
+    pressure p = -rho A^2/4 (cos 2kx + cos 2ky)), and the discrete advection's departure from it
+    is O(A dx) against the viscous O(nu k^2). The error is signed (values) and absolute (errors)."""
+    n = int(cells)
+    nu, amplitude = 1e-3, 1e-3
+    dx = 1.0 / n
+    grid = FluidGrid(
+        origin=np.zeros(3),
+        spacing=np.array([dx, dx, dx]),
+        shape=(n, n, 2),
+        periodic=np.array([True, True, False]),
+    )
+    config = NavierStokesFluid.model_validate(
+        {"model": "navier-stokes", "density": RHO, "viscosity": nu * RHO,
+         "bottom": {"type": "no-flow"}, "top": {"type": "no-flow"}}
+    )  # fmt: skip
+    solver = NavierStokesSolver(config, grid, (0.0, 0.0, 0.0))
+    fs = solver.allocate()
+    k = 2 * math.pi
+    x, y, _ = solver.face_coordinates(0)
+    u0 = amplitude * np.sin(k * x) * np.cos(k * y)
+    x, y, _ = solver.face_coordinates(1)
+    v0 = -amplitude * np.cos(k * x) * np.sin(k * y)
+    solver.set_velocity(fs, (u0, v0, 0.0))
+    duration = 0.1 / (2 * nu * k * k)
+    steps = math.ceil(duration / (0.25 * solver.viscous_limit()))
+    dt = duration / steps
+    start = time.perf_counter()
+    for step in range(steps):
+        solver.step(fs, step * dt, dt)
+    seconds = time.perf_counter() - start
+    shape = np.broadcast_to(u0, fs.v_face[..., :-1, 0].shape)
+    measured = float((fs.v_face[..., :-1, 0] * shape).sum() / (shape * shape).sum())
+    if np.abs(fs.v_face[..., 2]).max() != 0.0:
+        raise RuntimeError("the 2D vortex grew a vertical velocity")
+    error = -math.log(measured) / duration / (2 * nu * k * k) - 1.0
+    return Outcome(
+        dt=dt, steps=steps, particles=0, errors={"rate": abs(error)}, values={"rate_error": error},
+        step_seconds=seconds, work=steps * n * n * 2, work_unit="cell-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c2-ns-taylor-green",
+        title="C2 Navier-Stokes: decay rate of the Taylor-Green vortex",
+        model="navier-stokes",
+        reference=(
+            "u = A sin(kx) cos(ky) e^{-2 nu k^2 t} (Taylor & Green 1937): the rate 2 nu k^2; the "
+            "MAC grid's second differences give 2 nu k^2 (1 - (k dx)^2/12)"
+        ),
+        description=(
+            "one wavelength of 1 m, A = 1e-3 m/s, nu = 1e-3 m^2/s (Reynolds number 1), two layers "
+            "between free-slip walls, over 0.1 of the decay time at a quarter of the viscous limit"
+        ),
+        run=taylor_green_rate_error,
+        ladder=(16, 32, 64),
+        quick_ladder=(16, 32),
+        resolution="cells per wavelength",
+        error_labels={"rate": "|measured rate / 2 nu k^2 - 1|"},
+        order_metrics=("rate",),
+        formal_order=2.0,
+        min_order=1.9,
+        order_note=(
+            "second-order differences; forward Euler's error at a fixed fraction of the viscous "
+            "limit falls as dx^2 too"
+        ),
+        tolerances=(Tolerance("rate", 0.01, 32, source="issue acceptance: 1 % at 32 cells per wavelength"),),
+    )
+)
+
+
+# ---------------------------------------------------------------------------------- Darcy
+
+TERZAGHI_T = 0.2  # time factor D t/H^2 of the comparison
+
+
+def terzaghi(cells: float) -> Outcome:
+    """Terzaghi consolidation of a 1 m layer (drained top, impermeable base, p0 = 1e4 Pa) on
+    `cells` layers, backward Euler at 10x the explicit limit h^2/(2D) (so dt falls as h^2 and
+    the time error with the space error), compared at T = TERZAGHI_T."""
+    n = int(cells)
+    height, p0 = 1.0, 1.0e4
+    model = column(
+        n, height, {"permeability": {"model": "constant", "value": 1e-12}, "initial_pressure": p0,
+                    "bottom": {"type": "no-flow"}},
+    )  # fmt: skip
+    diffusivity = 1e-12 / (COMPRESSIBILITY * POROSITY * VISCOSITY)
+    steps = round(TERZAGHI_T * height**2 / diffusivity / (10.0 * model.explicit_limit()))
+    dt = TERZAGHI_T * height**2 / diffusivity / steps
+    start = time.perf_counter()
+    for step in range(1, steps + 1):
+        model.advance(dt, step * dt)
+    seconds = time.perf_counter() - start
+    depth = height - model.grid.centres(2)
+    p = model.state.pressure[0, 0]
+    error = float(np.max(np.abs(p - terzaghi_pressure(depth, TERZAGHI_T, p0, height))) / p0)
+    return Outcome(
+        dt=dt, steps=steps, particles=0, errors={"p_linf": error},
+        values={"consolidation": float(1.0 - p.mean() / p0)}, step_seconds=seconds, work=steps * n,
+        work_unit="cell-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c3-darcy-terzaghi",
+        title="C3 Darcy: Terzaghi consolidation of a drained layer",
+        model="darcy",
+        reference=(
+            "p = sum 2 p0/M sin(M z'/H) exp(-M^2 T), M = (2m + 1) pi/2 (Terzaghi 1943; Verruijt, "
+            "Soil Mechanics 2012, ch. 15); verification group C: 1 % of p0"
+        ),
+        description=(
+            "a 1 m layer, k = 1e-12 m^2, water, porosity 0.4, a rigid skeleton; drained top, "
+            "impermeable base, p0 = 1e4 Pa; at T = 0.2, backward Euler at 10x the explicit limit"
+        ),
+        run=terzaghi,
+        ladder=(25, 50, 100, 200),
+        quick_ladder=(25, 50),
+        resolution="cells",
+        error_labels={"p_linf": "max |p - exact| / p0"},
+        order_metrics=("p_linf",),
+        formal_order=2.0,
+        min_order=1.8,
+        order_note="second-order space; backward Euler's first-order time error falls as dt ~ dx^2",
+        tolerances=(Tolerance("p_linf", 0.01, 25, source="verification group C"),),
+    )
+)
