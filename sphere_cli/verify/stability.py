@@ -1,4 +1,5 @@
-"""Stability suite: stiff and extreme DEM input (verification group E).
+"""Stability suite: stiff and extreme input (verification group E); the DEM cases here, the
+fluids' in fluid_stability.py.
 
 For each case: what the program did (refused before the run, ran stably, reported a numerical
 failure with step, time and particle), and, where a persistent contact makes the question
@@ -856,3 +857,6 @@ def run_stability_case(case: StabilityCase, quick: bool = False) -> dict:
     )
     record["passed"] = all(c["passed"] for c in record["checks"])
     return record
+
+
+from . import fluid_stability  # noqa: E402, F401  (the fluids' cases register themselves into STABILITY)
