@@ -111,7 +111,7 @@ def fine_sphere_navier_stokes(quick: bool) -> dict:
 _register(
     StabilityCase(
         "stability-fluid-fine-sphere-navier-stokes",
-        "a 10 um sphere in glycerol, drag relaxation 100x below dt (Navier-Stokes)",
+        "a 10 um sphere in glycerol, its drag relaxation time 16x below dt (Navier-Stokes)",
         "ran",
         fine_sphere_navier_stokes,
     )
