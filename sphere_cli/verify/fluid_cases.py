@@ -6,9 +6,10 @@ its own equations, over a ladder of grid resolutions, with the cost in cell (or 
   YADE's cut-off) against the exact solution of that same mixing-length form
   (vans1d_exact.py), not against the log law by habit.
 - Navier-Stokes (physics/fluid/navier_stokes.py NavierStokesSolver): the decay rate of the
-  Taylor-Green vortex.
-- Darcy (physics/fluid/pore_pressure.py PorePressure): Terzaghi's consolidation
-  (darcy_reference.py).
+  Taylor-Green vortex; Ergun's pressure gradient through a fixed bed of imposed porosity, set up
+  from a case file at dt = "auto".
+- Darcy (physics/fluid/pore_pressure.py PorePressure): Terzaghi's consolidation, and steady
+  seepage through two layers in series (darcy_reference.py).
 """
 
 from __future__ import annotations
@@ -18,10 +19,12 @@ import time
 
 import numpy as np
 
+from ..api import run_in_memory
 from ..config.fluid_navier_stokes import NavierStokesFluid
 from ..physics.fluid.grid import FluidGrid
 from ..physics.fluid.navier_stokes import NavierStokesSolver
 from ..physics.fluid.vans1d import FluidColumn
+from ..simulation import advance
 from . import vans1d_exact as exact
 from .darcy_reference import COMPRESSIBILITY, POROSITY, VISCOSITY, column, terzaghi_pressure
 from .registry import Outcome, Tolerance, VerificationCase, register
@@ -266,6 +269,80 @@ register(
 )
 
 
+ERGUN_BED = """
+[simulation]
+duration = 100.0
+[domain]
+upper = [0.002, 0.002, 0.04]
+periodic = [true, true, false]
+gravity = [0.0, 0.0, 0.0]
+[fluid]
+model = "navier-stokes"
+grid = {{ cells = [2, 2, {cells}] }}
+bottom = {{ type = "pressure", pressure = 50.0 }}
+top = {{ type = "pressure", pressure = 0.0 }}
+[fluid.bed]
+porosity = 0.4
+diameter = 6e-4
+lower = 0.01
+upper = 0.03
+"""
+
+
+def ergun_bed(cells: float) -> Outcome:
+    """Water driven up a column 40 mm high (2 x 2 x `cells` cells) by 50 Pa through a fixed bed
+    of porosity 0.4 and grains of 0.6 mm between 10 and 30 mm ([fluid.bed]), dt = "auto" (the
+    viscous limit, 100 times the bed's drag relaxation time at 40 cells): after 50 (cells/40)^2
+    steps, the pressure gradient across the middle half of the bed against Ergun's at the flow
+    through it."""
+    n = int(cells)
+    scene = run_in_memory(ERGUN_BED.format(cells=n), 0)
+    steps = round(50 * (n / 40) ** 2)
+    start = time.perf_counter()
+    advance(scene, steps)
+    seconds = time.perf_counter() - start
+    fs = scene.state.fluid
+    superficial = float(0.4 * fs.v_face[:, :, n // 2, 2].mean())
+    quarter, three_quarters = round(0.375 * n), round(0.625 * n)  # cell centres in the bed's middle
+    z = (np.arange(n) + 0.5) * 0.04 / n
+    gradient = float(fs.p[:, :, quarter].mean() - fs.p[:, :, three_quarters].mean()) / (
+        z[three_quarters] - z[quarter]
+    )
+    eps, d, mu = 0.4, 6e-4, 1e-3
+    ergun = 150 * mu * (1 - eps) ** 2 * superficial / (eps**3 * d**2) + 1.75 * RHO * (
+        1 - eps
+    ) * superficial**2 / (eps**3 * d)
+    return Outcome(
+        dt=scene.state.clock.dt, steps=steps, particles=0, errors={"gradient": abs(gradient / ergun - 1.0)},
+        values={"superficial_velocity": superficial, "gradient": gradient}, step_seconds=seconds,
+        work=steps * 4 * n, work_unit="cell-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c2-ns-ergun-bed",
+        title="C2 Navier-Stokes: Ergun's pressure gradient through a fixed bed at dt = auto",
+        model="navier-stokes",
+        reference=(
+            "dP/L = 150 mu (1-eps)^2 U/(eps^3 d^2) + 1.75 rho (1-eps) U^2/(eps^3 d) (Ergun 1952); "
+            "verification group D: 1 % with imposed porosity"
+        ),
+        description=(
+            "a bed of imposed porosity 0.4, grains 0.6 mm, 20 mm thick in a 40 mm column of water "
+            "driven by 50 Pa; the drag implicit in the fluid at 100x its relaxation time"
+        ),
+        run=ergun_bed,
+        ladder=(20, 40, 80),
+        quick_ladder=(20, 40),
+        resolution="cells along z",
+        error_labels={"gradient": "|gradient across the bed's middle / Ergun's at the flow - 1|"},
+        order_note="not a convergence case: uniform inside the bed, the steady state is exact to round-off",
+        tolerances=(Tolerance("gradient", 1e-6, source="exact inside a uniform bed at steady state"),),
+    )
+)
+
+
 # ---------------------------------------------------------------------------------- Darcy
 
 TERZAGHI_T = 0.2  # time factor D t/H^2 of the comparison
@@ -321,5 +398,51 @@ register(
         min_order=1.8,
         order_note="second-order space; backward Euler's first-order time error falls as dt ~ dx^2",
         tolerances=(Tolerance("p_linf", 0.01, 25, source="verification group C"),),
+    )
+)
+
+
+def two_layers(cells: float) -> Outcome:
+    """Steady seepage up a 0.1 m column of two layers of porosity 0.3 and 0.5 (Kozeny-Carman,
+    k_c = 1e-9 m^2), equal thickness, 1 kPa across it, one backward-Euler step long enough to be
+    steady: the flux in every cell against that of the harmonic-mean permeability."""
+    n = int(cells)
+    height, kc, dp = 0.1, 1.0e-9, 1.0e3
+    model = column(
+        n, height, {"permeability": {"coefficient": kc}, "top": {"pressure": 0.0}, "bottom": {"pressure": dp}}
+    )
+    model.state.porosity[0, 0, :] = np.where(np.arange(n) < n // 2, 0.3, 0.5)
+    start = time.perf_counter()
+    model.advance(1.0e6, 1.0e6)
+    seconds = time.perf_counter() - start
+    k1, k2 = (kc * f**3 / (1 - f) ** 2 for f in (0.3, 0.5))
+    exact_flux = dp / height * (2 * k1 * k2 / (k1 + k2)) / VISCOSITY
+    flux = (model.state.porosity_used * model.state.velocity[..., 2])[0, 0]
+    return Outcome(
+        dt=1.0e6, steps=1, particles=0, errors={"flux": float(np.max(np.abs(flux / exact_flux - 1.0)))},
+        values={"flux": float(flux.mean())}, step_seconds=seconds, work=n, work_unit="cell-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c3-darcy-two-layers",
+        title="C3 Darcy: steady seepage through two layers in series",
+        model="darcy",
+        reference=(
+            "q = (dP/H) 2 k1 k2/(k1 + k2)/mu, the series resistance of the layers (Darcy 1856); "
+            "verification group C"
+        ),
+        description=(
+            "porosities 0.3 and 0.5 (Kozeny-Carman), equal thickness, 0.1 m, 1 kPa across; the "
+            "Darcy flux from the face fluxes in every cell, the interface cells included"
+        ),
+        run=two_layers,
+        ladder=(10, 20, 40, 80),
+        quick_ladder=(10, 20),
+        resolution="cells",
+        error_labels={"flux": "max over the cells |q / q_exact - 1|"},
+        order_note="not a convergence case: harmonic face permeabilities make the steady flux exact",
+        tolerances=(Tolerance("flux", 1e-6, source="exact: the solver tolerance"),),
     )
 )
