@@ -269,7 +269,7 @@ register(
 )
 
 
-ERGUN_BED = """
+BED_COLUMN = """
 [simulation]
 duration = 100.0
 [domain]
@@ -279,39 +279,45 @@ gravity = [0.0, 0.0, 0.0]
 [fluid]
 model = "navier-stokes"
 grid = {{ cells = [2, 2, {cells}] }}
-bottom = {{ type = "pressure", pressure = 50.0 }}
+bottom = {{ type = "pressure", pressure = {pressure!r} }}
 top = {{ type = "pressure", pressure = 0.0 }}
 [fluid.bed]
-porosity = 0.4
-diameter = 6e-4
+porosity = {porosity!r}
+diameter = {diameter!r}
 lower = 0.01
 upper = 0.03
 """
 
 
-def ergun_bed(cells: float) -> Outcome:
-    """Water driven up a column 40 mm high (2 x 2 x `cells` cells) by 50 Pa through a fixed bed
-    of porosity 0.4 and grains of 0.6 mm between 10 and 30 mm ([fluid.bed]), dt = "auto" (the
-    viscous limit, 100 times the bed's drag relaxation time at 40 cells): after 50 (cells/40)^2
-    steps, the pressure gradient across the middle half of the bed against Ergun's at the flow
-    through it."""
-    n = int(cells)
-    scene = run_in_memory(ERGUN_BED.format(cells=n), 0)
-    steps = round(50 * (n / 40) ** 2)
+def bed_column(cells: int, pressure: float, porosity: float, diameter: float, steps: int):
+    """Water driven up a column 40 mm high (2 x 2 x `cells` cells) by `pressure` [Pa] through a
+    fixed bed of `porosity` and grains of `diameter` [m] between 10 and 30 mm ([fluid.bed]),
+    dt = "auto", gravity off, after `steps` steps: (the scene, the time spent stepping [s], the
+    superficial velocity through the bed [m/s], the pressure gradient across its middle half
+    [Pa/m], Ergun's at that velocity [Pa/m])."""
+    text = BED_COLUMN.format(cells=cells, pressure=pressure, porosity=porosity, diameter=diameter)
+    scene = run_in_memory(text, 0)
     start = time.perf_counter()
     advance(scene, steps)
     seconds = time.perf_counter() - start
     fs = scene.state.fluid
-    superficial = float(0.4 * fs.v_face[:, :, n // 2, 2].mean())
-    quarter, three_quarters = round(0.375 * n), round(0.625 * n)  # cell centres in the bed's middle
-    z = (np.arange(n) + 0.5) * 0.04 / n
-    gradient = float(fs.p[:, :, quarter].mean() - fs.p[:, :, three_quarters].mean()) / (
-        z[three_quarters] - z[quarter]
-    )
-    eps, d, mu = 0.4, 6e-4, 1e-3
-    ergun = 150 * mu * (1 - eps) ** 2 * superficial / (eps**3 * d**2) + 1.75 * RHO * (
+    superficial = float(porosity * fs.v_face[:, :, cells // 2, 2].mean())
+    lower, upper = round(0.375 * cells), round(0.625 * cells)  # cell centres in the bed's middle
+    gradient = float(fs.p[:, :, lower].mean() - fs.p[:, :, upper].mean()) / ((upper - lower) * 0.04 / cells)
+    eps, mu = porosity, 1e-3
+    ergun = 150 * mu * (1 - eps) ** 2 * superficial / (eps**3 * diameter**2) + 1.75 * RHO * (
         1 - eps
-    ) * superficial**2 / (eps**3 * d)
+    ) * superficial**2 / (eps**3 * diameter)
+    return scene, seconds, superficial, gradient, ergun
+
+
+def ergun_bed(cells: float) -> Outcome:
+    """The bed column at porosity 0.4 with grains of 0.6 mm driven by 50 Pa, dt = "auto" (the
+    viscous limit, 100 times the bed's drag relaxation time at 40 cells), after 50 (cells/40)^2
+    steps: the gradient across the bed's middle against Ergun's at the flow through it."""
+    n = int(cells)
+    steps = round(50 * (n / 40) ** 2)
+    scene, seconds, superficial, gradient, ergun = bed_column(n, 50.0, 0.4, 6e-4, steps)
     return Outcome(
         dt=scene.state.clock.dt, steps=steps, particles=0, errors={"gradient": abs(gradient / ergun - 1.0)},
         values={"superficial_velocity": superficial, "gradient": gradient}, step_seconds=seconds,

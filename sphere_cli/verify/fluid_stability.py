@@ -16,6 +16,7 @@ from ..kernels.fluid.drag import GIDASPOW, drag_rate
 from ..scene.builder import build_scene
 from ..simulation import advance
 from .darcy_reference import COMPRESSIBILITY, POROSITY, VISCOSITY, column, terzaghi_pressure
+from .fluid_cases import bed_column
 from .stability import StabilityCase, _first_line, _register
 
 GLYCERIN, MU_GLYCERIN, GLASS, G = 1260.0, 1.41, 2500.0, 9.81
@@ -286,41 +287,17 @@ _register(
 
 # ------------------------------------------------------------------ porosity at the drag-law switch
 
-BED = """
-[simulation]
-duration = 2.0
-[domain]
-upper = [0.002, 0.002, 0.04]
-periodic = [true, true, false]
-gravity = [0.0, 0.0, 0.0]
-[fluid]
-model = "navier-stokes"
-grid = { cells = [2, 2, 40] }
-bottom = { type = "pressure", pressure = 5.0 }
-top = { type = "pressure", pressure = 0.0 }
-[fluid.bed]
-porosity = 0.8
-diameter = 1e-3
-lower = 0.01
-upper = 0.03
-"""
-
 
 def porosity_at_the_drag_switch(quick: bool) -> dict:
     """A fixed bed of porosity exactly 0.8, where Gidaspow's law switches from Wen-Yu to Ergun
-    (it takes Ergun at <= 0.8; the two differ by 1.153 there): the run is stable and the pressure
-    gradient across the bed is Ergun's at the flow within 1 %."""
-    error, scene = _build(BED)
-    if error is not None:
+    (it takes Ergun at <= 0.8; the two differ by 1.153 there), grains of 1 mm, 5 Pa across the
+    column (fluid_cases.bed_column): the run is stable and the pressure gradient across the bed
+    is Ergun's at the flow within 1 %."""
+    try:
+        scene, _, superficial, gradient, ergun = bed_column(40, 5.0, 0.8, 1e-3, 20)
+    except SphereError as error:
         return _record("refused", _first_line(str(error)), [], exit_code=error.exit_code)
-    advance(scene, 20)
     fs = scene.state.fluid
-    superficial = float(0.8 * fs.v_face[:, :, 20, 2].mean())
-    gradient = float(fs.p[:, :, 13].mean() - fs.p[:, :, 27].mean()) / 14e-3
-    eps, d, mu, rho = 0.8, 1e-3, 1e-3, 1000.0
-    ergun = 150 * mu * (1 - eps) ** 2 * superficial / (eps**3 * d**2) + 1.75 * rho * (
-        1 - eps
-    ) * superficial**2 / (eps**3 * d)
     finite = bool(np.isfinite(fs.v_face).all() and np.isfinite(fs.p).all())
     return _record(
         "ran",
