@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -83,6 +84,12 @@ def _read_trajectory(path: Path) -> dict:
                 for name, group in f["observables"].items()
                 if group["step"].shape[0]
             }
+            steady = {}
+            for name, group in f["observables"].items():
+                if group["value"].ndim == 1:
+                    estimate = steady_estimate(group["time"][...], group["value"][...])
+                    if estimate is not None:
+                        steady[name] = _describe_steady(estimate, group["value"].attrs.get("unit", ""))
             return {
                 "kind": "trajectory",
                 "path": str(path),
@@ -100,6 +107,7 @@ def _read_trajectory(path: Path) -> dict:
                 "periodic": resolved["domain"]["periodic"],
                 "fluid": _fluid(f),
                 "last_observables": obs,
+                "steady_state": steady,
                 "provenance": dict(f["sphere/provenance"].attrs.items()),
             }
     except Exception as exc:  # a damaged file can fail in any way inside h5py
@@ -127,6 +135,48 @@ def _fluid(f: h5py.File) -> dict | None:
             last = values[-1]
             out[name] = f"min {last.min():.6g}, max {last.max():.6g} {unit}".rstrip()
     return out
+
+
+STEADY_BATCHES = 8  # batch means of the latter half of a series
+STEADY_MIN_SAMPLES = 4 * STEADY_BATCHES
+
+
+def steady_estimate(times: np.ndarray, values: np.ndarray) -> dict | None:
+    """Whether a scalar time series has settled, and at what: over the latter half of its
+    samples (the last STEADY_BATCHES x k), the mean and its standard error from the spread of
+    STEADY_BATCHES batch means (which holds for samples correlated over less than a batch), and
+    the drift: the slope of a straight line through the batch means over its standard error (a
+    Student t of STEADY_BATCHES - 2 degrees of freedom; |drift| above about 3: still changing).
+    None with fewer than STEADY_MIN_SAMPLES finite samples."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.size < STEADY_MIN_SAMPLES or not np.isfinite(values).all():
+        return None
+    per_batch = values.size // 2 // STEADY_BATCHES
+    tail = values[-per_batch * STEADY_BATCHES :]
+    batches = tail.reshape(STEADY_BATCHES, per_batch).mean(axis=1)
+    x = np.arange(STEADY_BATCHES) - 0.5 * (STEADY_BATCHES - 1)
+    slope = float(x @ batches / (x @ x))
+    residual = batches - batches.mean() - slope * x
+    slope_error = math.sqrt(float(residual @ residual) / (STEADY_BATCHES - 2) / float(x @ x))
+    if slope_error > 0.0:
+        drift = slope / slope_error
+    else:
+        drift = 0.0 if slope == 0.0 else math.copysign(math.inf, slope)
+    return {
+        "mean": float(batches.mean()),
+        "error": float(batches.std(ddof=1) / math.sqrt(STEADY_BATCHES)),
+        "from_time": float(times[-tail.size]),
+        "to_time": float(times[-1]),
+        "drift_sigma": drift,
+    }
+
+
+def _describe_steady(e: dict, unit: str) -> str:
+    unit = f" {unit}" if unit and unit != "1" else ""
+    return (
+        f"{e['mean']:.6g} +- {e['error']:.2g}{unit} over t = {e['from_time']:.6g} .. {e['to_time']:.6g} s "
+        f"({STEADY_BATCHES} batch means of the last half), drift {e['drift_sigma']:+.1f} sigma"
+    )
 
 
 def _last_sample(group: h5py.Group):

@@ -213,3 +213,16 @@ def test_an_id_range_beyond_the_particles_is_refused(tmp_path):
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", tmp_path / "case.toml", "--output", tmp_path / "run")
     assert_clean_error(result, 65, "fluid.ids", "8 particles (0 .. 7)")
+
+
+def test_inspect_estimates_the_steady_transport(tmp_path):
+    """`sphere inspect` of a bedload run gives, for q_star and shields_number (every scalar
+    observable), the mean of the latter half with its batch-means error and the drift."""
+    text = edit(CASE, "duration = 0.0002", "duration = 0.0008") + "[output.observables]\nevery_steps = 1\n"
+    (tmp_path / "case.toml").write_text(text)
+    assert sphere_inproc("run", tmp_path / "case.toml", "--output", tmp_path / "run").code == 0
+    result = sphere_inproc("inspect", tmp_path / "run")
+    assert result.code == 0, result.stderr
+    assert "steady_state:" in result.stdout
+    line = next(x for x in result.stdout.splitlines() if x.strip().startswith("q_star:") and "+-" in x)
+    assert "batch means of the last half" in line and "drift" in line
