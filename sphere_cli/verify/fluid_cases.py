@@ -193,6 +193,20 @@ register(
 # ---------------------------------------------------------------------------------- Navier-Stokes
 
 
+def ns_solver(shape, length, **fluid) -> NavierStokesSolver:
+    """The Navier-Stokes solver alone on `shape` cells filling a box of `length` [m] (x, y
+    periodic), water unless `fluid` (the [fluid] keys) says otherwise, gravity off."""
+    spacing = np.asarray(length, dtype=float) / np.asarray(shape)
+    grid = FluidGrid(
+        origin=np.zeros(3), spacing=spacing, shape=tuple(shape), periodic=np.array([True, True, False])
+    )
+    config = NavierStokesFluid.model_validate({"model": "navier-stokes", "density": RHO, **fluid})
+    return NavierStokesSolver(config, grid, (0.0, 0.0, 0.0))
+
+
+CLOSED = {"bottom": {"type": "no-flow"}, "top": {"type": "no-flow"}}
+
+
 def taylor_green_rate_error(cells: float) -> Outcome:
     """Relative error of the decay rate of the Taylor-Green vortex (one wavelength L = 1 m on
     `cells` x `cells` cells, two layers along z between free-slip walls) against 2 nu k^2, over
@@ -202,18 +216,7 @@ def taylor_green_rate_error(cells: float) -> Outcome:
     is O(A dx) against the viscous O(nu k^2). The error is signed (values) and absolute (errors)."""
     n = int(cells)
     nu, amplitude = 1e-3, 1e-3
-    dx = 1.0 / n
-    grid = FluidGrid(
-        origin=np.zeros(3),
-        spacing=np.array([dx, dx, dx]),
-        shape=(n, n, 2),
-        periodic=np.array([True, True, False]),
-    )
-    config = NavierStokesFluid.model_validate(
-        {"model": "navier-stokes", "density": RHO, "viscosity": nu * RHO,
-         "bottom": {"type": "no-flow"}, "top": {"type": "no-flow"}}
-    )  # fmt: skip
-    solver = NavierStokesSolver(config, grid, (0.0, 0.0, 0.0))
+    solver = ns_solver((n, n, 2), (1.0, 1.0, 2.0 / n), viscosity=nu * RHO, **CLOSED)
     fs = solver.allocate()
     k = 2 * math.pi
     x, y, _ = solver.face_coordinates(0)
@@ -265,6 +268,142 @@ register(
             "limit falls as dx^2 too"
         ),
         tolerances=(Tolerance("rate", 0.01, 32, source="issue acceptance: 1 % at 32 cells per wavelength"),),
+    )
+)
+
+
+def shear_wave(phi: float = 1.0, formulation: str = "A"):
+    """The decaying shear wave u_x = A sin(k y) (A = 1e-3 m/s, one wavelength of 1 m along y,
+    nu = 1e-3 m^2/s) through a uniform porosity phi, over t = 0.2/(nu k^2) at dt = 0.1 of the
+    viscous limit: the relative error of its decay rate against nu k^2 (signed in values)."""
+
+    def run(cells: float) -> Outcome:
+        n = int(cells)
+        nu, amplitude = 1e-3, 1e-3
+        dy = 1.0 / n
+        solver = ns_solver(
+            (2, n, 3), (2 * dy, 1.0, 3 * dy), viscosity=nu * RHO, formulation=formulation, **CLOSED
+        )
+        fs = solver.allocate()
+        fs.porosity[...] = phi
+        k = 2 * math.pi
+        profile = np.sin(k * solver.grid.centres(1))
+        solver.set_velocity(fs, (amplitude * profile[None, :, None], 0.0, 0.0))
+        duration = 0.2 / (nu * k * k)
+        steps = math.ceil(duration / (0.1 * solver.viscous_limit()))
+        dt = duration / steps
+        start = time.perf_counter()
+        for step in range(steps):
+            solver.step(fs, step * dt, dt)
+        seconds = time.perf_counter() - start
+        measured = 2.0 / n * float(fs.v_face[0, :, 1, 0] @ profile)  # the wave keeps its shape
+        if np.abs(fs.v_face[..., 1:]).max() != 0.0:
+            raise RuntimeError("the shear wave grew a v_y or v_z")
+        error = -math.log(measured / amplitude) / duration / (nu * k * k) - 1.0
+        return Outcome(
+            dt=dt, steps=steps, particles=0, errors={"rate": abs(error)}, values={"rate_error": error},
+            step_seconds=seconds, work=steps * 6 * n, work_unit="cell-update",
+        )  # fmt: skip
+
+    return run
+
+
+_WAVE = dict(
+    model="navier-stokes",
+    ladder=(16, 32, 64, 128),
+    quick_ladder=(16, 32),
+    resolution="cells per wavelength",
+    error_labels={"rate": "|measured rate / nu k^2 - 1|"},
+    order_metrics=("rate",),
+    formal_order=2.0,
+    min_order=1.9,
+    order_note=(
+        "the 3-point second difference, nu k^2 (1 - (k dy)^2/12); forward Euler at 0.1 of the "
+        "viscous limit adds 0.1 (k dy)^2/16"
+    ),
+    tolerances=(Tolerance("rate", 0.01, 32, source="verification group C: 1 % at 32 cells per wavelength"),),
+)
+
+register(
+    VerificationCase(
+        name="c2-ns-shear-wave",
+        title="C2 Navier-Stokes: decay rate of a shear wave",
+        reference=(
+            "u_x = A sin(ky) e^{-nu k^2 t}, the exact solution of the unsteady Stokes (and "
+            "Navier-Stokes) equations"
+        ),
+        description="one wavelength of 1 m, A = 1e-3 m/s, nu = 1e-3 m^2/s, porosity 1, over 0.2 decay times",
+        run=shear_wave(),
+        **_WAVE,
+    )
+)
+
+register(
+    VerificationCase(
+        name="c2-ns-shear-wave-porous",
+        title="C2 Navier-Stokes: decay rate of a shear wave through a uniform porosity 0.4 (formulation B)",
+        reference=(
+            "the same rate nu k^2 as in clear fluid: (1/phi) div(phi tau) = div(tau) when phi is "
+            "uniform (verification group C: unchanged for uniform porosity)"
+        ),
+        description="the c2-ns-shear-wave set-up at porosity 0.4, formulation B (pressure in the fluid only)",
+        run=shear_wave(0.4, "B"),
+        **_WAVE,
+    )
+)
+
+
+def kolmogorov(cells: float) -> Outcome:
+    """Kolmogorov flow: a body-force field g_x = F sin(ky) (F = 1e-3 m/s^2, one wavelength of 1
+    m along y, nu = 1e-2 m^2/s) on fluid at rest, after 8 viscous times 1/(nu k^2): the largest
+    difference from the steady u = F sin(ky)/(nu k^2), relative to its amplitude."""
+    n = int(cells)
+    nu, force = 1e-2, 1e-3
+    dy = 1.0 / n
+    solver = ns_solver((2, n, 2), (2 * dy, 1.0, 2 * dy), viscosity=nu * RHO, **CLOSED)
+    fs = solver.allocate()
+    k = 2 * math.pi
+    _, y, _ = solver.face_coordinates(0)
+    fs.acceleration[..., :-1, 0] = force * np.sin(k * y)
+    duration = 8.0 / (nu * k * k)
+    steps = math.ceil(duration / (0.5 * solver.viscous_limit()))
+    dt = duration / steps
+    start = time.perf_counter()
+    for step in range(steps):
+        solver.step(fs, step * dt, dt)
+    seconds = time.perf_counter() - start
+    if np.abs(fs.v_face[..., 1:]).max() != 0.0:
+        raise RuntimeError("the forced shear flow grew a v_y or v_z")
+    exact = np.broadcast_to(force * np.sin(k * y) / (nu * k * k), fs.v_face[..., :-1, 0].shape)
+    error = float(np.abs(fs.v_face[..., :-1, 0] - exact).max() / np.abs(exact).max())
+    return Outcome(
+        dt=dt, steps=steps, particles=0, errors={"u_linf": error}, step_seconds=seconds,
+        work=steps * 4 * n, work_unit="cell-update",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="c2-ns-kolmogorov-flow",
+        title="C2 Navier-Stokes: a channel driven by a body-force field (Kolmogorov flow)",
+        model="navier-stokes",
+        reference="u = F sin(ky)/(nu k^2), the steady flow of the forcing g_x = F sin(ky)",
+        description=(
+            "F = 1e-3 m/s^2, one wavelength of 1 m, nu = 1e-2 m^2/s, from rest, after 8 viscous "
+            "times (the transient e^-8 = 3e-4 of it left)"
+        ),
+        run=kolmogorov,
+        ladder=(16, 32, 64),
+        quick_ladder=(16, 32),
+        resolution="cells per wavelength",
+        error_labels={"u_linf": "max |u - exact| / F/(nu k^2)"},
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.8,
+        order_note="the 3-point second difference, 1 - (k dy)^2/12, until the transient's 3e-4 floor",
+        tolerances=(
+            Tolerance("u_linf", 0.01, 32, source="issue 22 acceptance: 1 % of the analytic profile"),
+        ),
     )
 )
 

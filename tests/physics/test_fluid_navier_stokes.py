@@ -21,6 +21,7 @@ import pytest
 from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
 from sphere_cli.physics.fluid.grid import FluidGrid
 from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
+from sphere_cli.verify.fluid_cases import shear_wave
 
 RHO = 1000.0  # kg/m^3
 G = 9.81  # m/s^2
@@ -140,37 +141,12 @@ def test_hydrostatic_pressure_follows_a_top_pressure_series(tmp_path):
 
 # ------------------------------------------------------------------------------- shear wave
 
-NU = 1e-3  # m^2/s, mu = 1 Pa s at rho = 1000
-AMPLITUDE = 1e-3  # m/s
-
 
 def _decay_rate_error(cells: int, phi: float = 1.0, formulation: str = "A") -> float:
     """Relative error of the measured decay rate of u_x = A sin(k y) against nu k^2, one
-    wavelength L = 1 m on `cells` cells along y, over t = 0.2/(nu k^2), dt = 0.1 of the viscous
-    limit (forward Euler's own error, ~ nu k^2 dt/2 relative, is then 0.1 (k dy)^2/16 against
-    the space error (k dy)^2/12: both O(dy^2))."""
-    length = 1.0
-    dy = length / cells
-    grid = _grid((2, cells, 3), (2 * dy, length, 3 * dy))
-    solver = _solver(
-        grid, viscosity=NU * RHO, formulation=formulation, bottom={"type": "no-flow"}, top={"type": "no-flow"}
-    )
-    fs = solver.allocate()
-    fs.porosity[...] = phi
-    k = 2 * math.pi / length
-    profile = np.sin(k * grid.centres(1))
-    solver.set_velocity(fs, (AMPLITUDE * profile[None, :, None], 0.0, 0.0))
-    duration = 0.2 / (NU * k * k)
-    steps = math.ceil(duration / (0.1 * solver.viscous_limit()))
-    dt = duration / steps
-    for step in range(steps):
-        solver.step(fs, step * dt, dt)
-    # the discrete wave keeps its shape: project on sin(k y)
-    amplitude = 2.0 / cells * float(fs.v_face[0, :, 1, 0] @ profile)
-    assert np.abs(fs.v_face[..., 1:]).max() == 0.0  # a pure shear flow has no pressure and no v_y, v_z
-    assert (fs.v_face[..., :-1, 0] == fs.v_face[0:1, :, 0:1, 0]).all()  # and stays uniform along x and z
-    rate = -math.log(amplitude / AMPLITUDE) / duration
-    return rate / (NU * k * k) - 1.0
+    wavelength on `cells` cells (sphere_cli/verify/fluid_cases.py shear_wave, which also checks
+    that no v_y or v_z appears)."""
+    return shear_wave(phi, formulation)(cells).values["rate_error"]
 
 
 def test_shear_wave_decays_at_the_viscous_rate_with_order_two():
