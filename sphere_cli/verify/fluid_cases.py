@@ -207,6 +207,14 @@ def ns_solver(shape, length, **fluid) -> NavierStokesSolver:
 CLOSED = {"bottom": {"type": "no-flow"}, "top": {"type": "no-flow"}}
 
 
+def timed_steps(solver: NavierStokesSolver, fs, steps: int, dt: float) -> float:
+    """`steps` fluid steps of dt [s] from t = 0; the wall time they took [s]."""
+    start = time.perf_counter()
+    for step in range(steps):
+        solver.step(fs, step * dt, dt)
+    return time.perf_counter() - start
+
+
 def taylor_green_rate_error(cells: float) -> Outcome:
     """Relative error of the decay rate of the Taylor-Green vortex (one wavelength L = 1 m on
     `cells` x `cells` cells, two layers along z between free-slip walls) against 2 nu k^2, over
@@ -227,10 +235,7 @@ def taylor_green_rate_error(cells: float) -> Outcome:
     duration = 0.1 / (2 * nu * k * k)
     steps = math.ceil(duration / (0.25 * solver.viscous_limit()))
     dt = duration / steps
-    start = time.perf_counter()
-    for step in range(steps):
-        solver.step(fs, step * dt, dt)
-    seconds = time.perf_counter() - start
+    seconds = timed_steps(solver, fs, steps, dt)
     shape = np.broadcast_to(u0, fs.v_face[..., :-1, 0].shape)
     measured = float((fs.v_face[..., :-1, 0] * shape).sum() / (shape * shape).sum())
     if np.abs(fs.v_face[..., 2]).max() != 0.0:
@@ -292,10 +297,7 @@ def shear_wave(phi: float = 1.0, formulation: str = "A"):
         duration = 0.2 / (nu * k * k)
         steps = math.ceil(duration / (0.1 * solver.viscous_limit()))
         dt = duration / steps
-        start = time.perf_counter()
-        for step in range(steps):
-            solver.step(fs, step * dt, dt)
-        seconds = time.perf_counter() - start
+        seconds = timed_steps(solver, fs, steps, dt)
         measured = 2.0 / n * float(fs.v_face[0, :, 1, 0] @ profile)  # the wave keeps its shape
         if np.abs(fs.v_face[..., 1:]).max() != 0.0:
             raise RuntimeError("the shear wave grew a v_y or v_z")
@@ -368,10 +370,7 @@ def kolmogorov(cells: float) -> Outcome:
     duration = 8.0 / (nu * k * k)
     steps = math.ceil(duration / (0.5 * solver.viscous_limit()))
     dt = duration / steps
-    start = time.perf_counter()
-    for step in range(steps):
-        solver.step(fs, step * dt, dt)
-    seconds = time.perf_counter() - start
+    seconds = timed_steps(solver, fs, steps, dt)
     if np.abs(fs.v_face[..., 1:]).max() != 0.0:
         raise RuntimeError("the forced shear flow grew a v_y or v_z")
     exact = np.broadcast_to(force * np.sin(k * y) / (nu * k * k), fs.v_face[..., :-1, 0].shape)
