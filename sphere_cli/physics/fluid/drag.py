@@ -96,6 +96,7 @@ class FluidParticleDrag:
         self.cell_coef = np.zeros(cells if self.corrected else 0)  # sum of K per cell [kg/s]
         self.response_spacing = np.zeros(3)
         self.case_spacing = self.spacing.copy()  # the grid's cells as the case gives them [m]
+        self.seen_spacing = np.zeros(3)  # the spacing at the last step [m]
         self.decay_dt = 0.0
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
@@ -183,13 +184,20 @@ class FluidParticleDrag:
         """The grid's response bands for its cells now and their decay over dt [s]. The cells
         change when the grid follows the top wall: the bands are those of the spacing rounded to
         a step of 1 % (in its logarithm) from the case's own, a function of the spacing alone, so
-        that a resumed run takes the same bands as the run it continues."""
-        steps = np.round(np.log(self.spacing / self.case_spacing) * 100.0)
-        rounded = self.case_spacing * np.exp(steps / 100.0)
-        moved = np.any(rounded != self.response_spacing)
+        that a resumed run takes the same bands as the run it continues. Nothing is computed
+        while the spacing and dt stay as they were (every step of a fixed grid)."""
+        seen = self.seen_spacing
+        spacing = self.spacing
+        moved = spacing[0] != seen[0] or spacing[1] != seen[1] or spacing[2] != seen[2]
         if moved:
-            self.band_weight[:], self.band_rate[:] = lattice_modes(rounded)
-            self.response_spacing[:] = rounded
+            seen[:] = spacing
+            steps = np.round(np.log(spacing / self.case_spacing) * 100.0)
+            rounded = self.case_spacing * np.exp(steps / 100.0)
+            if np.any(rounded != self.response_spacing):
+                self.band_weight[:], self.band_rate[:] = lattice_modes(rounded)
+                self.response_spacing[:] = rounded
+            else:
+                moved = False
         if moved or dt != self.decay_dt:
             np.exp(self.band_rate * (-self.viscosity / self.density * dt), out=self.band_decay)
             self.decay_dt = dt
