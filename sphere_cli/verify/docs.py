@@ -44,7 +44,8 @@ def _summary_row(record: dict) -> str:
     metric = metrics[0]
     order = record["orders"].get(metric)
     formal = record["formal_order"]
-    order_text = f"{fmt(order, 3)} ({'exact' if formal is None else f'{formal:g}'})"
+    # no formal order: exact to round-off or not a convergence case, a fitted slope means nothing
+    order_text = "-" if formal is None else f"{fmt(order, 3)} ({formal:g})"
     tolerance = next((t for t in record["tolerances"] if t["metric"] == metric), None)
     if tolerance is None:
         tol_text = "-"
