@@ -34,6 +34,29 @@ def _record(action, detail, checks, theory=None, limit=None, exit_code=0) -> dic
     }
 
 
+def _refusal(error, named: tuple[str, ...], accepted: str, theory: str, limit: float) -> dict:
+    """The record of a case that must be refused before the run: a CaseError (exit 65) whose
+    message holds every text in `named` (the key, the limit); `accepted` says what happened
+    when it was not refused."""
+    message = str(error) if error is not None else ""
+    refused = isinstance(error, CaseError)
+    return _record(
+        "refused" if refused else "ran",
+        _first_line(message) or accepted,
+        [
+            {"check": "refused with a CaseError (exit 65)", "passed": refused, "detail": ""},
+            {
+                "check": "the message names " + " and ".join(named),
+                "passed": all(text in message for text in named),
+                "detail": _first_line(message),
+            },
+        ],
+        theory=theory,
+        limit=limit,
+        exit_code=getattr(error, "exit_code", 0),
+    )
+
+
 def _build(text: str):
     """(error, scene) of a case text: a SphereError raised while it is read or built, or the scene."""
     try:
@@ -151,25 +174,12 @@ def fine_sediment_vans1d(quick: bool) -> dict:
     _, auto = _build(FINE_SEDIMENT.format(dt='"auto"'))
     limit = float(auto.dt_limit)
     error, _ = _build(FINE_SEDIMENT.format(dt=repr(10.0 * limit)))
-    message = str(error) if error is not None else ""
-    return _record(
-        "refused" if isinstance(error, CaseError) else "ran",
-        _first_line(message) or "accepted dt = 10 x the drag relaxation limit",
-        [
-            {
-                "check": "refused with a CaseError (exit 65)",
-                "passed": isinstance(error, CaseError),
-                "detail": "",
-            },
-            {
-                "check": "the message names simulation.dt and the drag's limit",
-                "passed": "simulation.dt" in message and f"{limit:.4g}" in message and "drag" in message,
-                "detail": _first_line(message),
-            },
-        ],
-        theory=auto.dt_limit_reason,
-        limit=limit,
-        exit_code=getattr(error, "exit_code", 0),
+    return _refusal(
+        error,
+        ("simulation.dt", f"{limit:.4g}", "drag"),
+        "accepted dt = 10 x the drag relaxation limit",
+        auto.dt_limit_reason,
+        limit,
     )
 
 
@@ -253,25 +263,12 @@ def coupling_beyond_its_limit(quick: bool) -> dict:
     _, ok = _build(COUPLED.format(interval=1e-4))
     limit = float(ok.fluid.fluid_step_limit()[0])
     error, _ = _build(COUPLED.format(interval=repr(2.0 * limit)))
-    message = str(error) if error is not None else ""
-    return _record(
-        "refused" if isinstance(error, CaseError) else "ran",
-        _first_line(message) or "accepted an interval of twice the limit",
-        [
-            {
-                "check": "refused with a CaseError (exit 65)",
-                "passed": isinstance(error, CaseError),
-                "detail": "",
-            },
-            {
-                "check": "the message names fluid.coupling.interval and the limit",
-                "passed": "fluid.coupling.interval" in message and f"{limit:.4g}" in message,
-                "detail": _first_line(message),
-            },
-        ],
-        theory="the fluid step's viscous limit dx^2/(8 nu)",
-        limit=limit,
-        exit_code=getattr(error, "exit_code", 0),
+    return _refusal(
+        error,
+        ("fluid.coupling.interval", f"{limit:.4g}"),
+        "accepted an interval of twice the limit",
+        "the fluid step's viscous limit dx^2/(8 nu)",
+        limit,
     )
 
 
