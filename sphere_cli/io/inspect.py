@@ -87,7 +87,9 @@ def _read_trajectory(path: Path) -> dict:
             steady = {}
             for name, group in f["observables"].items():
                 if group["value"].ndim == 1:
-                    estimate = steady_estimate(group["time"][...], group["value"][...])
+                    # a run appending while we read may have lengthened one of the two already
+                    n = min(group["time"].shape[0], group["value"].shape[0])
+                    estimate = steady_estimate(group["time"][:n], group["value"][:n])
                     if estimate is not None:
                         steady[name] = _describe_steady(estimate, group["value"].attrs.get("unit", ""))
             return {
