@@ -85,7 +85,7 @@ def register(case: VerificationCase) -> VerificationCase:
 
 def cases() -> dict[str, VerificationCase]:
     """All registered cases (importing the modules that define them)."""
-    from . import dem_cases, fluid_cases, hertz_cases  # noqa: F401  (register on import)
+    from . import coupled_cases, dem_cases, fluid_cases, hertz_cases  # noqa: F401  (register on import)
 
     return REGISTRY
 

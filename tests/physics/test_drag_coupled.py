@@ -5,17 +5,21 @@ run through the case file and the real loop (verification group D).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sphere_cli.api import run_in_memory
-from sphere_cli.kernels.fluid.drag import GIDASPOW, drag_rate
 from sphere_cli.simulation import advance
-
-G = 9.81
-STEEL, GLYCERIN, MU = 7800.0, 1260.0, 1.41
+from sphere_cli.verify.coupled_cases import (
+    GLYCERIN,
+    MU,
+    STEEL,
+    G,
+    bed_pressure_drop,
+    fluidized_bed,
+    settling_two_way,
+)
 
 
 def _toml(value) -> str:
@@ -75,65 +79,13 @@ def fluid_momentum(scene) -> np.ndarray:
     return momentum * fluid.grid().cell_volume
 
 
-def _law_terminal_velocity(phi: float, d: float) -> float:
-    """Settling speed [m/s] of steel d in glycerol at which the Gidaspow drag of a cell of porosity
-    phi balances the buoyant weight (fixed point of v = W / (V k(v)))."""
-    volume = math.pi / 6 * d**3
-    weight = (STEEL - GLYCERIN) * G * volume
-    v = weight / (3 * math.pi * MU * d)
-    for _ in range(60):
-        v = weight / (volume * drag_rate(GIDASPOW, phi, d, v, GLYCERIN, MU, 0.1))
-    return v
-
-
-def _settle_two_way(tmp_path, cells_per_side: int, self_induced: str, steps: int):
-    """Steel d = 2 mm released in glycerol at mid-height of a closed column 32 d wide (x, y
-    periodic) and 64 d high, on cubic cells of 32 d / cells_per_side; after `steps` of tau_p/25:
-    the settling speed over the law's terminal velocity at the porosity of the sphere's cell, - 1."""
-    d = 2e-3
-    tau = STEEL * d * d / (18 * MU)
-    side = 32 * d
-    cell = side / cells_per_side
-    scene = coupled_scene(
-        tmp_path,
-        [[0.5 * cell, 0.5 * cell, side + 0.5 * cell]],
-        d / 2,
-        upper=(side, side, 2 * side),
-        density=STEEL,
-        dt=tau / 25,
-        fluid={
-            "density": GLYCERIN,
-            "viscosity": MU,
-            "grid": {"cells": [cells_per_side, cells_per_side, 2 * cells_per_side]},
-            "top": {"type": "no-flow"},
-            "drag": {"self_induced": self_induced},
-        },
-    )
-    advance(scene, steps)
-    phi = float(scene.state.fluid.porosity.reshape(-1)[scene.fluid.drag.cell_of[0]])
-    return -scene.state.particles.vel[0, 2] / _law_terminal_velocity(phi, d) - 1.0
-
-
-@pytest.mark.parametrize("cells_per_side", [4, 8])
-def test_two_way_settling_reaches_the_terminal_velocity_on_any_cell_size(tmp_path, cells_per_side):
-    """D, issue 22 defect 3: a sphere two-way coupled hands its drag to the fluid of its own cell,
-    whose velocity then holds the sphere's own wake; felt as the fluid it moves through, it made
-    the sphere settle too fast, by 3 pi alpha d/dx of its speed once steady (alpha = 0.1264,
-    physics/fluid/self_induced.py): +30 % on cells of 4 d. With that self-induced velocity
-    subtracted, after 30 tau_p the sphere settles at the law's terminal velocity (at the porosity
-    of its cell: the sampling sphere gives 1 - (d/dx)^3, and the Wen-Yu factor phi^-2.65 slows it
-    by 4 % on cells of 4 d) on cells of 8 d and 4 d alike. Measured: -0.30 % and -0.52 %; what
-    is left is mostly the box's hindrance (periodic neighbours and walls 32 d away, growing over
-    L^2/nu, to about -1.5 % after 150 tau_p), which a resolved sphere in the same box feels too;
-    2 % allowed."""
-    assert abs(_settle_two_way(tmp_path, cells_per_side, "subtract", 750)) < 0.02
-
-
-def test_two_way_settling_keeping_the_self_induced_velocity_is_too_fast(tmp_path):
-    """The same sphere with the cell velocity kept as it is (`self_induced = "keep"`), cells of 4 d:
-    its own wake carries it, +20.7 % over the law's terminal velocity after 30 tau_p (the lattice
-    response of the grid after 30 tau_p = 0.6 dx^2/nu, 0.67 of its steady 3 pi alpha d/dx = 30 %)."""
-    assert _settle_two_way(tmp_path, 8, "keep", 750) > 0.15
+def test_two_way_settling_keeping_the_self_induced_velocity_is_too_fast():
+    """The sphere of the verification case d1-ns-settling-two-way (which checks the default,
+    the wake subtracted, on cells of 16, 8 and 4 d) with the cell velocity kept as it is
+    (`self_induced = "keep"`), cells of 4 d: its own wake carries it, +20.7 % over the law's
+    terminal velocity after 30 tau_p (the lattice response of the grid after 30 tau_p = 0.6
+    dx^2/nu, 0.67 of its steady 3 pi alpha d/dx = 30 %)."""
+    assert settling_two_way(8, "keep").values["speed_error"] > 0.15
 
 
 @pytest.mark.parametrize("formulation", ["A", "B"])
@@ -265,26 +217,6 @@ def test_a_packed_bed_is_unchanged_by_the_self_induced_correction(tmp_path):
         advance(scene, 1500)
         fields.append(scene.state.fluid.p[0, 0, :].copy())
     assert np.abs(fields[0] - fields[1]).max() < 1e-4 * 10.0
-
-
-def fluidized_bed(pressure: float | None = None):
-    """configs/fluidized-bed.toml, with another driving pressure over hydrostatic [Pa]."""
-    path = Path(__file__).resolve().parents[2] / "configs" / "fluidized-bed.toml"
-    text = path.read_text()
-    if pressure is not None:
-        text = text.replace("pressure = 463.92", f"pressure = {313.92 + pressure!r}")
-    return run_in_memory(text, 0, base_dir=path.parent)
-
-
-def bed_pressure_drop(scene) -> float:
-    """(Fluid force on the free particles - their buoyancy) / area: the bed's pressure drop [Pa]."""
-    p, fs = scene.state.particles, scene.state.fluid
-    free = p.inv_mass > 0
-    volume = math.pi / 6 * (2 * p.radius[free]) ** 3
-    drag = scene.fluid.drag
-    force = drag.f_drag[free, 2].sum() - (volume * fs.grad_p.reshape(-1, 3)[drag.cell_of[free], 2]).sum()
-    buoyancy = -(volume * 1000.0 * scene.state.box.body_acc[2]).sum()
-    return (force - buoyancy) / (0.004 * 0.004)
 
 
 def test_fluidization_plateau():

@@ -6,88 +6,22 @@ momentum exchange with the fluid (verification group D and E).
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numba
 import numpy as np
 import pytest
 from dem_physics_cases import make_scene
 
-from sphere_cli.config.drag import DragConfig
-from sphere_cli.physics.fluid.drag import FluidParticleDrag
-
-G = 9.81
-STEEL, GLYCERIN, MU = 7800.0, 1260.0, 1.41
-
-
-def fluid_state(shape, spacing, origin=(0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), phi=1.0, grad_p=(0.0, 0.0, 0.0)):
-    """A uniform cell-centred fluid state with the fields the drag module reads and writes."""
-    cells = tuple(shape)
-    return SimpleNamespace(
-        grid=SimpleNamespace(
-            origin=np.array(origin, float),
-            spacing=np.array(spacing, float),
-            shape=cells,
-            periodic=np.ones(3, bool),
-        ),
-        v=np.tile(np.array(v, float), (*cells, 1)),
-        porosity=np.full(cells, float(phi)),
-        grad_p=np.tile(np.array(grad_p, float), (*cells, 1)),
-        f_i=np.zeros((*cells, 3)),
-        k_drag=np.zeros(cells),
-        f_exchange=np.zeros((*cells, 3)),
-    )
-
-
-def drag_module(scene, fs, rho=GLYCERIN, mu=MU, formulation_b=False, **config):
-    # the fluid is held fixed, so its velocity holds no disturbance of the particles to subtract
-    drag = FluidParticleDrag(
-        DragConfig(**{"self_induced": "keep", **config}),
-        rho,
-        mu,
-        fs.grid,
-        scene.state.particles.count,
-        pressure_in_fluid_only=formulation_b,
-    )
-    drag.forces(scene.state, fs, spring_dt=0.0)  # the initial forces, as the builder's hook does
-    return drag
-
-
-def coupled_advance(scene, drag, fs, steps):
-    """simulation.advance with the fluid module's forces and kick (the fluid held fixed)."""
-    state = scene.state
-    for _ in range(steps):
-        scene.motion.kick_drift(state)
-        scene.neighbors.prepare(state)
-        for forces in scene.step.forces:
-            forces(state)
-        drag.forces(state, fs)
-        drag.kick(state, fs)
-        state.clock.step += 1
-
-
-def settling_reference(d, rho_p, rho_f, mu, times, substeps=400):
-    """m dv/dt = (m - m_f) g - 3 pi mu d (1 + 0.15 Re^0.687) v from rest (Schiller-Naumann, no
-    added mass, as the model), by classical RK4 with `substeps` per output interval."""
-    volume = math.pi / 6.0 * d**3
-    mass = rho_p * volume
-
-    def accel(v):
-        re = rho_f * d * abs(v) / mu
-        return ((rho_p - rho_f) * volume * G - 3.0 * math.pi * mu * d * (1.0 + 0.15 * re**0.687) * v) / mass
-
-    out, v, t = [], 0.0, 0.0
-    for target in times:
-        h = (target - t) / substeps
-        for _ in range(substeps):
-            k1 = accel(v)
-            k2 = accel(v + 0.5 * h * k1)
-            k3 = accel(v + 0.5 * h * k2)
-            k4 = accel(v + h * k3)
-            v += h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        t = target
-        out.append(v)
-    return np.array(out)
+from sphere_cli.verify.coupled_cases import (
+    GLYCERIN,
+    MU,
+    STEEL,
+    G,
+    advance_in_held_fluid,
+    held_fluid,
+    held_fluid_drag,
+    settling_reference,
+)
 
 
 def single_sphere(tmp_path, d, density, dt, vel=(0.0, 0.0, 0.0)):
@@ -116,11 +50,11 @@ def test_stokes_settling_one_way(tmp_path):
     tau = STEEL * d * d / (18.0 * MU)
     dt = tau / 50.0
     scene = single_sphere(tmp_path, d, STEEL, dt)
-    fs = fluid_state((2, 2, 2), (10 * d,) * 3, grad_p=(0.0, 0.0, -GLYCERIN * G))
-    drag = drag_module(scene, fs)
+    fs = held_fluid((2, 2, 2), (10 * d,) * 3, grad_p=(0.0, 0.0, -GLYCERIN * G))
+    drag = held_fluid_drag(scene, fs)
     times, speeds = [], []
     for _ in range(20):
-        coupled_advance(scene, drag, fs, 25)
+        advance_in_held_fluid(scene, drag, fs, 25)
         times.append(scene.state.clock.time)
         speeds.append(-scene.state.particles.vel[0, 2])
     reference = settling_reference(d, STEEL, GLYCERIN, MU, times)
@@ -143,12 +77,12 @@ def test_drag_relaxation_far_below_dt_is_stable_and_exact(tmp_path, law):
     d = 10e-6
     tau = 2500.0 * d * d / (18.0 * MU)
     scene = single_sphere(tmp_path, d, 2500.0, 100.0 * tau, vel=(0.0, 1.0, 0.0))
-    fs = fluid_state((2, 2, 2), (2.5e-3,) * 3, v=(0.01, 0.0, 0.0), grad_p=(0.0, 0.0, -GLYCERIN * G))
-    drag = drag_module(scene, fs, law=law)
+    fs = held_fluid((2, 2, 2), (2.5e-3,) * 3, v=(0.01, 0.0, 0.0), grad_p=(0.0, 0.0, -GLYCERIN * G))
+    drag = held_fluid_drag(scene, fs, law=law)
     p = scene.state.particles
     history = []
     for _ in range(20):
-        coupled_advance(scene, drag, fs, 1)
+        advance_in_held_fluid(scene, drag, fs, 1)
         history.append(p.vel[0].copy())
     history = np.array(history)
     k = drag.coef[0]
@@ -183,7 +117,7 @@ def _random_bed(tmp_path, n=120, seed=3):
         stability="contact",
         overlap_tolerance=0.5,
     )
-    fs = fluid_state((5, 4, 6), (1e-3, 1e-3, 1e-3))
+    fs = held_fluid((5, 4, 6), (1e-3, 1e-3, 1e-3))
     fs.v[...] = rng.normal(0.0, 0.02, fs.v.shape)
     fs.porosity[...] = rng.uniform(0.35, 1.0, fs.porosity.shape)
     fs.porosity.flat[0] = 0.05  # below the floor: clamped, with a warning
@@ -205,7 +139,7 @@ def test_fluid_receives_exactly_what_the_particles_received(tmp_path, law, formu
     mean drag at the fluid velocity now (kernels/fluid/drag.py)."""
     scene, fs = _random_bed(tmp_path)
     with pytest.warns(RuntimeWarning, match="porosity_floor"):
-        drag = drag_module(scene, fs, 1000.0, 1e-3, formulation_b, law=law)
+        drag = held_fluid_drag(scene, fs, 1000.0, 1e-3, formulation_b, law=law)
     p = scene.state.particles
     dt = scene.state.clock.dt
     volume = math.pi / 6 * (2 * p.radius) ** 3
@@ -216,7 +150,7 @@ def test_fluid_receives_exactly_what_the_particles_received(tmp_path, law, formu
         v0 = p.vel.copy()
         other = [drag.f_other.copy()]
         for _ in range(3):
-            coupled_advance(scene, drag, fs, 1)
+            advance_in_held_fluid(scene, drag, fs, 1)
             other.append(drag.f_other.copy())
         fs.f_exchange[...] = fs.f_i + implicit
         took = implicit + drag.predicted.reshape(fs.f_i.shape)
@@ -259,8 +193,8 @@ def test_exchange_and_kick_do_not_depend_on_the_thread_count(tmp_path):
         (tmp_path / str(threads)).mkdir()
         scene, fs = _random_bed(tmp_path / str(threads))
         with pytest.warns(RuntimeWarning):
-            drag = drag_module(scene, fs, 1000.0, 1e-3, True)
-        coupled_advance(scene, drag, fs, 3)
+            drag = held_fluid_drag(scene, fs, 1000.0, 1e-3, True)
+        advance_in_held_fluid(scene, drag, fs, 3)
         drag.fluid_forcing(scene.state, fs, 3e-6)
         p = scene.state.particles
         results.append((fs.f_i.copy(), fs.k_drag.copy(), p.vel.copy(), p.force.copy()))

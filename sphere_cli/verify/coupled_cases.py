@@ -1,0 +1,346 @@
+"""Verification cases of particles and the Navier-Stokes fluid coupled by drag (group D).
+
+- One-way settling: the drag and the particles' exact drag relaxation (physics/fluid/drag.py)
+  in a fluid held at rest, against the sphere's equation of motion, over a ladder of dt.
+- Two-way settling: a sphere handing its drag to the fluid of its cell (its own wake
+  subtracted, physics/fluid/self_induced.py) against the law's terminal velocity, over cell
+  sizes.
+- Fluidization: the example bed (configs/fluidized-bed.toml) above minimum fluidization, whose
+  pressure drop levels off at its buoyant weight per area, at several driving pressures.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..api import run_in_memory
+from ..config.drag import DragConfig
+from ..kernels.fluid.drag import GIDASPOW, drag_rate
+from ..physics.fluid.drag import FluidParticleDrag
+from ..simulation import advance
+from .registry import Outcome, Tolerance, VerificationCase, register
+from .scenes import linear_contact, particle_scene, toml_table
+
+G = 9.81
+STEEL, GLYCERIN, MU = 7800.0, 1260.0, 1.41  # [kg/m^3], [kg/m^3], [Pa s]
+DIAMETER = 2.0e-3  # the steel sphere [m]
+
+
+def held_fluid(shape, spacing, v=(0.0, 0.0, 0.0), phi=1.0, grad_p=(0.0, 0.0, 0.0)):
+    """A uniform fluid state held fixed (a prescribed fluid: one-way coupling), with the fields
+    the drag module reads (v, porosity, grad_p) and writes (f_i, k_drag, f_exchange)."""
+    cells = tuple(shape)
+    return SimpleNamespace(
+        grid=SimpleNamespace(
+            origin=np.zeros(3), spacing=np.array(spacing, float), shape=cells, periodic=np.ones(3, bool)
+        ),
+        v=np.tile(np.array(v, float), (*cells, 1)),
+        porosity=np.full(cells, float(phi)),
+        grad_p=np.tile(np.array(grad_p, float), (*cells, 1)),
+        f_i=np.zeros((*cells, 3)),
+        k_drag=np.zeros(cells),
+        f_exchange=np.zeros((*cells, 3)),
+    )
+
+
+def held_fluid_drag(scene, fs, rho=GLYCERIN, mu=MU, formulation_b=False, **config) -> FluidParticleDrag:
+    """The drag module of the scene's particles in the held fluid fs, its initial forces added.
+    The fluid does not move, so its velocity holds no disturbance of theirs to subtract."""
+    drag = FluidParticleDrag(
+        DragConfig(**{"self_induced": "keep", **config}),
+        rho,
+        mu,
+        fs.grid,
+        scene.state.particles.count,
+        pressure_in_fluid_only=formulation_b,
+    )
+    drag.forces(scene.state, fs, spring_dt=0.0)  # the initial forces, as the builder's hook does
+    return drag
+
+
+def advance_in_held_fluid(scene, drag: FluidParticleDrag, fs, steps: int) -> None:
+    """simulation.advance with the fluid module's forces and kick, the fluid held fixed."""
+    state = scene.state
+    for _ in range(steps):
+        scene.motion.kick_drift(state)
+        scene.neighbors.prepare(state)
+        for forces in scene.step.forces:
+            forces(state)
+        drag.forces(state, fs)
+        drag.kick(state, fs)
+        state.clock.step += 1
+
+
+def settling_reference(d, rho_p, rho_f, mu, times, substeps=400) -> np.ndarray:
+    """m dv/dt = (m - m_f) g - 3 pi mu d (1 + 0.15 Re^0.687) v from rest (Schiller-Naumann, no
+    added mass, as the model), by classical RK4 with `substeps` per output interval [m/s]."""
+    volume = math.pi / 6.0 * d**3
+    mass = rho_p * volume
+
+    def accel(v):
+        re = rho_f * d * abs(v) / mu
+        return ((rho_p - rho_f) * volume * G - 3.0 * math.pi * mu * d * (1.0 + 0.15 * re**0.687) * v) / mass
+
+    out, v, t = [], 0.0, 0.0
+    for target in times:
+        h = (target - t) / substeps
+        for _ in range(substeps):
+            k1 = accel(v)
+            k2 = accel(v + 0.5 * h * k1)
+            k3 = accel(v + 0.5 * h * k2)
+            k4 = accel(v + h * k3)
+            v += h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        t = target
+        out.append(v)
+    return np.array(out)
+
+
+def terminal_velocity(phi: float, d: float = DIAMETER) -> float:
+    """Settling speed [m/s] of steel d in glycerol at which the Gidaspow drag of a cell of porosity
+    phi balances the buoyant weight (fixed point of v = W / (V k(v)))."""
+    volume = math.pi / 6 * d**3
+    weight = (STEEL - GLYCERIN) * G * volume
+    v = weight / (3 * math.pi * MU * d)
+    for _ in range(60):
+        v = weight / (volume * drag_rate(GIDASPOW, phi, d, v, GLYCERIN, MU, 0.1))
+    return v
+
+
+def sphere_in_box(d: float, density: float, dt: float, vel=(0.0, 0.0, 0.0), **case_keys):
+    """One sphere of diameter d [m] at the centre of a fully periodic box 20 d wide (at least 5
+    mm), gravity on, dt [s]."""
+    box = max(20.0 * d, 5e-3)
+    keys = dict(gravity=(0.0, 0.0, -G), upper=(box, box, box), periodic=(True, True, True), dt=dt)
+    return particle_scene(
+        [[box / 2] * 3], d / 2, [vel], contact=linear_contact(1e3, 0.5, 0.5), density=density,
+        **{**keys, **case_keys},
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------- one way
+
+SETTLING_SPAN = 10.0  # tau_p of the one-way comparison
+
+
+def settling_one_way(per_tau: float) -> Outcome:
+    """Steel d = 2 mm from rest in glycerol held at rest (phi = 1, the hydrostatic pressure
+    gradient giving the buoyancy), dt = tau_p / per_tau, over 10 tau_p: the largest difference
+    of v(t) from the equation of motion at 20 sampled times, relative to v_t."""
+    n = int(per_tau)
+    tau = STEEL * DIAMETER**2 / (18.0 * MU)
+    scene = sphere_in_box(DIAMETER, STEEL, tau / n)
+    fs = held_fluid((2, 2, 2), (10 * DIAMETER,) * 3, grad_p=(0.0, 0.0, -GLYCERIN * G))
+    drag = held_fluid_drag(scene, fs)
+    chunk = n * SETTLING_SPAN / 20
+    if chunk != int(chunk):
+        raise ValueError("per_tau must make 20 equal samples over 10 tau_p")
+    times, speeds, seconds = [], [], 0.0
+    for _ in range(20):
+        start = time.perf_counter()
+        advance_in_held_fluid(scene, drag, fs, int(chunk))
+        seconds += time.perf_counter() - start
+        times.append(scene.state.clock.time)
+        speeds.append(-scene.state.particles.vel[0, 2])
+    reference = settling_reference(DIAMETER, STEEL, GLYCERIN, MU, times)
+    v_t = terminal_velocity(1.0)
+    return Outcome(
+        dt=tau / n, steps=20 * int(chunk), particles=1,
+        errors={"v_linf": float(np.max(np.abs(np.array(speeds) - reference)) / v_t),
+                "terminal": float(abs(speeds[-1] / reference[-1] - 1.0))},
+        values={"v_final": float(speeds[-1]), "v_terminal": v_t}, step_seconds=seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d1-ns-settling-one-way",
+        title="D1 Navier-Stokes coupling: one-way Stokes settling against the equation of motion",
+        model="navier-stokes",
+        reference=(
+            "m dv/dt = (m - m_f) g - 3 pi mu d (1 + 0.15 Re^0.687) v (Schiller-Naumann, the Wen-Yu "
+            "law at phi = 1), by RK4 to 1e-12; its Stokes limit v_t (1 - e^{-t/tau_p}) "
+            "(verification group D: 1 %)"
+        ),
+        description=(
+            "steel d = 2 mm (7800 kg/m^3) from rest in glycerol (1260 kg/m^3, 1.41 Pa s) held at "
+            "rest, tau_p = 1.23 ms, v_t = 0.010017 m/s; the drag, the buoyancy from the "
+            "hydrostatic pressure gradient and the exact drag relaxation of the second half kick; "
+            "v(t) at 20 times over 10 tau_p"
+        ),
+        run=settling_one_way,
+        ladder=(2, 4, 10, 20, 50),
+        quick_ladder=(4, 10, 20),
+        resolution="steps per tau_p",
+        error_labels={
+            "v_linf": "max over 20 times |v - v_ref| / v_t",
+            "terminal": "|v / v_ref - 1| at 10 tau_p",
+        },
+        order_metrics=("v_linf",),
+        formal_order=1.0,
+        min_order=0.9,
+        order_note=(
+            "the relaxation is exact at frozen K; K = V k(Re) is taken from the velocity before "
+            "the step, which lags the Reynolds-number dependence by O(dt)"
+        ),
+        tolerances=(
+            Tolerance("v_linf", 0.01, 4, source="verification group D: one-way 1 %"),
+            Tolerance("terminal", 1e-3, 4, source="the terminal velocity is a fixed point of the kick"),
+        ),
+    )
+)
+
+
+# ---------------------------------------------------------------------------------- two way
+
+
+def settling_two_way(cells_per_side: float, self_induced: str = "subtract") -> Outcome:
+    """Steel d = 2 mm released in glycerol at mid-height of a closed column 32 d wide (x, y
+    periodic) and 64 d high, on cubic cells of 32 d / cells_per_side, its own wake subtracted
+    or kept ([fluid.drag] self_induced); after 750 steps of tau_p/25 (30 tau_p): the settling
+    speed against the law's terminal velocity at the porosity of the sphere's cell."""
+    n = int(cells_per_side)
+    tau = STEEL * DIAMETER**2 / (18 * MU)
+    side = 32 * DIAMETER
+    cell = side / n
+    fluid = {
+        "model": "navier-stokes", "density": GLYCERIN, "viscosity": MU,
+        "grid": {"cells": [n, n, 2 * n]}, "top": {"type": "no-flow"}, "drag": {"self_induced": self_induced},
+    }  # fmt: skip
+    scene = particle_scene(
+        [[0.5 * cell, 0.5 * cell, side + 0.5 * cell]], DIAMETER / 2, contact=linear_contact(1e3, 0.5, 0.5),
+        density=STEEL, gravity=(0.0, 0.0, -G), upper=(side, side, 2 * side), periodic=(True, True, False),
+        dt=tau / 25, stability="contact", extra_tables=toml_table("fluid", fluid),
+    )  # fmt: skip
+    steps = 750
+    start = time.perf_counter()
+    advance(scene, steps)
+    seconds = time.perf_counter() - start
+    phi = float(scene.state.fluid.porosity.reshape(-1)[scene.fluid.drag.cell_of[0]])
+    speed = -float(scene.state.particles.vel[0, 2])
+    error = speed / terminal_velocity(phi) - 1.0
+    return Outcome(
+        dt=tau / 25, steps=steps, particles=1, errors={"v_terminal": abs(error)},
+        values={"speed_error": error, "cell_porosity": phi}, step_seconds=seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d1-ns-settling-two-way",
+        title="D1 Navier-Stokes coupling: two-way settling of a sphere smaller than its cell",
+        model="navier-stokes",
+        reference=(
+            "the Gidaspow law's terminal velocity at the porosity of the sphere's cell (a fixed "
+            "point of v = W/(V k(v))); verification group D: two-way 5-10 %"
+        ),
+        description=(
+            "steel d = 2 mm in glycerol at mid-height of a closed column 32 d wide and 64 d high, "
+            "x and y periodic, cells of 16, 8 and 4 d; the sphere's own wake in its cell "
+            "subtracted ([fluid.drag] self_induced, the default); after 30 tau_p at dt = tau_p/25"
+        ),
+        run=settling_two_way,
+        ladder=(2, 4, 8),
+        quick_ladder=(4, 8),
+        resolution="cells across the column",
+        error_labels={"v_terminal": "|v / terminal velocity at the cell's porosity - 1| after 30 tau_p"},
+        order_note=(
+            "not a convergence case: what is left is the box's own hindrance (periodic "
+            "neighbours and walls 32 d away), about -0.3 to -0.5 %"
+        ),
+        tolerances=(
+            Tolerance(
+                "v_terminal", 0.02, source="the box's hindrance, 1.5 % after 150 tau_p; group D allows 5 %"
+            ),
+        ),
+    )
+)
+
+
+# ---------------------------------------------------------------------------------- fluidization
+
+FLUIDIZED_BED = Path(__file__).resolve().parents[2] / "configs" / "fluidized-bed.toml"
+BED_AREA = 0.004 * 0.004  # [m^2]
+WATER_COLUMN = 313.92  # rho g H of the example's 32 mm of water [Pa]
+
+
+def fluidized_bed(pressure: float):
+    """configs/fluidized-bed.toml driven by `pressure` [Pa] over hydrostatic."""
+    text = FLUIDIZED_BED.read_text(encoding="utf-8")
+    if "pressure = 463.92" not in text:
+        raise RuntimeError("configs/fluidized-bed.toml no longer drives its bed by 150 Pa")
+    text = text.replace("pressure = 463.92", f"pressure = {WATER_COLUMN + pressure!r}")
+    return run_in_memory(text, 0, base_dir=FLUIDIZED_BED.parent)
+
+
+def bed_pressure_drop(scene) -> float:
+    """(Fluid force on the free particles - their buoyancy) / area: the bed's pressure drop [Pa]."""
+    p, fs = scene.state.particles, scene.state.fluid
+    free = p.inv_mass > 0
+    volume = math.pi / 6 * (2 * p.radius[free]) ** 3
+    drag = scene.fluid.drag
+    force = drag.f_drag[free, 2].sum() - (volume * fs.grad_p.reshape(-1, 3)[drag.cell_of[free], 2]).sum()
+    buoyancy = -(volume * scene.fluid.config.density * scene.state.box.body_acc[2]).sum()
+    return float((force - buoyancy) / BED_AREA)
+
+
+def buoyant_weight(scene) -> float:
+    """The free beads' weight less their buoyancy, per area, (1 - eps)(rho_p - rho_f) g L [Pa]."""
+    p = scene.state.particles
+    free = p.inv_mass > 0
+    volume = math.pi / 6 * (2 * p.radius[free]) ** 3
+    rho_f, g = scene.fluid.config.density, -scene.state.box.body_acc[2]
+    return float(((1.0 / p.inv_mass[free] - rho_f * volume) * g).sum() / BED_AREA)
+
+
+def fluidization(pressure: float) -> Outcome:
+    """The example bed driven by `pressure` over hydrostatic: 0.03 s to lift it, then the
+    pressure drop averaged over five samples 2 ms apart, against its buoyant weight per area."""
+    scene = fluidized_bed(pressure)
+    dt = scene.state.clock.dt
+    start = time.perf_counter()
+    advance(scene, round(0.03 / dt))
+    drops = []
+    for _ in range(5):
+        advance(scene, round(0.002 / dt))
+        drops.append(bed_pressure_drop(scene))
+    seconds = time.perf_counter() - start
+    drop, weight = float(np.mean(drops)), buoyant_weight(scene)
+    return Outcome(
+        dt=dt, steps=scene.state.clock.step, particles=scene.state.particles.count,
+        errors={"drop": abs(drop / weight - 1.0)}, values={"pressure_drop": drop, "buoyant_weight": weight},
+        step_seconds=seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d2-ns-fluidization-plateau",
+        title="D2 Navier-Stokes coupling: the pressure drop of a fluidized bed",
+        model="navier-stokes",
+        reference=(
+            "above minimum fluidization the bed's pressure drop is its buoyant weight per area, "
+            "(1 - eps)(rho_p - rho_f) g L = 61.64 Pa here (verification group D)"
+        ),
+        description=(
+            "configs/fluidized-bed.toml: 128 glass beads (1 mm) over a fixed distributor, water-"
+            "glycerol (0.01 Pa s) forced up by 150-250 Pa over hydrostatic; the drop averaged "
+            "over 10 ms after 30 ms (tau_p = 14 ms)"
+        ),
+        run=fluidization,
+        ladder=(150, 200, 250),
+        quick_ladder=(150, 250),
+        resolution="driving pressure over hydrostatic [Pa]",
+        error_labels={"drop": "|bed pressure drop / buoyant weight per area - 1|"},
+        order_note=(
+            "not a convergence case: a plateau over the driving pressure; a bead crossing into "
+            "the cell above the bed takes that cell's gradient, and the still expanding bed's "
+            "acceleration adds to the drop"
+        ),
+        tolerances=(Tolerance("drop", 0.02, source="a bed still expanding over 4 mm cells; steady: 1 %"),),
+    )
+)
