@@ -15,6 +15,7 @@ import copy
 import hashlib
 import io
 import json
+import logging
 import re
 import stat
 import sys
@@ -65,9 +66,18 @@ class LoadedCase:
         return CaseError(self.describe(loc, message))
 
 
+# the case's warnings also reach run.log while a run's log is open (io/rundir.py listens to
+# "sphere"); the null handler keeps logging's last resort from printing them a second time
+CASE_LOG = logging.getLogger("sphere.case")
+CASE_LOG.addHandler(logging.NullHandler())
+
+
 def warn(message: str) -> None:
-    """Tell the user (stderr) of something in the case that is allowed but probably not meant."""
-    print(f"sphere: warning: {message}", file=sys.stderr)
+    """Tell the user (stderr, and run.log during a run) of something in the case that is allowed
+    but probably not meant."""
+    text = f"sphere: warning: {message}"
+    print(text, file=sys.stderr)
+    CASE_LOG.warning("%s", text, extra={"printed": True})
 
 
 _KINDS = (

@@ -270,7 +270,8 @@ class _WarningsToLog(logging.Handler):
 
     def emit(self, record) -> None:
         message = record.getMessage()
-        print(message, file=sys.stderr)
+        if not getattr(record, "printed", False):  # the case's warnings print themselves
+            print(message, file=sys.stderr)
         self.run_log.log(record.levelno, "%s", message)
 
     def _show(self, message, category, filename, lineno, file=None, line=None) -> None:

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..config.fluid_common import PressureBoundary
+from ..config.load import warn
 from ..errors import CaseError, MissingInputError
 from .module import Module
 
@@ -28,6 +29,9 @@ MODELS = {
 # output field of a grid whose spacing changes in time (one that follows the top wall): the
 # spacing (3,) [m] of each frame, which the XDMF sidecar and `inspect` read back
 MOVING_GRID_SPACING = "grid_spacing"
+
+# fluid steps a period of a modulated boundary pressure below which the run warns
+RESOLVED_PERIOD = 20
 
 
 class FluidModule(Module):
@@ -121,6 +125,39 @@ class FluidModule(Module):
                 f"{self.fluid_dt:.6g} s, above the fluid's stability limit {limit:.4g} s ({reason}); "
                 f"use interval <= {limit - clock.dt:.4g} s or a dt that divides it",
             )
+        self._check_modulations()
+
+    def _check_modulations(self) -> None:
+        """A boundary pressure modulated faster than the fluid step can follow: refused below
+        two fluid steps a period (sampled at the steps, the modulation would alias into a slower
+        one, a plausible wrong answer), warned below RESOLVED_PERIOD steps (backward Euler and
+        the projection shift its phase and damp it by about omega dt / 2)."""
+        fluid = self.loaded.case.fluid
+        for face in ("bottom", "top"):
+            boundary = getattr(fluid, face, None)
+            if not isinstance(boundary, PressureBoundary) or boundary.amplitude == 0.0:
+                continue
+            steps = boundary.period / self.fluid_dt
+            what = (
+                f"{steps:.3g} fluid steps of {self.fluid_dt:.4g} s a period (dt x "
+                f"{self.coupling_steps} DEM steps a fluid step)"
+            )
+            if steps < 2.0:
+                raise self.loaded.error(
+                    ("fluid", face, "period"),
+                    f"{what}: the modulation is faster than the fluid step can sample (2 steps a "
+                    f"period at least) and would alias into a slower one; use a period >= "
+                    f"{2.0 * self.fluid_dt:.4g} s or a fluid step <= {boundary.period / 2.0:.4g} s",
+                )
+            if steps < RESOLVED_PERIOD:
+                warn(
+                    self.loaded.describe(
+                        ("fluid", face, "period"),
+                        f"{what}: below {RESOLVED_PERIOD} steps a period the modulation's amplitude "
+                        f"and phase inside the domain carry errors of about omega dt / 2 = "
+                        f"{math.pi / steps:.2g}; a smaller dt or fluid step resolves it",
+                    )
+                )
 
     def first_unstable(self, state) -> str | None:
         """A message naming the cell (or level), the quantity and its value when the fluid state

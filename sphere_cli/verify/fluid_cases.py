@@ -525,7 +525,7 @@ gravity = [0.0, 0.0, 0.0]
 [fluid]
 model = "navier-stokes"
 grid = {{ cells = [2, 2, {cells}] }}
-bottom = {{ type = "pressure", pressure = {pressure!r} }}
+bottom = {bottom}
 top = {{ type = "pressure", pressure = 0.0 }}
 [fluid.bed]
 porosity = {porosity!r}
@@ -541,7 +541,8 @@ def bed_column(cells: int, pressure: float, porosity: float, diameter: float, st
     dt = "auto", gravity off, after `steps` steps: (the scene, the time spent stepping [s], the
     superficial velocity through the bed [m/s], the pressure gradient across its middle half
     [Pa/m], Ergun's at that velocity [Pa/m])."""
-    text = BED_COLUMN.format(cells=cells, pressure=pressure, porosity=porosity, diameter=diameter)
+    bottom = f'{{ type = "pressure", pressure = {pressure!r} }}'
+    text = BED_COLUMN.format(cells=cells, bottom=bottom, porosity=porosity, diameter=diameter)
     scene = run_in_memory(text, 0)
     start = time.perf_counter()
     advance(scene, steps)

@@ -6,17 +6,18 @@ blow-up or a NaN reported as something else. Registered into stability.py's suit
 from __future__ import annotations
 
 import math
+import tempfile
 import textwrap
+from pathlib import Path
 
 import numpy as np
 
 from ..config.load import parse_case
 from ..errors import CaseError, SphereError
-from ..kernels.fluid.drag import GIDASPOW, drag_rate
 from ..scene.builder import build_scene
 from ..simulation import advance
 from .darcy_reference import COMPRESSIBILITY, POROSITY, VISCOSITY, column, terzaghi_pressure
-from .fluid_cases import bed_column
+from .fluid_cases import BED_COLUMN, bed_column
 from .stability import StabilityCase, _first_line, _register
 
 GLYCERIN, MU_GLYCERIN, GLASS, G = 1260.0, 1.41, 2500.0, 9.81
@@ -108,11 +109,7 @@ def fine_sphere_navier_stokes(quick: bool) -> dict:
     dt = scene.state.clock.dt
     advance(scene, 200 if quick else 1000)
     phi = float(scene.state.fluid.porosity.reshape(-1)[scene.fluid.drag.cell_of[0]])
-    volume = math.pi / 6.0 * d**3
-    weight = (GLASS - GLYCERIN) * G * volume
-    terminal = weight / (3.0 * math.pi * MU_GLYCERIN * d)
-    for _ in range(50):  # the law's own terminal velocity, by fixed point
-        terminal = weight / (volume * drag_rate(GIDASPOW, phi, d, terminal, GLYCERIN, MU_GLYCERIN, 0.1))
+    terminal = scene.fluid.drag.settling_speed(d, GLASS - GLYCERIN, G, phi)  # the law's own
     v = -float(p.vel[0, 2])
     finite = bool(np.isfinite(p.vel).all() and np.isfinite(scene.state.fluid.v_face).all())
     return _record(
@@ -258,16 +255,17 @@ coupling = {{ interval = {interval} }}
 
 
 def coupling_beyond_its_limit(quick: bool) -> dict:
-    """A Navier-Stokes coupling interval twice the fluid step's viscous limit must be refused
-    before the run, naming fluid.coupling.interval and the limit."""
+    """A Navier-Stokes coupling interval twice the fluid step's limit (here the settling
+    particle's crossing of half a cell, below the viscous limit) must be refused before the
+    run, naming fluid.coupling.interval and the limit."""
     _, ok = _build(COUPLED.format(interval=1e-4))
-    limit = float(ok.fluid.fluid_step_limit()[0])
+    limit, reason = ok.fluid.fluid_step_limit()
     error, _ = _build(COUPLED.format(interval=repr(2.0 * limit)))
     return _refusal(
         error,
         ("fluid.coupling.interval", f"{limit:.4g}"),
         "accepted an interval of twice the limit",
-        "the fluid step's viscous limit dx^2/(8 nu)",
+        reason,
         limit,
     )
 
@@ -317,5 +315,230 @@ _register(
         "a fixed bed at porosity exactly 0.8, the switch of Gidaspow's drag law",
         "ran",
         porosity_at_the_drag_switch,
+    )
+)
+
+
+# ------------------------------------------------------------------ particle Reynolds number > 1000
+
+HIGH_REYNOLDS = """
+[simulation]
+duration = 1.0
+[domain]
+upper = [0.08, 0.08, 0.64]
+periodic = [true, true, false]
+gravity = [0.0, 0.0, -9.81]
+[particles]
+density = 7800.0
+placement = { method = "file", path = "sphere.csv" }
+[contact]
+normal_stiffness = 1000.0
+[fluid]
+model = "navier-stokes"
+grid = { cells = [4, 4, 32] }
+top = { type = "no-flow" }
+"""
+
+
+def high_reynolds_navier_stokes(quick: bool) -> dict:
+    """A 5 mm steel sphere falling through water (Re_p = rho d v/mu about 5000, the drag's
+    Newton branch C_d = 0.44) at dt = "auto", which keeps it within half a cell a fluid step:
+    stable (the run's own stability check passes: fluid Courant number, the particle's crossing
+    of cells), and at the law's terminal velocity at its cell's porosity within 5 % after 0.4 s
+    (it reaches it within 0.3 s), released 2 cells below the closed top."""
+    with tempfile.TemporaryDirectory(prefix="sphere-stability-") as tmp:
+        (Path(tmp) / "sphere.csv").write_text("x,y,z,r\n0.0405,0.04,0.6,0.0025\n")
+        try:
+            scene = build_scene(parse_case(textwrap.dedent(HIGH_REYNOLDS), Path(tmp) / "case.toml"))
+        except SphereError as error:
+            return _record("refused", _first_line(str(error)), [], exit_code=error.exit_code)
+    p, dt = scene.state.particles, scene.state.clock.dt
+    advance(scene, round(0.4 / dt))
+    unstable = scene.fluid.first_unstable(scene.state)
+    d = 2.0 * float(p.radius[0])
+    phi = float(scene.state.fluid.porosity.reshape(-1)[scene.fluid.drag.cell_of[0]])
+    terminal = scene.fluid.drag.settling_speed(d, 7800.0 - 1000.0, G, phi)
+    v = -float(p.vel[0, 2])
+    reynolds = 1000.0 * d * v / 1e-3
+    finite = bool(np.isfinite(p.vel).all() and np.isfinite(scene.state.fluid.v_face).all())
+    return _record(
+        "ran",
+        f"dt = {dt:.3g} s ({scene.dt_limit_reason}); Re_p = {reynolds:.0f}, falling at {v:.4g} m/s, "
+        f"the law's terminal velocity {terminal:.4g} m/s at porosity {phi:.4f}",
+        [
+            {"check": "Re_p above 1000", "passed": reynolds > 1000.0, "detail": f"{reynolds:.0f}"},
+            {"check": "finite, and the run's stability check passes", "passed": finite and unstable is None,
+             "detail": unstable or ""},
+            {"check": "terminal velocity within 5 %", "passed": finite and abs(v / terminal - 1.0) < 0.05,
+             "detail": f"{v / terminal - 1.0:+.2%}"},
+        ],
+        theory="a settling particle crosses at most half a cell a fluid step (dt = auto)",
+        limit=float(scene.dt_limit),
+    )  # fmt: skip
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-high-reynolds-navier-stokes",
+        "a 5 mm steel sphere falling through water at a particle Reynolds number of 5000",
+        "ran",
+        high_reynolds_navier_stokes,
+    )
+)
+
+
+# ------------------------------------------------------------------ pressure pulses
+
+def pulsed(period: float) -> str:
+    """The bed column of fluid_cases.py (40 cells of 1 mm, dt = "auto" 0.1125 s) driven from below
+    by 10 Pa modulated by 5 Pa with this period [s]."""
+    bottom = f'{{ type = "pressure", pressure = 10.0, amplitude = 5.0, period = {period!r} }}'
+    return BED_COLUMN.format(cells=40, bottom=bottom, porosity=0.4, diameter=6e-4)
+
+
+def pulse_faster_than_the_fluid_step(quick: bool) -> dict:
+    """A boundary pressure modulated with a period of 1.5 fluid steps: sampled at the steps it
+    would alias into a slower modulation, a plausible wrong answer; it must be refused before
+    the run, naming fluid.bottom.period and the least period."""
+    _, ok = _build(pulsed(100.0))
+    step = float(ok.state.clock.dt)
+    error, _ = _build(pulsed(1.5 * step))
+    return _refusal(
+        error,
+        ("fluid.bottom.period", "alias", f"{2.0 * step:.4g}"),
+        "accepted a modulation of 1.5 fluid steps a period",
+        "two fluid steps a period at least (sampling)",
+        step,
+    )
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-pulse-faster-than-the-fluid-step",
+        "a boundary pressure modulated faster than the fluid step samples it",
+        "refused",
+        pulse_faster_than_the_fluid_step,
+    )
+)
+
+
+def darcy_pulse_faster_than_diffusion(quick: bool) -> dict:
+    """Top pressure A sin(omega t) over a 1 m layer on 50 cells whose period is 1e-3 of the
+    diffusion time of one cell (skin depth 0.018 cells), 40 steps a period: backward Euler
+    stays bounded (|p| <= A, no ringing) and the amplitude fitted over the fifth period is
+    that of the exact periodic state, A exp(-depth/delta), within 1e-3 A in every cell."""
+    k, A, n, height = 1.0e-12, 1.0e4, 50, 1.0
+    diffusivity = k / (COMPRESSIBILITY * POROSITY * VISCOSITY)
+    h = height / n
+    period = 1e-3 * h * h / diffusivity
+    omega = 2.0 * math.pi / period
+    delta = math.sqrt(2.0 * diffusivity / omega)
+    model = column(
+        n, height, {"permeability": {"model": "constant", "value": k},
+                    "top": {"amplitude": A, "period": period}, "bottom": {"type": "no-flow"}},
+    )  # fmt: skip
+    steps = 40
+    dt = period / steps
+    largest, samples = 0.0, []
+    for step in range(1, 5 * steps + 1):
+        model.advance(dt, step * dt)
+        p = model.state.pressure[0, 0]
+        largest = max(largest, float(np.abs(p).max()))
+        if step > 4 * steps:
+            samples.append(p.copy())
+    t = np.arange(4 * steps + 1, 5 * steps + 1) * dt
+    basis = np.stack([np.sin(omega * t), np.cos(omega * t)], axis=1)
+    (s, c), *_ = np.linalg.lstsq(basis, np.array(samples), rcond=None)
+    exact = A * np.exp(-(height - model.grid.centres(2)) / delta)
+    error = float(np.abs(np.hypot(s, c) - exact).max() / A)
+    finite = bool(np.all(np.isfinite(samples)))
+    return _record(
+        "ran",
+        f"skin depth {delta / h:.3g} cells; max |p| = {largest / A:.2e} A; amplitude error {error:.2e} A",
+        [
+            {"check": "finite", "passed": finite, "detail": ""},
+            {"check": "bounded: |p| <= A", "passed": finite and largest <= A, "detail": f"{largest / A:.2e}"},
+            {"check": "amplitude within 1e-3 A in every cell", "passed": finite and error < 1e-3,
+             "detail": f"{error:.2e}"},
+        ],
+        theory="backward Euler: unconditionally stable, no overshoot (an M-matrix each step)",
+        limit=model.explicit_limit(),
+    )  # fmt: skip
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-darcy-pulse-faster-than-diffusion",
+        "Darcy: a top pressure pulsed 1000x faster than diffusion across one cell",
+        "ran",
+        darcy_pulse_faster_than_diffusion,
+    )
+)
+
+
+# ------------------------------------------------------------------ porosity near 0
+
+
+def porosity_near_zero_navier_stokes(quick: bool) -> dict:
+    """A fixed bed of imposed porosity 0.01, below the drag laws' floor (fluid.drag.porosity_floor,
+    0.1; Ergun diverges as porosity -> 0): refused before the run, naming the key and the floor."""
+    try:
+        bed_column(40, 5.0, 0.01, 1e-3, 1)
+        error = None
+    except SphereError as exc:
+        error = exc
+    return _refusal(
+        error,
+        ("fluid.bed.porosity", "porosity_floor"),
+        "accepted a bed of porosity 0.01",
+        "the drag laws' porosity floor",
+        math.nan,
+    )
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-porosity-near-zero-navier-stokes",
+        "Navier-Stokes: a fixed bed of porosity 0.01, below the drag laws' floor",
+        "refused",
+        porosity_near_zero_navier_stokes,
+    )
+)
+
+
+def porosity_near_zero_darcy(quick: bool) -> dict:
+    """Steady seepage up a column whose lower half has porosity 1e-3 (a near-solid layer) and
+    upper half 0.5, Kozeny-Carman: the lower half is raised to fluid.porosity_min = 0.1 (the
+    documented clamp, counted), and the flux is that of the clamped layers in series to 1e-6."""
+    n, height, kc, dp = 20, 0.1, 1.0e-9, 1.0e3
+    model = column(
+        n, height, {"permeability": {"coefficient": kc}, "top": {"pressure": 0.0}, "bottom": {"pressure": dp}}
+    )
+    model.state.porosity[0, 0, :] = np.where(np.arange(n) < n // 2, 1e-3, 0.5)
+    model.advance(1.0e6, 1.0e6)
+    k1, k2 = (kc * f**3 / (1 - f) ** 2 for f in (0.1, 0.5))
+    exact = dp / height * (2 * k1 * k2 / (k1 + k2)) / VISCOSITY
+    flux = (model.state.porosity_used * model.state.velocity[..., 2])[0, 0]
+    error = float(np.max(np.abs(flux / exact - 1.0)))
+    clamped = int(model.state.clamped_cells)
+    return _record(
+        "ran",
+        f"{clamped} cells clamped to porosity 0.1; flux {float(flux.mean()):.4g} m/s, error {error:.1e}",
+        [
+            {"check": "the near-solid cells counted as clamped", "passed": clamped == n // 2,
+             "detail": str(clamped)},
+            {"check": "the flux of the clamped layers to 1e-6", "passed": error < 1e-6,
+             "detail": f"{error:.1e}"},
+        ],
+        theory="porosity clamped to [porosity_min, porosity_max] in the fluid equations",
+    )  # fmt: skip
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-porosity-near-zero-darcy",
+        "Darcy: a layer of porosity 1e-3 under one of 0.5 (the clamp)",
+        "ran",
+        porosity_near_zero_darcy,
     )
 )

@@ -118,3 +118,38 @@ def test_dt_above_the_coupling_limit_names_it(tmp_path):
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "limit 5e-09 s")
+
+
+def _modulated(tmp_path, period: float):
+    """DARCY with its top pressure modulated at `period` [s] (dt = "auto" is 1.124e-6 s, one DEM
+    step a fluid step), in case.toml."""
+    top = f'top = {{ type = "pressure", amplitude = 10.0, period = {period!r} }}'
+    text = edit(DARCY, 'model = "darcy"', f'model = "darcy"\n{top}')
+    (tmp_path / "case.toml").write_text(text)
+    return text
+
+
+def test_a_modulation_faster_than_the_fluid_step_is_refused(tmp_path):
+    """A period of 1.5 fluid steps, sampled at the steps, would alias into a slower modulation (a
+    plausible wrong answer): refused before the run, naming the key, its line and the bounds."""
+    text = _modulated(tmp_path, 1.7e-6)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(
+        result, 65, "fluid.top.period", f"case.toml:{line_of(text, 'top =')}:", "alias", "2 steps a period"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("period", "warned"), [(1.1e-5, True), (1e-3, False)])
+def test_a_modulation_resolved_by_few_fluid_steps_is_warned_once_on_stderr_and_in_run_log(
+    tmp_path, period, warned
+):
+    """About 10 fluid steps a period: the run goes on, warning once on stderr and in run.log (as
+    every warning of the case) that its amplitude and phase carry errors of omega dt/2; 890
+    steps a period: no warning."""
+    _modulated(tmp_path, period)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    assert result.stderr.count("fluid.top.period") == (1 if warned else 0), result.stderr
+    log = (tmp_path / "out" / "run.log").read_text()
+    assert ("below 20 steps a period" in log) == warned, log

@@ -33,6 +33,7 @@ from ...kernels.fluid.drag import (
     cell_coefficients,
     cell_shares,
     drag_kick,
+    drag_rate,
     exchange,
     particle_drag,
 )
@@ -270,6 +271,22 @@ class FluidParticleDrag:
             self.cell_share[...] = arrays["share"]
             self.cell_diameter[...] = arrays["diameter"]
             self.cell_velocity[...] = arrays["velocity"]
+
+    def settling_speed(self, diameter: float, excess_density: float, gravity: float, porosity=1.0) -> float:
+        """Terminal speed [m/s] in fluid at rest of a sphere of `diameter` [m] whose density
+        differs from the fluid's by `excess_density` [kg/m^3], under `gravity` [m/s^2], in a cell
+        of `porosity` (1: clear fluid): the root of V k(v) v = V excess_density g, by bisection
+        (the drag grows with v; the laws' slow-flow drag is at least 0.96 of Stokes', and more
+        below porosity 1, so the root lies below twice Stokes' speed)."""
+        weight = abs(excess_density) * gravity  # per particle volume [N/m^3]
+        if weight == 0.0 or diameter <= 0.0:
+            return 0.0
+        low, high = 0.0, 2.0 * weight * diameter**2 / (18.0 * self.viscosity)
+        for _ in range(200):
+            speed = 0.5 * (low + high)
+            k = drag_rate(self.law, porosity, diameter, speed, self.density, self.viscosity, self.floor)
+            low, high = (speed, high) if k * speed < weight else (low, speed)
+        return 0.5 * (low + high)
 
     @staticmethod
     def dt_limit() -> tuple[float, str]:

@@ -47,10 +47,11 @@ class FixedBed:
         if bad.any():
             i, j, k = (int(n) for n in np.argwhere(bad)[0])
             point = ", ".join(f"{grid.centres(a)[n]:.6g}" for a, n in enumerate((i, j, k)))
+            value = float(self.porosity[i, j, k])
             raise loaded.error(
                 where,
-                f"porosity {self.porosity[i, j, k]!r} at fluid cell ({i}, {j}, {k}) at ({point}) m; expected "
-                f"between fluid.drag.porosity_floor = {floor} and 1",
+                f"porosity {value!r} at fluid cell ({i}, {j}, {k}) at ({point}) m; expected between "
+                f"fluid.drag.porosity_floor = {floor} and 1",
             )
         self.diameter = np.where(inside, float(config.diameter), 0.0).reshape(-1)
         self.at_rest = np.zeros((grid.cell_count, 3))

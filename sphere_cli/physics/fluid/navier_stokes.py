@@ -94,6 +94,13 @@ class NavierStokesState:
 # with forward Euler stays bounded up to 1/2 (kernels/fluid/navier_stokes.py, module docstring).
 COURANT_LIMIT = 0.5
 
+# Cells a particle may cross in one fluid step. The coupling takes each particle's drag from
+# the cell its centre is in and the porosity's rate from its move over the fluid step: a
+# particle that skips cells leaves them untouched. dt = "auto" keeps the fastest settling
+# particle within half a cell a fluid step; a run stops where any particle moves a whole cell.
+CROSSING_AUTO = 0.5
+CROSSING_LIMIT = 1.0
+
 
 class NavierStokesSolver:
     """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
@@ -447,6 +454,7 @@ class NavierStokes(FluidModule):
             self.top_wall = _top_wall(loaded, state)
         self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
         self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
+        self.cell = float(self._grid.spacing.min())  # the smallest cell side [m]
         if self.top_wall is not None:
             self.solver.resize(self._wall_height(state))
         self.porosity = Porosity(self._grid, state.particles.count)
@@ -456,6 +464,7 @@ class NavierStokes(FluidModule):
         self.fs = self.solver.allocate()
         state.fluid = self.fs
         self.loaded = loaded
+        self.speed, self.speed_reason = self._particle_speed(state)
         if cfg.body_force is not None:
             self._add_body_force(cfg.body_force)
         self.floor = float(cfg.drag.porosity_floor)
@@ -479,11 +488,39 @@ class NavierStokes(FluidModule):
         for c, value in fields.items():
             self.fs.acceleration[:, :, : face_shape(self._grid, c)[2], c] += value
 
+    def _particle_speed(self, state) -> tuple[float, str]:
+        """The speed [m/s] the particles are expected to reach, and what it is: the larger of
+        the fastest initial speed and the terminal speed in clear fluid of a sphere as wide as
+        the widest moving particle and as far from the fluid's density as the farthest (the
+        settling speed grows with both); 0 without moving particles."""
+        p = state.particles
+        moving = p.inv_mass > 0.0
+        if not moving.any():
+            return 0.0, ""
+        diameter = 2.0 * p.radius[moving]
+        density = 1.0 / (p.inv_mass[moving] * math.pi / 6.0 * diameter**3)
+        excess = float(np.abs(density - self.config.density).max())
+        gravity = float(np.linalg.norm(state.box.body_acc))
+        settling = self.drag.settling_speed(float(diameter.max()), excess, gravity)
+        initial = float(np.linalg.norm(p.vel[moving], axis=1).max())
+        if initial > settling:
+            return initial, f"the fastest initial particle speed, {initial:.4g} m/s"
+        return settling, (
+            f"the terminal speed in clear fluid of the widest moving particle ({diameter.max():.4g} m) "
+            f"at the largest density difference ({excess:.4g} kg/m^3), {settling:.4g} m/s"
+        )
+
     def fluid_step_limit(self) -> tuple[float, str]:
         """The fluid step's own limit [s] and what sets it."""
         nu = self.config.viscosity / self.config.density
         limit = self.solver.viscous_limit()
         reason = f"viscous diffusion dx^2/(8 nu) of the fluid step, nu = {nu:.4g} m^2/s"
+        if self.speed > 0.0 and CROSSING_AUTO * self.cell / self.speed < limit:
+            limit = CROSSING_AUTO * self.cell / self.speed
+            reason = (
+                f"a particle may cross {CROSSING_AUTO:g} of a cell ({self.cell:.4g} m) a fluid step at "
+                f"{self.speed_reason}"
+            )
         if self.config.max_speed is not None:
             advective = self.solver.advective_limit(self.config.max_speed)
             if advective < limit:
@@ -637,7 +674,21 @@ class NavierStokes(FluidModule):
         self.drag.restore({name[5:]: value for name, value in arrays.items() if name.startswith("drag_")})
 
     def first_unstable(self, state) -> str | None:
-        return self.solver.first_unstable(self.fs, self.fluid_dt)
+        found = self.solver.first_unstable(self.fs, self.fluid_dt)
+        if found is not None or not state.particles.count:
+            return found
+        p = state.particles
+        speed = np.where(p.inv_mass > 0.0, np.einsum("ij,ij->i", p.vel, p.vel), 0.0)
+        i = int(np.argmax(speed))
+        cells = math.sqrt(float(speed[i])) * self.fluid_dt / self.cell
+        if cells <= CROSSING_LIMIT:  # (a NaN speed is the motion check's to report)
+            return None
+        where = tuple(float(x) for x in p.pos[i])
+        return (
+            f"particle {i} at {where} m moves {cells:.3g} cells ({self.cell:.4g} m) a fluid step at "
+            f"{math.sqrt(float(speed[i])):.4g} m/s, more than {CROSSING_LIMIT:g}: its drag and the "
+            "porosity it leaves skip cells; use a smaller dt or fluid.coupling.steps, or larger cells"
+        )
 
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:
         fs = self.fs
