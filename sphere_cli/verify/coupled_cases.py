@@ -344,3 +344,83 @@ register(
         tolerances=(Tolerance("drop", 0.02, source="a bed still expanding over 4 mm cells; steady: 1 %"),),
     )
 )
+
+
+# ---------------------------------------------------------------------------------- 1D VANS forces
+
+LOG_LAW = dict(u_star=0.05, z0=1e-4, height=4.8e-3, radius=5e-4, density=2650.0)  # [m/s, m, m, m, kg/m^3]
+SLOPE_G = (0.5, 0.0, -9.8)  # [m/s^2]
+
+
+def vans1d_sphere_forces(layers: float) -> Outcome:
+    """A quartz sphere (d = 1 mm) at rest 4.8 mm above the bed, on a layer face of every ladder
+    rung (so midway between two layer centres), in the prescribed log law u = (u*/kappa)
+    ln(z/z0) (u* = 0.05 m/s, z0 = 0.1 mm) of water 20 mm deep on `layers` layers, no
+    hindrance (drag_exponent = 0), no lift: the fluid force of the first step (its force less its
+    weight) against the drag of YADE's HydroForceEngine at the log law's velocity at its centre
+    and the buoyancy's wall-normal part."""
+    n = int(layers)
+    c = LOG_LAW
+    flow = {
+        "kind": "log-law",
+        "friction_velocity": c["u_star"],
+        "bed_level": 0.0,
+        "roughness_length": c["z0"],
+    }
+    fluid = {"model": "vans1d", "surface": 0.02, "cells": n, "flow": flow, "drag_exponent": 0.0}
+    start = time.perf_counter()
+    scene = particle_scene(
+        [[0.005, 0.005, c["height"]]], c["radius"], contact=linear_contact(1e3, 0.5, 0.5),
+        density=c["density"], gravity=SLOPE_G, upper=(0.01, 0.01, 0.02), periodic=(True, True, False),
+        dt=1e-5, extra_tables=toml_table("fluid", fluid),
+    )  # fmt: skip
+    seconds = time.perf_counter() - start
+    p = scene.state.particles
+    fluid_force = p.force[0] - p.mass[0] * np.array(SLOPE_G)
+    r, rho, nu = c["radius"], 1000.0, 1e-6
+    u = c["u_star"] / 0.41 * math.log(c["height"] / c["z0"])
+    drag = (
+        0.5 * rho * math.pi * r * r * (0.44 * u + 12.0 * nu / r) * u
+    )  # 1/2 C_d A rho u^2, C_d = 0.44 + 24/Re
+    buoyancy = -rho * 4.0 / 3.0 * math.pi * r**3 * SLOPE_G[2]
+    return Outcome(
+        dt=1e-5, steps=0, particles=1,
+        errors={"drag": float(abs(fluid_force[0] / drag - 1.0)),
+                "buoyancy": float(abs(fluid_force[2] / buoyancy - 1.0))},
+        values={"drag": float(fluid_force[0]), "buoyancy": float(fluid_force[2])},
+        step_seconds=seconds, work=n, work_unit="layer",
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d3-vans1d-sphere-forces",
+        title="D3 1D VANS: drag and buoyancy on a sphere in a prescribed log law",
+        model="vans1d",
+        reference=(
+            "YADE HydroForceEngine (Maurin et al. 2015): drag 1/2 C_d (pi d^2/4) rho |u_r| u_r, "
+            "C_d = (0.44 + 24/Re_p)(1 - c)^-n, buoyancy -rho V g_z; u = (u*/kappa) ln(z/z0)"
+        ),
+        description=(
+            "quartz d = 1 mm at rest 4.8 mm above the bed, u* = 0.05 m/s, z0 = 0.1 mm (u = 0.47 m/s, "
+            "Re_p = 470), water 20 mm deep, gravity (0.5, 0, -9.8) m/s^2; n = 0, no lift; the force "
+            "of the first step"
+        ),
+        run=vans1d_sphere_forces,
+        ladder=(25, 50, 100, 200),
+        quick_ladder=(25, 50, 100),
+        resolution="layers",
+        error_labels={
+            "drag": "|F_x / drag at the log law's velocity - 1|",
+            "buoyancy": "|F_z / rho V |g_z| - 1|",
+        },
+        order_metrics=("drag",),
+        formal_order=2.0,
+        min_order=1.8,
+        order_note="the profile's linear interpolation between layer centres, second order in their spacing",
+        tolerances=(
+            Tolerance("drag", 0.01, 50, source="verification group D: 1 % with a resolved profile"),
+            Tolerance("buoyancy", 1e-12, source="exact: no profile enters it"),
+        ),
+    )
+)

@@ -104,27 +104,31 @@ register(
 )
 
 
-def free_surface(a_plus: float = 0.0, sublayer_plus: float = 0.0):
-    """Steady turbulent free-surface flow down a 0.05 rad slope, depth 0.1 m, Prandtl's mixing
-    length with van Driest's damping (a_plus) or YADE's sublayer cut-off (z+ = sublayer_plus),
-    on layers stretched 1e4x upwards (the sublayer resolved); error against the exact solution
-    of the same form."""
+def free_surface(a_plus: float = 0.0, sublayer_plus: float = 0.0, mixing: str = "prandtl", dt: float = 0.02):
+    """Steady turbulent free-surface flow down a 0.05 rad slope, depth 0.1 m, a mixing length
+    (Prandtl's with van Driest's damping (a_plus) or YADE's sublayer cut-off (z+ =
+    sublayer_plus); the parabolic one; Li & Sawamoto's through the smooth bed of
+    vans1d_exact.bed_solid, held as the solid fraction at the layer centres, no drag), on layers
+    stretched 1e4x upwards (the sublayer resolved); error against the exact solution of the
+    same form. Implicit steps of dt [s] to the steady state (the bed's slow viscous diffusion,
+    (30 mm)^2/nu = 900 s, takes long ones)."""
 
     def run(cells: float) -> Outcome:
         n = int(cells)
         sublayer = sublayer_plus * exact.NU / exact.U_STAR
         start = time.perf_counter()
         col = FluidColumn.regular(
-            0.0, exact.DEPTH, n, 1e4, rho=RHO, nu=exact.NU, mixing="prandtl", van_driest=a_plus,
-            sublayer=sublayer,
+            0.0, exact.DEPTH, n, 1e4, rho=RHO, nu=exact.NU, mixing=mixing, van_driest=a_plus,
+            sublayer=sublayer, packed_solid_fraction=exact.PACKED,
         )  # fmt: skip
         zero = np.zeros(n)
-        steps = steady_profile(col, zero, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=0.02)
+        solid = exact.bed_solid(col.centres) if mixing == "li-sawamoto" else zero
+        steps = steady_profile(col, solid, zero, zero, RHO * exact.G * math.sin(exact.SLOPE), dt=dt)
         seconds = time.perf_counter() - start
-        u = exact.free_surface_velocity("prandtl", col.centres, a_plus=a_plus, sublayer=sublayer)
+        u = exact.free_surface_velocity(mixing, col.centres, a_plus=a_plus, sublayer=sublayer)
         error = float(np.abs(col.u - u).max() / u.max())
         return Outcome(
-            dt=0.02, steps=steps, particles=0, errors={"u_linf": error},
+            dt=dt, steps=steps, particles=0, errors={"u_linf": error},
             values={"surface_velocity": float(col.u[-1])}, step_seconds=seconds, work=steps * n,
             work_unit="layer-update",
         )  # fmt: skip
@@ -196,6 +200,46 @@ register(
     )
 )
 
+
+register(
+    VerificationCase(
+        name="c1-vans1d-parabolic",
+        title="C1 1D VANS turbulent free-surface flow, parabolic mixing length",
+        reference=_EXACT + ", l = kappa s sqrt(1 - s/H) (vanishing at the free surface)",
+        description=_SLOPE + "; no sublayer treatment",
+        run=free_surface(mixing="parabolic"),
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.85,
+        order_note="central fluxes, the sublayer resolved by the stretched mesh",
+        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
+        **_TURBULENT,
+    )
+)
+
+register(
+    VerificationCase(
+        name="c1-vans1d-li-sawamoto",
+        title="C1 1D VANS turbulent free-surface flow through a bed, Li & Sawamoto's mixing length",
+        reference=(
+            "the exact steady solution through a solid fraction c(s): (1 - c)(nu + l^2 |u'|) u' = g "
+            "sin(alpha) int_s^H (1 - c), l = kappa int_0^s (1 - c/c_max) (Li & Sawamoto 1995), "
+            "integrated by Gauss-Legendre to 1e-12 (vans1d_exact.py)"
+        ),
+        description=(
+            _SLOPE + "; a smooth bed c = 0.25 (1 - tanh((s - 30 mm)/10 mm)), c_max = 0.61, held as "
+            "the layers' solid fraction without drag (the mixing length and the (1 - c) factors "
+            "alone); implicit steps of 1 s to the steady state"
+        ),
+        run=free_surface(mixing="li-sawamoto", dt=1.0),
+        order_metrics=("u_linf",),
+        formal_order=2.0,
+        min_order=1.85,
+        order_note="the solid fraction's midpoint integral, central fluxes, (1 - c) interpolated at faces",
+        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
+        **_TURBULENT,
+    )
+)
 
 # ---------------------------------------------------------------------------------- Navier-Stokes
 

@@ -389,6 +389,7 @@ _register(
 
 # ------------------------------------------------------------------ pressure pulses
 
+
 def pulsed(period: float) -> str:
     """The bed column of fluid_cases.py (40 cells of 1 mm, dt = "auto" 0.1125 s) driven from below
     by 10 Pa modulated by 5 Pa with this period [s]."""

@@ -74,7 +74,9 @@ def test_cli_verify_one_case_quick(tmp_path):
 @pytest.mark.parametrize("name", CASES)
 def test_coarsest_rung_of_the_full_ladder_runs(name):
     """The full run (`make verify`) reaches resolutions the quick one does not: its coarsest
-    rung, the one closest to the builder's dt limit, must build and run."""
+    rung, the one closest to the builder's dt limit, must build and run (a case of the forces
+    of the first state, d3-vans1d-sphere-forces, builds and evaluates them without a step)."""
     case = cases()[name]
     outcome = case.run(min(case.ladder))
-    assert outcome.steps > 0 and all(math.isfinite(v) for v in outcome.errors.values())
+    assert outcome.steps > 0 or outcome.work > 0
+    assert all(math.isfinite(v) for v in outcome.errors.values())
