@@ -143,6 +143,12 @@ _TURBULENT = dict(
     resolution="layers",
     error_labels={"u_linf": "max |u - exact| / max exact, exact of the same mixing-length form"},
 )
+_SECOND_ORDER = dict(
+    order_metrics=("u_linf",),
+    formal_order=2.0,
+    min_order=1.85,
+    tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
+)
 _EXACT = (
     "the exact steady solution of the same mixing length, (nu + l^2 |u'|) u' = u*^2 (1 - s/H) "
     "integrated by Gauss-Legendre to 1e-12 (vans1d_exact.py)"
@@ -159,12 +165,9 @@ register(
         reference=_EXACT + " (verification group C)",
         description=_SLOPE + "; l = kappa z down to the floor",
         run=free_surface(),
-        order_metrics=("u_linf",),
-        formal_order=2.0,
-        min_order=1.85,
         order_note="central fluxes, the sublayer resolved by the stretched mesh",
-        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
         **_TURBULENT,
+        **_SECOND_ORDER,
     )
 )
 
@@ -175,12 +178,9 @@ register(
         reference=_EXACT + ", l damped by 1 - exp(-z+/26) (van Driest 1956)",
         description=_SLOPE + "; u* from the largest shear stress of the previous step",
         run=free_surface(a_plus=26.0),
-        order_metrics=("u_linf",),
-        formal_order=2.0,
-        min_order=1.85,
         order_note="central fluxes, the damped sublayer resolved by the stretched mesh",
-        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
         **_TURBULENT,
+        **_SECOND_ORDER,
     )
 )
 
@@ -200,7 +200,6 @@ register(
     )
 )
 
-
 register(
     VerificationCase(
         name="c1-vans1d-parabolic",
@@ -208,12 +207,9 @@ register(
         reference=_EXACT + ", l = kappa s sqrt(1 - s/H) (vanishing at the free surface)",
         description=_SLOPE + "; no sublayer treatment",
         run=free_surface(mixing="parabolic"),
-        order_metrics=("u_linf",),
-        formal_order=2.0,
-        min_order=1.85,
         order_note="central fluxes, the sublayer resolved by the stretched mesh",
-        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
         **_TURBULENT,
+        **_SECOND_ORDER,
     )
 )
 
@@ -232,14 +228,12 @@ register(
             "alone); implicit steps of 1 s to the steady state"
         ),
         run=free_surface(mixing="li-sawamoto", dt=1.0),
-        order_metrics=("u_linf",),
-        formal_order=2.0,
-        min_order=1.85,
         order_note="the solid fraction's midpoint integral, central fluxes, (1 - c) interpolated at faces",
-        tolerances=(Tolerance("u_linf", 0.003, 100, source="verification group C"),),
         **_TURBULENT,
+        **_SECOND_ORDER,
     )
 )
+
 
 # ---------------------------------------------------------------------------------- Navier-Stokes
 
