@@ -140,6 +140,25 @@ class ProfileFlow(Strict):
 Flow = Annotated[SolvedFlow | LogLawFlow | ProfileFlow, Field(discriminator="kind")]
 
 
+class ImposedSolidFraction(Strict):
+    """A solid-fraction profile c(z) imposed on the fluid, linear between the given points and
+    constant beyond the first and last one."""
+
+    z: list[Real] = Field(min_length=2, description="Heights of the points, increasing [m].")
+    value: list[Real] = Field(min_length=2, description="Solid fraction at each height, in [0, 1) [-].")
+
+    @model_validator(mode="after")
+    def _matching(self):
+        if len(self.z) != len(self.value):
+            raise ValueError(f"z has {len(self.z)} points but value has {len(self.value)}")
+        if any(b <= a for a, b in zip(self.z, self.z[1:], strict=False)):
+            raise ValueError("z must increase strictly")
+        outside = [v for v in self.value if not 0.0 <= v < 1.0]
+        if outside:
+            raise ValueError(f"solid fraction {outside[0]!r}: expected 0 <= value < 1")
+        return self
+
+
 class Vans1dFluid(Strict):
     """A 1D vertical fluid velocity profile coupled to the particles (bedload transport)."""
 
@@ -165,6 +184,15 @@ class Vans1dFluid(Strict):
     )
     flow: Flow = Field(
         default_factory=SolvedFlow, description="How the fluid velocity is found: solved or prescribed."
+    )
+    solid_fraction: ImposedSolidFraction | None = Field(
+        None,
+        description=(
+            "A solid-fraction profile imposed on the fluid instead of the particles' layer average "
+            "(as YADE's HydroForceEngine with phiPart set by the user): the fluid's (1 - c) factors, "
+            "the Li-Sawamoto mixing length and the drag's hindrance take it; the particles' "
+            "velocity and drag are still averaged from them. Default: the particles' average [-]."
+        ),
     )
     coupling: CouplingConfig = Field(
         default_factory=CouplingConfig,

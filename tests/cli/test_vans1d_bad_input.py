@@ -99,6 +99,22 @@ ERRORS = [
     ("few-cells", "cells = 20", "cells = 1", "fluid.cells", "cells", ["greater than or equal to 2"]),
     ("ids-reversed", "cells = 20", "cells = 20\nids = [5, 2]", "fluid.ids", "ids", ["first <= last"]),
     (
+        "solid-fraction-of-one",
+        "cells = 20",
+        "cells = 20\nsolid_fraction = { z = [0.0, 0.01], value = [0.6, 1.0] }",
+        "fluid.solid_fraction",
+        "solid_fraction",
+        ["1.0", "0 <= value < 1"],
+    ),
+    (
+        "solid-fraction-points",
+        "cells = 20",
+        "cells = 20\nsolid_fraction = { z = [0.0, 0.01, 0.02], value = [0.6, 0.3] }",
+        "fluid.solid_fraction",
+        "solid_fraction",
+        ["z has 3 points but value has 2"],
+    ),
+    (
         "lid-velocity-without-a-lid",
         'mixing_length = "li-sawamoto" }',
         'mixing_length = "li-sawamoto", top_velocity = 0.5 }',

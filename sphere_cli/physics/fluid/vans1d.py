@@ -167,6 +167,10 @@ class Vans1d(FluidModule):
         )
         if not solved:
             column.u[:] = prescribed_profile(flow, column.centres)
+        self.imposed = None  # the solid fraction of [fluid.solid_fraction] at the layer centres
+        if cfg.solid_fraction is not None:
+            self.imposed = np.interp(column.centres, cfg.solid_fraction.z, cfg.solid_fraction.value)
+            state.fluid.profiles.solid_fraction[:] = self.imposed
         density = p.mass[selected == 1] / (4.0 / 3.0 * np.pi * p.radius[selected == 1] ** 3)
         self.diameter = 2.0 * float(p.radius[selected == 1].mean()) if selected.any() else 0.0
         self.particle_density = float(density.mean()) if density.size else 0.0
@@ -302,6 +306,8 @@ class Vans1d(FluidModule):
             f.drag_coef, f.drag_x,
         )  # fmt: skip
         f.profiles.average(p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x, col.faces, self.area)
+        if self.imposed is not None:
+            f.profiles.solid_fraction[:] = self.imposed
         col.update_mixing_length(f.profiles.solid_fraction)
 
     def _steady_start(self, state, tol: float = 1e-9, max_rounds: int = 20000) -> None:
@@ -400,7 +406,9 @@ class Vans1d(FluidModule):
         f = state.fluid
         prof = f.profiles
         fluid = {"layer_height": (f.column.centres, "m"), "fluid_velocity": (f.column.u, "m s-1")}
-        if state.particles.count == 0:  # clear water: no solid profiles
+        if state.particles.count == 0:  # no particles: the solid fraction, if imposed, alone
+            if self.imposed is not None:
+                fluid["solid_fraction"] = (prof.solid_fraction, "1")
             return fluid
         return {
             **fluid,
