@@ -120,6 +120,14 @@ class LogLawFlow(Strict):
     kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")
 
 
+def _check_points(z: list, values: list, name: str) -> None:
+    """A profile given at points: as many values as heights, the heights increasing strictly."""
+    if len(z) != len(values):
+        raise ValueError(f"z has {len(z)} points but {name} has {len(values)}")
+    if any(b <= a for a, b in zip(z, z[1:], strict=False)):
+        raise ValueError("z must increase strictly")
+
+
 class ProfileFlow(Strict):
     """A prescribed profile u(z), linear between the given points and constant beyond the first
     and last one (one-way coupling)."""
@@ -130,10 +138,7 @@ class ProfileFlow(Strict):
 
     @model_validator(mode="after")
     def _matching(self):
-        if len(self.z) != len(self.u):
-            raise ValueError(f"z has {len(self.z)} points but u has {len(self.u)}")
-        if any(b <= a for a, b in zip(self.z, self.z[1:], strict=False)):
-            raise ValueError("z must increase strictly")
+        _check_points(self.z, self.u, "u")
         return self
 
 
@@ -149,10 +154,7 @@ class ImposedSolidFraction(Strict):
 
     @model_validator(mode="after")
     def _matching(self):
-        if len(self.z) != len(self.value):
-            raise ValueError(f"z has {len(self.z)} points but value has {len(self.value)}")
-        if any(b <= a for a, b in zip(self.z, self.z[1:], strict=False)):
-            raise ValueError("z must increase strictly")
+        _check_points(self.z, self.value, "value")
         outside = [v for v in self.value if not 0.0 <= v < 1.0]
         if outside:
             raise ValueError(f"solid fraction {outside[0]!r}: expected 0 <= value < 1")
