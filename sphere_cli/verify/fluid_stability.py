@@ -425,9 +425,14 @@ _register(
 
 def darcy_pulse_faster_than_diffusion(quick: bool) -> dict:
     """Top pressure A sin(omega t) over a 1 m layer on 50 cells whose period is 1e-3 of the
-    diffusion time of one cell (skin depth 0.018 cells), 40 steps a period: backward Euler
-    stays bounded (|p| <= A, no ringing) and the amplitude fitted over the fifth period is
-    that of the exact periodic state, A exp(-depth/delta), within 1e-3 A in every cell."""
+    diffusion time of one cell (skin depth 0.018 cells), 40 steps a period, from p = 0. The
+    grid cannot resolve the skin: what it must do is stay bounded (|p| <= A, no ringing) and
+    give the periodic state of its own scheme, the complex amplitude P of backward Euler,
+    (1 - e^{-i omega dt})/dt P = (D/h^2)(L P + 2 A e_top) (L the cells' second difference, the
+    top face half a cell away, no flow at the base), which in the top cell is about 2 D/(h^2
+    omega) = 3e-4 A (the exact field there, A e^{-28}, is no test at all). Fitted over the fifth
+    period with a constant for the slowly decaying start (rate 3 D/h^2, 1.5 % over the run):
+    every cell within 1 % of the top cell's amplitude."""
     k, A, n, height = 1.0e-12, 1.0e4, 50, 1.0
     diffusivity = k / (COMPRESSIBILITY * POROSITY * VISCOSITY)
     h = height / n
@@ -448,19 +453,28 @@ def darcy_pulse_faster_than_diffusion(quick: bool) -> dict:
         if step > 4 * steps:
             samples.append(p.copy())
     t = np.arange(4 * steps + 1, 5 * steps + 1) * dt
-    basis = np.stack([np.sin(omega * t), np.cos(omega * t)], axis=1)
-    (s, c), *_ = np.linalg.lstsq(basis, np.array(samples), rcond=None)
-    exact = A * np.exp(-(height - model.grid.centres(2)) / delta)
-    error = float(np.abs(np.hypot(s, c) - exact).max() / A)
+    basis = np.stack([np.sin(omega * t), np.cos(omega * t), np.ones_like(t)], axis=1)
+    (s, c, _), *_ = np.linalg.lstsq(basis, np.array(samples), rcond=None)
+    rate = diffusivity / (h * h)
+    system = np.diag(np.full(n, 2.0 * rate + (1.0 - np.exp(-1j * omega * dt)) / dt).astype(complex))
+    system -= np.diag(np.full(n - 1, rate), 1) + np.diag(np.full(n - 1, rate), -1)
+    system[0, 0] -= rate  # no flow through the base
+    system[-1, -1] += rate  # the top face half a cell from the centre: twice the conductance
+    forcing = np.zeros(n, dtype=complex)
+    forcing[-1] = 2.0 * rate * A
+    scheme = np.linalg.solve(system, forcing)
+    top = float(abs(scheme[-1]))
+    error = float(np.abs((s + 1j * c) - scheme).max()) / top
     finite = bool(np.all(np.isfinite(samples)))
     return _record(
         "ran",
-        f"skin depth {delta / h:.3g} cells; max |p| = {largest / A:.2e} A; amplitude error {error:.2e} A",
+        f"skin depth {delta / h:.3g} cells; max |p| = {largest / A:.2e} A; top cell amplitude "
+        f"{float(np.hypot(s[-1], c[-1])) / A:.3e} A against the scheme's {top / A:.3e} A",
         [
             {"check": "finite", "passed": finite, "detail": ""},
             {"check": "bounded: |p| <= A", "passed": finite and largest <= A, "detail": f"{largest / A:.2e}"},
-            {"check": "amplitude within 1e-3 A in every cell", "passed": finite and error < 1e-3,
-             "detail": f"{error:.2e}"},
+            {"check": "the scheme's periodic state within 1 % of the top cell's amplitude",
+             "passed": finite and error < 0.01, "detail": f"{error:.2e}"},
         ],
         theory="backward Euler: unconditionally stable, no overshoot (an M-matrix each step)",
         limit=model.explicit_limit(),

@@ -43,11 +43,11 @@ def test_settling_speed_in_the_stokes_and_newton_regimes():
     assert di_felice == pytest.approx(stokes / 0.96, rel=2e-3)
 
 
-def steel_in_water(dt, cells=4):
+def steel_in_water(dt, cells=4, vel=None):
     """A 5 mm steel sphere in water in a column 16 d wide on `cells` cells across (20 mm)."""
     fluid = {"model": "navier-stokes", "grid": {"cells": [cells, cells, 32]}, "top": {"type": "no-flow"}}
     return particle_scene(
-        [[0.04, 0.04, 0.6]], 0.0025, contact=linear_contact(1e3, 0.5, 0.5), density=7800.0,
+        [[0.04, 0.04, 0.6]], 0.0025, vel, contact=linear_contact(1e3, 0.5, 0.5), density=7800.0,
         gravity=(0.0, 0.0, -G), upper=(0.08, 0.08, 0.64), periodic=(True, True, False), dt=dt,
         extra_tables=toml_table("fluid", fluid),
     )  # fmt: skip
@@ -65,3 +65,21 @@ def test_auto_dt_keeps_the_settling_particle_within_half_a_cell_and_a_larger_dt_
     assert scene.state.clock.dt <= scene.dt_limit
     with pytest.raises(CaseError, match=r"simulation\.dt.*above the stability limit 0\.009947 s.*cross 0\.5"):
         steel_in_water(0.02)
+
+
+def test_the_limit_does_not_depend_on_the_velocities_and_the_run_check_stops_a_fast_particle():
+    """A resume rebuilds the scene with the checkpoint's velocities and must find the same dt:
+    the limit takes the settling speed only (radii and masses, restored unchanged), the same for
+    the sphere at rest and thrown at 5 m/s. At dt = 0.8 ms (one DEM step a fluid step) 5 m/s
+    crosses 0.2 of a 20 mm cell a fluid step, which passes the run's check; 50 m/s, 1.99
+    cells, is stopped naming it; a NaN speed is left to the motion check, not reported as a
+    crossing."""
+    at_rest = steel_in_water("auto")
+    thrown = steel_in_water("auto", vel=[[5.0, 0.0, 0.0]])
+    assert thrown.dt_limit == at_rest.dt_limit and thrown.state.clock.dt == at_rest.state.clock.dt
+    p = thrown.state.particles
+    assert thrown.fluid.first_unstable(thrown.state) is None  # 5 m/s x 0.8 ms = 0.2 cells
+    p.vel[0] = [50.0, 0.0, 0.0]
+    assert "moves 1.99 cells (0.02 m) a fluid step at 50 m/s" in thrown.fluid.first_unstable(thrown.state)
+    p.vel[0] = [math.nan, 0.0, 0.0]
+    assert thrown.fluid.first_unstable(thrown.state) is None

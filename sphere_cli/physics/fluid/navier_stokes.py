@@ -454,7 +454,9 @@ class NavierStokes(FluidModule):
             self.top_wall = _top_wall(loaded, state)
         self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
         self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
-        self.cell = float(self._grid.spacing.min())  # the smallest cell side [m]
+        # the smallest cell side of the case's grid [m] (before a grid following the top wall is
+        # fitted to it, so that dt = "auto" is the same on a resume)
+        self.cell = float(self._grid.spacing.min())
         if self.top_wall is not None:
             self.solver.resize(self._wall_height(state))
         self.porosity = Porosity(self._grid, state.particles.count)
@@ -489,10 +491,12 @@ class NavierStokes(FluidModule):
             self.fs.acceleration[:, :, : face_shape(self._grid, c)[2], c] += value
 
     def _particle_speed(self, state) -> tuple[float, str]:
-        """The speed [m/s] the particles are expected to reach, and what it is: the larger of
-        the fastest initial speed and the terminal speed in clear fluid of a sphere as wide as
-        the widest moving particle and as far from the fluid's density as the farthest (the
-        settling speed grows with both); 0 without moving particles."""
+        """The speed [m/s] the particles are expected to reach, and what it is: the terminal speed
+        in clear fluid of a sphere as wide as the widest moving particle and as far from the
+        fluid's density as the farthest (the settling speed grows with both); 0 without moving
+        particles. From what a checkpoint restores unchanged (radii, masses), not from the
+        velocities, so that dt = "auto" is the same on a resume; faster particles are the run's
+        check to stop (first_unstable)."""
         p = state.particles
         moving = p.inv_mass > 0.0
         if not moving.any():
@@ -502,9 +506,6 @@ class NavierStokes(FluidModule):
         excess = float(np.abs(density - self.config.density).max())
         gravity = float(np.linalg.norm(state.box.body_acc))
         settling = self.drag.settling_speed(float(diameter.max()), excess, gravity)
-        initial = float(np.linalg.norm(p.vel[moving], axis=1).max())
-        if initial > settling:
-            return initial, f"the fastest initial particle speed, {initial:.4g} m/s"
         return settling, (
             f"the terminal speed in clear fluid of the widest moving particle ({diameter.max():.4g} m) "
             f"at the largest density difference ({excess:.4g} kg/m^3), {settling:.4g} m/s"
@@ -680,12 +681,13 @@ class NavierStokes(FluidModule):
         p = state.particles
         speed = np.where(p.inv_mass > 0.0, np.einsum("ij,ij->i", p.vel, p.vel), 0.0)
         i = int(np.argmax(speed))
-        cells = math.sqrt(float(speed[i])) * self.fluid_dt / self.cell
-        if cells <= CROSSING_LIMIT:  # (a NaN speed is the motion check's to report)
+        cell = float(self._grid.spacing.min())  # of the grid now (it may follow the top wall)
+        cells = math.sqrt(float(speed[i])) * self.fluid_dt / cell
+        if not cells > CROSSING_LIMIT:  # (a NaN speed is the motion check's to report)
             return None
         where = tuple(float(x) for x in p.pos[i])
         return (
-            f"particle {i} at {where} m moves {cells:.3g} cells ({self.cell:.4g} m) a fluid step at "
+            f"particle {i} at {where} m moves {cells:.3g} cells ({cell:.4g} m) a fluid step at "
             f"{math.sqrt(float(speed[i])):.4g} m/s, more than {CROSSING_LIMIT:g}: its drag and the "
             "porosity it leaves skip cells; use a smaller dt or fluid.coupling.steps, or larger cells"
         )
