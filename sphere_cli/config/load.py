@@ -66,10 +66,12 @@ class LoadedCase:
         return CaseError(self.describe(loc, message))
 
 
-# the case's warnings also reach run.log while a run's log is open (io/rundir.py listens to
-# "sphere"); the null handler keeps logging's last resort from printing them a second time
+# the case's warnings also reach run.log while a run's log is open (io/rundir.py listens to this
+# logger); they print themselves, so they go nowhere else: not up to a notebook's root handler,
+# and the null handler keeps logging's last resort from printing them a second time
 CASE_LOG = logging.getLogger("sphere.case")
 CASE_LOG.addHandler(logging.NullHandler())
+CASE_LOG.propagate = False
 
 
 def warn(message: str) -> None:

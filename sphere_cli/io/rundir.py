@@ -265,6 +265,8 @@ class _WarningsToLog(logging.Handler):
         self.run_log = run_log
         self.library = logging.getLogger("sphere")
         self.library.addHandler(self)
+        self.case = logging.getLogger("sphere.case")  # (does not propagate to "sphere")
+        self.case.addHandler(self)
         self.shown = warnings.showwarning
         warnings.showwarning = self._show
 
@@ -280,6 +282,7 @@ class _WarningsToLog(logging.Handler):
 
     def detach(self) -> None:
         self.library.removeHandler(self)
+        self.case.removeHandler(self)
         if warnings.showwarning == self._show:
             warnings.showwarning = self.shown
 
