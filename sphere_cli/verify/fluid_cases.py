@@ -238,6 +238,28 @@ register(
 # ---------------------------------------------------------------------------------- Navier-Stokes
 
 
+def register_solver_variants(name: str, title: str, setup: str, factory, common: dict) -> None:
+    """Register a case twice: solved by conjugate gradients (the default, as `name`) and by Jacobi
+    iteration (the original sphere's, as `name`-jacobi) to the same tolerance, whose errors are
+    the same and whose cost the work-precision plot sets side by side."""
+    register(
+        VerificationCase(
+            name=name, title=title, description=setup + "; solved by conjugate gradients (the default)",
+            run=factory("pcg"), **common,
+        )
+    )  # fmt: skip
+    register(
+        VerificationCase(
+            name=f"{name}-jacobi", title=title + ", with the Jacobi solver",
+            description=(
+                setup + '; solved by Jacobi iteration ([fluid.solver] method = "jacobi") to the same '
+                "tolerance: the same errors, at its own cost"
+            ),
+            run=factory("jacobi"), **common,
+        )
+    )  # fmt: skip
+
+
 def ns_solver(shape, length, gravity=(0.0, 0.0, 0.0), **fluid) -> NavierStokesSolver:
     """The Navier-Stokes solver alone on `shape` cells filling a box of `length` [m] (x, y
     periodic), water unless `fluid` (the [fluid] keys) says otherwise, under `gravity` [m/s^2]."""
@@ -327,27 +349,12 @@ _TG_SETUP = (
     "between free-slip walls, over 0.1 of the decay time at a quarter of the viscous limit"
 )
 
-register(
-    VerificationCase(
-        name="c2-ns-taylor-green",
-        title="C2 Navier-Stokes: decay rate of the Taylor-Green vortex",
-        description=_TG_SETUP + "; the pressure by conjugate gradients (the default solver)",
-        run=taylor_green("pcg"),
-        **_TAYLOR_GREEN,
-    )
-)
-
-register(
-    VerificationCase(
-        name="c2-ns-taylor-green-jacobi",
-        title="C2 Navier-Stokes: the Taylor-Green vortex with the Jacobi pressure solver",
-        description=(
-            _TG_SETUP + '; the pressure by Jacobi iteration ([fluid.solver] method = "jacobi", the '
-            "original sphere's) to the same tolerance: the same errors, at its own cost"
-        ),
-        run=taylor_green("jacobi"),
-        **_TAYLOR_GREEN,
-    )
+register_solver_variants(
+    "c2-ns-taylor-green",
+    "C2 Navier-Stokes: decay rate of the Taylor-Green vortex",
+    _TG_SETUP,
+    taylor_green,
+    _TAYLOR_GREEN,
 )
 
 
@@ -696,27 +703,12 @@ _TERZAGHI_SETUP = (
     "impermeable base, p0 = 1e4 Pa; at T = 0.2, backward Euler at 10x the explicit limit"
 )
 
-register(
-    VerificationCase(
-        name="c3-darcy-terzaghi",
-        title="C3 Darcy: Terzaghi consolidation of a drained layer",
-        description=_TERZAGHI_SETUP + "; each step solved by conjugate gradients (the default)",
-        run=terzaghi("pcg"),
-        **_TERZAGHI,
-    )
-)
-
-register(
-    VerificationCase(
-        name="c3-darcy-terzaghi-jacobi",
-        title="C3 Darcy: Terzaghi consolidation with the Jacobi solver",
-        description=(
-            _TERZAGHI_SETUP + "; each step solved by Jacobi iteration ([fluid.solver] method = "
-            '"jacobi") to the same tolerance: the same errors, at its own cost'
-        ),
-        run=terzaghi("jacobi"),
-        **_TERZAGHI,
-    )
+register_solver_variants(
+    "c3-darcy-terzaghi",
+    "C3 Darcy: Terzaghi consolidation of a drained layer",
+    _TERZAGHI_SETUP,
+    terzaghi,
+    _TERZAGHI,
 )
 
 
