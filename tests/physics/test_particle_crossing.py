@@ -43,9 +43,15 @@ def test_settling_speed_in_the_stokes_and_newton_regimes():
     assert di_felice == pytest.approx(stokes / 0.96, rel=2e-3)
 
 
-def steel_in_water(dt, cells=4, vel=None):
-    """A 5 mm steel sphere in water in a column 16 d wide on `cells` cells across (20 mm)."""
-    fluid = {"model": "navier-stokes", "grid": {"cells": [cells, cells, 32]}, "top": {"type": "no-flow"}}
+def steel_in_water(dt, cells=4, vel=None, **keys):
+    """A 5 mm steel sphere in water in a column 16 d wide on `cells` cells across (20 mm), more
+    [fluid] keys in `keys`."""
+    fluid = {
+        "model": "navier-stokes",
+        "grid": {"cells": [cells, cells, 32]},
+        "top": {"type": "no-flow"},
+        **keys,
+    }
     return particle_scene(
         [[0.04, 0.04, 0.6]], 0.0025, vel, contact=linear_contact(1e3, 0.5, 0.5), density=7800.0,
         gravity=(0.0, 0.0, -G), upper=(0.08, 0.08, 0.64), periodic=(True, True, False), dt=dt,
@@ -83,3 +89,13 @@ def test_the_limit_does_not_depend_on_the_velocities_and_the_run_check_stops_a_f
     assert "moves 1.99 cells (0.02 m) a fluid step at 50 m/s" in thrown.fluid.first_unstable(thrown.state)
     p.vel[0] = [math.nan, 0.0, 0.0]
     assert thrown.fluid.first_unstable(thrown.state) is None
+
+
+def test_a_declared_fluid_speed_adds_to_the_settling_speed():
+    """fluid.max_speed = 0.1 m/s (particles may be carried that fast by the flow): half a cell
+    over 1.005 + 0.1 m/s, 9.0 ms, the reason naming both (the advective limit of 0.1 m/s on 20 mm
+    cells, 33 ms, does not bind)."""
+    scene = steel_in_water("auto", max_speed=0.1)
+    newton = math.sqrt(4 * G * 5e-3 * 6800.0 / (3 * 0.44 * 1000.0))
+    assert scene.dt_limit == pytest.approx(0.5 * 0.02 / (newton + 0.1), rel=1e-9)
+    assert "plus fluid.max_speed = 0.1 m/s" in scene.dt_limit_reason

@@ -494,7 +494,8 @@ class NavierStokes(FluidModule):
         """The speed [m/s] the particles are expected to reach, and what it is: the terminal speed
         in clear fluid of a sphere as wide as the widest moving particle and as far from the
         fluid's density as the farthest (the settling speed grows with both); 0 without moving
-        particles. From what a checkpoint restores unchanged (radii, masses), not from the
+        particles; plus fluid.max_speed where the case gives it (particles carried by the flow).
+        From the case and what a checkpoint restores unchanged (radii, masses), not from the
         velocities, so that dt = "auto" is the same on a resume; faster particles are the run's
         check to stop (first_unstable)."""
         p = state.particles
@@ -506,10 +507,14 @@ class NavierStokes(FluidModule):
         excess = float(np.abs(density - self.config.density).max())
         gravity = float(np.linalg.norm(state.box.body_acc))
         settling = self.drag.settling_speed(float(diameter.max()), excess, gravity)
-        return settling, (
+        reason = (
             f"the terminal speed in clear fluid of the widest moving particle ({diameter.max():.4g} m) "
             f"at the largest density difference ({excess:.4g} kg/m^3), {settling:.4g} m/s"
         )
+        if self.config.max_speed is None:
+            return settling, reason
+        speed = settling + self.config.max_speed
+        return speed, f"{reason}, plus fluid.max_speed = {self.config.max_speed:g} m/s"
 
     def fluid_step_limit(self) -> tuple[float, str]:
         """The fluid step's own limit [s] and what sets it."""
