@@ -334,7 +334,7 @@ def test_a_resume_goes_on_while_a_reader_holds_the_trajectory(case, whole, tmp_p
     assert not list(run.glob("trajectory.unreadable-*"))
 
 
-LONG = 20  # the whole-run reader's case runs LONG times END steps: 160 frames
+LONG = 40  # the whole-run reader's case runs LONG times END steps: 320 frames, long enough under load
 
 
 def test_a_run_goes_on_while_readers_hold_and_inspect_it(tmp_path):
