@@ -118,7 +118,7 @@ class Walls:
     vel: np.ndarray  # (W,3) [m/s] velocity at the current step (a half step after kick_drift)
     acc: np.ndarray  # (W,3) [m/s^2] acceleration of the driven directions
     shift: np.ndarray  # (W,3) [m] displacement since the start of the run
-    force: np.ndarray  # (W,3) [N] force of the particles on each wall
+    force: np.ndarray  # (W,3) [N] force of the particles (and of a pore fluid it bounds) on each wall
     area: np.ndarray  # (W,) [m^2]
     mode: np.ndarray  # (W,2) int64 normal and shear mode (kernels/walls.py)
     control: np.ndarray  # (W,NC) parameters of the modes (kernels/walls.py)
@@ -129,6 +129,9 @@ class Walls:
     vel_pred: np.ndarray = None
     pforce: np.ndarray = None
     record: np.ndarray = None
+    # (W,3) [N] force of the pore fluid on a wall that bounds a Darcy fluid (an impermeable top
+    # wall the grid follows; physics/fluid/darcy.py sets it every fluid step), else zero
+    fluid_force: np.ndarray = None
 
     PROGNOSTIC = ("coord", "hist", "vel", "acc", "shift", "force", "attached", "attached_wall")
 

@@ -115,6 +115,16 @@ class DarcyFluid(Strict):
         ),
     )
     initial_pressure: Real = Field(0.0, description="Excess pore pressure in every cell at t = 0 [Pa].")
+    pressure_force: Literal["seepage", "pressure-gradient"] = Field(
+        "seepage",
+        description=(
+            'Force of the pore fluid on a particle of volume V: "seepage" (default), -V grad p / '
+            "(1 - phi), the whole seepage force -grad p per unit volume of the mixture shared among "
+            "the grains (Darcy drag plus pressure gradient: the classical critical gradient and "
+            'effective stress); "pressure-gradient", -V grad p, the original sphere\'s, a (1 - phi) '
+            "fraction of it."
+        ),
+    )
     top: DarcyBoundary = Field(
         default_factory=PressureBoundary,
         description='Top face (z+): type = "pressure" (default, 0 Pa) or "no-flow".',

@@ -3,7 +3,7 @@
 
 The grid spans the whole box: cell edge along an axis = box length / cells along it; with
 `follow_top_wall` its top is instead the "z+" wall wherever that wall is, and its nz cells
-stretch uniformly between the box bottom and the wall (Navier-Stokes only). What the
+stretch uniformly between the box bottom and the wall. What the
 porosity estimate needs (physics/fluid/porosity.py) is checked when the scene is built, against the
 particles actually made (physics/fluid/grid.py): the smallest cell edge must be at least the
 largest particle diameter, so that the spherical sampling volume of a cell (diameter = the
@@ -48,9 +48,10 @@ class FluidGridConfig(Strict):
         description=(
             'The grid\'s top is the "z+" wall and moves with it: the cells along z keep their '
             "number and stretch uniformly, dz = (z_wall - z_bottom) / nz, and the top boundary "
-            '(a prescribed pressure) acts at the wall. Needs a "z+" wall and a pressure top; the '
-            "run stops (exit 70) if dz falls below the largest particle diameter. Navier-Stokes "
-            "only [-]."
+            'acts at the wall. Needs a "z+" wall; the run stops (exit 70) if dz falls below the '
+            "largest particle diameter. Navier-Stokes: the top must be a pressure one. Darcy: "
+            'the wall bounds the pore fluid, permeable with a "pressure" top (drained) or '
+            'impermeable with a "no-flow" top (undrained: the pore pressure pushes the wall) [-].'
         ),
     )
 

@@ -392,14 +392,17 @@ def wall_areas(wall_axis, wall_sign, coord, lower, upper, area):
 
 
 @njit(cache=True)
-def wall_totals(pforce, record, attached, attached_wall, pforce_total, mass, body_acc, wall_force):
-    """Force of the particles on each wall marked in record [N]: minus the wall forces on free
-    particles (pforce, summed in particle order) plus the contact forces on the particles glued
-    to it (their total force pforce_total less their weight). Other walls: zero."""
+def wall_totals(
+    pforce, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
+):
+    """Force on each wall [N]: that of the pore fluid (fluid_force (W,3), zero but for a wall
+    bounding a Darcy fluid) plus, on each wall marked in record, that of the particles: minus
+    the wall forces on free particles (pforce, summed in particle order) plus the contact forces
+    on the particles glued to it (their total force pforce_total less their weight)."""
     nw = wall_force.shape[0]
     for w in range(nw):
         for b in range(3):
-            wall_force[w, b] = 0.0
+            wall_force[w, b] = fluid_force[w, b]
     for i in range(pforce.shape[0]):
         for w in range(nw):
             if record[w]:

@@ -78,6 +78,11 @@ class FluidModule(Module):
         """The stability limit on the fluid step itself [s] and what sets it (inf: none)."""
         return math.inf, ""
 
+    def wall_stiffness_limit(self, state) -> dict[int, tuple[float, str]]:
+        """Stiffness [N/m] the fluid adds to each wall it pushes (wall index -> (stiffness,
+        what it is)), which the wall's dt limit counts; none by default."""
+        return {}
+
     def coupling_limit(self) -> tuple[float, str]:
         """The limit the coupling puts on dt [s]: the DEM sub-steps fluid.coupling.interval, or
         takes fluid.coupling.steps steps a fluid step (the fluid step's own limit divided by

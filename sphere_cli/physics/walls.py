@@ -101,10 +101,11 @@ class WallScales:
         layers = max(1.0, height / self.diameter)
         return ratio * 2.0 * math.sqrt(self.stiffness_per_area[w] * area / layers * self.mass(spec, area))
 
-    def dt_limit(self, spec, w: int, area: float) -> float:
-        """Stability limit [s] of a driven wall against one layer of contacts: 2/omega (its
-        damping is implicit, kernels/walls.py)."""
-        return verlet_limit(self.stiffness_per_area[w] * area, 0.0, 0.0, self.mass(spec, area))
+    def dt_limit(self, spec, w: int, area: float, fluid: float = 0.0) -> float:
+        """Stability limit [s] of a driven wall against one layer of contacts and the stiffness
+        `fluid` [N/m] of a pore fluid pushing it (in parallel): 2/omega (its damping is
+        implicit, kernels/walls.py)."""
+        return verlet_limit(self.stiffness_per_area[w] * area + fluid, 0.0, 0.0, self.mass(spec, area))
 
 
 def bed_height(walls: Walls, w: int, coord, box) -> float:
@@ -325,7 +326,17 @@ class PlaneWallForces(Module):
         self._forces(
             state, 0.0, hist, scratch, scratch.copy(), springs, everyone, every_wall, pieces, every, pforce
         )
-        wall_totals(pforce, every, w.attached, w.attached_wall, p.force, p.mass, state.box.body_acc, w.force)
+        wall_totals(
+            pforce,
+            every,
+            w.attached,
+            w.attached_wall,
+            p.force,
+            p.mass,
+            state.box.body_acc,
+            w.fluid_force,
+            w.force,
+        )
 
     def observables(self, state: State) -> dict:
         """Wall positions, velocities, forces and stresses (compressive normal stress; shear
@@ -393,7 +404,17 @@ class WallMotion(Module):
     def kick(self, state: State) -> None:
         w, p, box = state.walls, state.particles, state.box
         wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
-        wall_totals(w.pforce, w.record, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.force)
+        wall_totals(
+            w.pforce,
+            w.record,
+            w.attached,
+            w.attached_wall,
+            p.force,
+            p.mass,
+            box.body_acc,
+            w.fluid_force,
+            w.force,
+        )
         dt = state.clock.dt
         wall_kick(
             w.axis,

@@ -198,7 +198,8 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     contacts = (tables, radius, mass, material, case.particles.overlap_tolerance, faces)
     limits = [one_contact_limit(*contacts), stability_limit(*contacts)]
     if walls_state is not None:
-        limits = [_driven_wall_limit(case, walls_state, scales, box, *limit) for limit in limits]
+        pushed = fluid.wall_stiffness_limit(state) if fluid is not None else {}
+        limits = [_driven_wall_limit(case, walls_state, scales, box, *limit, pushed) for limit in limits]
     solid_limit = limits[0][0]
     if fluid is not None:
         fluid_limit = fluid.dt_limit()
@@ -336,9 +337,12 @@ def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason:
     return dt
 
 
-def _driven_wall_limit(case: Case, walls, scales: WallScales, box: Box, limit: float, reason: str):
+def _driven_wall_limit(
+    case: Case, walls, scales: WallScales, box: Box, limit: float, reason: str, pushed: dict
+):
     """The smaller of `limit` and the stability limit of every stress-driven wall mode of the
-    case (against one layer of contacts, physics/walls.py), with what sets it."""
+    case (against one layer of contacts, physics/walls.py, and the fluid where `pushed`, wall
+    index -> (stiffness [N/m], what), says a fluid pushes it), with what sets it."""
     from ..kernels.walls import wall_areas
 
     area = np.zeros(len(walls.faces))
@@ -349,12 +353,14 @@ def _driven_wall_limit(case: Case, walls, scales: WallScales, box: Box, limit: f
         if not spec.driven:
             continue
         k = index[spec.face]
-        value = scales.dt_limit(spec, k, float(area[k]))
+        fluid, fluid_reason = pushed.get(k, (0.0, ""))
+        value = scales.dt_limit(spec, k, float(area[k]), fluid)
         if value < limit:
             limit = value
+            also = f" and {fluid_reason}" if fluid else ""
             reason = (
                 f"stress-driven {spec.face} wall ({where}): mass {scales.mass(spec, float(area[k])):.4g} kg "
-                "against one layer of contacts, 2/omega (its damping is implicit)"
+                f"against one layer of contacts{also}, 2/omega (its damping is implicit)"
             )
     return limit, reason
 

@@ -44,6 +44,7 @@ def allocate_walls(
         vel_pred=np.zeros((nw, 3)),
         pforce=np.zeros((n_particles if moving else 0, nw, 3)),
         record=np.zeros(nw, dtype=np.uint8),
+        fluid_force=np.zeros((nw, 3)),
     )
 
 

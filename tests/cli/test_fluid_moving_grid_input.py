@@ -37,15 +37,43 @@ def test_needs_an_open_top(tmp_path):
     assert_clean_error(result, 65, "fluid.top.type", f"case.toml:{line_of(text, 'top =')}:", '"no-flow"')
 
 
-def test_not_for_darcy(tmp_path):
-    text = TINY.replace(
+DARCY_FOLLOWING = TINY.replace(
+    "[output.frames]",
+    '[fluid]\nmodel = "darcy"\ntop = { type = "no-flow" }\n\n[fluid.grid]\ncells = [4, 4, 8]\n'
+    "follow_top_wall = true\n\n[output.frames]",
+)
+DARCY_TOP_WALL = '[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = 50.0\n\n[fluid]'
+
+
+def test_darcy_needs_a_top_wall(tmp_path):
+    result = _run(tmp_path, DARCY_FOLLOWING)
+    line = line_of(DARCY_FOLLOWING, "follow_top_wall")
+    assert_clean_error(result, 65, "fluid.grid.follow_top_wall", f"case.toml:{line}:", 'face = "z+"')
+
+
+def test_darcy_refuses_fixed_pressure_regions(tmp_path):
+    """The cells move with the wall: a region of them given in the case would not stay put."""
+    text = edit(DARCY_FOLLOWING, "[fluid]", DARCY_TOP_WALL)
+    text = edit(
+        text,
         "[output.frames]",
-        '[fluid]\nmodel = "darcy"\n\n[fluid.grid]\ncells = [4, 4, 8]\nfollow_top_wall = true\n\n'
+        "[[fluid.fixed_pressure]]\nlower = [0.0, 0.0, 0.0]\nupper = [0.01, 0.01, 0.005]\npressure = 10.0\n\n"
         "[output.frames]",
     )
     result = _run(tmp_path, text)
-    line = line_of(text, "follow_top_wall")
-    assert_clean_error(result, 65, "fluid.grid.follow_top_wall", f"case.toml:{line}:", "navier-stokes")
+    assert_clean_error(result, 65, "fluid.fixed_pressure", "follow_top_wall")
+
+
+def test_darcy_wall_squeezing_the_cells_below_a_particle_stops_the_run(tmp_path):
+    """8 cells of 2.5 mm under a wall coming down at 50 m/s: after about 4 mm (0.08 ms) the
+    cells are less than the largest particle (1.97 mm): exit 70 naming the cell height, before
+    any value goes bad."""
+    text = edit(DARCY_FOLLOWING, "[fluid]", DARCY_TOP_WALL)
+    result = _run(tmp_path, text)
+    assert_clean_error(
+        result, 70, "fluid cells (fluid.grid.follow_top_wall, 8 along z)", "largest particle diameter 0.00197"
+    )
+    assert "nan" not in result.stderr.lower()
 
 
 def test_cells_below_a_particle_at_the_start(tmp_path):

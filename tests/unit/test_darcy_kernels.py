@@ -19,6 +19,7 @@ from sphere_cli.kernels.fluid.pore_pressure import (
     clamp_porosity,
     kozeny_carman,
     pressure_gradient,
+    solid_divergence,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,21 +39,25 @@ def test_kozeny_carman_and_clamps():
 
 
 def test_compaction_raises_the_pressure():
-    """b - c p = -mu (dphi/dt + v.grad phi)/(1-phi): positive where the skeleton compacts."""
+    """b - c p = -mu div v_s = -mu (dphi/dt + v.grad phi)/(1-phi): positive where the skeleton
+    compacts."""
     p = np.full(SHAPE, 7.0)
     phi = np.full(SHAPE, 0.4)
     rate = np.full(SHAPE, -2.0)  # 1/s
     vbar = np.zeros(SHAPE + (3,))
-    c, b = np.zeros(SHAPE), np.zeros(SHAPE)
+    c, b, source = np.zeros(SHAPE), np.zeros(SHAPE), np.zeros(SHAPE)
     beta, mu, dt = 4.5e-10, 1e-3, 1e-5
-    backward_euler_system(p, phi, phi, rate, vbar, 1 / SPACING, np.zeros(3, np.uint8), beta, mu, dt, c, b)
+    none = np.zeros(3, np.uint8)
+    solid_divergence(phi, phi, rate, vbar, 1 / SPACING, none, source)
+    backward_euler_system(p, phi, source, beta, mu, dt, c, b)
     np.testing.assert_allclose(c, beta * 0.4 * mu / dt, rtol=1e-15)
     np.testing.assert_allclose(b - c * p, mu * 2.0 / 0.6, rtol=1e-12)
     # advection: a skeleton moving up (+z) into a porosity that grows with z: D phi / Dt > 0
     phi_z = np.broadcast_to(0.3 + 0.02 * np.arange(SHAPE[2]), SHAPE).copy()
     vbar[..., 2] = 0.1
     rate[...] = 0.0
-    backward_euler_system(p, phi_z, phi_z, rate, vbar, 1 / SPACING, np.zeros(3, np.uint8), beta, mu, dt, c, b)
+    solid_divergence(phi_z, phi_z, rate, vbar, 1 / SPACING, none, source)
+    backward_euler_system(p, phi_z, source, beta, mu, dt, c, b)
     np.testing.assert_allclose(b - c * p, -mu * 0.1 * (0.02 / SPACING[2]) / (1 - phi_z), rtol=1e-12)
 
 
@@ -84,14 +89,21 @@ def test_gradient_ghosts_and_force_in_a_linear_field():
     lo, hi = 1.5 * SPACING, (np.array(SHAPE) - 1.5) * SPACING  # between interior centres
     pos = lo + rng.random((n, 3)) * (hi - lo)
     radius = rng.uniform(1e-4, 2e-3, n)
-    force = np.zeros((n, 3))
     gravity = np.array([0.0, 0.0, -9.81])
-    add_pressure_forces(
-        pos, radius, grad, np.zeros(3), SPACING, np.zeros(3, np.uint8), 1000.0, gravity, force
-    )
     volume = 4.0 / 3.0 * math.pi * radius**3
-    expected = -volume[:, None] * slope[None, :] - 1000.0 * volume[:, None] * gravity[None, :]
-    np.testing.assert_allclose(force, expected, rtol=1e-10)
+    buoyancy = -1000.0 * volume[:, None] * gravity[None, :]
+    # the seepage force -V grad p / (1 - phi), phi interpolated like grad p (linear in x here:
+    # exact), and the original sphere's -V grad p
+    phi = linear_field(np.array([1000.0, 0.0, 0.0])) * 0.01  # 0.08 .. 0.28 at the centres
+    expected_phi = (1000.0 * pos[:, 0] + 3.0) * 0.01
+    for whole, share in ((1, 1.0 / (1.0 - expected_phi)), (0, 1.0)):
+        force = np.zeros((n, 3))
+        add_pressure_forces(
+            pos, radius, grad, phi, np.uint8(whole), np.zeros(3), SPACING, np.zeros(3, np.uint8), 1000.0,
+            gravity, force,
+        )  # fmt: skip
+        expected = -(share * volume)[:, None] * slope[None, :] + buoyancy
+        np.testing.assert_allclose(force, expected, rtol=1e-10)
 
 
 def test_kernels_run_as_plain_python():

@@ -1,12 +1,21 @@
 """Kernels of the Darcy model's forces on the particles (physics/fluid/darcy.py).
 
-As the original sphere: the pressure-gradient force -V grad p, with grad p (the excess pore
-pressure's, physics/fluid/pore_pressure.py) interpolated trilinearly from the cell centres to the
-particle centre, and the buoyancy -rho_f V g of the hydrostatic part that p leaves out, on a
-particle of volume V = 4/3 pi r^3.
+The seepage force: without fluid inertia the pore fluid's momentum balance is Darcy's law,
+0 = -phi grad p - (drag of the grains on the fluid), so per unit volume of the mixture the fluid
+pushes the grains with the drag phi (-grad p) plus the pressure-gradient force (1 - phi)(-grad p)
+on their own volume: -grad p in all (Terzaghi's seepage force, i gamma_w per unit volume of
+soil). Shared among the grains by volume, a particle of volume V = 4/3 pi r^3 at porosity phi
+gets -V grad p / (1 - phi); with it a bed lifts when the pressure drop across it carries its
+buoyant weight, and a loaded saturated bed shares the load as sigma = sigma' + p (effective
+stress). The original sphere applied -V grad p alone (its `(1 - phi)` factor is commented out),
+a (1 - phi) fraction of it: `[fluid] pressure_force = "pressure-gradient"` keeps that for
+comparison. grad p (the excess pore pressure's, physics/fluid/pore_pressure.py) and phi (clamped
+to [porosity_min, porosity_max]) are interpolated trilinearly from the cell centres to the
+particle centre. The buoyancy -rho_f V g of the hydrostatic part that p leaves out is added.
 
 Arguments: pos (N,3) [m], radius (N,) [m], force (N,3) [N]; grad (nx, ny, nz, 3) [Pa/m];
-origin, spacing (3,) [m] of the grid; periodic (3,) uint8; rho_f [kg/m^3]; gravity (3,) [m/s^2].
+porosity (nx, ny, nz) [-]; whole uint8 (1: divide by 1 - phi, 0: not); origin, spacing (3,)
+[m] of the grid; periodic (3,) uint8; rho_f [kg/m^3]; gravity (3,) [m/s^2].
 Every particle writes only its own force: results do not depend on the thread count.
 """
 
@@ -32,9 +41,22 @@ def _corner(x, origin, h, n, periodic):
     return i0, i0 + 1, w
 
 
+@njit(cache=True, inline="always")
+def _trilinear(f, i0, i1, j0, j1, k0, k1, wx, wy, wz):
+    """Trilinear interpolation of a cell field between the eight corners found by _corner."""
+    return (1.0 - wz) * (
+        (1.0 - wy) * ((1.0 - wx) * f[i0, j0, k0] + wx * f[i1, j0, k0])
+        + wy * ((1.0 - wx) * f[i0, j1, k0] + wx * f[i1, j1, k0])
+    ) + wz * (
+        (1.0 - wy) * ((1.0 - wx) * f[i0, j0, k1] + wx * f[i1, j0, k1])
+        + wy * ((1.0 - wx) * f[i0, j1, k1] + wx * f[i1, j1, k1])
+    )
+
+
 @njit(cache=True, parallel=True)
-def add_pressure_forces(pos, radius, grad, origin, spacing, periodic, rho_f, gravity, force):
-    """force += -V grad p (trilinear in the cell-centred gradient) - rho_f V g."""
+def add_pressure_forces(pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force):
+    """force += -V grad p / (1 - phi) (whole = 1) or -V grad p (whole = 0), both trilinear in the
+    cell fields, and - rho_f V g."""
     nx, ny, nz = grad.shape[0], grad.shape[1], grad.shape[2]
     for n in prange(pos.shape[0]):
         r = radius[n]
@@ -42,12 +64,9 @@ def add_pressure_forces(pos, radius, grad, origin, spacing, periodic, rho_f, gra
         i0, i1, wx = _corner(pos[n, 0], origin[0], spacing[0], nx, periodic[0])
         j0, j1, wy = _corner(pos[n, 1], origin[1], spacing[1], ny, periodic[1])
         k0, k1, wz = _corner(pos[n, 2], origin[2], spacing[2], nz, 0)
+        share = vol
+        if whole:
+            share = vol / (1.0 - _trilinear(porosity, i0, i1, j0, j1, k0, k1, wx, wy, wz))
         for a in range(3):
-            g = (1.0 - wz) * (
-                (1.0 - wy) * ((1.0 - wx) * grad[i0, j0, k0, a] + wx * grad[i1, j0, k0, a])
-                + wy * ((1.0 - wx) * grad[i0, j1, k0, a] + wx * grad[i1, j1, k0, a])
-            ) + wz * (
-                (1.0 - wy) * ((1.0 - wx) * grad[i0, j0, k1, a] + wx * grad[i1, j0, k1, a])
-                + wy * ((1.0 - wx) * grad[i0, j1, k1, a] + wx * grad[i1, j1, k1, a])
-            )
-            force[n, a] += -vol * g - rho_f * vol * gravity[a]
+            g = _trilinear(grad[:, :, :, a], i0, i1, j0, j1, k0, k1, wx, wy, wz)
+            force[n, a] += -share * g - rho_f * vol * gravity[a]

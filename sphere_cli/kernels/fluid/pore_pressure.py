@@ -96,22 +96,32 @@ def _derivative(f, i, j, k, axis, n, periodic, ih):
 
 
 @njit(cache=True, parallel=True)
-def backward_euler_system(p, phi_used, phi_raw, dphi_dt, vbar, ih, periodic, beta, mu, dt, c, b):
-    """Storage c = beta phi mu / dt and right-hand side b = c p - mu (dphi/dt + vbar . grad phi)
-    / (1 - phi) of one backward-Euler step (phi_raw, unclamped, for the rates, phi_used for the
-    coefficients)."""
+def solid_divergence(phi_used, phi_raw, dphi_dt, vbar, ih, periodic, source):
+    """source = div v_s = (dphi/dt + vbar . grad phi) / (1 - phi) [1/s] (phi_raw, unclamped, for
+    the rates, phi_used for the coefficient)."""
+    nx, ny, nz = phi_used.shape
+    for col in prange(nx * ny):
+        i = col // ny
+        j = col % ny
+        for k in range(nz):
+            adv = vbar[i, j, k, 0] * _derivative(phi_raw, i, j, k, 0, nx, periodic[0], ih[0])
+            adv += vbar[i, j, k, 1] * _derivative(phi_raw, i, j, k, 1, ny, periodic[1], ih[1])
+            adv += vbar[i, j, k, 2] * _derivative(phi_raw, i, j, k, 2, nz, 0, ih[2])
+            source[i, j, k] = (dphi_dt[i, j, k] + adv) / (1.0 - phi_used[i, j, k])
+
+
+@njit(cache=True, parallel=True)
+def backward_euler_system(p, phi_used, source, beta, mu, dt, c, b):
+    """Storage c = beta phi mu / dt and right-hand side b = c p - mu source of one
+    backward-Euler step."""
     nx, ny, nz = p.shape
     for col in prange(nx * ny):
         i = col // ny
         j = col % ny
         for k in range(nz):
-            ph = phi_used[i, j, k]
-            ci = beta * ph * mu / dt
-            adv = vbar[i, j, k, 0] * _derivative(phi_raw, i, j, k, 0, nx, periodic[0], ih[0])
-            adv += vbar[i, j, k, 1] * _derivative(phi_raw, i, j, k, 1, ny, periodic[1], ih[1])
-            adv += vbar[i, j, k, 2] * _derivative(phi_raw, i, j, k, 2, nz, 0, ih[2])
+            ci = beta * phi_used[i, j, k] * mu / dt
             c[i, j, k] = ci
-            b[i, j, k] = ci * p[i, j, k] - mu * (dphi_dt[i, j, k] + adv) / (1.0 - ph)
+            b[i, j, k] = ci * p[i, j, k] - mu * source[i, j, k]
 
 
 @njit(cache=True, parallel=True)

@@ -4,8 +4,10 @@ The fluid is the pore-pressure equation of physics/fluid/pore_pressure.py on the
 Each fluid step (every fluid.coupling.steps DEM steps, after the kick and the clock) measures the
 porosity and the mean particle velocity per cell from the particles (physics/fluid/porosity.py),
 takes dphi/dt as the backward difference over the fluid step, and solves one implicit step.
-The forces hook of every DEM step adds to each particle the pressure-gradient force -V grad p
-and the buoyancy -rho_f V g (kernels/fluid/darcy.py).
+The forces hook of every DEM step adds to each particle the seepage force -V grad p / (1 - phi)
+and the buoyancy -rho_f V g (kernels/fluid/darcy.py). With `[fluid.grid] follow_top_wall` the
+grid's top is the top wall: the cells stretch with it, and an impermeable wall (a "no-flow"
+top) is pushed by the pore pressure under it (walls.fluid_force).
 """
 
 from __future__ import annotations
@@ -18,16 +20,16 @@ import numpy as np
 from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces
-from ..fluid_plugin import FluidModule
-from .grid import FluidGrid, fluid_grid
+from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
+from .grid import FluidGrid, fluid_grid, top_wall_index
 from .pore_pressure import PorePressure, fixed_pressure_cells
 from .porosity import Porosity
 
 # porosity of the densest packing of equal spheres, 1 - pi / (3 sqrt 2) (FCC): the lowest a bed
 # of spheres reaches, where the permeability and so the coupling's time limit are smallest
 DENSEST_POROSITY = 0.26
-# fraction of the drag relaxation time rho_s k / mu a fluid step may take (stable at 0.3 and
-# unstable at 0.5 in the settling-bed test)
+# fraction of the seepage force's relaxation time rho_s k (1 - phi) / mu a fluid step may take
+# (Darcy.fluid_step_limit)
 COUPLING_FRACTION = 0.2
 
 
@@ -45,12 +47,27 @@ class Darcy(FluidModule):
                 ("domain", "periodic"),
                 "the Darcy model needs a bounded z axis (its top and bottom boundaries); make z non-periodic",
             )
-        if config.grid.follow_top_wall:
-            raise loaded.error(
-                ("fluid", "grid", "follow_top_wall"),
-                'true is available for model = "navier-stokes" only; the Darcy grid spans the box',
-            )
         grid = fluid_grid(config.grid, box, particles.radius, loaded)
+        # a grid that follows the top wall: the wall bounds the pore fluid (physics/fluid/grid.py)
+        self.top_wall = None
+        self.diameter = 2.0 * float(particles.radius.max()) if particles.count else 0.0
+        if config.grid.follow_top_wall:
+            self.top_wall = top_wall_index(loaded, state)
+            if config.fixed_pressure:
+                raise loaded.error(
+                    ("fluid", "fixed_pressure"),
+                    "cannot be combined with fluid.grid.follow_top_wall = true: the cells move with the "
+                    "wall, and a region of them would not stay where it was given",
+                )
+            height = self._wall_height(state, grid)
+            if not height / grid.shape[2] >= self.diameter:
+                raise loaded.error(
+                    ("fluid", "grid", "follow_top_wall"),
+                    f"the top wall {height:.6g} m above the grid's bottom makes the {grid.shape[2]} cells "
+                    f"along z lower than the largest particle diameter {self.diameter:.4g} m that the "
+                    "porosity estimate needs; use fewer cells along z",
+                )
+            grid.set_height(height)
         _, _, empty = fixed_pressure_cells(config, grid)
         if empty:
             raise loaded.error(
@@ -71,6 +88,14 @@ class Darcy(FluidModule):
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
         self.warned_clamp = False
+        self.whole_seepage = np.uint8(config.pressure_force == "seepage")
+        # an impermeable top wall takes the pore pressure under it (a permeable one has the same
+        # pressure on both faces and carries the effective stress only)
+        self.pushes_wall = self.top_wall is not None and not self.pore.top_dirichlet
+        self.wall_stiffness = 0.0  # dp/dH of the undrained fluid at the last fluid step [Pa/m]
+        nz = self.pore.grid.shape[2]
+        self.cell_heights = (np.arange(nz) + 0.5) / nz  # cell centres as fractions of the height
+        self.grid_velocity = np.zeros(nz)  # [m/s] of the cell centres of a grid following the wall
         state.fluid = self.pore.state
 
     # -- schedule --------------------------------------------------------------------------------
@@ -78,12 +103,18 @@ class Darcy(FluidModule):
     def fluid_step_limit(self) -> tuple[float, str]:
         """The diffusion is implicit and sets no limit; the coupling is explicit. A compacting
         skeleton raises, through the source term, a pressure whose gradient pushes back on the
-        grains one fluid step later, like a Darcy drag of relaxation time rho_s k / mu. Measured
-        on a settling bed (tests/physics/test_darcy_coupled.py): stable with a fluid step of
-        0.3 rho_s k / mu, blowing up at 0.5; the limit is COUPLING_FRACTION of it, with k at
-        the densest sphere packing (phi = 0.26, or porosity_min if higher; the constant k
-        otherwise) and rho_s the lightest density of the particles that move (fixed ones are
-        pushed but do not answer)."""
+        grains one fluid step later: in 1D, k dp/dz = -mu v_s, so the seepage force per unit
+        volume of solid, -(dp/dz)/(1 - phi), is a drag of relaxation time rho_s k (1 - phi) / mu
+        (rho_s k / mu for pressure_force = "pressure-gradient", without the 1/(1 - phi)).
+        The limit is COUPLING_FRACTION of that time at its shortest over the porosities the
+        model uses, with rho_s the lightest density of the particles that move (fixed ones are
+        pushed but do not answer). Kozeny-Carman's k (1 - phi) = k_c phi^3 / (1 - phi) is
+        smallest at the lowest porosity (the densest sphere packing, phi = 0.26, or
+        porosity_min if higher); a constant k (1 - phi) at the highest, porosity_max. Measured
+        on a loose settling bed (tests/physics/test_darcy_coupled.py): with a constant k stable
+        at 1.5 of the time at porosity_max = 0.9 and blowing up at 2; with Kozeny-Carman stable
+        at 4 of the time at 0.26 (its cells are looser, so more permeable). The fraction keeps
+        a margin for beds looser than that one."""
         if self.alone:
             return (
                 math.inf,
@@ -92,18 +123,82 @@ class Darcy(FluidModule):
         if math.isinf(self.lightest_density):
             return math.inf, "no particle moves: the pore pressure pushes on nothing that answers"
         config = self.pore.config
-        phi = max(config.porosity_min, DENSEST_POROSITY)
         if self.pore.kc is None:
+            phi = config.porosity_max
             k = config.permeability.value
         else:
+            phi = max(config.porosity_min, DENSEST_POROSITY)
             k = self.pore.kc * phi**3 / (1.0 - phi) ** 2
-        relaxation = self.lightest_density * k / config.viscosity
-        limit = COUPLING_FRACTION * relaxation
-        where = "" if self.pore.kc is None else f" at porosity {phi:g}"
+        share = 1.0 - phi if self.whole_seepage else 1.0
+        factor = " (1 - phi)" if self.whole_seepage else ""
+        where = f" at porosity {phi:g}" if self.whole_seepage or self.pore.kc is not None else ""
+        limit = COUPLING_FRACTION * self.lightest_density * k * share / config.viscosity
         return limit, (
-            f"explicit Darcy coupling: {COUPLING_FRACTION:g} rho_s k / mu with rho_s = "
-            f"{self.lightest_density:.4g} kg/m^3, k = {k:.3g} m^2{where}, mu = {config.viscosity:g} Pa s"
+            f"explicit Darcy coupling: {COUPLING_FRACTION:g} rho_s k{factor} / mu{where}, rho_s = "
+            f"{self.lightest_density:.4g} kg/m^3, k = {k:.3g} m^2, mu = {config.viscosity:g} Pa s"
         )
+
+    def _wall_height(self, state, grid: FluidGrid) -> float:
+        """Height of the top wall above the grid's bottom [m]."""
+        return float(state.walls.coord[self.top_wall]) - float(grid.origin[2])
+
+    def _follow_wall(self, state) -> float:
+        """Stretch the grid to the top wall; returns the speed of its top over the fluid step
+        [m/s]. Stops (exit 70) where the cells would be lower than the largest particle
+        diameter, which the porosity estimate needs."""
+        grid, clock = self.pore.grid, state.clock
+        height = self._wall_height(state, grid)
+        dz = height / grid.shape[2]
+        if not dz >= self.diameter:
+            raise NumericalError(
+                f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
+                f"{float(state.walls.coord[self.top_wall]):.7g} m makes the fluid cells (fluid.grid."
+                f"follow_top_wall, {grid.shape[2]} along z) {dz:.6g} m high, less than the largest particle "
+                f"diameter {self.diameter:.4g} m that the porosity estimate needs; use fewer cells along z"
+            )
+        speed = (height - grid.height) / self.fluid_dt
+        grid.set_height(height)
+        self.pore.update_spacing()
+        return speed
+
+    def _undrained_stiffness(self) -> float:
+        """dp/dH of the pore fluid without drainage [Pa/m]: the wall lowered by dH squeezes the
+        pore volume by A dH, and the storage beta_f phi (summed over the grid) raises p by
+        dH / (H beta_f phi_mean)."""
+        grid, s = self.pore.grid, self.pore.state
+        return 1.0 / (grid.height * self.pore.config.compressibility * float(np.mean(s.porosity_used)))
+
+    def _push_wall(self, state) -> None:
+        """The pore pressure under an impermeable top wall pushes it up (a permeable one has the
+        same pressure on both faces). The pressure at the wall is that of the top cells at the
+        last fluid step (no flow through the wall: zero gradient there), plus the undrained
+        response to the wall's move since then: the fluid is far stiffer than the skeleton, and
+        a force taken one step late would drive the wall unstable (negative damping ~ omega^2 dt
+        against its own), while this one moves with the wall like a spring, stable below
+        2/omega (the wall's dt limit, scene/builder.py)."""
+        grid, s = self.pore.grid, self.pore.state
+        moved = self._wall_height(state, grid) - grid.height
+        pressure = float(np.mean(s.pressure[:, :, -1])) - moved * self.wall_stiffness
+        area = float(grid.spacing[0] * grid.spacing[1]) * grid.shape[0] * grid.shape[1]
+        state.walls.fluid_force[self.top_wall, 2] = pressure * area
+
+    def wall_stiffness_limit(self, state) -> dict[int, tuple[float, str]]:
+        """Stiffness [N/m] the pore fluid adds to a wall it pushes, for the wall's dt limit: the
+        undrained A^2 dp/dV at the lowest porosity (the densest sphere packing, or porosity_min if
+        higher), with what it is."""
+        if not self.pushes_wall:
+            return {}
+        grid, config = self.pore.grid, self.pore.config
+        phi = max(config.porosity_min, DENSEST_POROSITY)
+        area = float(grid.spacing[0] * grid.spacing[1]) * grid.shape[0] * grid.shape[1]
+        stiffness = area / (grid.height * config.compressibility * phi)
+        return {
+            self.top_wall: (
+                stiffness,
+                f"the undrained pore fluid under it (A / (H beta_f phi), beta_f = {config.compressibility:g} "
+                f"1/Pa, phi = {phi:g}: {stiffness:.3g} N/m)",
+            )
+        }
 
     def initialize(self, state) -> None:
         s = self.pore.state
@@ -115,22 +210,39 @@ class Darcy(FluidModule):
         s.porosity_rate[...] = 0.0
         self.pore.update_permeability()
         self.pore.update_gradient(state.clock.time)
+        if self.pushes_wall:
+            self.wall_stiffness = self._undrained_stiffness()
 
     def after_step(self, state) -> None:
         clock = state.clock
         s = self.pore.state
+        grid_speed = self._follow_wall(state) if self.top_wall is not None else 0.0
         if not self.alone:  # without particles the porosity stays as initialize() measured it
             self._measure(state)
             np.subtract(s.porosity, self.porosity_previous, out=s.porosity_rate)
             s.porosity_rate *= 1.0 / self.fluid_dt
+            if grid_speed:
+                # the rate is that of cells moving with the grid, at w = speed (z - z0)/H: the
+                # solid's own rate then advects phi with v_p - w (pore_pressure.py)
+                np.multiply(self.cell_heights, grid_speed, out=self.grid_velocity)
+                s.particle_velocity[..., 2] -= self.grid_velocity
+        # in a grid bounded by the top wall the solid stays inside: the skeleton's divergence
+        # integrates to the grid's change of volume, A dH/dt (its mean: dH/dt / H). The lens
+        # estimate of the porosity, sampled in a sphere of each cell, holds that only roughly
+        # (on a lattice aligned with the grid, to a few per cent at rest and not at all while
+        # the cells change faster than the grains follow), and the pore pressure of an undrained
+        # bed is that integral: it is imposed.
+        mean_source = grid_speed / self.pore.grid.height if self.top_wall is not None else None
         try:
-            self.pore.advance(self.fluid_dt, clock.time)
+            self.pore.advance(self.fluid_dt, clock.time, mean_source)
         except ArithmeticError as exc:
             raise NumericalError(
                 f"numerical failure at step {clock.step} (t = {clock.time:.6g} s) in the fluid: {exc}"
             ) from None
         if not self.alone:
             self.porosity_previous[...] = s.porosity
+        if self.pushes_wall:
+            self.wall_stiffness = self._undrained_stiffness()
         if s.clamped_cells and not self.warned_clamp:
             self.warned_clamp = True
             config = self.pore.config
@@ -148,10 +260,12 @@ class Darcy(FluidModule):
     # -- particles -------------------------------------------------------------------------------
 
     def forces(self, state, spring_dt: float | None = None) -> None:
+        if self.pushes_wall:
+            self._push_wall(state)
         p, grid, s = state.particles, self.pore.grid, self.pore.state
         add_pressure_forces(
-            p.pos, p.radius, s.gradient, grid.origin, grid.spacing, self.pore.periodic,
-            self.pore.config.density, self.gravity, p.force,
+            p.pos, p.radius, s.gradient, s.porosity_used, self.whole_seepage, grid.origin, grid.spacing,
+            self.pore.periodic, self.pore.config.density, self.gravity, p.force,
         )  # fmt: skip
 
     # -- restart ---------------------------------------------------------------------------------
@@ -164,16 +278,22 @@ class Darcy(FluidModule):
             "porosity_previous": self.porosity_previous,
             "gradient": s.gradient,
             "darcy_velocity": s.velocity,  # output only, but made with the last step's faces
+            **({"grid_height": np.array(self.pore.grid.height)} if self.top_wall is not None else {}),
         }
 
     def restore(self, state, arrays: dict) -> None:
         s = self.pore.state
+        if self.top_wall is not None:
+            self.pore.grid.set_height(float(arrays["grid_height"]))
+            self.pore.update_spacing()
         s.pressure[...] = arrays["pressure"]
         s.porosity[...] = arrays["porosity"]
         self.porosity_previous[...] = arrays["porosity_previous"]
         s.gradient[...] = arrays["gradient"]
         self.pore.update_permeability()
         s.velocity[...] = arrays["darcy_velocity"]
+        if self.pushes_wall:
+            self.wall_stiffness = self._undrained_stiffness()
 
     # -- diagnostics and output ------------------------------------------------------------------
 
@@ -187,6 +307,7 @@ class Darcy(FluidModule):
             "porosity": (s.porosity, "1"),
             "permeability": (s.permeability, "m2"),
             "darcy_velocity": (s.velocity, "m s-1"),
+            **({MOVING_GRID_SPACING: (self.pore.grid.spacing, "m")} if self.top_wall is not None else {}),
         }
 
     def grid(self) -> FluidGrid:
@@ -194,12 +315,17 @@ class Darcy(FluidModule):
 
     def observables(self, state) -> dict[str, tuple[float, str]]:
         s = self.pore.state
-        return {
+        values = {
             "darcy_mean_pressure": (float(np.mean(s.pressure)), "Pa"),
             "darcy_max_abs_pressure": (float(np.max(np.abs(s.pressure))), "Pa"),
             "darcy_solver_iterations": (float(s.iterations), "1"),
             "darcy_clamped_cells": (float(s.clamped_cells), "1"),
         }
+        if self.top_wall is not None:
+            grid = self.pore.grid
+            values["fluid_grid_height"] = (grid.height, "m")
+            values["fluid_pore_volume"] = (float(s.porosity.sum()) * grid.cell_volume, "m3")
+        return values
 
     def summary(self) -> dict[str, str]:
         pore, config = self.pore, self.pore.config

@@ -87,3 +87,16 @@ def fluid_grid(config: FluidGridConfig, box, radius: np.ndarray, loaded=None) ->
         shape=shape,
         periodic=np.asarray(box.periodic, dtype=bool).copy(),
     )
+
+
+def top_wall_index(loaded, state) -> int:
+    """Index of the "z+" wall that a grid with `[fluid.grid] follow_top_wall` follows; a case
+    without one is refused naming the key (exit 65)."""
+    faces = state.walls.faces if state.walls is not None else []
+    if "z+" not in faces:
+        raise loaded.error(
+            ("fluid", "grid", "follow_top_wall"),
+            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+            f"{', '.join(faces) or 'none'})",
+        )
+    return faces.index("z+")

@@ -43,7 +43,7 @@ from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .fixed_bed import FixedBed
-from .grid import FluidGrid, fluid_grid
+from .grid import FluidGrid, fluid_grid, top_wall_index
 from .poisson import PoissonResult, PoissonSolver
 from .porosity import Porosity
 
@@ -732,17 +732,11 @@ class NavierStokes(FluidModule):
 def _top_wall(loaded, state) -> int:
     """Index of the "z+" wall that the grid's top follows; refuses a case where it cannot."""
     cfg = loaded.case.fluid
-    faces = state.walls.faces if state.walls is not None else []
-    if "z+" not in faces:
-        raise loaded.error(
-            ("fluid", "grid", "follow_top_wall"),
-            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
-            f"{', '.join(faces) or 'none'})",
-        )
+    wall = top_wall_index(loaded, state)
     if not isinstance(cfg.top, PressureBoundary):
         raise loaded.error(
             ("fluid", "top", "type"),
             f'"{cfg.top.type}" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be '
             'free to leave or enter through the moving top; use type = "pressure"',
         )
-    return faces.index("z+")
+    return wall

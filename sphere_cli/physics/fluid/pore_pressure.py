@@ -34,6 +34,7 @@ from ...kernels.fluid.pore_pressure import (
     first_bad_cell,
     kozeny_carman,
     pressure_gradient,
+    solid_divergence,
 )
 from .grid import FluidGrid
 from .poisson import PoissonResult, PoissonSolver
@@ -72,6 +73,7 @@ class DarcyState:
     porosity_rate: np.ndarray  # dphi/dt at fixed cell [1/s]
     particle_velocity: np.ndarray  # mean particle velocity per cell [m/s]
     porosity_used: np.ndarray  # phi clamped to [porosity_min, porosity_max] [-]
+    source: np.ndarray  # divergence of the skeleton's velocity, div v_s [1/s]
     permeability: np.ndarray  # k [m^2]
     gradient: np.ndarray  # grad p [Pa/m]
     velocity: np.ndarray  # Darcy velocity q / phi, q from the face fluxes [m/s]
@@ -126,6 +128,7 @@ class PorePressure:
             porosity_rate=np.zeros(shape),
             particle_velocity=np.zeros(shape + (3,)),
             porosity_used=np.zeros(shape),
+            source=np.zeros(shape),
             permeability=np.zeros(shape),
             gradient=np.zeros(shape + (3,)),
             velocity=np.zeros(shape + (3,)),
@@ -138,6 +141,13 @@ class PorePressure:
         self.state.pressure[fixed == 1] = fixed_value[fixed == 1]
         self.has_fixed = bool(fixed.any())
 
+    def update_spacing(self) -> None:
+        """Take the grid's current spacing: call after grid.set_height (a grid that follows the
+        top wall)."""
+        self.ih[:] = 1.0 / self.grid.spacing
+        self.ih2[:] = self.ih**2
+        self.solver.update_spacing()
+
     # -- the steps -------------------------------------------------------------------------------
 
     def update_permeability(self) -> None:
@@ -149,17 +159,29 @@ class PorePressure:
         else:
             kozeny_carman(s.porosity_used, self.kc, s.permeability)
 
-    def advance(self, dt: float, time: float) -> PoissonResult:
+    def advance(self, dt: float, time: float, mean_source: float | None = None) -> PoissonResult:
         """One backward-Euler step of length dt [s] ending at `time` [s] (boundary values taken
-        there), from the current inputs. Raises ArithmeticError if the solve did not converge."""
+        there), from the current inputs. With `mean_source` [1/s], the skeleton's divergence is
+        shifted uniformly to have that mean over the grid. Raises ArithmeticError if the solve
+        did not converge."""
         s, c = self.state, self.config
         self.update_permeability()
         ax, ay, az = s.faces
         face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        solid_divergence(
+            s.porosity_used,
+            s.porosity,
+            s.porosity_rate,
+            s.particle_velocity,
+            self.ih,
+            self.periodic,
+            s.source,
+        )
+        if mean_source is not None:
+            s.source += mean_source - float(np.mean(s.source))
         backward_euler_system(
-            s.pressure, s.porosity_used, s.porosity, s.porosity_rate, s.particle_velocity, self.ih,
-            self.periodic, c.compressibility, c.viscosity, dt, s.storage, s.rhs,
-        )  # fmt: skip
+            s.pressure, s.porosity_used, s.source, c.compressibility, c.viscosity, dt, s.storage, s.rhs
+        )
         if self.has_fixed:
             eliminate_fixed_cells(
                 s.fixed, s.fixed_value, ax, ay, az, self.ih2, self.periodic, s.storage, s.rhs
