@@ -111,13 +111,13 @@ def test_periodic_z_is_refused(tmp_path):
 
 
 def test_dt_above_the_coupling_limit_names_it(tmp_path):
-    """k = 1e-14 m^2: the coupling's limit 0.2 rho_s k / mu = 0.2 x 2500 x 1e-14 / 1e-3 = 5e-9 s
-    is below the contact limit; a dt of 1e-6 s is refused naming it."""
+    """k = 1e-14 m^2: the coupling's limit 0.2 rho_s k (1 - porosity_max) / mu = 0.2 x 2500 x
+    1e-14 x 0.1 / 1e-3 = 5e-10 s is below the contact limit; a dt of 1e-6 s is refused naming it."""
     law = 'permeability = { model = "constant", value = 1e-14 }'
     text = edit(edit(DARCY, 'model = "darcy"', f'model = "darcy"\n{law}'), 'dt = "auto"', "dt = 1e-6")
     (tmp_path / "case.toml").write_text(text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "limit 5e-09 s")
+    assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "limit 5e-10 s")
 
 
 def _modulated(tmp_path, period: float):

@@ -142,10 +142,9 @@ class Darcy(FluidModule):
         """Height of the top wall above the grid's bottom [m]."""
         return float(state.walls.coord[self.top_wall]) - float(grid.origin[2])
 
-    def _follow_wall(self, state) -> float:
-        """Stretch the grid to the top wall; returns the speed of its top over the fluid step
-        [m/s]. Stops (exit 70) where the cells would be lower than the largest particle
-        diameter, which the porosity estimate needs."""
+    def _fit_grid(self, state) -> None:
+        """Stretch the grid to the top wall, or stop (exit 70) where its cells would be lower than
+        the largest particle diameter, which the porosity estimate needs."""
         grid, clock = self.pore.grid, state.clock
         height = self._wall_height(state, grid)
         dz = height / grid.shape[2]
@@ -156,10 +155,26 @@ class Darcy(FluidModule):
                 f"follow_top_wall, {grid.shape[2]} along z) {dz:.6g} m high, less than the largest particle "
                 f"diameter {self.diameter:.4g} m that the porosity estimate needs; use fewer cells along z"
             )
-        speed = (height - grid.height) / self.fluid_dt
         grid.set_height(height)
         self.pore.update_spacing()
-        return speed
+
+    def _follow_wall(self, state) -> float:
+        """Stretch the grid to the top wall (_fit_grid); returns the speed of its top over the
+        fluid step [m/s]. Stops (exit 70) where the wall moved more than half a cell in one fluid
+        step (as a stage's approach may, which moves it at once): the porosity rate and the
+        wall's undrained spring are linear in a small move."""
+        grid, clock = self.pore.grid, state.clock
+        before = grid.height
+        moved = self._wall_height(state, grid) - before
+        if not abs(moved) <= 0.5 * before / grid.shape[2]:
+            raise NumericalError(
+                f"step {clock.step} (t = {clock.time:.6g} s): the top wall moved {abs(moved):.4g} m in one "
+                f"fluid step of {self.fluid_dt:.4g} s, more than half a fluid cell "
+                f"({before / grid.shape[2]:.4g} m, fluid.grid.follow_top_wall); move it slower (no "
+                "approach on a wall the Darcy grid follows) or use a smaller dt or fluid.coupling.steps"
+            )
+        self._fit_grid(state)
+        return (grid.height - before) / self.fluid_dt
 
     def _undrained_stiffness(self) -> float:
         """dp/dH of the pore fluid without drainage [Pa/m]: the wall lowered by dH squeezes the
@@ -202,6 +217,8 @@ class Darcy(FluidModule):
 
     def initialize(self, state) -> None:
         s = self.pore.state
+        if self.top_wall is not None:  # where the wall is now (a stage's approach may have moved it)
+            self._fit_grid(state)
         if self.alone:  # open fluid, porosity 1, seen through the clamp as every open cell is
             s.porosity[...] = self.pore.config.porosity_max
         else:
@@ -292,8 +309,9 @@ class Darcy(FluidModule):
         s.gradient[...] = arrays["gradient"]
         self.pore.update_permeability()
         s.velocity[...] = arrays["darcy_velocity"]
-        if self.pushes_wall:
+        if self.pushes_wall:  # (the walls are restored first: their coordinates are the checkpoint's)
             self.wall_stiffness = self._undrained_stiffness()
+            self._push_wall(state)
 
     # -- diagnostics and output ------------------------------------------------------------------
 
