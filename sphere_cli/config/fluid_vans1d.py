@@ -23,8 +23,9 @@ class SolvedFlow(Strict):
             'Eddy viscosity nu_t = l^2 |du/dz| with the mixing length l: "none" (laminar), "prandtl" '
             'l = kappa s, "parabolic" l = kappa s sqrt(1 - s/H) (s: height above the fluid bottom, H: '
             'flow depth), "li-sawamoto" l = kappa * integral of (c_max - c)/c_max dz from the bottom '
-            "(c: the solid fraction, c_max: packed_solid_fraction), which damps it inside the bed "
-            "(Li & Sawamoto 1995) [-]."
+            "(c: the solid fraction, c_max: packed_solid_fraction), 0 in the layers at or below the "
+            "highest one that reaches c_max, which damps it inside the bed (Li & Sawamoto 1995; "
+            "the packed rule of YADE's HydroForceEngine) [-]."
         ),
     )
     kappa: Real = Field(0.41, gt=0, le=1, description="von Karman constant [-].")

@@ -424,3 +424,81 @@ register(
         ),
     )
 )
+
+
+# ---------------------------------------------------------------------------------- 1D VANS bedload
+
+BEDLOAD = Path(__file__).resolve().parents[2] / "configs" / "bedload.toml"
+# Q* = a (theta - theta_c)^1.5: the published laws that bracket bedload over a granular bed,
+# Wong & Parker (2006, J. Hydraul. Eng. 132, 1159; the corrected Meyer-Peter & Mueller) below
+# and Meyer-Peter & Mueller (1948) above
+WONG_PARKER = (3.97, 0.0495)
+MEYER_PETER_MUELLER = (8.0, 0.047)
+BEDLOAD_SAMPLE = 0.01  # [s] between samples of Q* and theta
+
+
+def transport_law(law: tuple[float, float], shields: float) -> float:
+    a, critical = law
+    return a * max(shields - critical, 0.0) ** 1.5
+
+
+def bedload_band(duration: float) -> Outcome:
+    """configs/bedload.toml run for `duration` s from its settled bed; Q* and the Shields number
+    sampled every 0.01 s and averaged over the second half of the run; the error is
+    max(Q*_low / Q*, Q* / Q*_high) of the two laws at the mean Shields number: at most 1 inside
+    their band, the nearer edge's ratio."""
+    scene = run_in_memory(BEDLOAD.read_text(encoding="utf-8"), 0, base_dir=BEDLOAD.parent)
+    dt, samples = scene.state.clock.dt, round(duration / BEDLOAD_SAMPLE)
+    every = round(BEDLOAD_SAMPLE / dt)
+    rates, shields = [], []
+    start = time.perf_counter()
+    for i in range(samples):
+        advance(scene, every)
+        if i >= samples // 2:
+            observed = scene.fluid.observables(scene.state)
+            rates.append(observed["q_star"][0])
+            shields.append(observed["shields_number"][0])
+    seconds = time.perf_counter() - start
+    rate, theta = float(np.mean(rates)), float(np.mean(shields))
+    low, high = transport_law(WONG_PARKER, theta), transport_law(MEYER_PETER_MUELLER, theta)
+    band = max(low / rate if rate > 0 else math.inf, rate / high)
+    return Outcome(
+        dt=dt, steps=scene.state.clock.step, particles=scene.state.particles.count,
+        errors={"band": band},
+        values={
+            "q_star": rate, "shields_number": theta, "q_star_wong_parker": low,
+            "q_star_meyer_peter_mueller": high, "coefficient": rate / (theta - WONG_PARKER[1]) ** 1.5,
+        },
+        step_seconds=seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d4-vans1d-bedload-band",
+        title="D4 1D VANS coupling: the bedload transport rate against the published laws",
+        model="vans1d",
+        reference=(
+            "Q* between Wong & Parker (2006), 3.97 (theta - 0.0495)^1.5, and Meyer-Peter & Mueller "
+            "(1948), 8 (theta - 0.047)^1.5, at the run's Shields number"
+        ),
+        description=(
+            "configs/bedload.toml: 1000 glass beads (6 mm) on a flat floor, 16 x 10 d periodic, slope "
+            "0.05 rad, 6 d of water, Li-Sawamoto mixing length; Q* and theta sampled every 0.01 s "
+            "and averaged over the second half of the run"
+        ),
+        run=bedload_band,
+        ladder=(1.0, 3.0),
+        quick_ladder=(1.0,),
+        resolution="simulated seconds",
+        error_labels={
+            "band": "max(Q* of Wong-Parker / Q*, Q* / Q* of Meyer-Peter-Mueller): at most 1 inside the band"
+        },
+        order_note=(
+            "not a convergence case: the steady transport of a bed that takes about 1 s to reach it "
+            "(Q* rises from 0.19 over 0.5-1 s to 0.25 over 1-3 s)"
+        ),
+        tolerances=(Tolerance("band", 1.0, source="the band of the two laws, the spread of published data"),),
+        repeats=1,
+    )
+)

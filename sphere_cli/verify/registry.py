@@ -71,6 +71,10 @@ class VerificationCase:
     tolerances: tuple[Tolerance, ...] = ()
     drift_bounds: dict[str, float] = field(default_factory=dict)  # drift name -> largest allowed
     roundoff_floor: float = 1e-13  # errors below this are round-off: left out of the order fit
+    # timed runs per resolution (None: the runner's): 1 for a case too costly to repeat, whose
+    # runs are then not checked against each other (restarts and threads are checked bitwise by
+    # tests/restart); its one run's wall time includes any compilation
+    repeats: int | None = None
 
 
 REGISTRY: dict[str, VerificationCase] = {}

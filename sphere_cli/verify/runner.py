@@ -63,6 +63,7 @@ def _same(a: Outcome, b: Outcome) -> bool:
 def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=None) -> dict:
     """Run one case over its ladder; returns its JSON record (rows, orders, checks, verdict)."""
     ladder = case.quick_ladder if quick else case.ladder
+    repeats = case.repeats or repeats
     say = log or (lambda _msg: None)
     record = {
         "name": case.name,
@@ -98,7 +99,7 @@ def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=
     try:
         for i, resolution in enumerate(ladder):
             first = None
-            if i == 0:
+            if i == 0 and repeats > 1:
                 t0 = time.perf_counter()
                 first = case.run(resolution)
                 record["first_call_s"] = time.perf_counter() - t0
@@ -120,7 +121,7 @@ def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=
                 )
             row = _row(resolution, outcomes[0], walls, step_walls)
             record["rows"].append(row)
-            if i == 0:
+            if i == 0 and repeats > 1:
                 record["compile_s"] = max(0.0, record["first_call_s"] - row["wall_s"])
             say(
                 f"  {case.name}: {resolution:g} {case.resolution}: "

@@ -1,12 +1,11 @@
 """configs/bedload.toml: bedload transport by the vans1d fluid over a bed of 1000 glass beads.
 
-Above the threshold of motion (Shields number about 0.16 here) the sediment moves: after
-0.04-0.05 s Q* is 0.05-0.06 (0.067 on average over 0.5-1.5 s, about half the 0.13 of the law
-of Wong & Parker (2006), Q* = 3.97 (theta - 0.0495)^1.5). Not far below the threshold (slope
-0.01 rad, theta about 0.035, 0.7 of Wong & Parker's 0.0495) the bed stays put: Q* about 1e-3,
-the rattling of surface grains.
-The bounds (above: Q* > 0.02; below: |Q*| < 0.005) sit between the two measured regimes with
-a factor 2 or more of margin on each side.
+Above the threshold of motion (Shields number about 0.16 here) the sediment moves within
+0.05 s (its steady rate, between Wong & Parker's and Meyer-Peter & Mueller's laws, is the
+`sphere verify` case d4-vans1d-bedload-band). Not far below the threshold (slope 0.01 rad,
+theta about 0.035, 0.7 of Wong & Parker's 0.0495) the bed stays put: Q* about 1e-3, the
+rattling of surface grains. The bounds (above: Q* > 0.02; below: |Q*| < 0.005) sit between the
+two measured regimes with a factor 2 or more of margin on each side.
 """
 
 from __future__ import annotations

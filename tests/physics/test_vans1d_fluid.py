@@ -171,7 +171,8 @@ def test_uniform_porous_layer_with_drag():
 def test_li_sawamoto_mixing_length():
     """Li & Sawamoto (1995): l = kappa * integral of (c_max - c)/c_max, c the solid fraction and
     c_max the packed one: equal to Prandtl's kappa z in clear water (bitwise here), 0 through a bed
-    packed at c_max, and kappa (z - z_bed) above it; half the rate in a layer at c_max / 2."""
+    packed at c_max (and below its highest packed layer, whatever lies there), and
+    kappa (z - z_bed) above it; half the rate in a layer at c_max / 2."""
     faces = np.linspace(0.0, 0.1, 11)
     clear = FluidColumn(faces, RHO, 1e-6, mixing="li-sawamoto", packed_solid_fraction=0.6)
     prandtl = FluidColumn(faces, RHO, 1e-6, mixing="prandtl")
@@ -184,3 +185,13 @@ def test_li_sawamoto_mixing_length():
     clear.update_mixing_length(solid)
     np.testing.assert_allclose(clear.mixing[:5], 0.0, atol=0)
     np.testing.assert_allclose(clear.mixing[5:], 0.41 * (faces[5:] - 0.045), rtol=1e-13)
+    # under the highest packed layer the bed counts as packed (YADE's ilm = 2): a void at the
+    # floor and a loose layer inside the bed lend the flow above it nothing
+    solid[0], solid[2] = 0.05, 0.45
+    clear.update_mixing_length(solid)
+    np.testing.assert_allclose(clear.mixing[:5], 0.0, atol=0)
+    np.testing.assert_allclose(clear.mixing[5:], 0.41 * (faces[5:] - 0.045), rtol=1e-13)
+    # a bed that reaches c_max nowhere is integrated from the floor
+    loose = np.full(10, 0.3)
+    clear.update_mixing_length(loose)
+    np.testing.assert_allclose(clear.mixing, 0.41 * 0.5 * faces, rtol=1e-13)

@@ -19,7 +19,10 @@ Mixing lengths at the faces (s = z - z_0 height above the bottom, H the depth):
   1 "prandtl"     l = kappa s
   2 "parabolic"   l = kappa s sqrt(1 - s/H)
   3 "li-sawamoto" l = kappa * integral_0^s (solid_max - solid)/solid_max dz  (Li & Sawamoto 1995),
-                  the integrand taken as 0 where solid > solid_max.
+                  the integrand taken as 0 where solid > solid_max and in every layer below the
+                  highest one that reaches solid_max: the bed under its packed top counts as
+                  packed, so that voids at the floor and looser layers inside the bed lend the
+                  flow above it no mixing length (as YADE's HydroForceEngine, ilm = 2).
 Optionally damped in the viscous sublayer (van Driest 1956): l (1 - exp(-z+/A+)), z+ = (l/kappa)
 u*/nu, u* = sqrt(tau_b/rho) with tau_b the largest fluid shear stress of the previous step (A+ = 0:
 no damping). The solve uses the damped length `damped`, kept equal to damp(mixing, u*).
@@ -43,6 +46,10 @@ def mixing_length(faces, solid, kind, kappa, solid_max, out):
     n = faces.shape[0] - 1
     depth = faces[n] - faces[0]
     fluid_height = 0.0
+    packed = 0  # the layers below the highest packed one count as packed (li-sawamoto)
+    for k in range(n):
+        if solid[k] >= solid_max:
+            packed = k
     for f in range(n + 1):
         s = faces[f] - faces[0]
         if kind == 0:
@@ -53,7 +60,7 @@ def mixing_length(faces, solid, kind, kappa, solid_max, out):
             out[f] = kappa * s * math.sqrt(max(0.0, 1.0 - s / depth))
         else:
             out[f] = kappa * fluid_height
-            if f < n:
+            if f < n and f >= packed:
                 fluid_height += max(0.0, solid_max - solid[f]) / solid_max * (faces[f + 1] - faces[f])
 
 
