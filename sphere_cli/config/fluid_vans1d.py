@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from .base import Count, Real, Strict
+from .base import Count, Flag, Real, Strict
 from .fluid_common import CouplingConfig
 
 
@@ -162,6 +162,38 @@ class ImposedSolidFraction(Strict):
         return self
 
 
+class TurbulentFluctuations(Strict):
+    """Turbulent velocity fluctuations seen by the particles, a discrete random walk (YADE's
+    HydroForceEngine turbulentFluctuationZDep; Maurin et al. 2015): each particle above the bed
+    draws a fluctuation (u', v', w') = u*_l (r3, r2, r1) with r1, r2 standard normal and
+    r3 = -r1 + r4 (correlated: <u'w'> = -u*_l^2, the Reynolds shear stress over rho, and
+    <u'^2> = 2 <w'^2>) or r3 standard normal, u*_l = sqrt(R_xz / rho) from the solved profile's
+    Reynolds stress at its height, and keeps it for an eddy lifetime 0.33 kappa z_b / u*_l
+    (z_b its height above the bed, at least 11.6 nu / u*_l; at most 10 s)."""
+
+    bed_elevation: Real = Field(
+        description=(
+            "Height of the bed surface: particles whose centre lies at or below it see no "
+            "fluctuation, and the lifetime's depth is measured from it [m]."
+        )
+    )
+    seed: int = Field(
+        0,
+        ge=0,
+        description=(
+            "Seed of the draws: each particle's n-th draw is a fixed function of (seed, particle "
+            "index, n), so runs do not depend on the thread count and a resume continues them [-]."
+        ),
+    )
+    correlated: Flag = Field(
+        True,
+        description=(
+            "Streamwise and wall-normal fluctuations correlated as the Reynolds shear stress "
+            "demands (YADE's default, after Nezu 1977); false: independent [-]."
+        ),
+    )
+
+
 class Vans1dFluid(Strict):
     """A 1D vertical fluid velocity profile coupled to the particles (bedload transport)."""
 
@@ -227,6 +259,14 @@ class Vans1dFluid(Strict):
         description=(
             '"full": -rho_f V g; "wall-normal": only its z part, for a steady uniform flow whose '
             "pressure has no streamwise gradient [-]."
+        ),
+    )
+    fluctuations: TurbulentFluctuations | None = Field(
+        None,
+        description=(
+            "Turbulent velocity fluctuations added to the fluid velocity each particle's forces "
+            'see (a discrete random walk, YADE\'s); needs flow.kind = "solved" (its Reynolds '
+            "stress). Default: none [-]."
         ),
     )
     lift_coefficient: Real = Field(

@@ -115,6 +115,23 @@ ERRORS = [
         ["z has 3 points but value has 2"],
     ),
     (
+        "fluctuations-without-a-solved-flow",
+        'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
+        'flow = { kind = "log-law", friction_velocity = 0.05, bed_level = 0.002, roughness_length = 1e-4 }'
+        "\nfluctuations = { bed_elevation = 0.002 }",
+        "fluid.fluctuations",
+        "fluctuations",
+        ['flow.kind = "solved"', "Reynolds stress"],
+    ),
+    (
+        "fluctuations-without-a-bed-elevation",
+        "cells = 20",
+        "cells = 20\nfluctuations = { seed = 3 }",
+        "fluid.fluctuations.bed_elevation",
+        "fluctuations",
+        ["required key is missing"],
+    ),
+    (
         "lid-velocity-without-a-lid",
         'mixing_length = "li-sawamoto" }',
         'mixing_length = "li-sawamoto", top_velocity = 0.5 }',

@@ -18,7 +18,7 @@ RHO, NU, R = 1000.0, 1.0e-6, 0.5e-3
 GRAVITY = np.array([0.5, 0.0, -9.8])
 
 
-def forces(z, vel, u_of_z, solid=0.0, full=False, lift=0.0, top=0.02, exponent=3.1):
+def forces(z, vel, u_of_z, solid=0.0, full=False, lift=0.0, top=0.02, exponent=3.1, fluct=None):
     faces = layer_faces(0.0, top, 200)
     centres = 0.5 * (faces[1:] + faces[:-1])
     u = u_of_z(centres)
@@ -27,8 +27,9 @@ def forces(z, vel, u_of_z, solid=0.0, full=False, lift=0.0, top=0.02, exponent=3
     coef, drag_x = np.zeros(1), np.zeros(1)
     profile_forces(
         pos, np.array([vel], dtype=float), np.array([R]), np.ones(1, np.uint8), faces, centres, u,
-        np.full(centres.size, solid), False, 0.0, RHO, NU, exponent, 0.61, GRAVITY, full, lift, force, coef,
-        drag_x,
+        np.full(centres.size, solid), False, 0.0, RHO, NU, exponent, 0.61, GRAVITY, full, lift,
+        fluct is not None, np.array([fluct if fluct is not None else (0.0, 0.0, 0.0)], dtype=float), force,
+        coef, drag_x,
     )  # fmt: skip
     return force[0], coef[0], drag_x[0], (faces, centres, u)
 
@@ -107,8 +108,18 @@ def test_forces_do_not_depend_on_the_thread_count():
         force, coef, drag_x = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
         profile_forces(
             pos, vel, radius, np.ones(n, np.uint8), faces, centres, u, solid, False, 0.0, RHO, NU, 3.1, 0.61,
-            GRAVITY, True, 0.2, force, coef, drag_x,
+            GRAVITY, True, 0.2, False, np.zeros((1, 3)), force, coef, drag_x,
         )  # fmt: skip
         results.append((force, coef, drag_x))
     for a, b in zip(*results, strict=True):
         assert np.array_equal(a, b)
+
+
+def test_a_turbulent_fluctuation_adds_to_the_fluid_velocity_the_particle_sees():
+    """The drag of a particle at velocity v in a fluctuation f is that of one at v - f without
+    it (buoyancy and the profile unchanged)."""
+    fluct, vel = (0.03, -0.02, 0.015), np.array([0.1, 0.01, -0.005])
+    with_fluct = forces(0.008, vel, lambda z: 0.4 + 0 * z, solid=0.2, fluct=fluct)
+    shifted = forces(0.008, vel - np.array(fluct), lambda z: 0.4 + 0 * z, solid=0.2)
+    for a, b in zip(with_fluct[:3], shifted[:3], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13)

@@ -43,6 +43,28 @@ def test_resume_is_bitwise_identical(config: Path, tmp_path: Path):
     assert a.keys() <= b.keys()
 
 
+def test_vans1d_turbulent_fluctuations_resume_bitwise(tmp_path: Path):
+    """configs/bedload.toml with [fluid.fluctuations]: the fluctuations, their lifetimes and
+    each particle's count of draws are in the checkpoint, so a resume (here between two fluid
+    couplings) continues every particle's random sequence exactly."""
+    config = Path(__file__).parents[2] / "configs" / "bedload.toml"
+    text = config.read_text().replace(
+        "flow = {", "fluctuations = { bed_elevation = 0.034, seed = 3 }\nflow = {", 1
+    )
+    case = tmp_path / "bedload.toml"
+    case.write_text(text)
+    (tmp_path / "bedload-bed.csv").write_bytes((config.parent / "bedload-bed.csv").read_bytes())
+    dt = step_dt(case)
+    end = STEPS * dt
+    api.run(case, tmp_path / "whole", until=end)
+    api.run(case, tmp_path / "split", until=0.5 * end)
+    api.resume(tmp_path / "split", until=end)
+    whole = final_state(tmp_path / "whole")
+    assert_same_state(whole, final_state(tmp_path / "split"))
+    assert np.count_nonzero(whole["fluid"]["fluctuation"][:, 2]) > 10  # the beads above the bed
+    assert whole["fluid"]["fluctuation_draws"].max() >= 1
+
+
 # Runs the case in a child process that SIGKILLs itself while writing the checkpoint of step
 # 300: after `part` of its bytes are on disk (the file is built in memory, then written), or
 # just before the rename.

@@ -17,6 +17,8 @@ Arguments: pos, vel (N,3) [m, m/s]; radius (N,) [m]; selected (N,) uint8; faces 
 centres (n,) [m]; u (n,) [m/s]; solid (n,) [-]; top_no_slip (bool); lid_velocity [m/s] of a
 no-slip lid; rho [kg/m^3]; nu [m^2/s];
 exponent n [-]; solid_max [-]; gravity (3,) [m/s^2]; buoyancy_full (bool); lift_coef [-];
+fluct (N,3) [m/s] turbulent fluctuations added to the fluid velocity each particle sees, read
+only where `fluctuating` (kernels/fluid/turbulent_fluctuations.py; else any array);
 force (N,3) [N] (added to); drag_coef (N,) [kg/s] and drag_x (N,) [N] (written).
 """
 
@@ -95,6 +97,8 @@ def profile_forces(
     gravity,
     buoyancy_full,
     lift_coef,
+    fluctuating,
+    fluct,
     force,
     drag_coef,
     drag_x,
@@ -117,6 +121,10 @@ def profile_forces(
         ur = _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w) - vel[i, 0]
         vr = -vel[i, 1]
         wr = -vel[i, 2]
+        if fluctuating:
+            ur += fluct[i, 0]
+            vr += fluct[i, 1]
+            wr += fluct[i, 2]
         speed = math.sqrt(ur * ur + vr * vr + wr * wr)
         solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
         k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)

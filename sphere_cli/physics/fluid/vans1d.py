@@ -19,6 +19,7 @@ import numpy as np
 from ...config.consistency import particle_materials
 from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
 from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces
+from ...kernels.fluid.turbulent_fluctuations import turbulent_fluctuations
 from ...kernels.fluid.vans1d import (
     MIXING_KINDS,
     advance_fluid,
@@ -175,8 +176,42 @@ class Vans1d(FluidModule):
         self.diameter = 2.0 * float(p.radius[selected == 1].mean()) if selected.any() else 0.0
         self.particle_density = float(density.mean()) if density.size else 0.0
         self._dt_limit = self._drag_relaxation_limit(p, selected)
+        self._allocate_fluctuations(loaded, p.count, cfg.cells)
         self.fluid_steps = 1
         self.substep_dt = 0.0  # the fluid's own implicit steps within a fluid step [s]
+
+    def _allocate_fluctuations(self, loaded, count: int, cells: int) -> None:
+        """The per-particle state of [fluid.fluctuations] (kernels/fluid/turbulent_fluctuations.py):
+        the fluctuation, its remaining lifetime and the number of draws so far, and the Reynolds
+        stress they are drawn from; a (1, 3) placeholder without them."""
+        spec = self.cfg.fluctuations
+        self.fluctuating = spec is not None
+        if not self.fluctuating:
+            self.fluct = np.zeros((1, 3))
+            return
+        if not self.solved:
+            raise loaded.error(
+                ("fluid", "fluctuations"),
+                'need flow.kind = "solved": their magnitude is the solved profile\'s Reynolds stress',
+            )
+        self.fluct = np.zeros((count, 3))  # [m/s]
+        self.fluct_lifetime = np.zeros(count)  # [s] left; <= 0: draw at the next coupling
+        self.fluct_draws = np.zeros(count, dtype=np.uint64)
+        self.reynolds = np.zeros(cells + 1)  # [Pa] at the layer faces
+
+    def _fluctuate(self, state, elapsed: float) -> None:
+        """Draw the particles whose fluctuation has lived its time, from the current profile."""
+        f, spec, col = state.fluid, self.cfg.fluctuations, state.fluid.column
+        # the turbulent part of the shear stress alone: the stress with nu = 0
+        shear_stress(
+            col.faces, col.centres, col.u, f.profiles.solid_fraction, col.damped, col.rho, 0.0,
+            col.top_no_slip, col.lid_velocity, self.reynolds,
+        )  # fmt: skip
+        turbulent_fluctuations(
+            state.particles.pos, f.selected, col.faces, self.reynolds, col.rho, col.nu, col.kappa,
+            spec.bed_elevation, np.uint64(spec.seed), spec.correlated, elapsed, self.fluct,
+            self.fluct_lifetime, self.fluct_draws,
+        )  # fmt: skip
 
     # ---------------------------------------------------------------- checks and schedule
 
@@ -253,6 +288,8 @@ class Vans1d(FluidModule):
         self._warn_smooth_floor(state)
         if self.solved and self.cfg.flow.initial == "steady":
             self._steady_start(state)
+        if self.fluctuating:
+            self._fluctuate(state, 0.0)
 
     def _warn_smooth_floor(self, state) -> None:
         """A turbulent flow over a clear (smooth) floor with neither sublayer treatment: the
@@ -280,7 +317,8 @@ class Vans1d(FluidModule):
         profile_forces(
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
-            self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, p.force, f.drag_coef, f.drag_x,
+            self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, self.fluctuating, self.fluct, p.force,
+            f.drag_coef, f.drag_x,
         )  # fmt: skip
 
     def after_step(self, state) -> None:
@@ -292,6 +330,8 @@ class Vans1d(FluidModule):
                 prof.solid_fraction, prof.vel, prof.exchange_coefficient, self.source, self.substep_dt,
                 self.fluid_steps,
             )  # fmt: skip
+            if self.fluctuating:
+                self._fluctuate(state, self.fluid_dt)
 
     def _average(self, state) -> None:
         """Solid profiles of the current particles, the drag evaluated with the current fluid.
@@ -345,6 +385,15 @@ class Vans1d(FluidModule):
             "vel": prof.vel,
             "exchange_coefficient": prof.exchange_coefficient,
             "drag": prof.drag,
+            **(
+                {
+                    "fluctuation": self.fluct,
+                    "fluctuation_lifetime": self.fluct_lifetime,
+                    "fluctuation_draws": self.fluct_draws,
+                }
+                if self.fluctuating
+                else {}
+            ),
         }
 
     def restore(self, state, arrays) -> None:
@@ -353,6 +402,10 @@ class Vans1d(FluidModule):
         f.column.u_star[...] = arrays["u_star"]
         for name in ("solid_fraction", "vel", "exchange_coefficient", "drag"):
             getattr(f.profiles, name)[...] = arrays[name]
+        if self.fluctuating:
+            self.fluct[...] = arrays["fluctuation"]
+            self.fluct_lifetime[...] = arrays["fluctuation_lifetime"]
+            self.fluct_draws[...] = arrays["fluctuation_draws"]
         f.column.update_mixing_length(f.profiles.solid_fraction)
 
     # ---------------------------------------------------------------- diagnostics
