@@ -142,6 +142,15 @@ class DarcyFluid(Strict):
         description="Fluid steps against DEM steps (default: steps = 1); one pressure solve a fluid step.",
     )
     solver: DarcySolver = Field(default_factory=DarcySolver, description="The implicit pressure solve.")
+    time_scheme: Literal["implicit", "explicit"] = Field(
+        "implicit",
+        description=(
+            '"implicit" (default): backward Euler, one solve a fluid step, stable at any step; '
+            '"explicit": forward Euler (the original sphere\'s explicit scheme), no solve but the fluid '
+            "step bound by the diffusion limit 1/(2 D sum 1/h^2), D = k/(beta_f phi mu) at its largest "
+            "(nanoseconds for water in sand): for comparison; not with fixed_pressure regions [-]."
+        ),
+    )
 
     @model_validator(mode="before")
     @classmethod

@@ -110,6 +110,29 @@ def test_periodic_z_is_refused(tmp_path):
     assert_clean_error(result, 65, "domain.periodic", "bounded z axis")
 
 
+def test_the_explicit_scheme_is_refused_with_fixed_pressure_regions(tmp_path):
+    text = edit(
+        DARCY,
+        'model = "darcy"',
+        'model = "darcy"\ntime_scheme = "explicit"\n[[fluid.fixed_pressure]]\nlower = [0.0, 0.0, 0.0]\n'
+        "upper = [0.01, 0.01, 0.005]\npressure = 10.0",
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "fluid.time_scheme", "fluid.fixed_pressure", 'time_scheme = "implicit"')
+
+
+def test_dt_above_the_explicit_diffusion_limit_names_it(tmp_path):
+    """time_scheme = "explicit" with Kozeny-Carman (k_c = d^2/180, d = 1.8 mm): D = k/(beta_f phi mu)
+    peaks at porosity_max = 0.9, about 3e4 m^2/s, so the limit is nanoseconds on 2.5 mm cells: the
+    default contact time step is refused naming it."""
+    text = edit(DARCY, 'model = "darcy"', 'model = "darcy"\ntime_scheme = "explicit"')
+    text = edit(text, 'dt = "auto"', "dt = 1e-6")
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "simulation.dt", 'time_scheme = "explicit"', "diffusion limit")
+
+
 def test_dt_above_the_coupling_limit_names_it(tmp_path):
     """k = 1e-14 m^2: the coupling's limit 0.2 rho_s k (1 - porosity_max) / mu = 0.2 x 2500 x
     1e-14 x 0.1 / 1e-3 = 5e-10 s is below the contact limit; a dt of 1e-6 s is refused naming it."""

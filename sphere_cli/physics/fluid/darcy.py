@@ -47,6 +47,18 @@ class Darcy(FluidModule):
                 ("domain", "periodic"),
                 "the Darcy model needs a bounded z axis (its top and bottom boundaries); make z non-periodic",
             )
+        if config.time_scheme == "explicit":
+            for key, given in (
+                ("fixed_pressure", config.fixed_pressure),
+                ("grid", config.grid.follow_top_wall),
+            ):
+                if given:
+                    raise loaded.error(
+                        ("fluid", "time_scheme"),
+                        f'"explicit" cannot be combined with fluid.{key}'
+                        f"{'.follow_top_wall' if key == 'grid' else ''}: the explicit scheme is there "
+                        'to compare with; use time_scheme = "implicit"',
+                    )
         grid = fluid_grid(config.grid, box, particles.radius, loaded)
         # a grid that follows the top wall: the wall bounds the pore fluid (physics/fluid/grid.py)
         self.top_wall = None
@@ -101,7 +113,20 @@ class Darcy(FluidModule):
     # -- schedule --------------------------------------------------------------------------------
 
     def fluid_step_limit(self) -> tuple[float, str]:
-        """The diffusion is implicit and sets no limit; the coupling is explicit. A compacting
+        """The smaller of the coupling's limit (_coupling_step_limit) and, with the explicit
+        scheme, its diffusion limit."""
+        coupling = self._coupling_step_limit()
+        if self.pore.explicit:
+            diffusion = self.pore.explicit_step_limit()
+            if diffusion < coupling[0]:
+                return diffusion, (
+                    'time_scheme = "explicit": the diffusion limit 1/(2 D sum 1/h^2) at the largest '
+                    "D = k/(beta_f phi mu) the porosity clamps allow"
+                )
+        return coupling
+
+    def _coupling_step_limit(self) -> tuple[float, str]:
+        """The implicit diffusion sets no limit; the coupling is explicit. A compacting
         skeleton raises, through the source term, a pressure whose gradient pushes back on the
         grains one fluid step later: in 1D, k dp/dz = -mu v_s, so the seepage force per unit
         volume of solid, -(dp/dz)/(1 - phi), is a drag of relaxation time rho_s k (1 - phi) / mu

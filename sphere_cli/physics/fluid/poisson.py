@@ -298,6 +298,18 @@ class PoissonSolver:
             np.ldexp(x, exponent, out=x)
         return PoissonResult(iterations, res, res <= self.tolerance, mean_removed)
 
+    def explicit_step(self, x, b, c, ax, ay, az, bottom_value: float = 0.0, top_value: float = 0.0) -> None:
+        """One forward-Euler step of the system that solve() would take one backward-Euler step
+        of: with A = c + (the face and boundary terms), c (x' - x) = b - A x, so x += (b - A x)/c
+        in place (c > 0 everywhere; no cell may have been eliminated into c)."""
+        prepare_system(
+            b, c, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
+            float(bottom_value), float(top_value), self.ih2, self.rhs, self.diag, self.inv_diag, self.part_a,
+        )  # fmt: skip
+        self._true_residual(x, ax, ay, az)
+        np.divide(self.r, c, out=self.r)
+        x += self.r
+
     # -- helpers -----------------------------------------------------------------------------
 
     def _mean(self, field: np.ndarray) -> float:

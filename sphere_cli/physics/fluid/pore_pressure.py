@@ -140,6 +140,9 @@ class PorePressure:
         )
         self.state.pressure[fixed == 1] = fixed_value[fixed == 1]
         self.has_fixed = bool(fixed.any())
+        self.explicit = config.time_scheme == "explicit"
+        if self.explicit and self.has_fixed:
+            raise ValueError("the explicit scheme does not take fixed_pressure regions")
 
     def update_spacing(self) -> None:
         """Take the grid's current spacing: call after grid.set_height (a grid that follows the
@@ -188,6 +191,11 @@ class PorePressure:
             )
             cut_fixed_faces(s.fixed, ax, ay, az, self.periodic)
         bottom, top = self.boundary_values(time)
+        if self.explicit:
+            self.solver.explicit_step(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
+            s.iterations, s.residual = 0, 0.0
+            self.update_gradient(time)
+            return PoissonResult(0, 0.0, True)
         result = self.solver.solve(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
         s.iterations, s.residual = result.iterations, result.residual
         if not result.converged:
@@ -229,6 +237,20 @@ class PorePressure:
         s, c = self.state, self.config
         self.update_permeability()
         diffusivity = float(np.max(s.permeability / (c.compressibility * s.porosity_used * c.viscosity)))
+        stencil = sum(float(self.ih2[a]) for a in range(3) if self.grid.shape[a] > 1)
+        return 1.0 / (2.0 * diffusivity * stencil) if stencil > 0 else math.inf
+
+    def explicit_step_limit(self) -> float:
+        """explicit_limit() at the largest diffusivity the clamps allow [s]: D = k/(beta_f phi mu)
+        peaks at porosity_max for Kozeny-Carman (k/phi = k_c phi^2/(1 - phi)^2 grows with phi),
+        at porosity_min for a constant k. What the explicit scheme's fluid step must stay below
+        whatever the particles do."""
+        c = self.config
+        if self.kc is None:
+            diffusivity = c.permeability.value / (c.compressibility * c.porosity_min * c.viscosity)
+        else:
+            phi = c.porosity_max
+            diffusivity = self.kc * phi**2 / (1.0 - phi) ** 2 / (c.compressibility * c.viscosity)
         stencil = sum(float(self.ih2[a]) for a in range(3) if self.grid.shape[a] > 1)
         return 1.0 / (2.0 * diffusivity * stencil) if stencil > 0 else math.inf
 
