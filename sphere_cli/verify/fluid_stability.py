@@ -145,6 +145,45 @@ _register(
 )
 
 
+# ------------------------------------------------------------------ the Darcy coupling far below dt
+
+FINE_DARCY = (
+    FINE.split("[fluid]")[0]
+    + """[fluid]
+model = "darcy"
+viscosity = 1.41
+grid = { cells = [10, 10, 20] }
+"""
+)
+
+
+def fine_sphere_darcy(quick: bool) -> dict:
+    """The same 10 um glass sphere in glycerol under the Darcy fluid, whose coupling is explicit:
+    its relaxation time rho_s k (1 - phi)/mu (Kozeny-Carman k at the densest packing, k_c =
+    d^2/180) is picoseconds, so the case's dt (0.16 us) must be refused before the run, naming
+    simulation.dt, the limit and the coupling (dt = "auto" stays below it)."""
+    _, auto = _build(FINE_DARCY.replace("dt = 1.6e-7", 'dt = "auto"'))
+    limit = float(auto.dt_limit)
+    error, _ = _build(FINE_DARCY)
+    return _refusal(
+        error,
+        ("simulation.dt", f"{limit:.4g}", "explicit Darcy coupling"),
+        "accepted dt = 0.16 us, far above the coupling's limit",
+        auto.dt_limit_reason,
+        limit,
+    )
+
+
+_register(
+    StabilityCase(
+        "stability-fluid-fine-sphere-darcy",
+        "a 10 um sphere in glycerol under the Darcy fluid, dt far above its coupling limit",
+        "refused",
+        fine_sphere_darcy,
+    )
+)
+
+
 # ------------------------------------------------------------------ drag far below dt, 1D VANS
 
 FINE_SEDIMENT = """
