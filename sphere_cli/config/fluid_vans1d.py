@@ -180,6 +180,7 @@ class TurbulentFluctuations(Strict):
     seed: int = Field(
         0,
         ge=0,
+        le=2**64 - 1,
         description=(
             "Seed of the draws: each particle's n-th draw is a fixed function of (seed, particle "
             "index, n), so runs do not depend on the thread count and a resume continues them [-]."

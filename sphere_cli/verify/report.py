@@ -96,6 +96,10 @@ def case_markdown(record: dict, plot: str | None = None, heading: str = "##") ->
             f"{record.get('compile_s', 0.0):.3g} s, reported apart from the timings); each row is the "
             f"median of {record['repeats']} runs."
         )
+    elif record["rows"]:
+        lines.append(
+            "One run per resolution (a costly case), its kernel compilation in the first row's time."
+        )
     lines += ["", "| check | result | detail |", "|---|---|---|"]
     for c in record["checks"]:
         lines.append(f"| {c['check']} | {_mark(c['passed'])} | {c['detail']} |")

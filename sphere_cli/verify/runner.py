@@ -3,8 +3,10 @@
 Each resolution is run once untimed at the start of a case (the first call: it pays for
 loading or compiling the Numba kernels, reported apart as first_call_s/compile_s), then
 `repeats` times; the median wall time is reported, and the repeats must agree bitwise (the
-runs are deterministic). The observed order is the least-squares slope of log(error) against
-log(resolution), over the rows whose error is above the case's round-off floor.
+runs are deterministic). A case too costly for that (VerificationCase.repeats = 1) is run
+once per resolution, its compilation in the first row's time. The observed order is the
+least-squares slope of log(error) against log(resolution), over the rows whose error is above
+the case's round-off floor.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=
     """Run one case over its ladder; returns its JSON record (rows, orders, checks, verdict)."""
     ladder = case.quick_ladder if quick else case.ladder
     repeats = case.repeats or repeats
+    warm_up = case.repeats != 1  # one untimed first call, unless the case runs once
     say = log or (lambda _msg: None)
     record = {
         "name": case.name,
@@ -99,7 +102,7 @@ def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=
     try:
         for i, resolution in enumerate(ladder):
             first = None
-            if i == 0 and repeats > 1:
+            if i == 0 and warm_up:
                 t0 = time.perf_counter()
                 first = case.run(resolution)
                 record["first_call_s"] = time.perf_counter() - t0
@@ -121,7 +124,7 @@ def run_case(case: VerificationCase, quick: bool = False, repeats: int = 3, log=
                 )
             row = _row(resolution, outcomes[0], walls, step_walls)
             record["rows"].append(row)
-            if i == 0 and repeats > 1:
+            if i == 0 and warm_up:
                 record["compile_s"] = max(0.0, record["first_call_s"] - row["wall_s"])
             say(
                 f"  {case.name}: {resolution:g} {case.resolution}: "

@@ -49,7 +49,7 @@ def uniform(seed, particle, draw, k):
     x = _mix(seed * GOLDEN + particle)
     x = _mix(x + draw * GOLDEN)
     x = _mix(x + k)
-    return (np.float64(x >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+    return (np.float64(x >> np.uint64(12)) + 0.5) * (1.0 / 4503599627370496.0)  # 52 bits, exact
 
 
 @njit(cache=True, inline="always")
