@@ -354,3 +354,17 @@ def test_the_coupling_limit_counts_only_particles_that_move(tmp_path, sand_fixed
     else:
         assert limit == pytest.approx(0.2 * 2650.0 * 1.0e-9 * (1.0 - 0.9) / 1.0e-3, rel=1e-9)
         assert "2650 kg/m^3" in reason
+
+
+def test_a_wall_pushed_by_a_stiffer_fluid_than_its_time_step_counted_is_warned_once(caplog):
+    """The wall's dt limit counts the undrained fluid at the build's height and phi = 0.26; when
+    the live stiffness passes what was counted (here made so by lowering the counted value), one
+    warning names both, and the run goes on."""
+    scene, _ = oedometer('{ type = "no-flow" }')
+    counted = scene.fluid.assumed_wall_stiffness
+    assert counted == pytest.approx(0.004 * 0.004 / (HEIGHT * 4.5e-10 * 0.26), rel=1e-9)
+    scene.fluid.assumed_wall_stiffness = 1.0
+    with caplog.at_level("WARNING", logger="sphere.fluid.darcy"):
+        advance(scene, 3)
+    warned = [r for r in caplog.records if "stiff" in r.getMessage()]
+    assert len(warned) == 1 and "1 N/m the time step was chosen for" in warned[0].getMessage()

@@ -105,6 +105,9 @@ class Darcy(FluidModule):
         # pressure on both faces and carries the effective stress only)
         self.pushes_wall = self.top_wall is not None and not self.pore.top_dirichlet
         self.wall_stiffness = 0.0  # dp/dH of the undrained fluid at the last fluid step [Pa/m]
+        self.warned_stiffer = False
+        limit = self.wall_stiffness_limit(state)  # what the wall's dt limit counted [N/m]
+        self.assumed_wall_stiffness = limit[self.top_wall][0] if limit else math.inf
         nz = self.pore.grid.shape[2]
         self.cell_heights = (np.arange(nz) + 0.5) / nz  # cell centres as fractions of the height
         self.grid_velocity = np.zeros(nz)  # [m/s] of the cell centres of a grid following the wall
@@ -240,6 +243,23 @@ class Darcy(FluidModule):
             )
         }
 
+    def _warn_stiffer_wall(self, step: int) -> None:
+        """The wall's dt limit counted the fluid's stiffness at the build's height and phi = 0.26
+        (wall_stiffness_limit); a lower wall or denser cells make it stiffer: warn once when it
+        passes that, since the time step no longer has its margin there."""
+        grid = self.pore.grid
+        area = float(grid.spacing[0] * grid.spacing[1]) * grid.shape[0] * grid.shape[1]
+        if self.warned_stiffer or not self.wall_stiffness * area > self.assumed_wall_stiffness:
+            return
+        self.warned_stiffer = True
+        logging.getLogger("sphere.fluid.darcy").warning(
+            "Darcy: at step %d the undrained pore fluid under the top wall is %.3g N/m stiff, more than "
+            "the %.3g N/m the time step was chosen for (the wall %.4g m above the grid's bottom, mean "
+            "porosity %.3g); a smaller dt or a heavier wall (mass) keeps the wall's margin",
+            step, self.wall_stiffness * area, self.assumed_wall_stiffness, grid.height,
+            float(np.mean(self.pore.state.porosity_used)),
+        )  # fmt: skip
+
     def initialize(self, state) -> None:
         s = self.pore.state
         if self.top_wall is not None:  # where the wall is now (a stage's approach may have moved it)
@@ -285,6 +305,7 @@ class Darcy(FluidModule):
             self.porosity_previous[...] = s.porosity
         if self.pushes_wall:
             self.wall_stiffness = self._undrained_stiffness()
+            self._warn_stiffer_wall(clock.step)
         if s.clamped_cells and not self.warned_clamp:
             self.warned_clamp = True
             config = self.pore.config
