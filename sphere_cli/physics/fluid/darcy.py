@@ -21,7 +21,7 @@ from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
-from .grid import FluidGrid, fluid_grid, top_wall_index
+from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .pore_pressure import PorePressure, fixed_pressure_cells
 from .porosity import Porosity
 
@@ -173,16 +173,9 @@ class Darcy(FluidModule):
     def _fit_grid(self, state) -> None:
         """Stretch the grid to the top wall, or stop (exit 70) where its cells would be lower than
         the largest particle diameter, which the porosity estimate needs."""
-        grid, clock = self.pore.grid, state.clock
+        grid = self.pore.grid
         height = self._wall_height(state, grid)
-        dz = height / grid.shape[2]
-        if not dz >= self.diameter:
-            raise NumericalError(
-                f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
-                f"{float(state.walls.coord[self.top_wall]):.7g} m makes the fluid cells (fluid.grid."
-                f"follow_top_wall, {grid.shape[2]} along z) {dz:.6g} m high, less than the largest particle "
-                f"diameter {self.diameter:.4g} m that the porosity estimate needs; use fewer cells along z"
-            )
+        wall_cells(state, self.top_wall, grid.shape[2], height, self.diameter)
         grid.set_height(height)
         self.pore.update_spacing()
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config.fluid_grid import FluidGridConfig, grid_cells
+from ...errors import NumericalError
 
 
 @dataclass(frozen=True)
@@ -100,3 +101,22 @@ def top_wall_index(loaded, state) -> int:
             f"{', '.join(faces) or 'none'})",
         )
     return faces.index("z+")
+
+
+def wall_cells(state, wall: int, nz: int, height: float, diameter: float) -> str:
+    """Where the cells of a grid following the top wall stand when the wall puts its top
+    `height` [m] above the grid's bottom, as the start of a stop message; stops (exit 70) here if
+    they would be lower than the largest particle `diameter` [m] that the porosity estimate
+    needs."""
+    clock, dz = state.clock, height / nz
+    where = (
+        f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
+        f"{float(state.walls.coord[wall]):.7g} m makes the fluid cells (fluid.grid."
+        f"follow_top_wall, {nz} along z) {dz:.6g} m high"
+    )
+    if not dz >= diameter:
+        raise NumericalError(
+            f"{where}, less than the largest particle diameter {diameter:.4g} m that the porosity "
+            "estimate needs; use fewer cells along z or stop the wall higher"
+        )
+    return where

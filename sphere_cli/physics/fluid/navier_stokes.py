@@ -43,7 +43,7 @@ from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .fixed_bed import FixedBed
-from .grid import FluidGrid, fluid_grid, top_wall_index
+from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .poisson import PoissonResult, PoissonSolver
 from .porosity import Porosity
 
@@ -605,19 +605,10 @@ class NavierStokes(FluidModule):
         hold what the porosity estimate (dz at least the largest particle diameter), the moving
         grid's advection (the top moves at most half a cell per fluid step, the fluid's own
         advective limit) or the viscous limit need."""
-        clock, nz = state.clock, self._grid.shape[2]
+        nz = self._grid.shape[2]
         height = self._wall_height(state)
-        dz_old, dz = self.fs.height / nz, height / nz
-        where = (
-            f"step {clock.step} (t = {clock.time:.6g} s): the top wall at z = "
-            f"{float(state.walls.coord[self.top_wall]):.7g} m makes the fluid cells (fluid.grid."
-            f"follow_top_wall, {nz} along z) {dz:.6g} m high"
-        )
-        if not dz >= self.diameter:
-            raise NumericalError(
-                f"{where}, less than the largest particle diameter {self.diameter:.4g} m that the porosity "
-                "estimate needs; use fewer cells along z or stop the wall higher"
-            )
+        dz_old = self.fs.height / nz
+        where = wall_cells(state, self.top_wall, nz, height, self.diameter)
         if not abs(height - self.fs.height) <= 0.5 * dz_old:
             raise NumericalError(
                 f"{where}; the wall moved {abs(height - self.fs.height):.4g} m in one fluid step of "
