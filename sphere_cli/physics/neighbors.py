@@ -75,7 +75,7 @@ class NeighborSearch(Module):
         self.cell_key = np.zeros(0 if self.dense else p.count, dtype=np.int64)
         self.order = np.zeros(p.count, dtype=np.int64)
         self.threshold2 = (0.5 * nl.skin) ** 2
-        self.builds_since_growth = QUIET_BUILDS + 1  # no growth seen yet (also after a restore)
+        self.builds_since_growth = QUIET_BUILDS + 1  # no growth seen yet (a restore sets the checkpoint's)
         self._spare_like(nl)
 
     def _spare_like(self, nl: NeighborList):
@@ -184,6 +184,9 @@ class NeighborSearch(Module):
         if self.springs:
             arrays["hist"] = spring_rows(nl)
         arrays["skin"] = np.float64(nl.skin)
+        # when the rows may narrow next: without it a resumed run narrows them at another build
+        # than the run it continues, and its checkpoints differ (the same pairs, other widths)
+        arrays["builds_since_growth"] = np.int64(self.builds_since_growth)
         return arrays
 
     def restore(self, state: State, arrays: dict) -> None:
@@ -198,6 +201,7 @@ class NeighborSearch(Module):
             _pack_springs(nl, arrays["hist"])
         self._spare_like(nl)
         self._reverse(nl)
+        self.builds_since_growth = int(arrays.get("builds_since_growth", QUIET_BUILDS + 1))
         if float(arrays["skin"]) != nl.skin:
             self.rebuild(state)
 
