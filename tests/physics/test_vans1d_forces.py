@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.fluid.profile_forces import fluid_velocity_at, profile_forces
+from sphere_cli.kernels.fluid.profile_forces import bracket, fluid_velocity_at, profile_forces
 from sphere_cli.physics.fluid.layer_averaging import layer_faces
 
 RHO, NU, R = 1000.0, 1.0e-6, 0.5e-3
@@ -123,3 +123,34 @@ def test_a_turbulent_fluctuation_adds_to_the_fluid_velocity_the_particle_sees():
     shifted = forces(0.008, vel - np.array(fluct), lambda z: 0.4 + 0 * z, solid=0.2)
     for a, b in zip(with_fluct[:3], shifted[:3], strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-13)
+
+
+def _bisection(centres, z):
+    """The bracket by plain bisection: the unique lo with centres[lo] <= z < centres[lo + 1]."""
+    n = len(centres)
+    if z <= centres[0]:
+        return 0, 0, 0.0
+    if z >= centres[-1]:
+        return n - 1, n - 1, 0.0
+    lo = int(np.searchsorted(centres, z, side="right")) - 1
+    return lo, lo + 1, (z - centres[lo]) / (centres[lo + 1] - centres[lo])
+
+
+@pytest.mark.parametrize("layers", [2, 3, 7, 900])
+@pytest.mark.parametrize("stretching", [1.0, 1.5, 20.0])
+def test_bracket_starts_from_even_spacing_and_finds_the_bisection_bracket(layers, stretching):
+    """The guess from evenly spaced centres is only a start: on stretched layers, at the centres
+    and one rounding step either side of them, the bracket is the bisection's, bitwise."""
+    faces = layer_faces(0.0, 0.17, layers, stretching)
+    centres = 0.5 * (faces[1:] + faces[:-1])
+    z = np.concatenate(
+        [
+            np.random.default_rng(layers).uniform(-0.01, 0.18, 2000),
+            centres,
+            faces,
+            np.nextafter(centres, 1.0),
+            np.nextafter(centres, -1.0),
+        ]
+    )
+    for height in z:
+        assert bracket(centres, height) == _bisection(centres, height)

@@ -38,8 +38,21 @@ def bracket(centres, z):
         return 0, 0, 0.0
     if z >= centres[n - 1]:
         return n - 1, n - 1, 0.0
+    # Start from the layer z would be in if the centres were evenly spaced (they are unless the
+    # layers are stretched): two comparisons confirm it, instead of ~log2(n) hard-to-predict
+    # branches. The bracket is unique (centres[lo] <= z < centres[lo + 1]), so the result is the
+    # plain bisection's whatever the guess.
     lo = 0
     hi = n - 1
+    guess = min(max(int((z - centres[0]) / (centres[n - 1] - centres[0]) * (n - 1)), 0), n - 2)
+    if centres[guess] <= z:
+        lo = guess
+    else:
+        hi = guess
+    if centres[guess + 1] > z:
+        hi = min(hi, guess + 1)
+    else:
+        lo = max(lo, guess + 1)
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if centres[mid] <= z:
