@@ -56,19 +56,21 @@ bench-lean: $(STAMP)
 	$(BIN)/python benchmarks/lean_kernel/compare.py 100000 50 9
 
 # sphere against LIGGGHTS and LAMMPS on the same settled bed, alternating rounds, 1 and 2
-# threads / MPI ranks (benchmarks/peers/). The peers are Debian's packages, installed where apt-get
-# can be run as root; a peer that is absent is skipped, saying so. PEER_SIZES to choose the beds
-# (the 100 000 bed is settled once, about 15 min of one core, and cached).
+# threads / MPI ranks, then against YADE on its bedload example's scene (configs/bedload-yade.toml),
+# one core each (benchmarks/peers/). The peers are Debian's packages, installed where apt-get can
+# be run as root; a peer that is absent is skipped, saying so. PEER_SIZES to choose the beds (the
+# 100 000 bed is settled once, about 15 min of one core, and cached).
 PEER_SIZES ?= 10000 100000
 bench-peers: $(STAMP)
-	@missing=""; for p in liggghts lmp mpirun; do command -v $$p >/dev/null || missing=1; done; \
+	@missing=""; for p in liggghts lmp mpirun yade; do command -v $$p >/dev/null || missing=1; done; \
 	if [ -n "$$missing" ] && command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
-	  echo "installing the peers (Debian: liggghts lammps openmpi-bin)"; \
+	  echo "installing the peers (Debian: liggghts lammps openmpi-bin yade)"; \
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-	    liggghts lammps openmpi-bin) >/dev/null 2>&1 || echo "the peers could not be installed"; fi
+	    liggghts lammps openmpi-bin yade) >/dev/null 2>&1 || echo "the peers could not be installed"; fi
 	@for n in $(PEER_SIZES); do \
 	  if [ $$n -ge 100000 ]; then steps=100; else steps=1000; fi; \
 	  $(BIN)/python benchmarks/peers/compare.py $$n $$steps 5 1 2 || exit 1; done
+	$(BIN)/python benchmarks/peers/bedload_compare.py 0.5 3
 
 docs: $(STAMP)
 	$(BIN)/python -m sphere_cli.config.reference docs/case-reference.md
