@@ -57,17 +57,42 @@ class StepSchedule:
 
 def advance(scene, steps: int) -> bool:
     """Advance the scene by `steps` steps with no output (library use and tests), or until the
-    last stage ends. Returns True if a stage ended on the last step taken."""
+    last stage ends. Returns True if a stage ended on the last step taken.
+
+    Where the scene's step allows it (physics/compiled_steps.py), whole runs of steps up to the
+    next after_step hook are taken in one compiled call; the step that makes the neighbour list
+    stale is finished here with the hooks. The result is bitwise the same either way."""
     state = scene.state
     step = scene.step
     kick_drift, prepare, forces, kick = step.kick_drift, step.prepare, step.forces, step.kick
     finish_step, after_step = step.finish_step, step.after_step
+    compiled = step.compiled
     clock = state.clock
-    for _ in range(steps):
-        if scene.finished:
-            break
-        for hook in kick_drift:
-            hook(state)
+
+    def after() -> None:
+        for module, hook in after_step:
+            if clock.step % module.coupling_steps == 0:
+                hook(state)
+
+    taken = 0
+    while taken < steps and not scene.finished:
+        drifted = False
+        if compiled is not None:
+            # no after_step hook runs before the last of these steps
+            run = min(
+                [steps - taken] + [m.coupling_steps - clock.step % m.coupling_steps for m, _ in after_step]
+            )
+            if run > 1:
+                done, drifted = compiled.run(state, run)
+                if done:
+                    clock.step += done
+                    taken += done
+                    after()
+                if not drifted:
+                    continue
+        if not drifted:
+            for hook in kick_drift:
+                hook(state)
         for hook in prepare:
             hook(state)
         for hook in forces:
@@ -77,9 +102,8 @@ def advance(scene, steps: int) -> bool:
         for hook in finish_step:
             hook(state)
         clock.step += 1
-        for module, hook in after_step:
-            if clock.step % module.coupling_steps == 0:
-                hook(state)
+        taken += 1
+        after()
     return scene.stages is not None and scene.stages.ended
 
 
@@ -107,6 +131,12 @@ def check_stable(scene) -> None:
         )
 
 
+# The loop takes steps in bursts of about this much wall time [s] (at most MAX_BURST steps)
+# between its looks at the stop flag and the wall-clock schedules.
+BURST_SECONDS = 0.05
+MAX_BURST = 10_000
+
+
 class Loop:
     """Runs a scene to `end_step`, calling back into the run directory for output."""
 
@@ -127,6 +157,19 @@ class Loop:
         self.observations = None if observed.follows_frames else StepSchedule.from_config(observed, clock)
         self.status = StepSchedule(wall_seconds=progress.interval)
         self.check_every = scene.case.simulation.blowup_check_every
+        self.burst = 1  # steps per call of advance, grown from the measured rate
+
+    def _next_stop(self, step: int) -> int:
+        """The next step with something on a step schedule (frames, observables, checkpoints,
+        the stability check) or the end step."""
+        stop = self.end_step
+        every = [self.frames.every_steps, self.checkpoints.every_steps, self.check_every]
+        if self.observations is not None:
+            every.append(self.observations.every_steps)
+        for n in every:
+            if n:
+                stop = min(stop, (step // n + 1) * n)
+        return stop
 
     def run(self) -> str:
         """Returns "done" or the stop reason."""
@@ -142,7 +185,16 @@ class Loop:
             if self.max_wall_seconds is not None and wallclock.monotonic() - started >= self.max_wall_seconds:
                 self.stop.request("wall-time budget (--max-wall-time) reached")
                 break
-            stage_ended = advance(scene, 1)
+            # up to the next step the loop must look at, in bursts of about BURST_SECONDS so that
+            # stop requests and wall-clock schedules are seen as promptly as step by step; with
+            # stages, one step at a time (a stage may end at any step)
+            burst = (
+                1 if scene.stages is not None else min(self._next_stop(clock.step) - clock.step, self.burst)
+            )
+            burst_start = wallclock.monotonic()
+            stage_ended = advance(scene, burst)
+            elapsed = wallclock.monotonic() - burst_start
+            self.burst = max(1, min(MAX_BURST, int(BURST_SECONDS * burst / max(elapsed, 1e-9))))
             step = clock.step
             if self.progress.rate_start is None:
                 self.progress.first_step_done(step)

@@ -109,6 +109,15 @@ class PairContactForces(Module):
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
         `spring_dt` (default: one step; 0 for the forces of the initial state)."""
+        cross, pairs = self.kernel_arguments(state, spring_dt)
+        if cross is not None:
+            cross_chunk_pairs(*cross)
+        chunk_pair_forces(*pairs)
+
+    def kernel_arguments(self, state: State, spring_dt: float | None = None) -> tuple:
+        """The arguments of cross_chunk_pairs (None with one chunk: nothing crosses) and of
+        chunk_pair_forces (kernels/contact.py; also for kernels/steps.py), valid until the
+        neighbour list is rebuilt or the thread count changes."""
         p, box, nl = state.particles, state.box, state.neighbors
         dt = state.clock.dt
         spring = dt if spring_dt is None else spring_dt
@@ -135,11 +144,10 @@ class PairContactForces(Module):
             spring,
             dt,
         )
+        cross = None
         if self.bounds.size > 2:
-            cross_chunk_pairs(
-                *common, self.cross_rows, self.cross_bounds, self.slots, self.blocks, self.block_ids
-            )
-        chunk_pair_forces(
+            cross = (*common, self.cross_rows, self.cross_bounds, self.slots, self.blocks, self.block_ids)
+        return cross, (
             *common,
             nl.rev,
             nl.rev_count,

@@ -139,3 +139,6 @@ class Step:
         self.after_step = tuple((m, m.after_step) for m in modules if defines(m, "after_step"))
         self.stateful = {m.name: m for m in modules if defines(m, "prognostic_state") and m.name}
         self.observed = tuple(m.observables for m in modules if defines(m, "observables"))
+        # many steps in one compiled call where the hooks allow it (physics/compiled_steps.py,
+        # set by the scene once its modules are ordered)
+        self.compiled = None

@@ -13,8 +13,16 @@ class Motion(Module):
     def kick_drift(self, state: State) -> None:
         """The drift also measures how far the particles have moved since the neighbour list
         was built (NeighborSearch.prepare, next in the step, reads it)."""
+        state.neighbors.moved2 = kick_drift(*self.drift_arguments(state))
+
+    def kick(self, state: State) -> None:
+        kick(*self.kick_arguments(state))
+
+    @staticmethod
+    def drift_arguments(state: State) -> tuple:
+        """The arguments of kernels/motion.py kick_drift (also for kernels/steps.py)."""
         p, box, nl = state.particles, state.box, state.neighbors
-        nl.moved2 = kick_drift(
+        return (
             p.pos,
             p.vel,
             p.angvel,
@@ -31,9 +39,10 @@ class Motion(Module):
             nl.ref_pos,
         )
 
-    def kick(self, state: State) -> None:
+    @staticmethod
+    def kick_arguments(state: State) -> tuple:
         p = state.particles
-        kick(p.vel, p.angvel, p.force, p.torque, p.inv_mass, p.inv_inertia, state.clock.dt)
+        return (p.vel, p.angvel, p.force, p.torque, p.inv_mass, p.inv_inertia, state.clock.dt)
 
     @staticmethod
     def first_unstable(state: State) -> tuple[int, int]:

@@ -251,13 +251,20 @@ class PlaneWallForces(Module):
         return np.concatenate(([0], cuts, [near.size])).astype(np.int64)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
+        wall_forces(*self.kernel_arguments(state, spring_dt))
+
+    def kernel_arguments(self, state: State, spring_dt: float | None = None) -> tuple:
+        """The arguments of wall_forces (kernels/walls.py; also for kernels/steps.py), valid
+        while the neighbour list, the walls' positions and the thread count stay as they are."""
         hist = state.walls.hist
         springs = self._spring_mask(hist, state.particles.count)
         near = self._near_walls(state, springs)
         p = state.particles
-        self._forces(state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces)
+        return self._arguments(
+            state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces
+        )
 
-    def _forces(
+    def _arguments(
         self,
         state: State,
         spring_dt,
@@ -270,11 +277,11 @@ class PlaneWallForces(Module):
         pieces,
         record=None,
         pforce=None,
-    ) -> None:
+    ) -> tuple:
         p, w, c = state.particles, state.walls, self.contact
         dt = state.clock.dt
         self._threads_blocks()
-        wall_forces(
+        return (
             p.pos,
             p.vel,
             p.angvel,
@@ -323,8 +330,20 @@ class PlaneWallForces(Module):
         springs = every_wall.copy()  # check every spring
         everyone = np.arange(p.count, dtype=np.int64)
         pieces = self._cut(everyone, hist)
-        self._forces(
-            state, 0.0, hist, scratch, scratch.copy(), springs, everyone, every_wall, pieces, every, pforce
+        wall_forces(
+            *self._arguments(
+                state,
+                0.0,
+                hist,
+                scratch,
+                scratch.copy(),
+                springs,
+                everyone,
+                every_wall,
+                pieces,
+                every,
+                pforce,
+            )
         )
         wall_totals(
             pforce,

@@ -18,6 +18,7 @@ from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import ResumeRefused
 from ..kernels.neighbors import worst_overlap
+from ..physics.compiled_steps import CompiledSteps
 from ..physics.contact import PairContactForces, one_contact_limit, stability_limit
 from ..physics.fluid_plugin import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
@@ -86,6 +87,7 @@ class Scene:
         if problems:  # a programming error: the order above breaks physics/module.py ORDER
             raise RuntimeError("; ".join(problems))
         self.step = Step(self.modules, particles=self.state.particles.count > 0)
+        self.step.compiled = CompiledSteps.of(self.step)
 
     def compute_initial_forces(self) -> None:
         """Forces of the initial state, for the first half kick: no time has passed, so the

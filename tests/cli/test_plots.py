@@ -30,6 +30,7 @@ EXPECTED = {
     "seepage-pulses-darcy": {"energy", "pore_pressure"},
     "bedload": {"energy", "bedload_profiles", "bedload_series"},
     "bedload-deposition": {"energy", "bedload_profiles", "bedload_series"},
+    "bedload-yade": {"energy", "bedload_profiles", "bedload_series"},
     "fluid-settling": {"energy", "fluid_slices"},
     "fluidized-bed": {"energy", "fluid_slices"},
 }
@@ -67,7 +68,8 @@ def test_plot_draws_the_headline_figures_with_units(tmp_path, monkeypatch, name)
             r"\b((?:duration|min_time) = )([0-9.eE+-]+)", lambda m: f"{m[1]}{float(m[2]) / 20!r}", text
         )
     case.write_text(text)
-    (tmp_path / "bedload-bed.csv").write_text((CONFIGS / "bedload-bed.csv").read_text())
+    for bed in CONFIGS.glob("*.csv"):  # the beds of the bedload cases, beside the case
+        (tmp_path / bed.name).write_text(bed.read_text())
     api.run(case, tmp_path / "run", until=_until(name))
 
     figures = {}
