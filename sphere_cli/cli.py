@@ -199,7 +199,7 @@ def plot(
 bench_app = typer.Typer(
     no_args_is_help=True,
     rich_markup_mode=None,
-    help="Benchmarks (never part of the tests): dem, fluid, darcy, vans1d, grid.",
+    help="Benchmarks (never part of the tests): dem, fluid, darcy, vans1d, grid, compile.",
 )
 app.add_typer(bench_app, name="bench")
 
@@ -300,6 +300,17 @@ def bench_vans1d(
 
     counts = _numbers(threads)
     _bench(lambda: run_vans1d_benchmark(case, counts, simulated))
+
+
+@bench_app.command("compile")
+def bench_compile(
+    repeats: int = typer.Option(1, "--repeats", min=1, help="Fresh caches timed."),
+) -> None:
+    """Seconds a dry scene waits for its kernels before the first step: cold (empty Numba cache)
+    and cached, each in a fresh process."""
+    from .bench.compile import run_compile_benchmark
+
+    _bench(lambda: run_compile_benchmark(repeats))
 
 
 @bench_app.command("grid")

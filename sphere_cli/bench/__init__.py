@@ -1,10 +1,11 @@
-"""`sphere bench dem|fluid|darcy|vans1d|grid`: benchmarks, never part of the tests' timings.
+"""`sphere bench dem|fluid|darcy|vans1d|grid|compile`: benchmarks, never part of the tests' timings.
 
     dem      particle-steps per second on the canonical DEM scene (dem.py)
     fluid    the porous Navier-Stokes fluid coupled to a DEM bed (fluid.py)
     darcy    the Darcy model coupled to the DEM (darcy.py)
     vans1d   the 1D VANS bedload case (vans1d.py)
     grid     the fluids' shared plumbing: the pressure solvers and the porosity (grid.py)
+    compile  the seconds a dry scene waits for its kernels, cold and cached (compile.py)
 
 Shared here: the stopwatch that times a method inside the step, the timing of whole steps, and
 what is recorded of the machine.

@@ -1,0 +1,55 @@
+"""`sphere bench compile`: how long a dry scene waits for its kernels before the first step,
+with an empty Numba cache (cold: every kernel compiled) and with the cache that run filled
+(cached: every kernel loaded), each in a fresh process.
+
+The scene is the canonical one of `sphere bench dem` with 64 spheres and six walls. Timed in the
+child from before `import sphere_cli` to the end of its first steps, taken both ways: many at a
+time in the compiled loop (physics/compiled_steps.py) and one at a time through the hooks, so
+that every kernel of a dry run is compiled or loaded (the neighbour build and its sort, the pair
+and wall contacts, the kicks, the compiled loop). Python's start-up is not counted.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+CHILD = """
+import time
+start = time.perf_counter()
+import json
+from sphere_cli.bench.dem import canonical_case
+from sphere_cli.config.load import parse_case
+from sphere_cli.scene.builder import build_scene
+from sphere_cli.simulation import advance
+scene = build_scene(parse_case(canonical_case(64)))
+advance(scene, 20)
+scene.step.compiled = None
+advance(scene, 1)
+print(json.dumps({"seconds": time.perf_counter() - start}))
+"""
+
+
+def _first_steps(cache: str) -> float:
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache, "NUMBA_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True)
+    return float(json.loads(out.stdout.strip().splitlines()[-1])["seconds"])
+
+
+def run_compile_benchmark(repeats: int = 1, log=print) -> dict:
+    """Cold and cached seconds of `repeats` fresh caches (module docstring)."""
+    cold, cached = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory(prefix="sphere-numba-") as cache:
+            t0 = time.perf_counter()
+            cold.append(_first_steps(cache))
+            cached.append(_first_steps(cache))
+            log(
+                f"kernels of a dry scene: cold {cold[-1]:.1f} s, cached {cached[-1]:.2f} s "
+                f"(round of {time.perf_counter() - t0:.0f} s)"
+            )
+    return {"cold_seconds": cold, "cached_seconds": cached}
