@@ -1,4 +1,4 @@
-"""Many steps of a dry DEM scene in one compiled call (physics/compiled_steps.py).
+"""Many DEM steps in one compiled call (physics/compiled_steps.py).
 
 The step's kernels are called here in the order and with the arguments the Python hooks give
 them (physics/motion.py, contact.py, walls.py), so the result is bitwise that of the step-by-step
@@ -8,8 +8,10 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
-chunk), chunk_pair_forces, wall_forces (None without walls) and kick. Returns (the complete
-steps taken, the last squared displacement, whether a drift beyond the skin ended the loop)."""
+chunk), chunk_pair_forces, wall_forces (None without walls) and kick; extra_kernel and extra,
+a module's force kernel and its arguments (a fluid's force on the particles; None without).
+Returns (the complete steps taken, the last squared displacement, whether a drift beyond the
+skin ended the loop)."""
 
 from numba import njit
 
@@ -19,7 +21,7 @@ from .walls import wall_forces
 
 
 @njit(cache=True)
-def dry_steps(steps, threshold2, drift, cross, pairs, walls, kicks):
+def many_steps(steps, threshold2, drift, cross, pairs, walls, extra_kernel, extra, kicks):
     moved2 = 0.0
     for done in range(steps):
         moved2 = kick_drift(*drift)
@@ -30,5 +32,7 @@ def dry_steps(steps, threshold2, drift, cross, pairs, walls, kicks):
         chunk_pair_forces(*pairs)
         if walls is not None:
             wall_forces(*walls)
+        if extra is not None:
+            extra_kernel(*extra)
         kick(*kicks)
     return steps, moved2, False

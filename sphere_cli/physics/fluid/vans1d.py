@@ -311,10 +311,16 @@ class Vans1d(FluidModule):
     # ---------------------------------------------------------------- every step
 
     def forces(self, state, spring_dt=None) -> None:
+        kernel, arguments = self.force_kernel(state)
+        kernel(*arguments)
+
+    def force_kernel(self, state) -> tuple:
+        """The one kernel call of `forces` and its arguments, valid until the next after_step:
+        the compiled steps call it in the loop (physics/compiled_steps.py)."""
         p, f = state.particles, state.fluid
         col = f.column
         cfg = self.cfg
-        profile_forces(
+        return profile_forces, (
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, self.fluctuating, self.fluct, p.force,
