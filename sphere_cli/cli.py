@@ -237,15 +237,24 @@ def bench_dem(
     repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
     output: Path = OUTPUT_OPTION,
+    fixed_cost_sizes: str = typer.Option(
+        "10,30,100,300,1000,3000,10000",
+        "--fixed-cost-sizes",
+        help="Particle counts of the fixed cost per step (an intercept; at least two, empty: none).",
+    ),
 ) -> None:
-    """Particle-steps per second on the canonical DEM scene, for each size, state and thread count."""
+    """Particle-steps per second on the canonical DEM scene, for each size, state and thread count,
+    and the fixed cost of a step."""
     from .bench.dem import run_benchmark
 
     chosen = tuple(s.strip() for s in states.split(",") if s.strip())
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
+    fixed = _numbers(fixed_cost_sizes, "--fixed-cost-sizes")
+    if len(fixed) == 1:
+        raise typer.BadParameter(f"--fixed-cost-sizes {fixed_cost_sizes!r}: a line needs two sizes or more")
     counts = _numbers(sizes, "--sizes"), _numbers(threads)
-    _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output))
+    _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output, fixed_cost_sizes=fixed))
 
 
 @bench_app.command("fluid")

@@ -9,7 +9,8 @@ The settled bed is made once by letting the same particles, placed on a denser l
 (SETTLE_SPACING), fall for SETTLE_TIME of simulated time with the canonical contact law and dt;
 it is cached under the user cache directory, keyed by the text of that case (an interrupted
 settling resumes from its last checkpoint).
-A last row times a sparse scene: one sphere of 0.5 mm in a
+The fixed cost of a step, the intercept of step time against N over loose scenes of 10 to
+10 000 spheres, is reported after the rows. A last row times a sparse scene: one sphere of 0.5 mm in a
 1 m cube falling onto its floor, SPARSE_STEPS steps (the search's memory and time follow the
 particle count, not the box volume over the particle size: physics/neighbors.py).
 Compile (or cache-load) time is measured apart from run time; each row reports the median of
@@ -28,6 +29,7 @@ import time
 from pathlib import Path
 
 import numba
+import numpy as np
 
 from ..config.load import parse_case
 from ..io.checkpoint import FORMAT, newest_valid_checkpoint
@@ -44,6 +46,7 @@ SETTLE_SPACING = 1.05
 SETTLE_TIME = 0.15  # s
 SETTLE_CHECKPOINTS = 0.01  # s of simulated time between checkpoints while settling
 SPARSE_STEPS = 1000
+FIXED_COST_SIZES = (10, 30, 100, 300, 1000, 3000, 10_000)  # N of the fixed-cost fit
 SPARSE_CASE = """
 title = "sparse benchmark scene: one small sphere in a 1 m cube"
 [simulation]
@@ -167,6 +170,7 @@ def run_benchmark(
     states=("loose", "settled"),
     out_dir: Path = Path("bench-results"),
     log=print,
+    fixed_cost_sizes=FIXED_COST_SIZES,
 ) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     max_threads = numba.config.NUMBA_NUM_THREADS
@@ -220,10 +224,32 @@ def run_benchmark(
                 )
             numba.set_num_threads(max_threads)
     _speedups(results, log)
+    if fixed_cost_sizes:
+        results["fixed_cost"] = _fixed_cost(fixed_cost_sizes, log)
     results["sparse"] = _sparse_row(log)
     (out_dir / "bench.json").write_text(json.dumps(results, indent=2))
     log(f"results written to {out_dir / 'bench.json'}")
     return results
+
+
+def _fixed_cost(sizes, log) -> dict:
+    """The cost of a step that does not grow with N: the intercept of a straight line through
+    the step times of loose canonical scenes of `sizes` spheres (one thread; the best
+    of 7 timings of about 2e5 particle-steps each, so that a busy machine's slices fall out)."""
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    seconds = []
+    for n in sizes:
+        scene = build_scene(parse_case(canonical_case(n)))
+        advance(scene, 20)
+        seconds.append(min(_time_steps(scene, max(20, 200_000 // n), 7)) / max(20, 200_000 // n))
+    numba.set_num_threads(threads)
+    slope, intercept = np.polyfit(sizes, seconds, 1)
+    log(
+        f"fixed cost of a step (intercept over N = {sizes[0]}..{sizes[-1]}, "
+        f"loose scenes, one thread): {intercept * 1e6:.1f} us, then {slope * 1e9:.1f} ns per particle"
+    )
+    return {"sizes": list(sizes), "step_seconds": seconds, "intercept_seconds": float(intercept)}
 
 
 def _sparse_row(log) -> dict:

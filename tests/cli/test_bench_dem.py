@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from cli_test_support import sphere_inproc
 
 
 def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
     result = sphere_inproc(
         "bench", "dem", "--sizes", "216", "--states", "loose", "--threads", "1,2", "--steps", "3",
-        "--repeats", "2", "-o", tmp_path / "out",
+        "--repeats", "2", "-o", tmp_path / "out", "--fixed-cost-sizes", "10,40",
     )  # fmt: skip
     assert result.code == 0, result.stdout + result.stderr
     report = json.loads((tmp_path / "out" / "bench.json").read_text())
@@ -33,3 +34,9 @@ def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
         one, two = rows
         assert two["speedup"] == two["particle_steps_per_second"] / one["particle_steps_per_second"]
     assert f"N = {216:>7}" in result.stdout
+    # the fixed cost: a straight line through the step times of the two sizes
+    fixed = report["fixed_cost"]
+    assert fixed["sizes"] == [10, 40] and len(fixed["step_seconds"]) == 2
+    (t10, t40) = fixed["step_seconds"]
+    assert fixed["intercept_seconds"] == pytest.approx(t10 - 10 * (t40 - t10) / 30, rel=1e-9, abs=1e-12)
+    assert "fixed cost of a step" in result.stdout
