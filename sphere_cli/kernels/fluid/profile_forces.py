@@ -29,7 +29,7 @@ from numba import njit, prange
 from .layer_averaging import slice_volume
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bracket(centres, z):
     """(lo, hi, w): z lies between centres[lo] and centres[hi] at the fraction w; lo = hi and
     w = 0 beyond the first or the last centre."""
