@@ -15,8 +15,9 @@ def _kernel_cache_dir() -> Path:
     """Numba's cache checks only the source file of each kernel, not the functions it inlines
     from other files: a cache keyed by the hash of every kernel source cannot go stale."""
     digest = hashlib.sha256()
-    for path in sorted((Path(__file__).parent / "kernels").glob("*.py")):
-        digest.update(path.name.encode())
+    kernels = Path(__file__).parent / "kernels"
+    for path in sorted(kernels.rglob("*.py")):
+        digest.update(str(path.relative_to(kernels)).encode())
         digest.update(path.read_bytes())
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return base / "sphere" / "numba" / digest.hexdigest()[:16]

@@ -5,7 +5,8 @@ The run is done when the last stage ends (physics/stages.py) or at its end step.
 stability guard (every `blowup_check_every` steps and before
 every checkpoint), trajectory frames, observables, checkpoints and status, each on its own
 schedule (observables follow the frames unless output.observables sets a schedule of its own).
-A stop request (signal, wall-time budget) writes a checkpoint at the next step boundary.
+A stop request (signal, wall-time budget) writes a checkpoint at the end of the burst of steps
+under way (about BURST_SECONDS of wall time).
 """
 
 from __future__ import annotations
@@ -87,6 +88,8 @@ def advance(scene, steps: int) -> bool:
                 if done:
                     clock.step += done
                     taken += done
+                    # only the last whole step can be a coupling step (run bounds it); when the
+                    # next step's kick-drift is already done, that one is not
                     after()
                 if not drifted:
                     continue
@@ -157,7 +160,9 @@ class Loop:
         self.observations = None if observed.follows_frames else StepSchedule.from_config(observed, clock)
         self.status = StepSchedule(wall_seconds=progress.interval)
         self.check_every = scene.case.simulation.blowup_check_every
-        self.burst = 1  # steps per call of advance, grown from the measured rate
+        # steps per call of advance, grown from the measured rate; the first call takes two, so
+        # that the compiled steps (physics/compiled_steps.py) compile before the progress rate starts
+        self.burst = 2
 
     def _next_stop(self, step: int) -> int:
         """The next step with something on a step schedule (frames, observables, checkpoints,

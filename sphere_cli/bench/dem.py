@@ -182,7 +182,7 @@ def run_benchmark(
         log(f"warning: {note}")
     t0 = time.perf_counter()
     warm = build_scene(parse_case(canonical_case(64)))
-    advance(warm, 1)
+    advance(warm, 2)  # two: the compiled steps too (physics/compiled_steps.py)
     results["first_call_seconds"] = time.perf_counter() - t0
     log(f"compile / cache load of the kernels: {results['first_call_seconds']:.2f} s")
     for n in sizes:

@@ -8,10 +8,11 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
-chunk), chunk_pair_forces, wall_forces (None without walls) and kick; extra_kernel and extra,
-a module's force kernel and its arguments (a fluid's force on the particles; None without).
-Returns (the complete steps taken, the last squared displacement, whether a drift beyond the
-skin ended the loop)."""
+chunk), chunk_pair_forces, wall_forces (None without walls) and kick. Returns (the complete
+steps taken, the last squared displacement, whether a drift beyond the skin ended the loop).
+A fluid whose force on the particles is one kernel has its own loop calling `contacts` and that
+kernel (kernels/fluid/profile_forces.py vans1d_steps): a kernel passed as an argument would key
+Numba's cache by an object that differs in every process, so it would compile on every run."""
 
 from numba import njit
 
@@ -21,18 +22,22 @@ from .walls import wall_forces
 
 
 @njit(cache=True)
-def many_steps(steps, threshold2, drift, cross, pairs, walls, extra_kernel, extra, kicks):
+def contacts(cross, pairs, walls):
+    """The pair contacts, then the walls' (the forces hooks' order)."""
+    if cross is not None:
+        cross_chunk_pairs(*cross)
+    chunk_pair_forces(*pairs)
+    if walls is not None:
+        wall_forces(*walls)
+
+
+@njit(cache=True)
+def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks):
     moved2 = 0.0
     for done in range(steps):
         moved2 = kick_drift(*drift)
         if moved2 > threshold2:
             return done, moved2, True
-        if cross is not None:
-            cross_chunk_pairs(*cross)
-        chunk_pair_forces(*pairs)
-        if walls is not None:
-            wall_forces(*walls)
-        if extra is not None:
-            extra_kernel(*extra)
+        contacts(cross, pairs, walls)
         kick(*kicks)
     return steps, moved2, False

@@ -2,9 +2,10 @@
 the hooks one step at a time, without the interpreter's ~18 us a step.
 
 It applies when the step is exactly: the particles' kick-drift, the neighbour search, the pair
-contacts, optionally the plane-wall contacts and one more force whose hook is a single kernel
-call that its module hands over (`force_kernel`: the 1D VANS fluid's force on the particles),
-the particles' kick, and nothing after the kick (physics/module.py). Anything else in the step
+contacts, optionally the plane-wall contacts and one more force from a module that has a
+compiled loop with that force in it (`steps_kernel`, and `force_arguments` for its kernel: the
+1D VANS fluid's force on the particles), the particles' kick, and nothing after the kick
+(physics/module.py). Anything else in the step
 (moving walls, the energy budget, a fluid with another force or its own kick, a hook replaced by
 a wrapper) keeps the step-by-step loop. simulation.advance bounds each call by the next step
 where an after_step hook runs (a fluid's coupling, stages every step), so those run in Python.
@@ -12,7 +13,7 @@ where an after_step hook runs (a fluid's coupling, stages every step), so those 
 
 from __future__ import annotations
 
-from ..kernels.steps import many_steps
+from ..kernels.steps import dem_steps
 from ..state import State
 from .contact import PairContactForces
 from .module import Step
@@ -30,6 +31,18 @@ def _own(hook, name: str) -> bool:
 def _is(hook, cls, name: str) -> bool:
     """True if `hook` is cls's own method `name`, bound to an instance of exactly cls."""
     return type(getattr(hook, "__self__", None)) is cls and _own(hook, name)
+
+
+def _has_steps_kernel(hook) -> bool:
+    """True if `hook` is the forces method of the class that gives the compiled loop with that
+    force (`steps_kernel`): a subclass with forces of its own does not inherit the loop."""
+    if not _own(hook, "forces"):
+        return False
+    cls = type(hook.__self__)
+    for base in cls.__mro__:
+        if "steps_kernel" in vars(base):
+            return vars(base).get("forces") is cls.forces
+    return False
 
 
 class CompiledSteps:
@@ -55,7 +68,7 @@ class CompiledSteps:
         contact, walls, extra = forces.pop(0).__self__, None, None
         if forces and _is(forces[0], PlaneWallForces, "forces"):
             walls = forces.pop(0).__self__
-        if forces and _own(forces[0], "forces") and hasattr(forces[0].__self__, "force_kernel"):
+        if forces and _has_steps_kernel(forces[0]):
             extra = forces.pop(0).__self__
         if forces:
             return None
@@ -67,10 +80,13 @@ class CompiledSteps:
         caller finishes that step with the hooks, from `prepare` on)."""
         cross, pairs = self.contact.kernel_arguments(state)
         walls = None if self.walls is None else self.walls.kernel_arguments(state)
-        kernel, extra = (None, None) if self.extra is None else self.extra.force_kernel(state)
         drift, kicks = Motion.drift_arguments(state), Motion.kick_arguments(state)
-        done, moved2, drifted = many_steps(
-            steps, self.search.threshold2, drift, cross, pairs, walls, kernel, extra, kicks
-        )
+        threshold2 = self.search.threshold2
+        if self.extra is None:
+            done, moved2, drifted = dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks)
+        else:
+            extra = self.extra.force_arguments(state)
+            loop = self.extra.steps_kernel
+            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks)
         state.neighbors.moved2 = moved2
         return int(done), bool(drifted)

@@ -5,12 +5,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
 import numba
 import numpy as np
 import pytest
+from numba.core import types
 
+from sphere_cli import api
 from sphere_cli.bench.dem import canonical_case
 from sphere_cli.config.load import load_case, parse_case
+from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.kernels.fluid.profile_forces import vans1d_steps
+from sphere_cli.kernels.steps import dem_steps
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
@@ -86,3 +92,42 @@ def test_a_wrapped_hook_keeps_the_step_by_step_loop():
     contact.forces = lambda state, spring_dt=None: original(state, spring_dt)
     scene.order_modules()
     assert scene.step.compiled is None
+
+
+def test_a_subclass_with_forces_of_its_own_keeps_the_step_by_step_loop():
+    """A module whose forces hook is overridden does not inherit the compiled loop of its base
+    (the loop would skip whatever the override adds)."""
+    scene = build_scene(load_case(CONFIGS / "bedload.toml"))
+    assert scene.step.compiled is not None and scene.step.compiled.extra is scene.fluid
+    base = type(scene.fluid)
+    scene.fluid.__class__ = type("Wrapped", (base,), {"forces": lambda self, s, spring_dt=None: None})
+    scene.order_modules()
+    assert scene.step.compiled is None
+
+
+def test_the_compiled_loops_take_no_function_arguments():
+    """A kernel passed as an argument keys Numba's cache by an object that is new in every
+    process: that loop would compile on every run and add a cache file each time."""
+    scene = build_scene(load_case(CONFIGS / "bedload.toml"))
+    advance(scene, 50)
+    for loop in (dem_steps, vans1d_steps):
+        for signature in loop.signatures:
+            assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
+    assert vans1d_steps.signatures
+
+
+def test_run_frames_and_checkpoints_fall_on_their_steps(tmp_path):
+    """The run loop takes steps in bursts (simulation.Loop); the frames, checkpoints and the
+    end still fall on the steps of their schedules."""
+    case = tmp_path / "case.toml"
+    text = canonical_case(64, duration=53 * 4.0e-6)
+    text = text.replace("[output.frames]\nevery_time", "[output.frames]\nevery_steps = 7\n#")
+    text = text.replace("[output.checkpoints]\nevery_time", "[output.checkpoints]\nevery_steps = 10\n#")
+    text = text.replace("keep = 1", "keep = 20")
+    case.write_text(text)
+    api.run(case, tmp_path / "run")
+    with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
+        frames = list(f["particles/trajectory/position/step"][...])
+    assert frames == [0, 7, 14, 21, 28, 35, 42, 49, 53]
+    checkpoints = [read_checkpoint(c).step for c in list_checkpoints(tmp_path / "run" / "checkpoints")]
+    assert checkpoints == [0, 10, 20, 30, 40, 50, 53]  # the first one at the start

@@ -26,6 +26,8 @@ import math
 
 from numba import njit, prange
 
+from ..motion import kick, kick_drift
+from ..steps import contacts
 from .layer_averaging import slice_volume
 
 
@@ -198,3 +200,18 @@ def drag_coefficients(
         k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)
         drag_coef[i] = k
         drag_x[i] = k * ur
+
+
+@njit(cache=True)
+def vans1d_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks):
+    """kernels/steps.py dem_steps with the fluid's force on the particles after the contacts
+    (profile_forces with the argument tuple `fluid`), where the forces hooks put it."""
+    moved2 = 0.0
+    for done in range(steps):
+        moved2 = kick_drift(*drift)
+        if moved2 > threshold2:
+            return done, moved2, True
+        contacts(cross, pairs, walls)
+        profile_forces(*fluid)
+        kick(*kicks)
+    return steps, moved2, False

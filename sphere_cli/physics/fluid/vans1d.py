@@ -18,7 +18,7 @@ import numpy as np
 
 from ...config.consistency import particle_materials
 from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
-from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces
+from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces, vans1d_steps
 from ...kernels.fluid.turbulent_fluctuations import turbulent_fluctuations
 from ...kernels.fluid.vans1d import (
     MIXING_KINDS,
@@ -310,17 +310,19 @@ class Vans1d(FluidModule):
 
     # ---------------------------------------------------------------- every step
 
-    def forces(self, state, spring_dt=None) -> None:
-        kernel, arguments = self.force_kernel(state)
-        kernel(*arguments)
+    # the compiled steps with this module's force in the loop (physics/compiled_steps.py)
+    steps_kernel = staticmethod(vans1d_steps)
 
-    def force_kernel(self, state) -> tuple:
-        """The one kernel call of `forces` and its arguments, valid until the next after_step:
-        the compiled steps call it in the loop (physics/compiled_steps.py)."""
+    def forces(self, state, spring_dt=None) -> None:
+        profile_forces(*self.force_arguments(state))
+
+    def force_arguments(self, state) -> tuple:
+        """The arguments of the one kernel call of `forces`, valid until the next after_step
+        (also for the compiled steps)."""
         p, f = state.particles, state.fluid
         col = f.column
         cfg = self.cfg
-        return profile_forces, (
+        return (
             p.pos, p.vel, p.radius, f.selected, col.faces, col.centres, col.u, f.profiles.solid_fraction,
             col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             self.gravity, cfg.buoyancy == "full", cfg.lift_coefficient, self.fluctuating, self.fluct, p.force,
