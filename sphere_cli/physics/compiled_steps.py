@@ -5,10 +5,10 @@ It applies when the step is exactly: the particles' kick-drift, the neighbour se
 contacts, optionally the plane-wall contacts and one more force from a module that has a
 compiled loop with that force in it (`steps_kernel`, and `force_arguments` for its kernel: the
 1D VANS fluid's force on the particles), the particles' kick, and nothing after the kick
-(physics/module.py). Anything else in the step
-(moving walls, the energy budget, a fluid with another force or its own kick, a hook replaced by
-a wrapper) keeps the step-by-step loop. simulation.advance bounds each call by the next step
-where an after_step hook runs (a fluid's coupling, stages every step), so those run in Python.
+(physics/module.py). Anything else in the step (moving walls, the energy budget, a fluid with
+another force or its own kick, a hook replaced by a wrapper) keeps the step-by-step loop.
+simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
+coupling, stages every step), so those run in Python.
 """
 
 from __future__ import annotations
