@@ -49,6 +49,7 @@ test: $(STAMP) $(PARAVIEW_STAMP)
 
 bench: $(STAMP)
 	$(BIN)/sphere bench dem
+	$(BIN)/sphere bench compile
 
 # sphere against a lean hand-written C kernel of the same scene, side by side (needs gcc)
 bench-lean: $(STAMP)
