@@ -111,8 +111,9 @@ def _drive(
         if outcome != "done":
             log.warning("stopped early (%s) at step %d; checkpoint written", outcome, clock.step)
             raise StoppedEarly(
-                f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a checkpoint "
-                f"was written: continue with `sphere resume {rundir.path}`"
+                reason=outcome,
+                message=f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a "
+                f"checkpoint was written: continue with `sphere resume {rundir.path}`",
             )
         log.info(
             "done at step %d (t = %.6g s), %.3g steps/s, %.3g particle-steps/s",
@@ -142,8 +143,13 @@ def run(
     handle_signals: bool = False,
     show_progress: bool = False,
     until: float | None = None,
+    origin: str | Path | None = None,
 ) -> RunResult:
+    """Run a case in a new run directory. `origin`: the case file whose folder resolves the
+    case's relative paths, if not the case's own (a sweep member's: sphere_cli/sweep.py)."""
     loaded = _with_duration(load_case(case_path), until)
+    if origin is not None:
+        loaded = dataclasses.replace(loaded, origin=Path(origin))
     set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
@@ -151,7 +157,7 @@ def run(
     try:
         # the directory and status.json exist from the start: a batch job's monitor sees the run
         # while its first scene compiles the kernels (a minute or more on a machine's first run)
-        rundir.prepare_new(overwrite, loaded.text, Path(case_path))
+        rundir.prepare_new(overwrite, loaded.text, Path(origin if origin is not None else case_path))
         try:
             log = rundir.logger()
             log.info("case %s -> %s", case_path, rundir.path)

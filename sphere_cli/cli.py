@@ -9,14 +9,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 import typer
 
 from . import api
-from .errors import SphereError, StoppedEarly
-from .runtime import parse_wall_time
+from .errors import SphereError, StoppedEarly, UsageError
+from .runtime import StopFlag, parse_wall_time, signal_handlers
 
 app = typer.Typer(
     add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish
@@ -113,7 +114,7 @@ def run(
     max_wall_time: str | None = typer.Option(
         None,
         "--max-wall-time",
-        help="Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00.",
+        help=WALL_TIME_HELP,
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
 ) -> None:
@@ -144,7 +145,7 @@ def resume(
     max_wall_time: str | None = typer.Option(
         None,
         "--max-wall-time",
-        help="Checkpoint and exit 75 after this long: 3600 (s), 45m, 2h30m, or SLURM's 2:30:00, 1-00:00:00.",
+        help=WALL_TIME_HELP,
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
 ) -> None:
@@ -393,6 +394,144 @@ def verify(
     if not report["passed"]:
         typer.echo(f"sphere: verification failed: {', '.join(report['failed'])}", err=True)
         raise typer.Exit(NumericalError.exit_code)
+
+
+@app.command()
+def sweep(
+    case: Path = typer.Argument(
+        ..., metavar="CASE", help="Case file (TOML), or the folder of a sweep made before (to run it on)."
+    ),
+    vary: list[str] | None = typer.Option(
+        None,
+        "--vary",
+        metavar="KEY=VALUES",
+        help="A key and its values: particles.seed=1..32 (integers, both ends), contact.friction=0.3,0.5 "
+        "(TOML values separated by commas). Repeat for more keys: every combination is a member.",
+    ),
+    zipped: bool = typer.Option(
+        False, "--zip", help="Pair the values of the --vary options (the i-th of each) instead of combining."
+    ),
+    output: Path | None = typer.Option(
+        None, "-o", "--output", help="Sweep folder (default runs/<case name>-sweep)."
+    ),
+    local: int | None = typer.Option(
+        None, "--local", min=1, metavar="N", help="Run the members not done here, N processes at a time."
+    ),
+    threads: int | None = typer.Option(
+        None,
+        "--threads",
+        min=1,
+        help="Threads per member (default: 1 in the SLURM script; with --local, the cores shared out).",
+    ),
+) -> None:
+    """Run one case many times with keys varied: write each member's case and run directory and a
+    SLURM job array (sweep.sbatch), and with --local run the members here. Run it again to
+    continue: members done are skipped, stopped or killed ones resume from their checkpoints."""
+    from . import sweep as sweeps
+
+    try:
+        if case.is_dir() and (case / sweeps.SWEEP_FILE).is_file():
+            if vary:
+                raise UsageError(f"{case}: is a sweep already; give its case file to make one with --vary")
+            made = sweeps.Sweep.load(case)
+        else:
+            varies = [sweeps.parse_vary(text) for text in vary or []]
+            made = sweeps.create(case, varies, zipped, output, threads or 1)
+        typer.echo(f"sweep: {len(made.names)} members in {made.path} (members.csv lists their values)")
+        if local is None:
+            typer.echo(
+                f"run them: sbatch {made.path}/sweep.sbatch, or here: sphere sweep {made.path} --local N\n"
+                f"results: sphere sweep-summary {made.path}"
+            )
+            return
+        per_member = threads or max(1, (os.cpu_count() or 1) // local)
+        stop = StopFlag()
+        with signal_handlers(stop, True):
+            code = sweeps.run_local(
+                made, local, per_member, stop, log=lambda line: typer.echo(f"sweep: {line}")
+            )
+        typer.echo(f"sweep: summary in {sweeps.write_summary(made, sweeps.summary(made))}")
+    except SphereError as exc:
+        _fail(exc)
+    except KeyboardInterrupt:
+        _interrupted()
+    if code == StoppedEarly.exit_code:
+        typer.echo(f"sphere: sweep stopped; continue: sphere sweep {made.path} --local {local}", err=True)
+    elif code:
+        typer.echo("sphere: some members did not finish (see their logs above)", err=True)
+    raise typer.Exit(code)
+
+
+@app.command("sweep-member")
+def sweep_member(
+    sweep_dir: Path = typer.Argument(..., metavar="SWEEP_DIR", help="Folder made by `sphere sweep`."),
+    member: str = typer.Argument(..., metavar="MEMBER", help="Member name (m003) or index (3)."),
+    max_wall_time: str | None = typer.Option(None, "--max-wall-time", help=WALL_TIME_HELP),
+    requeue: bool = typer.Option(
+        False,
+        "--requeue",
+        help="In a SLURM job: when stopped by SIGUSR1 or --max-wall-time, requeue the task (scontrol) "
+        "and exit 0.",
+    ),
+    quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
+) -> None:
+    """Run one member of a sweep: start it, continue it from its checkpoint, or, if it is done,
+    nothing (what each task of sweep.sbatch runs)."""
+    from . import sweep as sweeps
+
+    try:
+        made = sweeps.Sweep.load(sweep_dir)
+        name = made.member(member)
+        result = sweeps.run_member(
+            made,
+            name,
+            max_wall_time=_wall_time(max_wall_time),
+            handle_signals=True,
+            show_progress=not quiet,
+        )
+    except StoppedEarly as exc:
+        if requeue and not (exc.reason or "").startswith(("SIGTERM", "SIGINT")):
+            problem = sweeps.requeue_task()
+            if problem is None:
+                typer.echo(f"sphere: {exc}; task requeued", err=True)
+                raise typer.Exit(0) from None
+            typer.echo(f"sphere: {problem}", err=True)
+        _fail(exc)
+    except SphereError as exc:
+        _fail(exc)
+    except KeyboardInterrupt:
+        _interrupted()
+    if result is None:
+        typer.echo(f"{name}: done already ({made.run_dir(name)})")
+    else:
+        _report(result)
+
+
+@app.command("sweep-summary")
+def sweep_summary(
+    sweep_dir: Path = typer.Argument(..., metavar="SWEEP_DIR", help="Folder made by `sphere sweep`."),
+    as_json: bool = typer.Option(False, "--json", help="Print the table as JSON."),
+) -> None:
+    """Each member's values, state and last observables, as one table (SWEEP_DIR/summary.csv)."""
+    from . import sweep as sweeps
+
+    try:
+        made = sweeps.Sweep.load(sweep_dir)
+        rows = sweeps.summary(made)
+        path = sweeps.write_summary(made, rows)
+    except SphereError as exc:
+        _fail(exc)
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    states = {}
+    for row in rows:
+        states[row["state"]] = states.get(row["state"], 0) + 1
+    for row in rows:
+        progress = f"step {row['step']}/{row['end_step']}" if row["step"] is not None else ""
+        values = ", ".join(f"{v.key} = {row[v.key]}" for v in made.varies)
+        typer.echo(f"{row['member']}  {row['state']:<11}  {progress:<20}  {values}")
+    typer.echo(", ".join(f"{count} {state}" for state, count in states.items()) + f"; table: {path}")
 
 
 def _interrupted() -> None:

@@ -39,9 +39,14 @@ class OutputError(SphereError):
 
 
 class StoppedEarly(SphereError):
-    """Stopped on request (signal or wall-time budget) after writing a checkpoint (EX_TEMPFAIL)."""
+    """Stopped on request (signal or wall-time budget) after writing a checkpoint (EX_TEMPFAIL).
+    `reason`: what asked for the stop ("SIGTERM received", the wall-time budget)."""
 
     exit_code = 75
+
+    def __init__(self, message: str, reason: str | None = None):
+        super().__init__(message)
+        self.reason = reason
 
 
 class ResumeRefused(SphereError):

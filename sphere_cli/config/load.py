@@ -118,7 +118,9 @@ def load_case(path: str | Path) -> LoadedCase:
     return parse_case(text, path)
 
 
-def parse_case(text: str, path: Path | None = None) -> LoadedCase:
+def parse_case(text: str, path: Path | None = None, show_warnings: bool = True) -> LoadedCase:
+    """The case in `text` validated (`path` names it in messages); its warnings printed unless
+    `show_warnings` is False (a caller that reports them itself: sphere_cli/sweep.py)."""
     where = str(path) if path is not None else "<case>"
     try:
         data = tomli.loads(text)
@@ -140,7 +142,7 @@ def parse_case(text: str, path: Path | None = None) -> LoadedCase:
     problems = check_consistency(case)
     if problems:
         raise CaseError(_report(where, text, [(loc, _value_at(data, loc), msg) for loc, msg in problems]))
-    warnings = case_warnings(case)
+    warnings = case_warnings(case) if show_warnings else []
     if warnings:
         lines = KeyLines(text)
         for loc, message in warnings:
@@ -212,21 +214,21 @@ _MISSING = object()
 
 def _toml_value(value) -> str:
     """A value as it would be written in TOML, for messages (long tables and arrays elided)."""
-    text = _toml_text(value)
+    text = toml_text(value)
     return text if len(text) <= 80 else text[:76] + " ..."
 
 
-def _toml_text(value) -> str:
+def toml_text(value) -> str:
     """A value written in TOML (inline tables and arrays; None, not set, is left out of tables)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
         return json.dumps(value, ensure_ascii=False)  # JSON's escapes are TOML's
     if isinstance(value, dict):
-        items = [f"{_toml_key(k)} = {_toml_text(v)}" for k, v in value.items() if v is not None]
+        items = [f"{_toml_key(k)} = {toml_text(v)}" for k, v in value.items() if v is not None]
         return "{ " + ", ".join(items) + " }" if items else "{}"
     if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_text(v) for v in value) + "]"
+        return "[" + ", ".join(toml_text(v) for v in value) + "]"
     return repr(value) if isinstance(value, float) else str(value)
 
 
@@ -362,7 +364,7 @@ def _toml_table(table: dict, path: tuple, out: list[str]) -> None:
         if (isinstance(value, dict) and value) or _is_table_array(value):
             nested.append((key, value))
         else:
-            out.append(f"{_toml_key(key)} = {_toml_text(value)}")
+            out.append(f"{_toml_key(key)} = {toml_text(value)}")
     for key, value in nested:
         name = ".".join(_toml_key(k) for k in (*path, key))
         for item in value if isinstance(value, list) else [value]:

@@ -61,13 +61,31 @@ def _checkpoint_entry(path: Path) -> dict:
 READ_RETRY_DELAYS = (0.2, 0.5, 1.0)
 
 
-def _trajectory(path: Path) -> dict:
+def _retrying(read, path: Path):
     for delay in READ_RETRY_DELAYS:
         try:
-            return _read_trajectory(path)
+            return read(path)
         except OutputError:
             time.sleep(delay)
-    return _read_trajectory(path)
+    return read(path)
+
+
+def _trajectory(path: Path) -> dict:
+    return _retrying(_read_trajectory, path)
+
+
+def last_observables(path: Path) -> dict[str, np.ndarray]:
+    """The last sample of every observable that has one, as stored (full precision), from a
+    trajectory that may be growing."""
+    return _retrying(_read_last_observables, path)
+
+
+def _read_last_observables(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with h5py.File(path, "r") as f:
+            return {name: g["value"][-1] for name, g in f["observables"].items() if g["value"].shape[0]}
+    except Exception as exc:  # a damaged file can fail in any way inside h5py
+        raise OutputError(f"{path}: not a readable sphere trajectory ({type(exc).__name__}: {exc})") from None
 
 
 def _read_trajectory(path: Path) -> dict:

@@ -218,6 +218,22 @@ class RunDirectory:
             raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
         self._lock_fd = fd
 
+    def busy(self) -> bool:
+        """Whether some process holds the writer lock now (the lock is only tested, not kept)."""
+        if self._lock_fd is not None or not self.marker.is_file():
+            return False
+        try:
+            fd = os.open(self.marker, os.O_RDONLY)
+        except OSError:
+            return False
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            return exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+        finally:
+            os.close(fd)  # closing releases a lock taken here
+        return False
+
     def unlock(self) -> None:
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # closing releases the flock

@@ -1,0 +1,260 @@
+"""`sphere sweep`: ensembles of one case with keys varied, run as a SLURM job array or locally.
+
+The values on the command line, the members' cases (checked before anything is written), the
+job-array script (shellcheck, and bash running a task with a stand-in Python), a member that
+requeues its own SLURM task, and a 6-member sweep run locally, killed (every process, as a node
+failure would) and run again: it resumes, and a member that was cut off ends bitwise where an
+uninterrupted run of its case ends. The summary table is checked against the trajectories as
+h5py reads them.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import tomli
+from cli_test_support import TINY, assert_clean_error, sphere_inproc
+
+from sphere_cli import api
+from sphere_cli import sweep as sweeps
+from sphere_cli.errors import ResumeRefused, StoppedEarly, UsageError
+from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint, read_checkpoint
+
+SHELLCHECK = shutil.which("shellcheck") or str(Path(sys.executable).with_name("shellcheck"))
+
+
+def test_vary_values_as_typed():
+    assert sweeps.parse_vary("particles.seed=1..4") == sweeps.Vary("particles.seed", (1, 2, 3, 4))
+    assert sweeps.parse_vary("contact.friction=0.3,0.5").values == (0.3, 0.5)
+    assert sweeps.parse_vary("contact.model=hertz-mindlin,linear").values == ("hertz-mindlin", "linear")
+    assert sweeps.parse_vary('contact.model="linear"').values == ("linear",)
+    assert sweeps.parse_vary("domain.gravity=[0,0,-9.81],[0,0,-1.62]").values == (
+        [0, 0, -9.81],
+        [0, 0, -1.62],
+    )
+    assert sweeps.parse_vary("walls.0.velocity=[0,0,1]").parts == ("walls", 0, "velocity")
+    for bad in ("particles.seed", "=1,2", "particles.seed=", "particles.seed=5..1", "a b=1", "x=1 2,(3)"):
+        with pytest.raises(UsageError, match="--vary"):
+            sweeps.parse_vary(bad)
+
+
+def test_members_every_combination_or_zipped():
+    a, b = sweeps.Vary("a", (1, 2, 3)), sweeps.Vary("b", (0.1, 0.2))
+    assert sweeps.combinations([a, b], False) == [(1, 0.1), (1, 0.2), (2, 0.1), (2, 0.2), (3, 0.1), (3, 0.2)]
+    assert sweeps.combinations([a, sweeps.Vary("c", (7, 8, 9))], True) == [(1, 7), (2, 8), (3, 9)]
+    with pytest.raises(UsageError, match="a: 3, b: 2"):
+        sweeps.combinations([a, b], True)
+    assert sweeps.member_names(3) == ["m000", "m001", "m002"]
+    assert sweeps.member_names(1001)[-1] == "m1000"
+
+
+@pytest.fixture
+def base(tmp_path) -> Path:
+    case = tmp_path / "bed.toml"
+    case.write_text(TINY)
+    return case
+
+
+def test_sweep_folder_and_member_cases(base, tmp_path):
+    out = tmp_path / "sw"
+    varies = [sweeps.parse_vary("particles.seed=1..3"), sweeps.parse_vary("contact.friction=0.3,0.5")]
+    made = sweeps.create(base, varies, False, out)
+    assert made.names == [f"m00{k}" for k in range(6)]
+    table = (out / "members.csv").read_text().splitlines()
+    assert table[0] == "member,particles.seed,contact.friction"
+    assert table[4] == "m003,2,0.5"
+    case = tomli.loads((out / "cases" / "m003.toml").read_text())
+    assert case["particles"]["seed"] == 2 and case["contact"]["friction"] == 0.5
+    # every other key as in the base case
+    reference = tomli.loads(TINY)
+    case["particles"].pop("seed"), case["contact"].pop("friction")
+    assert case == reference
+    manifest = json.loads((out / "sweep.json").read_text())
+    assert manifest["members"][3] == {
+        "name": "m003",
+        "values": {"particles.seed": 2, "contact.friction": 0.5},
+    }
+    assert manifest["base_case"] == str(base.resolve())
+    # the same sweep again: found as it is; another one in its folder: refused, members kept
+    again = sweeps.create(base, varies, False, out)
+    assert again.names == made.names
+    with pytest.raises(ResumeRefused, match="vary"):
+        sweeps.create(base, [sweeps.parse_vary("particles.seed=1..4")], False, out)
+    assert (out / "cases" / "m005.toml").is_file()
+
+
+@pytest.mark.parametrize(
+    "vary, code, fragments",
+    [
+        ("contact.friction=0.5,-1", 65, ["sweep member m001", "contact.friction = -1", "contact.friction"]),
+        ("contact.frictoin=0.5", 65, ["sweep member m000", "contact.frictoin"]),
+        ("walls.3.face=z+", 2, ["walls has 1 entries", "index 3"]),
+        ("particles.count.value=3", 2, ["particles.count is a value"]),
+        ("contact.friction", 2, ["--vary 'contact.friction'", "KEY=VALUES"]),
+    ],
+)
+def test_bad_sweep_is_refused_before_anything_is_written(base, tmp_path, vary, code, fragments):
+    out = tmp_path / "sw"
+    result = sphere_inproc("sweep", base, "--vary", vary, "-o", out)
+    assert_clean_error(result, code, *fragments)
+    assert not out.exists()
+
+
+def test_sweep_folder_given_again_with_vary_is_a_usage_error(base, tmp_path):
+    out = tmp_path / "sw"
+    assert sphere_inproc("sweep", base, "--vary", "particles.seed=1,2", "-o", out).code == 0
+    assert_clean_error(sphere_inproc("sweep", out, "--vary", "particles.seed=3"), 2, "is a sweep already")
+    assert_clean_error(sphere_inproc("sweep-member", out, "7"), 2, "no member '7'", "m000..m001")
+    assert_clean_error(sphere_inproc("sweep-summary", tmp_path), 66, "not a sweep directory")
+
+
+def test_job_array_script_passes_shellcheck_and_runs_its_task(base, tmp_path):
+    out = tmp_path / "sw"
+    sweeps.create(base, [sweeps.parse_vary("particles.seed=1..5")], False, out, threads=4)
+    script = out / "sweep.sbatch"
+    text = script.read_text()
+    assert "#SBATCH --array=0-4" in text and "#SBATCH --cpus-per-task=4" in text
+    checked = subprocess.run([SHELLCHECK, "--severity=style", str(script)], capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout
+    # a task as SLURM starts it, with a stand-in for the Python that records what it is given
+    stand_in = tmp_path / "python"
+    stand_in.write_text('#!/bin/bash\necho "$NUMBA_NUM_THREADS $OMP_NUM_THREADS $*" > "$STUB_LOG"\n')
+    stand_in.chmod(0o755)
+    env = {
+        **os.environ,
+        "SLURM_ARRAY_TASK_ID": "3",
+        "SLURM_CPUS_PER_TASK": "4",
+        "SPHERE_PYTHON": str(stand_in),
+    }
+    env["STUB_LOG"] = str(tmp_path / "log")
+    assert subprocess.run(["bash", str(script)], env=env).returncode == 0
+    assert (tmp_path / "log").read_text().split() == [
+        "4", "4", "-m", "sphere_cli", "sweep-member", str(out.resolve()), "3", "--requeue", "--quiet"
+    ]  # fmt: skip
+    # outside a job array it says so, and starts nothing
+    env.pop("SLURM_ARRAY_TASK_ID")
+    (tmp_path / "log").unlink()
+    refused = subprocess.run(["bash", str(script)], env=env, capture_output=True, text=True)
+    assert refused.returncode != 0 and "sbatch" in refused.stderr and not (tmp_path / "log").exists()
+
+
+def test_the_users_slurm_template_passes_shellcheck():
+    template = Path(__file__).parents[2] / "docs" / "slurm" / "sphere-job.sh"
+    checked = subprocess.run([SHELLCHECK, "--severity=style", str(template)], capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stdout
+
+
+@pytest.fixture
+def scontrol(tmp_path, monkeypatch) -> Path:
+    """A stand-in `scontrol` on PATH that records its arguments; SLURM's variables of array task
+    77_4."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    log = tmp_path / "scontrol.log"
+    (bin_dir / "scontrol").write_text(f'#!/bin/bash\necho "$@" >> {log}\n')
+    (bin_dir / "scontrol").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}:{os.environ['PATH']}")
+    for name, value in (("SLURM_JOB_ID", "80"), ("SLURM_ARRAY_JOB_ID", "77"), ("SLURM_ARRAY_TASK_ID", "4")):
+        monkeypatch.setenv(name, value)
+    return log
+
+
+def test_member_stopped_before_its_time_limit_requeues_its_task(base, tmp_path, scontrol, monkeypatch):
+    out = tmp_path / "sw"
+    sweeps.create(base, [sweeps.parse_vary("particles.seed=1,2")], False, out)
+    stopped = StoppedEarly("stopped early (SIGUSR1 received)", reason="SIGUSR1 received")
+
+    def stop(*_args, **_kwargs):
+        raise stopped
+
+    real = sweeps.run_member
+    monkeypatch.setattr(sweeps, "run_member", stop)
+    result = sphere_inproc("sweep-member", out, "1", "--requeue", "-q")
+    assert result.code == 0 and "requeued" in result.stderr
+    assert scontrol.read_text() == "requeue 77_4\n"
+    # scancel's SIGTERM: a checkpoint and exit 75, never a requeue
+    stopped.reason = "SIGTERM received"
+    assert sphere_inproc("sweep-member", out, "1", "--requeue", "-q").code == 75
+    assert scontrol.read_text() == "requeue 77_4\n"
+    # for real: the wall-time budget stops it and requeues; the next start finishes it; then nothing
+    monkeypatch.setattr(sweeps, "run_member", real)
+    result = sphere_inproc("sweep-member", out, "m001", "--requeue", "-q", "--max-wall-time", "0.3")
+    assert result.code == 0 and "wall-time budget" in result.stderr
+    assert scontrol.read_text() == "requeue 77_4\nrequeue 77_4\n"
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.STOPPED
+    assert sphere_inproc("sweep-member", out, "1", "--requeue", "-q").code == 0
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.DONE
+    again = sphere_inproc("sweep-member", out, "1", "--requeue", "-q")
+    assert again.code == 0 and "done already" in again.stdout
+
+
+@pytest.mark.slow
+def test_local_sweep_killed_resumes_and_sums_up(base, tmp_path):
+    """Six members, two processes at a time; SIGKILL to the sweep and its members once one member
+    is under way; the sweep run again finishes every member from its checkpoints."""
+    out = tmp_path / "sw"
+    command = [sys.executable, "-m", "sphere_cli", "sweep", str(base), "-o", str(out), "--local", "2"]
+    command += ["--vary", "particles.seed=1..3", "--vary", "contact.friction=0.3,0.5"]
+    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
+    first = subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL)
+    made = None
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if made is None and (out / sweeps.SWEEP_FILE).is_file():
+            made = sweeps.Sweep.load(out)
+        # a member with a checkpoint at step 200 or later (one every 50 steps; about 1750 in all)
+        written = {n: list_checkpoints(out / "runs" / n / "checkpoints") for n in made.names} if made else {}
+        under_way = [n for n, files in written.items() if files and int(files[-1].stem[5:]) >= 200]
+        if under_way:
+            break
+        time.sleep(0.05)
+    os.killpg(first.pid, signal.SIGKILL)
+    first.wait()
+    # the members are not ours to wait for: their locks go when the kernel has closed their files
+    while any(sweeps.member_state(made, name)[0] == sweeps.RUNNING for name in made.names):
+        assert time.monotonic() < deadline + 10
+        time.sleep(0.05)
+    name = under_way[0]
+    assert sweeps.member_state(made, name)[0] == sweeps.INTERRUPTED, sweeps.member_state(made, name)
+    assert all(sweeps.member_state(made, name)[0] != sweeps.DONE for name in made.names[2:])
+    again = subprocess.run(
+        [sys.executable, "-m", "sphere_cli", "sweep", str(out), "--local", "2"],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert "6 members" in again.stdout
+    assert "resuming from" in (out / "runs" / name / "run.log").read_text()
+    # the member cut off ends bitwise where its case, run without a stop, ends
+    whole = tmp_path / "whole"
+    api.run(out / "cases" / f"{name}.toml", whole)
+    resumed = read_checkpoint(newest_valid_checkpoint(out / "runs" / name / "checkpoints").path)
+    uninterrupted = read_checkpoint(newest_valid_checkpoint(whole / "checkpoints").path)
+    assert resumed.step == uninterrupted.step
+    for key in ("pos", "vel", "angvel"):
+        np.testing.assert_array_equal(
+            resumed.arrays["particles"][key], uninterrupted.arrays["particles"][key]
+        )
+    # the summary: one row per member, its values, its state and its last observables
+    with (out / "summary.csv").open() as table:
+        rows = list(csv.DictReader(table))
+    assert [row["member"] for row in rows] == made.names
+    assert [row["state"] for row in rows] == ["done"] * 6
+    assert [(row["particles.seed"], row["contact.friction"]) for row in rows][3] == ("2", "0.5")
+    with h5py.File(out / "runs" / "m004" / "trajectory.h5", "r") as f:
+        kinetic = f["observables/kinetic_energy/value"][-1]
+        force = f["observables/wall_force/value"][-1]
+    assert float(rows[4]["kinetic_energy"]) == kinetic
+    assert float(rows[4]["wall_force[0][2]"]) == force[0, 2]
