@@ -19,7 +19,7 @@ from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .runtime import StopFlag, set_threads, shared_cores_warning, signal_handlers
+from .runtime import StopFlag, refuse_many_ranks, set_threads, shared_cores_warning, signal_handlers
 from .scene.builder import build_scene
 from .simulation import Loop
 
@@ -147,6 +147,7 @@ def run(
 ) -> RunResult:
     """Run a case in a new run directory. `origin`: the case file whose folder resolves the
     case's relative paths, if not the case's own (a sweep member's: sphere_cli/sweep.py)."""
+    refuse_many_ranks()
     loaded = _with_duration(load_case(case_path), until)
     if origin is not None:
         loaded = dataclasses.replace(loaded, origin=Path(origin))
@@ -210,6 +211,7 @@ def resume(
     handle_signals: bool = False,
     show_progress: bool = False,
 ) -> RunResult:
+    refuse_many_ranks()
     rundir = RunDirectory(Path(run_dir))
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")

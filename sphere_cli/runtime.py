@@ -16,6 +16,13 @@ import sys
 import time
 from contextlib import contextmanager
 
+from .errors import UsageError
+
+# what MPI launchers tell each process of the number of ranks (Open MPI, MPICH/Intel MPI's PMI,
+# MVAPICH); SLURM's own variables are not read: a batch script's SLURM_NTASKS describes the
+# allocation, not how many copies of this process were started
+MPI_SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MV2_COMM_WORLD_SIZE")
+
 # how long the other processes' use of the cores is sampled [s]; /proc/stat counts in 1/100 s
 SAMPLE_SECONDS = 0.1
 # a busy process sharing our cores holds most of one; half of one is the margin for noise
@@ -100,6 +107,21 @@ class StopFlag:
     def request(self, reason: str) -> None:
         if self.reason is None:
             self.reason = reason
+
+
+def refuse_many_ranks() -> None:
+    """A run started as several MPI ranks (mpiexec -n 4 sphere run ...) would be that many copies
+    of one scene racing for one run directory: refused before anything is written. One scene
+    runs in one process, on its threads; independent scenes run as a sweep."""
+    for name in MPI_SIZE_VARIABLES:
+        value = os.environ.get(name, "")
+        if value.isdigit() and int(value) > 1:
+            raise UsageError(
+                f"started as {value} MPI ranks ({name}={value}): a scene runs in one process, on "
+                "its threads (simulation.threads, NUMBA_NUM_THREADS); a scene split across ranks "
+                "is not available yet. Start one process (no mpiexec -n / srun -n), or run "
+                "independent cases with `sphere sweep`"
+            )
 
 
 def set_threads(case) -> None:

@@ -26,6 +26,8 @@ from cli_test_support import (
     sphere_inproc,
 )
 
+from sphere_cli.runtime import refuse_many_ranks
+
 # --- the case file alone ------------------------------------------------------------------------
 # (id, text to replace, replacement, key named, text on the line named, other fragments)
 CASE_ERRORS = [
@@ -454,6 +456,20 @@ def test_existing_run_directory_needs_overwrite(tmp_path):
     result = sphere("run", "case.toml", "-o", "out", "-q", "--overwrite", cwd=tmp_path)
     assert_clean_error(result, 0)
     assert (tmp_path / "out" / "trajectory.h5").is_file()
+
+
+@pytest.mark.parametrize("variable", ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MV2_COMM_WORLD_SIZE"])
+def test_a_run_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, variable):
+    """`mpiexec -n 2 sphere run` (the variable each launcher sets in every rank): two copies of one
+    scene would race for one run directory; refused before anything is written."""
+    (tmp_path / "case.toml").write_text(TINY)
+    monkeypatch.setenv(variable, "2")
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 2, f"{variable}=2", "one process", "sphere sweep")
+    assert not (tmp_path / "out").exists()
+    assert_clean_error(sphere_inproc("resume", "out", cwd=tmp_path), 2, f"{variable}=2")
+    monkeypatch.setenv(variable, "1")  # one rank: an ordinary run
+    refuse_many_ranks()
 
 
 def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):
