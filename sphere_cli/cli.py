@@ -429,6 +429,7 @@ def sweep(
     continue: members done are skipped, stopped or killed ones resume from their checkpoints."""
     from . import sweep as sweeps
 
+    made = None
     try:
         if case.is_dir() and (case / sweeps.SWEEP_FILE).is_file():
             if vary:
@@ -436,7 +437,7 @@ def sweep(
             made = sweeps.Sweep.load(case)
         else:
             varies = [sweeps.parse_vary(text) for text in vary or []]
-            made = sweeps.create(case, varies, zipped, output, threads or 1)
+            made = sweeps.create(case, varies, zipped, output, threads)
         typer.echo(f"sweep: {len(made.names)} members in {made.path} (members.csv lists their values)")
         if local is None:
             typer.echo(
@@ -454,9 +455,13 @@ def sweep(
     except SphereError as exc:
         _fail(exc)
     except KeyboardInterrupt:
-        _interrupted()
+        again = f"; continue with: sphere sweep {made.path} --local {local}" if made is not None else ""
+        typer.echo(f"sphere: interrupted{again}", err=True)
+        raise typer.Exit(StoppedEarly.exit_code) from None
     if code == StoppedEarly.exit_code:
-        typer.echo(f"sphere: sweep stopped; continue: sphere sweep {made.path} --local {local}", err=True)
+        typer.echo(
+            f"sphere: sweep stopped; continue with: sphere sweep {made.path} --local {local}", err=True
+        )
     elif code:
         typer.echo("sphere: some members did not finish (see their logs above)", err=True)
     raise typer.Exit(code)

@@ -42,14 +42,36 @@ import tomli
 
 from .config.consistency import case_warnings
 from .config.load import load_case, parse_case, render_toml, toml_text, warn
-from .errors import CaseError, MissingInputError, OutputError, ResumeRefused, UsageError
+from .errors import (
+    CaseError,
+    MissingInputError,
+    NumericalError,
+    OutputError,
+    ResumeRefused,
+    RunBusy,
+    StoppedEarly,
+    UsageError,
+)
 from .io.atomic import write_text_atomic
 from .io.rundir import RunDirectory
 
 SWEEP_FILE = "sweep.json"
 FORMAT = 1
-# SLURM's default MaxArraySize is 1001 (task ids 0..1000): a larger sweep is warned of
+# SLURM's default MaxArraySize is 1001 (task ids 0..1000): a larger sweep is warned of, and its
+# script submitted in parts with SWEEP_OFFSET
 SLURM_ARRAY_LIMIT = 1001
+# characters a sweep folder's path may not hold: #SBATCH lines cannot quote them
+UNSAFE_PATH_CHARACTERS = '"\\\n#'
+# what an interrupted `sphere sweep` may have left before its sweep.json: it may go on there
+OWN_ENTRIES = {
+    "cases",
+    "runs",
+    "logs",
+    "members.csv",
+    "sweep.sbatch",
+    ".members.csv.tmp",
+    ".sweep.sbatch.tmp",
+}
 POLL_SECONDS = 0.1  # how often --local looks at its members
 MAX_COLUMNS = 24  # an observable of more values (a profile) is left out of the summary table
 _KEY_PART = re.compile(r"[A-Za-z0-9_-]+")
@@ -226,7 +248,9 @@ class Sweep:
             raise OutputError(f"{file}: unreadable ({type(exc).__name__}: {exc})") from None
 
 
-def create(case: Path, varies: list[Vary], zipped: bool, out: Path | None, threads: int = 1) -> Sweep:
+def create(
+    case: Path, varies: list[Vary], zipped: bool, out: Path | None, threads: int | None = None
+) -> Sweep:
     """Write the sweep's folder (or find the same sweep already there): every member's case is
     checked before anything is written."""
     from .scene.builder import check_placement
@@ -240,7 +264,18 @@ def create(case: Path, varies: list[Vary], zipped: bool, out: Path | None, threa
     base_path = Path(case).resolve()
     data = tomli.loads(base.text)
     out = Path(out) if out is not None else Path("runs") / f"{Path(case).stem}-sweep"
+    awkward = set(str(out.resolve())) & set(UNSAFE_PATH_CHARACTERS)
+    if awkward:
+        raise UsageError(
+            f"{out}: a sweep folder's path may not hold {' '.join(sorted(map(repr, awkward)))}: the SLURM "
+            "script names it in #SBATCH lines; choose another with -o"
+        )
     values = combinations(varies, zipped)
+    if len(values) > SLURM_ARRAY_LIMIT:
+        warn(
+            f"{len(values)} members: more task ids than SLURM's usual MaxArraySize ({SLURM_ARRAY_LIMIT}); "
+            "sweep.sbatch says how to submit the rest (SWEEP_OFFSET)"
+        )
     names = member_names(len(values))
     digest = hashlib.sha256(base.text.encode()).hexdigest()
     sweep = Sweep(out, base_path, digest, varies, zipped, names, values)
@@ -270,18 +305,20 @@ def create(case: Path, varies: list[Vary], zipped: bool, out: Path | None, threa
     return sweep
 
 
-def _write(sweep: Sweep, texts: dict[str, str], threads: int) -> None:
+def _write(sweep: Sweep, texts: dict[str, str], threads: int | None) -> None:
     manifest = sweep.manifest()
     file = sweep.path / SWEEP_FILE
     if file.is_file():
         old = Sweep.load(sweep.path).manifest()
-        if old != manifest:
+        if json.dumps(old) != json.dumps(manifest):  # as text: a nan value equals itself
             changed = [k for k in manifest if manifest[k] != old.get(k)]
             raise ResumeRefused(
                 f"{sweep.path}: holds another sweep (differs in: {', '.join(changed)}); its members "
                 "are kept. Choose another folder with -o, or remove this one to start again."
             )
-    elif sweep.path.exists() and (not sweep.path.is_dir() or any(sweep.path.iterdir())):
+    elif sweep.path.exists() and (
+        not sweep.path.is_dir() or not {e.name for e in sweep.path.iterdir()} <= OWN_ENTRIES
+    ):
         raise OutputError(f"{sweep.path}: exists and is not a sweep folder; choose another with -o")
     try:
         for sub in ("cases", "runs", "logs"):
@@ -297,8 +334,10 @@ def _write(sweep: Sweep, texts: dict[str, str], threads: int) -> None:
         write_text_atomic(sweep.path / "members.csv", table.getvalue())
         script = sweep.path / "sweep.sbatch"
         if not script.is_file():  # kept as it is once written: users edit its #SBATCH lines
-            write_text_atomic(script, sbatch_script(sweep, threads))
+            write_text_atomic(script, sbatch_script(sweep, threads or 1))
             script.chmod(0o755)
+        elif threads is not None and f"--cpus-per-task={threads}\n" not in script.read_text(encoding="utf-8"):
+            warn(f"{script}: kept as it is; its --cpus-per-task is not {threads} (edit it, or remove it)")
         write_text_atomic(file, json.dumps(manifest, indent=2) + "\n")
     except OSError as exc:
         raise OutputError(f"{sweep.path}: cannot write the sweep ({exc})") from None
@@ -314,6 +353,15 @@ def sbatch_script(sweep: Sweep, threads: int) -> str:
     the time limit reaches sphere itself (exec), which checkpoints and requeues the task."""
     path = sweep.path.resolve()
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", sweep.base_case.stem)
+    last = min(len(sweep.names), SLURM_ARRAY_LIMIT) - 1
+    more = ""
+    if len(sweep.names) > SLURM_ARRAY_LIMIT:
+        more = (
+            f"# {len(sweep.names)} members: more task ids than SLURM's usual MaxArraySize "
+            f"({SLURM_ARRAY_LIMIT}) allows.\n# The members from 1000 on: sbatch --array=0-999 "
+            "--export=ALL,SWEEP_OFFSET=1000 sweep.sbatch (and so on)\n"
+        )
+    output = str(path / "logs").replace("%", "%%") + "/%x-%A_%a.out"  # sbatch expands % patterns
     return f"""#!/bin/bash
 # The members of the sweep in {path} as a SLURM job array, one task per member
 # (written by `sphere sweep`; docs/user-guide.md, section 7):
@@ -322,15 +370,15 @@ def sbatch_script(sweep: Sweep, threads: int) -> str:
 # Each task starts its member, continues it from its newest checkpoint, or ends at once if it is
 # done. SIGUSR1, 300 s before the time limit, makes the member checkpoint and requeue its task;
 # scancel's SIGTERM makes it checkpoint and stop. Collect the results: sphere sweep-summary {path}
-#SBATCH --job-name={name}-sweep
-#SBATCH --array=0-{len(sweep.names) - 1}
+{more}#SBATCH --job-name={name}-sweep
+#SBATCH --array=0-{last}
 #SBATCH --ntasks=1
 #SBATCH --cpus-per-task={threads}
 #SBATCH --time=24:00:00
 #SBATCH --signal=B:USR1@300
 #SBATCH --requeue
 #SBATCH --open-mode=append
-#SBATCH --output={path}/logs/%x-%A_%a.out
+#SBATCH --output="{output}"
 
 set -eu
 # exactly the CPUs SLURM gave the task (the results do not depend on the count)
@@ -341,6 +389,7 @@ export OMP_WAIT_POLICY="${{OMP_WAIT_POLICY:-ACTIVE}}"
 made_with={shlex.quote(sys.executable)}
 SPHERE_PYTHON="${{SPHERE_PYTHON:-$made_with}}"
 task="${{SLURM_ARRAY_TASK_ID:?submit this script with sbatch: it is a job array}}"
+task=$((task + ${{SWEEP_OFFSET:-0}}))
 exec "$SPHERE_PYTHON" -m sphere_cli sweep-member {shlex.quote(str(path))} "$task" --requeue --quiet
 """
 
@@ -352,11 +401,14 @@ def member_state(sweep: Sweep, name: str) -> tuple[str, dict]:
     rundir = RunDirectory(sweep.run_dir(name))
     if not rundir.is_run():
         return NOT_STARTED, {}
+    # the lock first: a member that ends between the two readings is then seen running, not
+    # (from its last status while running) interrupted
+    running = rundir.busy()
     try:
         status = json.loads(rundir.status_path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         status = {}
-    if rundir.busy():
+    if running:
         return RUNNING, status
     state = status.get("state")
     if state == "done" and status.get("step") == status.get("end_step"):
@@ -373,9 +425,16 @@ def run_member(sweep: Sweep, name: str, **options):
     done already."""
     from . import api
 
-    state, _ = member_state(sweep, name)
+    state, status = member_state(sweep, name)
     if state == DONE:
         return None
+    if state == FAILED:
+        raise NumericalError(
+            f"sweep member {name} failed before ({status.get('error', 'see its run.log')}); it would "
+            f"fail again: remove {sweep.run_dir(name)} to run it anew"
+        )
+    if state == RUNNING:
+        raise RunBusy(f"sweep member {name} is running in another process ({sweep.run_dir(name)})")
     if RunDirectory(sweep.run_dir(name)).is_run():
         return api.resume(sweep.run_dir(name), **options)
     return api.run(sweep.case_path(name), sweep.run_dir(name), origin=sweep.base_case, **options)
@@ -397,24 +456,50 @@ def requeue_task() -> str | None:
     return None
 
 
-def _die_with_parent() -> None:
-    """In a member process (Linux): SIGTERM when `sphere sweep --local` dies, so that a killed
-    sweep leaves no member running on (SIGTERM: the member checkpoints and exits 75)."""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+def _die_with_parent(parent: int):
+    """The member's first act (Linux): SIGTERM when `sphere sweep --local` dies, so that a killed
+    sweep leaves no member running on (on SIGTERM a member checkpoints and exits 75); a parent
+    already gone before that is seen by the parent's id."""
+
+    def arrange() -> None:
+        if sys.platform.startswith("linux"):
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+            if os.getppid() != parent:
+                os._exit(75)
+
+    return arrange
+
+
+def _start(sweep: Sweep, name: str, env: dict) -> tuple[subprocess.Popen, object]:
+    command = [sys.executable, "-m", "sphere_cli", "sweep-member", str(sweep.path), name, "-q"]
+    try:
+        out = sweep.log_path(name).open("ab")
+    except OSError as exc:
+        raise OutputError(f"{sweep.log_path(name)}: cannot open the member's log ({exc})") from None
+    try:
+        return subprocess.Popen(
+            command, stdout=out, stderr=subprocess.STDOUT, env=env, preexec_fn=_die_with_parent(os.getpid())
+        ), out
+    except OSError as exc:
+        out.close()
+        raise OutputError(f"cannot start sweep member {name} ({exc})") from None
 
 
 def run_local(sweep: Sweep, processes: int, threads: int, stop, log=print) -> int:
     """Run every member not done, `processes` at a time with `threads` threads each; after a
     stop request (stop.reason set) the running members are told to checkpoint (SIGTERM) and no
-    new one starts. Returns the exit code: 0 when every member is done, else the first member's
-    non-zero code (75: stopped, continue by running the sweep again)."""
+    new one starts. Returns the exit code: 0 when every member is done, 75 when stopped or when
+    members run elsewhere (run the sweep again), else the first member's non-zero code (a member
+    killed by signal N: 128 + N)."""
     pending, codes = [], {}
     for name in sweep.names:
         state, _ = member_state(sweep, name)
         if state == FAILED:
-            codes[name] = 70
+            codes[name] = NumericalError.exit_code
             log(f"{name}: failed before; not run again (remove {sweep.run_dir(name)} to retry)")
+        elif state == RUNNING:
+            codes[name] = StoppedEarly.exit_code
+            log(f"{name}: running in another process; left to it")
         elif state != DONE:
             pending.append(name)
     done_before = len(sweep.names) - len(pending) - len(codes)
@@ -429,12 +514,7 @@ def run_local(sweep: Sweep, processes: int, threads: int, stop, log=print) -> in
         while pending or running:
             while pending and len(running) < processes and stop.reason is None:
                 name = pending.pop(0)
-                out = sweep.log_path(name).open("ab")
-                command = [sys.executable, "-m", "sphere_cli", "sweep-member", str(sweep.path), name, "-q"]
-                member = subprocess.Popen(
-                    command, stdout=out, stderr=subprocess.STDOUT, env=env, preexec_fn=_die_with_parent
-                )
-                running[name] = (member, out)
+                running[name] = _start(sweep, name, env)
             if stop.reason is not None and not told:
                 told = True
                 pending.clear()
@@ -445,8 +525,8 @@ def run_local(sweep: Sweep, processes: int, threads: int, stop, log=print) -> in
             for name in [n for n, (proc, _) in running.items() if proc.poll() is not None]:
                 proc, out = running.pop(name)
                 out.close()
-                codes[name] = proc.returncode
-                code = proc.returncode
+                code = proc.returncode if proc.returncode >= 0 else 128 - proc.returncode
+                codes[name] = code
                 log(f"{name}: " + ("done" if code == 0 else f"exit {code}, see {sweep.log_path(name)}"))
     finally:
         for proc, out in running.values():
@@ -454,7 +534,7 @@ def run_local(sweep: Sweep, processes: int, threads: int, stop, log=print) -> in
             proc.wait()
             out.close()
     if stop.reason is not None:
-        return 75
+        return StoppedEarly.exit_code
     return next((codes[n] for n in sweep.names if codes.get(n)), 0)
 
 

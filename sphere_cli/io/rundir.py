@@ -26,6 +26,7 @@ import os
 import re
 import shutil
 import sys
+import time
 import warnings
 from datetime import UTC, datetime
 from pathlib import Path
@@ -39,6 +40,8 @@ from .trajectory import Trajectory, frame_clock, is_grid_field, open_as_writer
 from .xdmf import frame_grid, write_xdmf
 
 MARKER = ".sphere-run"
+# how long `lock` waits for a lock held by someone else before saying the run is in use [s]
+LOCK_PATIENCE = 0.2
 # what sphere writes at the top of a run directory (atomic writes leave ".<name>.tmp" for an instant)
 OWN_FILES = re.compile(
     r"^(\.sphere-run|case\.toml|trajectory\.h5|trajectory\.xmf|status\.json|run\.log"
@@ -136,8 +139,14 @@ class RunDirectory:
             info = {"sphere_run": 1, "created": datetime.now(UTC).isoformat(timespec="seconds")}
             if case_path is not None:
                 info["case"] = str(Path(case_path).resolve())
-            write_text_atomic(self.marker, json.dumps(info) + "\n")
+            # locked before it is written, and written in place: a second process starting the
+            # same run at once finds it locked (a marker replaced by rename would give each
+            # process a lock of its own, on two files)
             self.lock()
+            data = (json.dumps(info) + "\n").encode()
+            os.ftruncate(self._lock_fd, 0)
+            os.pwrite(self._lock_fd, data, 0)
+            os.fsync(self._lock_fd)
             write_text_atomic(self.case, case_text)
             self.checkpoints.mkdir(exist_ok=True)
         except OSError as exc:
@@ -199,27 +208,37 @@ class RunDirectory:
         return Path(origin) if isinstance(origin, str) else None
 
     def lock(self) -> None:
-        """Take the run directory's exclusive writer lock (RunBusy if another process holds it)."""
+        """Take the run directory's exclusive writer lock (RunBusy if another process holds it
+        for longer than LOCK_PATIENCE: a reader's probe, `busy`, holds it for microseconds)."""
         if self._lock_fd is not None:
             return
         try:
             fd = os.open(self.marker, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
             raise OutputError(f"{self.marker}: cannot open the run directory's lock ({exc})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            os.close(fd)
-            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                raise RunBusy(
-                    f"{self.path}: another sphere process is writing this run directory (it holds the lock "
-                    f"on {MARKER}); wait for it to end, or stop it, before `run --overwrite` or `resume`"
-                ) from None
-            raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
-        self._lock_fd = fd
+        deadline = time.monotonic() + LOCK_PATIENCE
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                self._lock_fd = fd
+                return
+            except OSError as exc:
+                held = exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+                if held and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                    continue
+                os.close(fd)
+                if held:
+                    raise RunBusy(
+                        f"{self.path}: another sphere process is writing this run directory (it holds "
+                        f"the lock on {MARKER}); wait for it to end, or stop it, before `run --overwrite` "
+                        "or `resume`"
+                    ) from None
+                raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
 
     def busy(self) -> bool:
-        """Whether some process holds the writer lock now (the lock is only tested, not kept)."""
+        """Whether some process holds the writer lock now. Probed with a shared lock (which a
+        read-only open may take, also on NFS) and released at once."""
         if self._lock_fd is not None or not self.marker.is_file():
             return False
         try:
@@ -227,7 +246,7 @@ class RunDirectory:
         except OSError:
             return False
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except OSError as exc:
             return exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
         finally:

@@ -120,11 +120,12 @@ def test_sweep_folder_given_again_with_vary_is_a_usage_error(base, tmp_path):
 
 
 def test_job_array_script_passes_shellcheck_and_runs_its_task(base, tmp_path):
-    out = tmp_path / "sw"
+    out = tmp_path / "my 100% sweeps" / "sw"  # a space and sbatch's pattern character
     sweeps.create(base, [sweeps.parse_vary("particles.seed=1..5")], False, out, threads=4)
     script = out / "sweep.sbatch"
     text = script.read_text()
     assert "#SBATCH --array=0-4" in text and "#SBATCH --cpus-per-task=4" in text
+    assert f'#SBATCH --output="{tmp_path}/my 100%% sweeps/sw/logs/%x-%A_%a.out"' in text
     checked = subprocess.run([SHELLCHECK, "--severity=style", str(script)], capture_output=True, text=True)
     assert checked.returncode == 0, checked.stdout
     # a task as SLURM starts it, with a stand-in for the Python that records what it is given
@@ -139,14 +140,62 @@ def test_job_array_script_passes_shellcheck_and_runs_its_task(base, tmp_path):
     }
     env["STUB_LOG"] = str(tmp_path / "log")
     assert subprocess.run(["bash", str(script)], env=env).returncode == 0
-    assert (tmp_path / "log").read_text().split() == [
-        "4", "4", "-m", "sphere_cli", "sweep-member", str(out.resolve()), "3", "--requeue", "--quiet"
-    ]  # fmt: skip
+    words = (tmp_path / "log").read_text().rstrip("\n").split(" ")
+    assert " ".join(words[5:-3]) == str(out.resolve())
+    assert words[:5] + words[-3:] == [
+        "4",
+        "4",
+        "-m",
+        "sphere_cli",
+        "sweep-member",
+        "3",
+        "--requeue",
+        "--quiet",
+    ]
+    # members beyond SLURM's array size limit: the same task ids with an offset
+    subprocess.run(["bash", str(script)], env={**env, "SWEEP_OFFSET": "1000"}, check=True)
+    assert (tmp_path / "log").read_text().split()[-3] == "1003"
     # outside a job array it says so, and starts nothing
     env.pop("SLURM_ARRAY_TASK_ID")
     (tmp_path / "log").unlink()
     refused = subprocess.run(["bash", str(script)], env=env, capture_output=True, text=True)
     assert refused.returncode != 0 and "sbatch" in refused.stderr and not (tmp_path / "log").exists()
+
+
+def test_a_sweep_folder_sbatch_cannot_name_is_refused(base, tmp_path):
+    result = sphere_inproc("sweep", base, "--vary", "particles.seed=1,2", "-o", tmp_path / "run#2")
+    assert_clean_error(result, 2, "'#'", "#SBATCH")
+    assert not (tmp_path / "run#2").exists()
+
+
+def test_reading_a_run_directory_never_keeps_its_writer_out(tmp_path):
+    """sweep-summary and --local probe each member's lock (RunDirectory.busy) while members start
+    and resume: a probe must never make a writer's lock fail."""
+    import threading
+
+    from sphere_cli.io.rundir import RunDirectory
+
+    (tmp_path / "run").mkdir()
+    writer, reader = RunDirectory(tmp_path / "run"), RunDirectory(tmp_path / "run")
+    writer.lock()
+    assert reader.busy()
+    writer.unlock()
+    assert not reader.busy()
+    done = threading.Event()
+
+    def probe():
+        while not done.is_set():
+            reader.busy()
+
+    prober = threading.Thread(target=probe)
+    prober.start()
+    try:
+        for _ in range(300):
+            writer.lock()
+            writer.unlock()
+    finally:
+        done.set()
+        prober.join()
 
 
 def test_the_users_slurm_template_passes_shellcheck():
@@ -189,7 +238,7 @@ def test_member_stopped_before_its_time_limit_requeues_its_task(base, tmp_path, 
     assert scontrol.read_text() == "requeue 77_4\n"
     # for real: the wall-time budget stops it and requeues; the next start finishes it; then nothing
     monkeypatch.setattr(sweeps, "run_member", real)
-    result = sphere_inproc("sweep-member", out, "m001", "--requeue", "-q", "--max-wall-time", "0.3")
+    result = sphere_inproc("sweep-member", out, "m001", "--requeue", "-q", "--max-wall-time", "0.1")
     assert result.code == 0 and "wall-time budget" in result.stderr
     assert scontrol.read_text() == "requeue 77_4\nrequeue 77_4\n"
     assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.STOPPED
@@ -197,43 +246,65 @@ def test_member_stopped_before_its_time_limit_requeues_its_task(base, tmp_path, 
     assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.DONE
     again = sphere_inproc("sweep-member", out, "1", "--requeue", "-q")
     assert again.code == 0 and "done already" in again.stdout
+    # a member whose integration failed is not run again: it would fail the same way
+    status = out / "runs" / "m001" / "status.json"
+    status.write_text(json.dumps({"state": "failed", "step": 9, "error": "blow-up at step 9"}))
+    assert_clean_error(
+        sphere_inproc("sweep-member", out, "1", "-q"), 70, "failed before", "blow-up", "remove"
+    )
 
 
 @pytest.mark.slow
 def test_local_sweep_killed_resumes_and_sums_up(base, tmp_path):
-    """Six members, two processes at a time; SIGKILL to the sweep and its members once one member
-    is under way; the sweep run again finishes every member from its checkpoints."""
+    """Six members, two processes at a time. SIGTERM to the sweep once a member is under way: its
+    running members checkpoint and it exits 75. Run again, then SIGKILL to the sweep and its
+    members (a node failing): the member cut off is left interrupted. Run again: every member
+    ends, from its checkpoints."""
     out = tmp_path / "sw"
-    command = [sys.executable, "-m", "sphere_cli", "sweep", str(base), "-o", str(out), "--local", "2"]
-    command += ["--vary", "particles.seed=1..3", "--vary", "contact.friction=0.3,0.5"]
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
-    first = subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL)
-    made = None
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        if made is None and (out / sweeps.SWEEP_FILE).is_file():
-            made = sweeps.Sweep.load(out)
-        # a member with a checkpoint at step 200 or later (one every 50 steps; about 1750 in all)
-        written = {n: list_checkpoints(out / "runs" / n / "checkpoints") for n in made.names} if made else {}
-        under_way = [n for n, files in written.items() if files and int(files[-1].stem[5:]) >= 200]
-        if under_way:
-            break
+    sweep = [sys.executable, "-m", "sphere_cli", "sweep"]
+    deadline = time.monotonic() + 180
+
+    def start(*args) -> subprocess.Popen:
+        command = [*sweep, *map(str, args), "--local", "2"]
+        return subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL)
+
+    def under_way(skip=()) -> list[str]:
+        """Members past a checkpoint at step 200 (one every 50 steps; about 1750 in all)."""
+        if not (out / sweeps.SWEEP_FILE).is_file():
+            return []
+        names = [n for n in sweeps.Sweep.load(out).names if n not in skip]
+        written = {n: list_checkpoints(out / "runs" / n / "checkpoints") for n in names}
+        return [n for n, files in written.items() if files and int(files[-1].stem[5:]) >= 200]
+
+    def settled(made) -> list[str]:
+        # the members are not ours to wait for: their locks go when the kernel has closed their files
+        while any(sweeps.member_state(made, n)[0] == sweeps.RUNNING for n in made.names):
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        return [sweeps.member_state(made, n)[0] for n in made.names]
+
+    first = start(base, "-o", out, "--vary", "particles.seed=1..3", "--vary", "contact.friction=0.3,0.5")
+    while not (going := under_way()):
+        assert time.monotonic() < deadline and first.poll() is None
         time.sleep(0.05)
-    os.killpg(first.pid, signal.SIGKILL)
-    first.wait()
-    # the members are not ours to wait for: their locks go when the kernel has closed their files
-    while any(sweeps.member_state(made, name)[0] == sweeps.RUNNING for name in made.names):
-        assert time.monotonic() < deadline + 10
+    first.send_signal(signal.SIGTERM)
+    assert first.wait() == 75
+    made = sweeps.Sweep.load(out)
+    states = settled(made)
+    assert states[made.names.index(going[0])] == sweeps.STOPPED, states  # it wrote a checkpoint
+    started = [n for n, state in zip(made.names, states, strict=True) if state != sweeps.NOT_STARTED]
+
+    second = start(out)
+    while not (cut := under_way(skip=started)):
+        assert time.monotonic() < deadline and second.poll() is None
         time.sleep(0.05)
-    name = under_way[0]
-    assert sweeps.member_state(made, name)[0] == sweeps.INTERRUPTED, sweeps.member_state(made, name)
-    assert all(sweeps.member_state(made, name)[0] != sweeps.DONE for name in made.names[2:])
-    again = subprocess.run(
-        [sys.executable, "-m", "sphere_cli", "sweep", str(out), "--local", "2"],
-        env=env,
-        capture_output=True,
-        text=True,
-    )
+    os.killpg(second.pid, signal.SIGKILL)
+    second.wait()
+    name = cut[0]
+    assert settled(made)[made.names.index(name)] == sweeps.INTERRUPTED
+    assert sweeps.DONE not in settled(made)[4:]
+    again = subprocess.run([*sweep, str(out), "--local", "2"], env=env, capture_output=True, text=True)
     assert again.returncode == 0, again.stdout + again.stderr
     assert "6 members" in again.stdout
     assert "resuming from" in (out / "runs" / name / "run.log").read_text()
