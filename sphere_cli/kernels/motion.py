@@ -19,6 +19,7 @@ from numba import njit, prange
 
 from .layout import U3, flat
 from .neighbors import minimum_image
+from .serial import serial_twin
 
 
 @njit(cache=True, inline="always")
@@ -109,3 +110,8 @@ def first_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt):
             if not periodic[a] and (pos[i, a] < lower[a] - radius[i] or pos[i, a] > upper[a] + radius[i]):
                 return i, 3
     return -1, 0
+
+
+# one thread: the same kernels without parallel regions (kernels/serial.py)
+kick_drift_serial = serial_twin(kick_drift)
+kick_serial = serial_twin(kick)

@@ -80,6 +80,7 @@ from .contact import (
 from .contact_probe import wall_normal
 from .laws import COLUMNS
 from .layout import U1, U2, U3, flat
+from .serial import serial_twin
 
 FIXED = 0
 VELOCITY = 1
@@ -439,3 +440,7 @@ def wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, t
             drive = area[w] * control[w, C_SHEAR] + wall_force[w, t]
             vel[w, t] = (vel[w, t] + half * drive / mass) / relax
             acc[w, t] = (drive - control[w, C_DAMPING] * vel[w, t]) / mass
+
+
+# one thread: the same kernel without parallel regions (kernels/serial.py)
+wall_forces_serial = serial_twin(wall_forces)

@@ -13,7 +13,8 @@ coupling, stages every step), so those run in Python.
 
 from __future__ import annotations
 
-from ..kernels.steps import dem_steps
+from ..kernels.serial import use_serial
+from ..kernels.steps import dem_steps, dem_steps_serial
 from ..state import State
 from .contact import PairContactForces
 from .module import Step
@@ -82,11 +83,13 @@ class CompiledSteps:
         walls = None if self.walls is None else self.walls.kernel_arguments(state)
         drift, kicks = Motion.drift_arguments(state), Motion.kick_arguments(state)
         threshold2 = self.search.threshold2
+        serial = use_serial(state.particles.count)  # without parallel regions (kernels/serial.py)
         if self.extra is None:
-            done, moved2, drifted = dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks)
+            loop = dem_steps_serial if serial else dem_steps
+            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks)
         else:
             extra = self.extra.force_arguments(state)
-            loop = self.extra.steps_kernel
+            loop = self.extra.serial_steps_kernel if serial else self.extra.steps_kernel
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks)
         state.neighbors.moved2 = moved2
         return int(done), bool(drifted)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from ..kernels.motion import first_unstable, kick, kick_drift
+from ..kernels.motion import first_unstable, kick, kick_drift, kick_drift_serial, kick_serial
+from ..kernels.serial import use_serial
 from ..state import Particles, State
 from .module import Module
 
@@ -13,10 +14,11 @@ class Motion(Module):
     def kick_drift(self, state: State) -> None:
         """The drift also measures how far the particles have moved since the neighbour list
         was built (NeighborSearch.prepare, next in the step, reads it)."""
-        state.neighbors.moved2 = kick_drift(*self.drift_arguments(state))
+        kernel = kick_drift_serial if use_serial(state.particles.count) else kick_drift
+        state.neighbors.moved2 = kernel(*self.drift_arguments(state))
 
     def kick(self, state: State) -> None:
-        kick(*self.kick_arguments(state))
+        (kick_serial if use_serial(state.particles.count) else kick)(*self.kick_arguments(state))
 
     @staticmethod
     def drift_arguments(state: State) -> tuple:

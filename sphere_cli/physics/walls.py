@@ -36,6 +36,7 @@ import numpy as np
 
 from ..kernels.contact import BLOCK, FIELDS
 from ..kernels.observe.energy import wall_elastic_energy
+from ..kernels.serial import use_serial
 from ..kernels.walls import (
     C_AMPLITUDE,
     C_DAMPING,
@@ -53,6 +54,7 @@ from ..kernels.walls import (
     near_walls,
     wall_areas,
     wall_forces,
+    wall_forces_serial,
     wall_kick,
     wall_kick_drift,
     wall_totals,
@@ -251,7 +253,8 @@ class PlaneWallForces(Module):
         return np.concatenate(([0], cuts, [near.size])).astype(np.int64)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
-        wall_forces(*self.kernel_arguments(state, spring_dt))
+        kernel = wall_forces_serial if use_serial(state.particles.count) else wall_forces
+        kernel(*self.kernel_arguments(state, spring_dt))
 
     def kernel_arguments(self, state: State, spring_dt: float | None = None) -> tuple:
         """The arguments of wall_forces (kernels/walls.py; also for kernels/steps.py), valid

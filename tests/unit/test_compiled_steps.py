@@ -15,8 +15,11 @@ from sphere_cli import api
 from sphere_cli.bench.dem import canonical_case
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
-from sphere_cli.kernels.fluid.profile_forces import vans1d_steps
-from sphere_cli.kernels.steps import dem_steps
+from sphere_cli.kernels import serial
+from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
+from sphere_cli.kernels.motion import kick_drift_serial
+from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
+from sphere_cli.physics import motion as motion_module
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
@@ -110,7 +113,7 @@ def test_the_compiled_loops_take_no_function_arguments():
     process: that loop would compile on every run and add a cache file each time."""
     scene = build_scene(load_case(CONFIGS / "bedload.toml"))
     advance(scene, 50)
-    for loop in (dem_steps, vans1d_steps):
+    for loop in (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial):
         for signature in loop.signatures:
             assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
     assert vans1d_steps.signatures
@@ -131,3 +134,46 @@ def test_run_frames_and_checkpoints_fall_on_their_steps(tmp_path):
     assert frames == [0, 7, 14, 21, 28, 35, 42, 49, 53]
     checkpoints = [read_checkpoint(c).step for c in list_checkpoints(tmp_path / "run" / "checkpoints")]
     assert checkpoints == [0, 10, 20, 30, 40, 50, 53]  # the first one at the start
+
+
+@pytest.mark.parametrize("name", ["hertz-mixture", "canonical", "periodic", "bedload"])
+def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_parallel_kernels(name, monkeypatch):
+    """kernels/serial.py: on one thread, below SERIAL_BELOW particles (raised here to cover these
+    scenes of 400-1000), the hooks and the compiled loops run the kernels' serial twins; on two
+    threads the parallel kernels. The runs are bitwise the same."""
+    monkeypatch.setattr(serial, "SERIAL_BELOW", 10**6)
+    loop = vans1d_steps_serial if name == "bedload" else dem_steps_serial
+    twins = (loop, kick_drift_serial)
+    runs = {}
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            before = [len(t.overloads) for t in twins]
+            scene = build_scene(_case(name))
+            advance(scene, STEPS)
+            assert scene.state.neighbors.builds >= 2
+            runs[threads] = _state(scene)
+            if threads == 1:
+                assert all(t.overloads for t in twins)  # compiled or loaded for this run at the latest
+            else:  # the parallel run used no twin
+                assert [len(t.overloads) for t in twins] == before
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    for key in runs[1]:
+        assert np.array_equal(runs[1][key], runs[2][key]), key
+
+
+def test_the_serial_twins_run_only_for_small_scenes_on_one_thread(monkeypatch):
+    calls = []
+    monkeypatch.setattr(motion_module, "kick_serial", lambda *args: calls.append("serial"))
+    monkeypatch.setattr(motion_module, "kick", lambda *args: calls.append("parallel"))
+    scene = build_scene(parse_case(canonical_case(serial.SERIAL_BELOW - 1)))
+    big = build_scene(parse_case(canonical_case(serial.SERIAL_BELOW)))
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            for each in (scene, big):
+                next(m for m in each.modules if m.name == "particles").kick(each.state)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert calls == ["serial", "parallel", "parallel", "parallel"]

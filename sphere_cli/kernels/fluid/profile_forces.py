@@ -26,8 +26,9 @@ import math
 
 from numba import njit, prange
 
-from ..motion import kick, kick_drift
-from ..steps import contacts
+from ..motion import kick, kick_drift, kick_drift_serial, kick_serial
+from ..serial import serial_twin
+from ..steps import contacts, contacts_serial
 from .layer_averaging import slice_volume
 
 
@@ -215,3 +216,14 @@ def vans1d_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks):
         profile_forces(*fluid)
         kick(*kicks)
     return steps, moved2, False
+
+
+# one thread: the same kernels without parallel regions (kernels/serial.py)
+profile_forces_serial = serial_twin(profile_forces)
+vans1d_steps_serial = serial_twin(
+    vans1d_steps,
+    kick_drift=kick_drift_serial,
+    kick=kick_serial,
+    contacts=contacts_serial,
+    profile_forces=profile_forces_serial,
+)

@@ -18,7 +18,13 @@ import numpy as np
 
 from ...config.consistency import particle_materials
 from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
-from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces, vans1d_steps
+from ...kernels.fluid.profile_forces import (
+    drag_coefficients,
+    profile_forces,
+    profile_forces_serial,
+    vans1d_steps,
+    vans1d_steps_serial,
+)
 from ...kernels.fluid.turbulent_fluctuations import turbulent_fluctuations
 from ...kernels.fluid.vans1d import (
     MIXING_KINDS,
@@ -27,6 +33,7 @@ from ...kernels.fluid.vans1d import (
     mixing_length,
     shear_stress,
 )
+from ...kernels.serial import use_serial
 from ..fluid_plugin import FluidModule
 from .layer_averaging import LayerProfiles, layer_faces
 
@@ -312,9 +319,11 @@ class Vans1d(FluidModule):
 
     # the compiled steps with this module's force in the loop (physics/compiled_steps.py)
     steps_kernel = staticmethod(vans1d_steps)
+    serial_steps_kernel = staticmethod(vans1d_steps_serial)  # on one thread (kernels/serial.py)
 
     def forces(self, state, spring_dt=None) -> None:
-        profile_forces(*self.force_arguments(state))
+        kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces
+        kernel(*self.force_arguments(state))
 
     def force_arguments(self, state) -> tuple:
         """The arguments of the one kernel call of `forces`, valid until the next after_step
