@@ -29,7 +29,8 @@ def serial_twin(kernel, **callees):
     twin.__qualname__ = f"{func.__qualname__}_serial"
     twin.__module__ = func.__module__
     twin.__doc__ = func.__doc__
-    return numba.jit(**{**kernel.targetoptions, "parallel": False})(twin)
+    # cached like every kernel here (caching is not among a dispatcher's target options)
+    return numba.jit(**{**kernel.targetoptions, "parallel": False}, cache=True)(twin)
 
 
 SERIAL_BELOW = 200  # particles

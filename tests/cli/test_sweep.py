@@ -260,6 +260,11 @@ def test_local_sweep_killed_resumes_and_sums_up(base, tmp_path):
     running members checkpoint and it exits 75. Run again, then SIGKILL to the sweep and its
     members (a node failing): the member cut off is left interrupted. Run again: every member
     ends, from its checkpoints."""
+    # fewer frames and checkpoints than TINY's one every 50 steps: writing them is most of a run
+    text = TINY.replace("[output.frames]\nevery_steps = 50", "[output.frames]\nevery_steps = 500")
+    base.write_text(
+        text.replace("[output.checkpoints]\nevery_steps = 50", "[output.checkpoints]\nevery_steps = 100")
+    )
     out = tmp_path / "sw"
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
     sweep = [sys.executable, "-m", "sphere_cli", "sweep"]
@@ -270,7 +275,7 @@ def test_local_sweep_killed_resumes_and_sums_up(base, tmp_path):
         return subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL)
 
     def under_way(skip=()) -> list[str]:
-        """Members past a checkpoint at step 200 (one every 50 steps; about 1750 in all)."""
+        """Members past a checkpoint at step 200 (one every 100 steps; about 1750 in all)."""
         if not (out / sweeps.SWEEP_FILE).is_file():
             return []
         names = [n for n in sweeps.Sweep.load(out).names if n not in skip]

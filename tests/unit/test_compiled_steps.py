@@ -17,7 +17,7 @@ from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.kernels import serial
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
-from sphere_cli.kernels.motion import kick_drift_serial
+from sphere_cli.kernels.motion import kick_drift, kick_drift_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import motion as motion_module
 from sphere_cli.scene.builder import build_scene
@@ -177,3 +177,15 @@ def test_the_serial_twins_run_only_for_small_scenes_on_one_thread(monkeypatch):
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     assert calls == ["serial", "parallel", "parallel", "parallel"]
+
+
+def test_the_serial_twins_are_cached_apart_from_their_kernels():
+    """A twin without Numba's cache would compile in every process (seconds per run); with the
+    kernel's own name it would overwrite the kernel's cache entry."""
+    for twin, kernel in (
+        (dem_steps_serial, dem_steps),
+        (vans1d_steps_serial, vans1d_steps),
+        (kick_drift_serial, kick_drift),
+    ):
+        assert twin._cache._cache_path == kernel._cache._cache_path
+        assert twin._cache._cache_file._index_path != kernel._cache._cache_file._index_path
