@@ -455,7 +455,7 @@ def sweep(
     except SphereError as exc:
         _fail(exc)
     except KeyboardInterrupt:
-        again = f"; continue with: sphere sweep {made.path} --local {local}" if made is not None else ""
+        again = "" if made is None else f"; continue with: sphere sweep {made.path} --local {local or 'N'}"
         typer.echo(f"sphere: interrupted{again}", err=True)
         raise typer.Exit(StoppedEarly.exit_code) from None
     if code == StoppedEarly.exit_code:

@@ -60,17 +60,12 @@ FORMAT = 1
 # SLURM's default MaxArraySize is 1001 (task ids 0..1000): a larger sweep is warned of, and its
 # script submitted in parts with SWEEP_OFFSET
 SLURM_ARRAY_LIMIT = 1001
+ARRAY_PART = 1000  # members per submission of a larger sweep
 # characters a sweep folder's path may not hold: #SBATCH lines cannot quote them
 UNSAFE_PATH_CHARACTERS = '"\\\n#'
 # what an interrupted `sphere sweep` may have left before its sweep.json: it may go on there
-OWN_ENTRIES = {
-    "cases",
-    "runs",
-    "logs",
-    "members.csv",
-    "sweep.sbatch",
-    ".members.csv.tmp",
-    ".sweep.sbatch.tmp",
+OWN_ENTRIES = {"cases", "runs", "logs", "members.csv", "sweep.sbatch"} | {
+    f".{name}.tmp" for name in ("members.csv", "sweep.sbatch", SWEEP_FILE)
 }
 POLL_SECONDS = 0.1  # how often --local looks at its members
 MAX_COLUMNS = 24  # an observable of more values (a profile) is left out of the summary table
@@ -316,15 +311,17 @@ def _write(sweep: Sweep, texts: dict[str, str], threads: int | None) -> None:
                 f"{sweep.path}: holds another sweep (differs in: {', '.join(changed)}); its members "
                 "are kept. Choose another folder with -o, or remove this one to start again."
             )
-    elif sweep.path.exists() and (
-        not sweep.path.is_dir() or not {e.name for e in sweep.path.iterdir()} <= OWN_ENTRIES
-    ):
-        raise OutputError(f"{sweep.path}: exists and is not a sweep folder; choose another with -o")
+    # a new sweep writes everything, also over what an interrupted `sphere sweep` left (its cases
+    # may be another sweep's); a sweep found again keeps its cases and its (edited) script
+    fresh = not file.is_file()
+    if fresh and sweep.path.exists():
+        if not sweep.path.is_dir() or not {e.name for e in sweep.path.iterdir()} <= OWN_ENTRIES:
+            raise OutputError(f"{sweep.path}: exists and is not a sweep folder; choose another with -o")
     try:
         for sub in ("cases", "runs", "logs"):
             (sweep.path / sub).mkdir(parents=True, exist_ok=True)
         for name, text in texts.items():
-            if not sweep.case_path(name).is_file():
+            if fresh or not sweep.case_path(name).is_file():
                 write_text_atomic(sweep.case_path(name), text)
         table = io.StringIO()
         rows = csv.writer(table, lineterminator="\n")
@@ -333,7 +330,7 @@ def _write(sweep: Sweep, texts: dict[str, str], threads: int | None) -> None:
             rows.writerow([name, *(_cell(x) for x in values)])
         write_text_atomic(sweep.path / "members.csv", table.getvalue())
         script = sweep.path / "sweep.sbatch"
-        if not script.is_file():  # kept as it is once written: users edit its #SBATCH lines
+        if fresh or not script.is_file():  # then kept as it is: users edit its #SBATCH lines
             write_text_atomic(script, sbatch_script(sweep, threads or 1))
             script.chmod(0o755)
         elif threads is not None and f"--cpus-per-task={threads}\n" not in script.read_text(encoding="utf-8"):
@@ -353,13 +350,14 @@ def sbatch_script(sweep: Sweep, threads: int) -> str:
     the time limit reaches sphere itself (exec), which checkpoints and requeues the task."""
     path = sweep.path.resolve()
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", sweep.base_case.stem)
-    last = min(len(sweep.names), SLURM_ARRAY_LIMIT) - 1
+    count = len(sweep.names)
+    last = (count if count <= SLURM_ARRAY_LIMIT else ARRAY_PART) - 1
     more = ""
-    if len(sweep.names) > SLURM_ARRAY_LIMIT:
+    if count > SLURM_ARRAY_LIMIT:
         more = (
-            f"# {len(sweep.names)} members: more task ids than SLURM's usual MaxArraySize "
-            f"({SLURM_ARRAY_LIMIT}) allows.\n# The members from 1000 on: sbatch --array=0-999 "
-            "--export=ALL,SWEEP_OFFSET=1000 sweep.sbatch (and so on)\n"
+            f"# {count} members: more task ids than SLURM's usual MaxArraySize ({SLURM_ARRAY_LIMIT}) "
+            f"allows. The array\n# below runs members 0-{ARRAY_PART - 1}; then, and so on: sbatch "
+            f"--array=0-{ARRAY_PART - 1} --export=ALL,SWEEP_OFFSET={ARRAY_PART} sweep.sbatch\n"
         )
     output = str(path / "logs").replace("%", "%%") + "/%x-%A_%a.out"  # sbatch expands % patterns
     return f"""#!/bin/bash
@@ -390,6 +388,9 @@ made_with={shlex.quote(sys.executable)}
 SPHERE_PYTHON="${{SPHERE_PYTHON:-$made_with}}"
 task="${{SLURM_ARRAY_TASK_ID:?submit this script with sbatch: it is a job array}}"
 task=$((task + ${{SWEEP_OFFSET:-0}}))
+if [ "$task" -ge {count} ]; then
+    exit 0  # past the last member (the last part of a sweep submitted with SWEEP_OFFSET)
+fi
 exec "$SPHERE_PYTHON" -m sphere_cli sweep-member {shlex.quote(str(path))} "$task" --requeue --quiet
 """
 

@@ -2,7 +2,8 @@
 with an empty Numba cache (cold: every kernel compiled) and with the cache that run filled
 (cached: every kernel loaded), each in a fresh process.
 
-The scene is the canonical one of `sphere bench dem` with 64 spheres and six walls. Timed in the
+The scene is the canonical one of `sphere bench dem` with 256 spheres and six walls (one thread:
+at 200 spheres and more a run uses the parallel kernels, kernels/serial.py). Timed in the
 child from before `import sphere_cli` to the end of its first steps, taken both ways: many at a
 time in the compiled loop (physics/compiled_steps.py) and one at a time through the hooks, so
 that every kernel of a dry run is compiled or loaded (the neighbour build and its sort, the pair
@@ -26,7 +27,7 @@ from sphere_cli.bench.dem import canonical_case
 from sphere_cli.config.load import parse_case
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
-scene = build_scene(parse_case(canonical_case(64)))
+scene = build_scene(parse_case(canonical_case(256)))
 advance(scene, 20)
 scene.step.compiled = None
 advance(scene, 1)

@@ -53,6 +53,15 @@ OWN_FOLDERS = {
 }
 
 
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether the open file `fd` is the one at `path` now."""
+    try:
+        here, there = os.fstat(fd), os.stat(path)
+    except OSError:
+        return False
+    return (here.st_dev, here.st_ino) == (there.st_dev, there.st_ino)
+
+
 class RunDirectory:
     def __init__(self, path: Path):
         self.path = Path(path)
@@ -199,42 +208,54 @@ class RunDirectory:
             }
         )
 
+    def _read_marker(self) -> str:
+        """The marker's text; through the locked descriptor while this holds the lock (on NFS a
+        lock is the process's, and closing any other descriptor of the file would drop it)."""
+        if self._lock_fd is None:
+            return self.marker.read_text(encoding="utf-8")
+        size = os.fstat(self._lock_fd).st_size
+        return os.pread(self._lock_fd, size, 0).decode("utf-8")
+
     def case_origin(self) -> Path | None:
         """The case file the run was started from (its folder resolves relative paths), if known."""
         try:
-            origin = json.loads(self.marker.read_text(encoding="utf-8")).get("case")
+            origin = json.loads(self._read_marker()).get("case")
         except (OSError, ValueError, AttributeError):
             return None
         return Path(origin) if isinstance(origin, str) else None
 
     def lock(self) -> None:
         """Take the run directory's exclusive writer lock (RunBusy if another process holds it
-        for longer than LOCK_PATIENCE: a reader's probe, `busy`, holds it for microseconds)."""
+        for longer than LOCK_PATIENCE: a reader's probe, `busy`, holds it for microseconds). A
+        lock won on a marker that is no longer the directory's (moved aside by `run --overwrite`
+        while this waited) is let go and the marker there now tried instead."""
         if self._lock_fd is not None:
             return
-        try:
-            fd = os.open(self.marker, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as exc:
-            raise OutputError(f"{self.marker}: cannot open the run directory's lock ({exc})") from None
         deadline = time.monotonic() + LOCK_PATIENCE
         while True:
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                self._lock_fd = fd
-                return
+                fd = os.open(self.marker, os.O_RDWR | os.O_CREAT, 0o644)
             except OSError as exc:
-                held = exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
-                if held and time.monotonic() < deadline:
-                    time.sleep(0.01)
-                    continue
+                raise OutputError(f"{self.marker}: cannot open the run directory's lock ({exc})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
                 os.close(fd)
-                if held:
+                held = exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+                if not held:
+                    raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
+                if time.monotonic() >= deadline:
                     raise RunBusy(
                         f"{self.path}: another sphere process is writing this run directory (it holds "
                         f"the lock on {MARKER}); wait for it to end, or stop it, before `run --overwrite` "
                         "or `resume`"
                     ) from None
-                raise OutputError(f"{self.marker}: cannot lock the run directory ({exc})") from None
+                time.sleep(0.01)
+                continue
+            if _same_file(fd, self.marker):
+                self._lock_fd = fd
+                return
+            os.close(fd)
 
     def busy(self) -> bool:
         """Whether some process holds the writer lock now. Probed with a shared lock (which a

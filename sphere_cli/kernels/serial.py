@@ -29,8 +29,11 @@ def serial_twin(kernel, **callees):
     twin.__qualname__ = f"{func.__qualname__}_serial"
     twin.__module__ = func.__module__
     twin.__doc__ = func.__doc__
+    options = {**kernel.targetoptions, "parallel": False}
+    if kernel.targetoptions.get("parallel"):
+        options["error_model"] = "numpy"  # as Numba compiles a parallel loop's body
     # cached like every kernel here (caching is not among a dispatcher's target options)
-    return numba.jit(**{**kernel.targetoptions, "parallel": False}, cache=True)(twin)
+    return numba.jit(**options, cache=True)(twin)
 
 
 SERIAL_BELOW = 200  # particles

@@ -89,7 +89,8 @@ class CompiledSteps:
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks)
         else:
             extra = self.extra.force_arguments(state)
-            loop = self.extra.serial_steps_kernel if serial else self.extra.steps_kernel
+            twin = getattr(self.extra, "serial_steps_kernel", None)
+            loop = twin if serial and twin is not None else self.extra.steps_kernel
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks)
         state.neighbors.moved2 = moved2
         return int(done), bool(drifted)

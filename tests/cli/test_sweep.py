@@ -89,6 +89,12 @@ def test_sweep_folder_and_member_cases(base, tmp_path):
     # the same sweep again: found as it is; another one in its folder: refused, members kept
     again = sweeps.create(base, varies, False, out)
     assert again.names == made.names
+    # what an interrupted `sphere sweep` left (no sweep.json yet) is written over, cases too
+    other = tmp_path / "left"
+    (other / "cases").mkdir(parents=True)
+    (other / "cases" / "m000.toml").write_text("# another sweep's member\n")
+    sweeps.create(base, varies, False, other)
+    assert tomli.loads((other / "cases" / "m000.toml").read_text())["contact"]["friction"] == 0.3
     with pytest.raises(ResumeRefused, match="vary"):
         sweeps.create(base, [sweeps.parse_vary("particles.seed=1..4")], False, out)
     assert (out / "cases" / "m005.toml").is_file()
@@ -152,12 +158,15 @@ def test_job_array_script_passes_shellcheck_and_runs_its_task(base, tmp_path):
         "--requeue",
         "--quiet",
     ]
-    # members beyond SLURM's array size limit: the same task ids with an offset
+    # members beyond SLURM's array size limit: the same task ids with an offset; past the last
+    # member a task ends at once
+    subprocess.run(["bash", str(script)], env={**env, "SWEEP_OFFSET": "1"}, check=True)
+    assert (tmp_path / "log").read_text().split()[-3] == "4"
+    (tmp_path / "log").unlink()
     subprocess.run(["bash", str(script)], env={**env, "SWEEP_OFFSET": "1000"}, check=True)
-    assert (tmp_path / "log").read_text().split()[-3] == "1003"
+    assert not (tmp_path / "log").exists()
     # outside a job array it says so, and starts nothing
     env.pop("SLURM_ARRAY_TASK_ID")
-    (tmp_path / "log").unlink()
     refused = subprocess.run(["bash", str(script)], env=env, capture_output=True, text=True)
     assert refused.returncode != 0 and "sbatch" in refused.stderr and not (tmp_path / "log").exists()
 

@@ -15,9 +15,13 @@ from sphere_cli import api
 from sphere_cli.bench.dem import canonical_case
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.kernels import motion as kernels_motion
 from sphere_cli.kernels import serial
+from sphere_cli.kernels import steps as kernels_steps
+from sphere_cli.kernels import walls as kernels_walls
+from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
-from sphere_cli.kernels.motion import kick_drift, kick_drift_serial
+from sphere_cli.kernels.motion import kick_drift_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import motion as motion_module
 from sphere_cli.scene.builder import build_scene
@@ -146,17 +150,21 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
     twins = (loop, kick_drift_serial)
     runs = {}
     try:
-        for threads in (1, 2):
+        for threads in (2, 1):
             numba.set_num_threads(threads)
-            before = [len(t.overloads) for t in twins]
+            calls = []
+            twin = kernels_motion.kick_serial
+            monkeypatch.setattr(
+                motion_module, "kick_serial", lambda *a, c=calls, k=twin: c.append(1) or k(*a)
+            )
             scene = build_scene(_case(name))
             advance(scene, STEPS)
             assert scene.state.neighbors.builds >= 2
             runs[threads] = _state(scene)
+            # the list builds end their steps through the hooks: the twin's kick there on one thread
+            assert bool(calls) == (threads == 1)
             if threads == 1:
                 assert all(t.overloads for t in twins)  # compiled or loaded for this run at the latest
-            else:  # the parallel run used no twin
-                assert [len(t.overloads) for t in twins] == before
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for key in runs[1]:
@@ -182,10 +190,14 @@ def test_the_serial_twins_run_only_for_small_scenes_on_one_thread(monkeypatch):
 def test_the_serial_twins_are_cached_apart_from_their_kernels():
     """A twin without Numba's cache would compile in every process (seconds per run); with the
     kernel's own name it would overwrite the kernel's cache entry."""
-    for twin, kernel in (
-        (dem_steps_serial, dem_steps),
-        (vans1d_steps_serial, vans1d_steps),
-        (kick_drift_serial, kick_drift),
-    ):
-        assert twin._cache._cache_path == kernel._cache._cache_path
-        assert twin._cache._cache_file._index_path != kernel._cache._cache_file._index_path
+    twins = {
+        kernels_motion: ("kick_drift", "kick"),
+        kernels_walls: ("wall_forces",),
+        kernels_steps: ("contacts", "dem_steps"),
+        kernels_profile: ("profile_forces", "vans1d_steps"),
+    }
+    for module, names in twins.items():
+        for name in names:
+            twin, kernel = getattr(module, f"{name}_serial"), getattr(module, name)
+            assert twin._cache._cache_path == kernel._cache._cache_path
+            assert twin._cache._cache_file._index_path != kernel._cache._cache_file._index_path
