@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -470,6 +472,29 @@ def test_a_run_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, va
     assert_clean_error(sphere_inproc("resume", "out", cwd=tmp_path), 2, f"{variable}=2")
     monkeypatch.setenv(variable, "1")  # one rank: an ordinary run
     refuse_many_ranks()
+
+
+def test_mpiexec_with_two_ranks_is_refused_by_every_rank(tmp_path):
+    """The real launcher (the mpich wheel of the test extra): `mpiexec -n 2 sphere run` stops
+    in both ranks with the message, and writes nothing; one rank is an ordinary process."""
+    mpiexec = Path(sys.executable).with_name("mpiexec")
+    if not mpiexec.is_file():
+        pytest.skip("no mpiexec beside this Python (the test extra installs the mpich wheel on Linux)")
+    (tmp_path / "case.toml").write_text(TINY)
+    command = [str(mpiexec), "-n", "2", sys.executable, "-m", "sphere_cli", "run", "case.toml", "-o", "out"]
+    done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0
+    assert done.stderr.count("sphere: error: started as 2 MPI ranks") == 2, done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "out").exists()
+    one = [
+        str(mpiexec),
+        "-n",
+        "1",
+        sys.executable,
+        "-c",
+        "from sphere_cli.runtime import refuse_many_ranks as r; r()",
+    ]
+    assert subprocess.run(one, capture_output=True, timeout=120).returncode == 0
 
 
 def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):
