@@ -70,6 +70,21 @@ def write_data(scene, path: Path) -> dict:
     return {key: float(v) if isinstance(v, np.floating) else v for key, v in values.items()}
 
 
+def open_mpi_launcher() -> str | None:
+    """The first mpirun on PATH that is Open MPI's: Debian's peers are built against it (an
+    activated sphere environment puts the mpich wheel's mpirun first, which cannot start them)."""
+    for folder in os.environ.get("PATH", "").split(os.pathsep):
+        candidate = Path(folder) / "mpirun"
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            version = subprocess.run([str(candidate), "--version"], capture_output=True, text=True)
+            if "Open MPI" in version.stdout + version.stderr:
+                return str(candidate)
+    return None
+
+
+MPIRUN = open_mpi_launcher()
+
+
 def run_peer(program: str, script: Path, variables: dict, ranks: int, workdir: Path) -> tuple[float, str]:
     """One run of a peer; returns the seconds of its timed loop and its last thermo line."""
     command = [program, "-in", str(script), "-log", "none"]
@@ -77,7 +92,7 @@ def run_peer(program: str, script: Path, variables: dict, ranks: int, workdir: P
         command += ["-var", key, repr(value) if isinstance(value, float) else str(value)]
     env = dict(os.environ)
     if ranks > 1:
-        command = ["mpirun", "--oversubscribe", "-np", str(ranks)] + command
+        command = [MPIRUN, "--oversubscribe", "-np", str(ranks)] + command
         env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     out = subprocess.run(command, cwd=workdir, env=env, capture_output=True, text=True)
     loops = LOOP.findall(out.stdout)
@@ -102,8 +117,8 @@ def main(n: int, steps: int, rounds: int, threads: list[int]) -> dict:
             print(f"{name} is not installed ({program} not on PATH): skipped")
         else:
             peers[name] = (path, script)
-    if any(t > 1 for t in threads) and shutil.which("mpirun") is None:
-        print("mpirun is not installed: the peers run on one rank only")
+    if any(t > 1 for t in threads) and MPIRUN is None:
+        print("Open MPI's mpirun is not on PATH: the peers run on one rank only")
         threads = [1]
     # a bed at rest: the kinetic energy a peer may end with, per particle (m g d / 100)
     ke_limit = n * float(p.mass[0]) * 9.81 * 2 * float(p.radius[0]) / 100
