@@ -421,6 +421,7 @@ def sweep(
         None,
         "--threads",
         min=1,
+        metavar="T",
         help="Threads per member (default: 1 in the SLURM script; with --local, the cores shared out).",
     ),
 ) -> None:
