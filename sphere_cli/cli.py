@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import typer
 
 from . import api
 from .errors import SphereError, StoppedEarly, UsageError
-from .runtime import StopFlag, parse_wall_time, signal_handlers
+from .runtime import StopFlag, parse_wall_time, signal_handlers, usable_cores
 
 app = typer.Typer(
     add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish
@@ -446,7 +445,7 @@ def sweep(
                 f"results: sphere sweep-summary {made.path}"
             )
             return
-        per_member = threads or max(1, (os.cpu_count() or 1) // local)
+        per_member = threads or max(1, usable_cores() // local)
         stop = StopFlag()
         with signal_handlers(stop, True):
             code = sweeps.run_local(

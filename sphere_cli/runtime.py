@@ -43,6 +43,14 @@ def busy_cores(stat_before: str, stat_after: str) -> float:
     return cores * busy / total
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (a batch job's or container's CPU set), else all."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def measure_busy_cores(seconds: float = SAMPLE_SECONDS, stat: str = "/proc/stat") -> float | None:
     """Cores that other processes keep busy now (this one sleeps while it samples); None where
     /proc/stat cannot be read (not Linux)."""

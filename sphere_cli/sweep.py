@@ -54,6 +54,7 @@ from .errors import (
 )
 from .io.atomic import write_text_atomic
 from .io.rundir import RunDirectory
+from .runtime import usable_cores
 
 SWEEP_FILE = "sweep.json"
 FORMAT = 1
@@ -506,7 +507,7 @@ def run_local(sweep: Sweep, processes: int, threads: int, stop, log=print) -> in
     done_before = len(sweep.names) - len(pending) - len(codes)
     log(f"{len(sweep.names)} members: {done_before} done, {len(pending)} to run, {processes} at a time")
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
-    if processes * threads > (os.cpu_count() or 1):
+    if processes * threads > usable_cores():
         # spinning OpenMP threads on shared cores are many times slower (docs/performance.md)
         env["OMP_WAIT_POLICY"] = "PASSIVE"
     running: dict[str, tuple[subprocess.Popen, object]] = {}

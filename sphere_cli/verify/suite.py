@@ -82,11 +82,9 @@ def machine() -> dict:
     import numpy
 
     from ..io.provenance import _version
+    from ..runtime import usable_cores
 
-    try:
-        usable = len(os.sched_getaffinity(0))
-    except AttributeError:
-        usable = os.cpu_count()
+    usable = usable_cores()
     try:
         layer = numba.threading_layer()
     except ValueError:  # no parallel kernel has run yet
