@@ -32,6 +32,11 @@ def summarize(path: Path) -> dict:
 
 def _run_directory(rundir: RunDirectory) -> dict:
     if not rundir.is_run():
+        if (rundir.path / "sweep.json").is_file():
+            raise MissingInputError(
+                f"{rundir.path}: a sweep's folder, not a run directory: `sphere sweep-summary {rundir.path}` "
+                "tabulates its members; each member's run is in its runs/ folder"
+            )
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     out = {"kind": "run directory", "path": str(rundir.path)}
     if rundir.status_path.is_file():

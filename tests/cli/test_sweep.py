@@ -17,6 +17,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,12 +25,13 @@ import h5py
 import numpy as np
 import pytest
 import tomli
-from cli_test_support import TINY, assert_clean_error, sphere_inproc
+from cli_test_support import FROM_FILE, TINY, TWO_SPHERES_CSV, assert_clean_error, sphere_inproc
 
 from sphere_cli import api
 from sphere_cli import sweep as sweeps
 from sphere_cli.errors import ResumeRefused, StoppedEarly, UsageError
 from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint, read_checkpoint
+from sphere_cli.io.rundir import RunDirectory
 
 SHELLCHECK = shutil.which("shellcheck") or str(Path(sys.executable).with_name("shellcheck"))
 
@@ -125,6 +127,31 @@ def test_sweep_folder_given_again_with_vary_is_a_usage_error(base, tmp_path):
     assert_clean_error(sphere_inproc("sweep-summary", tmp_path), 66, "not a sweep directory")
 
 
+def test_members_read_relative_files_from_the_base_case_folder(tmp_path):
+    """A placement file next to the base case is found by a member, though the members' cases
+    live in the sweep's folder, and its run records the base case as the folder a resume resolves
+    relative paths from; --zip pairs the values."""
+    (tmp_path / "cases").mkdir()
+    (tmp_path / "cases" / "pair.toml").write_text(FROM_FILE)
+    (tmp_path / "cases" / "spheres.csv").write_text(TWO_SPHERES_CSV)
+    out = tmp_path / "sw"
+    made = sphere_inproc(
+        "sweep", tmp_path / "cases" / "pair.toml", "-o", out, "--zip",
+        "--vary", "contact.friction=0.2,0.4", "--vary", "particles.density=2000,3000",
+    )  # fmt: skip
+    assert made.code == 0, made.stderr
+    assert (out / "members.csv").read_text().splitlines()[1:] == ["m000,0.2,2000", "m001,0.4,3000"]
+    first = sphere_inproc("sweep-member", out, "1", "-q", "--max-wall-time", "0")
+    assert first.code == 75, first.stderr  # stopped at once, a checkpoint written
+    origin = RunDirectory(out / "runs" / "m001").case_origin()
+    assert origin == (tmp_path / "cases" / "pair.toml").resolve()
+    resumed = sphere_inproc("sweep-member", out, "1", "-q")
+    assert resumed.code == 0, resumed.stderr
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.DONE
+    # a sweep's folder given to `inspect` says where the members are
+    assert_clean_error(sphere_inproc("inspect", out), 66, "sphere sweep-summary", "runs/")
+
+
 def test_job_array_script_passes_shellcheck_and_runs_its_task(base, tmp_path):
     out = tmp_path / "my 100% sweeps" / "sw"  # a space and sbatch's pattern character
     sweeps.create(base, [sweeps.parse_vary("particles.seed=1..5")], False, out, threads=4)
@@ -180,10 +207,6 @@ def test_a_sweep_folder_sbatch_cannot_name_is_refused(base, tmp_path):
 def test_reading_a_run_directory_never_keeps_its_writer_out(tmp_path):
     """sweep-summary and --local probe each member's lock (RunDirectory.busy) while members start
     and resume: a probe must never make a writer's lock fail."""
-    import threading
-
-    from sphere_cli.io.rundir import RunDirectory
-
     (tmp_path / "run").mkdir()
     writer, reader = RunDirectory(tmp_path / "run"), RunDirectory(tmp_path / "run")
     writer.lock()
