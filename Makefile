@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_DIR ?= runs/demo
 
-.PHONY: install demo test bench bench-lean bench-peers docs lint clean
+.PHONY: install demo test test-cuda bench bench-lean bench-peers docs lint clean
 
 $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +47,20 @@ $(PARAVIEW_STAMP): $(STAMP)
 test: $(STAMP) $(PARAVIEW_STAMP)
 	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q --durations=10 -n auto --maxprocesses=4 --dist=loadfile
 
+# The GPU path with the CUDA extra (numba-cuda and NVIDIA's compiler as wheels, about 0.5 GB, in a
+# venv of its own): the GPU tests under numba-cuda's simulator, and every GPU kernel compiled for
+# an H200 (sm_90) without a GPU. On a GPU machine, CUDASIM=0 runs the tests on the device.
+CUDA_VENV  := .venv-cuda
+CUDA_STAMP := $(CUDA_VENV)/.installed
+$(CUDA_STAMP): pyproject.toml Makefile
+	$(PYTHON) -m venv $(CUDA_VENV)
+	$(CUDA_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(CUDA_VENV)/bin/python -m pip install --quiet -e ".[test,cuda]"
+	touch $@
+
+test-cuda: $(CUDA_STAMP)
+	NUMBA_ENABLE_CUDASIM=$${CUDASIM:-1} $(CUDA_VENV)/bin/python -m pytest -q -p no:randomly tests/unit/test_cuda_dem.py
+
 bench: $(STAMP)
 	$(BIN)/sphere bench dem
 	$(BIN)/sphere bench compile
@@ -80,7 +94,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check sphere_cli tests benchmarks
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) $(CUDA_VENV) runs .pytest_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
 # Full verification run (error against run time, stability suite), then the report regenerated.

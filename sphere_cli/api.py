@@ -54,10 +54,12 @@ def _log_note(log, note: str | None) -> None:
         log.warning("%s", note)
 
 
-def _with_duration(loaded: LoadedCase, until: float | None) -> LoadedCase:
-    if until is None:
+def _with_simulation(loaded: LoadedCase, **given) -> LoadedCase:
+    """The case with the [simulation] keys given on the command line (None: not given)."""
+    update = {key: value for key, value in given.items() if value is not None}
+    if not update:
         return loaded
-    sim = loaded.case.simulation.model_copy(update={"duration": until})
+    sim = loaded.case.simulation.model_copy(update=update)
     return LoadedCase(
         case=loaded.case.model_copy(update={"simulation": sim}),
         text=loaded.text,
@@ -97,6 +99,9 @@ def _drive(
         clock.dt,
         scene.state.particles.count,
     )
+    gpu = getattr(scene.step.compiled, "device_name", None)
+    if gpu is not None:
+        log.info("steps on the GPU (simulation.device = cuda): %s", gpu)
     log.info("time step limit %.6g s: %s", scene.dt_limit, scene.dt_limit_reason)
     log.info("stability bound %.6g s: %s", scene.dt_bound, scene.dt_bound_reason)
     if scene.fluid is not None:
@@ -144,11 +149,12 @@ def run(
     show_progress: bool = False,
     until: float | None = None,
     origin: str | Path | None = None,
+    device: str | None = None,
 ) -> RunResult:
     """Run a case in a new run directory. `origin`: the case file whose folder resolves the
     case's relative paths, if not the case's own (a sweep member's: sphere_cli/sweep.py)."""
     refuse_many_ranks()
-    loaded = _with_duration(load_case(case_path), until)
+    loaded = _with_simulation(load_case(case_path), duration=until, device=device)
     if origin is not None:
         loaded = dataclasses.replace(loaded, origin=Path(origin))
     set_threads(loaded.case)
@@ -210,6 +216,7 @@ def resume(
     max_wall_time: float | None = None,
     handle_signals: bool = False,
     show_progress: bool = False,
+    device: str | None = None,
 ) -> RunResult:
     refuse_many_ranks()
     rundir = RunDirectory(Path(run_dir))
@@ -217,14 +224,17 @@ def resume(
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     rundir.lock()
     try:
-        return _resume_locked(rundir, until, max_wall_time, handle_signals, show_progress)
+        return _resume_locked(rundir, until, max_wall_time, handle_signals, show_progress, device)
     finally:
         rundir.close_logger()
         rundir.unlock()
 
 
-def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, show_progress) -> RunResult:
-    loaded = _with_duration(dataclasses.replace(load_case(rundir.case), origin=rundir.case_origin()), until)
+def _resume_locked(
+    rundir: RunDirectory, until, max_wall_time, handle_signals, show_progress, device
+) -> RunResult:
+    loaded = dataclasses.replace(load_case(rundir.case), origin=rundir.case_origin())
+    loaded = _with_simulation(loaded, duration=until, device=device)
     set_threads(loaded.case)
     if rundir.xdmf.exists() and not rundir.xdmf.is_file():
         raise OutputError(f"{rundir.xdmf}: is not a file; remove or rename it, then resume again")
@@ -235,7 +245,7 @@ def _resume_locked(rundir: RunDirectory, until, max_wall_time, handle_signals, s
         # stopped before its first checkpoint: nothing was computed that a new start would not redo
         log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
-        fresh = _with_duration(fresh, until)
+        fresh = _with_simulation(fresh, duration=until, device=device)
         note = shared_cores_warning()
         _starting(rundir, show_progress)
         scene = build_scene(fresh)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from enum import StrEnum
 from pathlib import Path
 
 import typer
@@ -95,6 +96,19 @@ def schema() -> None:
     typer.echo(json.dumps(api.schema(), indent=2))
 
 
+class Device(StrEnum):
+    cpu = "cpu"
+    cuda = "cuda"
+
+
+DEVICE_OPTION = typer.Option(
+    None,
+    "--device",
+    help='Where the steps run, instead of simulation.device: "cpu" or "cuda" (an NVIDIA GPU, needs '
+    "pip install 'sphere-cli[cuda]'; agrees with the CPU to round-off).",
+)
+
+
 @app.command()
 def run(
     case: Path = typer.Argument(..., metavar="CASE", help="Case file (TOML)."),
@@ -116,6 +130,7 @@ def run(
         help=WALL_TIME_HELP,
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
+    device: Device | None = DEVICE_OPTION,
 ) -> None:
     """Run a case: build the scene, advance it, write trajectory and checkpoints."""
     try:
@@ -127,6 +142,7 @@ def run(
             handle_signals=True,
             show_progress=not quiet,
             until=until,
+            device=None if device is None else device.value,
         )
     except SphereError as exc:
         _fail(exc)
@@ -147,8 +163,10 @@ def resume(
         help=WALL_TIME_HELP,
     ),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
+    device: Device | None = DEVICE_OPTION,
 ) -> None:
-    """Continue a run from its newest checkpoint that verifies (bitwise identical continuation)."""
+    """Continue a run from its newest checkpoint that verifies (bitwise identical continuation on
+    the device it ran on)."""
     try:
         result = api.resume(
             run_dir,
@@ -156,6 +174,7 @@ def resume(
             max_wall_time=_wall_time(max_wall_time),
             handle_signals=True,
             show_progress=not quiet,
+            device=None if device is None else device.value,
         )
     except SphereError as exc:
         _fail(exc)

@@ -83,7 +83,7 @@ def advance(scene, steps: int) -> bool:
             run = min(
                 [steps - taken] + [m.coupling_steps - clock.step % m.coupling_steps for m, _ in after_step]
             )
-            if run > 1:
+            if run > 1 or compiled.whole_steps:
                 done, drifted = compiled.run(state, run)
                 if done:
                     clock.step += done

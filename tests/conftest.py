@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import os
 import textwrap
 from pathlib import Path
 
 import pytest
+
+# The GPU kernels run under Numba's CUDA simulator unless asked otherwise (NUMBA_ENABLE_CUDASIM=0
+# on a GPU machine): set before Numba reads its configuration, also for the processes tests start.
+os.environ.setdefault("NUMBA_ENABLE_CUDASIM", "1")
 
 
 @pytest.fixture

@@ -65,6 +65,16 @@ class Simulation(Strict):
             "(docs/performance.md)."
         ),
     )
+    device: Literal["cpu", "cuda"] = Field(
+        "cpu",
+        description=(
+            'Where the steps run: "cpu" (every model), or "cuda", an NVIDIA GPU (needs the CUDA '
+            "extra, pip install 'sphere-cli[cuda]'), for particles with pair contacts, gravity, fixed "
+            "walls and periodic boundaries so far (a case with moving walls, a fluid, stages or the "
+            "energy budget is refused). The GPU agrees with the CPU to round-off; `sphere run "
+            "--device` overrides this key."
+        ),
+    )
     blowup_check_every: Count = Field(
         100,
         ge=1,
@@ -822,5 +832,6 @@ NON_PHYSICS_KEYS = (
     ("simulation", "duration"),
     ("simulation", "threads"),
     ("simulation", "neighbor_skin"),
+    ("simulation", "device"),
     ("output",),
 )

@@ -53,11 +53,8 @@ from .laws import (
     K_T,
     MU,
     MU_R,
-    contact_window,
-    normal_law,
+    contact_response,
     reduced,
-    rolling_torque,
-    tangential_spring,
 )
 from .layout import U1, U2, U3, flat
 from .neighbors import minimum_image
@@ -120,75 +117,35 @@ def _law(
     spring_dt,
     step_dt,
 ):
-    """The law of contact c of a block, from its normal n (from the partner to i), overlap
-    delta [m], sqrt of the reduced mass [kg^1/2], R* [m] and I* [kg m^2] (pairs and walls
-    alike): reads the velocity and spring rows, writes the results and the new spring."""
-    # contact-point velocity of i relative to the partner: v_i - v_j - (r_i w_i + r_j w_j) x n
-    s0 = buf[B_S0 * BLOCK + c]
-    s1 = buf[B_S1 * BLOCK + c]
-    s2 = buf[B_S2 * BLOCK + c]
-    v0 = buf[B_A0 * BLOCK + c] - (s1 * n2 - s2 * n1)
-    v1 = buf[B_A1 * BLOCK + c] - (s2 * n0 - s0 * n2)
-    v2 = buf[B_A2 * BLOCK + c] - (s0 * n1 - s1 * n0)
-    vn = v0 * n0 + v1 * n1 + v2 * n2
-    # the same at the predicted full step, for the dashpots
-    q0 = buf[B_Q0 * BLOCK + c]
-    q1 = buf[B_Q1 * BLOCK + c]
-    q2 = buf[B_Q2 * BLOCK + c]
-    u0 = buf[B_P0 * BLOCK + c] - (q1 * n2 - q2 * n1)
-    u1 = buf[B_P1 * BLOCK + c] - (q2 * n0 - q0 * n2)
-    u2 = buf[B_P2 * BLOCK + c] - (q0 * n1 - q1 * n0)
-    un = u0 * n0 + u1 * n1 + u2 * n2
-    travel, grow, end = contact_window(delta, vn, un, step_dt)
-    fn, kt_now, ct = normal_law(kn, kt, dn, dt, law, delta, r_eff, root_m, un, travel, grow)
-    g0, g1, g2, x0, x1, x2 = tangential_spring(
-        buf[B_H0 * BLOCK + c],
-        buf[B_H1 * BLOCK + c],
-        buf[B_H2 * BLOCK + c],
-        v0 - vn * n0,
-        v1 - vn * n1,
-        v2 - vn * n2,
-        n0,
-        n1,
-        n2,
-        kt_now,
-        ct,
-        mu,
-        fn,
-        spring_dt * grow,
-        u0 - un * n0,
-        u1 - un * n1,
-        u2 - un * n2,
-        end,
-    )
+    """The law of contact c of a block (laws.py contact_response), from its normal n (from the
+    partner to i), overlap delta [m], sqrt of the reduced mass [kg^1/2], R* [m] and I* [kg m^2]
+    (pairs and walls alike): reads the velocity and spring rows, writes the results and the new
+    spring."""
+    w0 = w1 = w2 = 0.0
+    if rolling:
+        w0 = buf[B_W0 * BLOCK + c]
+        w1 = buf[B_W1 * BLOCK + c]
+        w2 = buf[B_W2 * BLOCK + c]
+    e0, e1, e2, c0, c1, c2, m0, m1, m2, x0, x1, x2 = contact_response(
+        (n0, n1, n2), delta, root_m, r_eff, i_eff, (kn, kt, dn, dt, mu, mu_r), law, rolling, spring_dt,
+        step_dt,
+        (buf[B_A0 * BLOCK + c], buf[B_A1 * BLOCK + c], buf[B_A2 * BLOCK + c]),
+        (buf[B_S0 * BLOCK + c], buf[B_S1 * BLOCK + c], buf[B_S2 * BLOCK + c]),
+        (buf[B_P0 * BLOCK + c], buf[B_P1 * BLOCK + c], buf[B_P2 * BLOCK + c]),
+        (buf[B_Q0 * BLOCK + c], buf[B_Q1 * BLOCK + c], buf[B_Q2 * BLOCK + c]),
+        (buf[B_H0 * BLOCK + c], buf[B_H1 * BLOCK + c], buf[B_H2 * BLOCK + c]),
+        (w0, w1, w2),
+    )  # fmt: skip
     buf[B_H0 * BLOCK + c] = x0
     buf[B_H1 * BLOCK + c] = x1
     buf[B_H2 * BLOCK + c] = x2
-    # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
-    buf[B_E0 * BLOCK + c] = fn * n0 + g0
-    buf[B_E1 * BLOCK + c] = fn * n1 + g1
-    buf[B_E2 * BLOCK + c] = fn * n2 + g2
-    buf[B_C0 * BLOCK + c] = n1 * g2 - n2 * g1
-    buf[B_C1 * BLOCK + c] = n2 * g0 - n0 * g2
-    buf[B_C2 * BLOCK + c] = n0 * g1 - n1 * g0
+    buf[B_E0 * BLOCK + c] = e0
+    buf[B_E1 * BLOCK + c] = e1
+    buf[B_E2 * BLOCK + c] = e2
+    buf[B_C0 * BLOCK + c] = c0
+    buf[B_C1 * BLOCK + c] = c1
+    buf[B_C2 * BLOCK + c] = c2
     if rolling:
-        m0 = 0.0
-        m1 = 0.0
-        m2 = 0.0
-        if mu_r > 0.0:
-            m0, m1, m2 = rolling_torque(
-                buf[B_W0 * BLOCK + c],
-                buf[B_W1 * BLOCK + c],
-                buf[B_W2 * BLOCK + c],
-                n0,
-                n1,
-                n2,
-                mu_r,
-                r_eff,
-                fn,
-                i_eff,
-                step_dt,
-            )
         buf[B_M0 * BLOCK + c] = m0
         buf[B_M1 * BLOCK + c] = m1
         buf[B_M2 * BLOCK + c] = m2

@@ -226,3 +226,46 @@ def reduced(inv_a, inv_b):
     whose contact moves nothing."""
     s = inv_a + inv_b
     return 1.0 / s if s > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def contact_response(n, delta, root_m, r_eff, i_eff, row, law, rolling, spring_dt, step_dt, a, s, p, q, h, w):
+    """The whole law of one contact, pairs and walls alike, shared by the CPU blocks
+    (kernels/contact.py) and the GPU threads (kernels/cuda_dem.py): from its normal n (from the
+    partner to i), overlap delta [m], sqrt of the reduced mass [kg^1/2], R* [m], I* [kg m^2],
+    its table row (K_N ... MU_R), v_i - v_j (a) and r_i w_i + r_j w_j (s) at the half step, the
+    same predicted (p, q), its spring h [m] and w_i - w_j (w) [rad/s], each a 3-tuple (Numba
+    inlines no function of more than about 30 arguments). Returns the force on i (3 values)
+    [N], n x F_t (3) [N], the rolling torque on i (3, zero without rolling) [N m] and the new
+    spring (3) [m]."""
+    n0, n1, n2 = n
+    kn, kt, dn, dt, mu, mu_r = row
+    s0, s1, s2 = s
+    q0, q1, q2 = q
+    # contact-point velocity of i relative to the partner: v_i - v_j - (r_i w_i + r_j w_j) x n
+    v0 = a[0] - (s1 * n2 - s2 * n1)
+    v1 = a[1] - (s2 * n0 - s0 * n2)
+    v2 = a[2] - (s0 * n1 - s1 * n0)
+    vn = v0 * n0 + v1 * n1 + v2 * n2
+    # the same at the predicted full step, for the dashpots
+    u0 = p[0] - (q1 * n2 - q2 * n1)
+    u1 = p[1] - (q2 * n0 - q0 * n2)
+    u2 = p[2] - (q0 * n1 - q1 * n0)
+    un = u0 * n0 + u1 * n1 + u2 * n2
+    travel, grow, end = contact_window(delta, vn, un, step_dt)
+    fn, kt_now, ct = normal_law(kn, kt, dn, dt, law, delta, r_eff, root_m, un, travel, grow)
+    g0, g1, g2, x0, x1, x2 = tangential_spring(
+        h[0], h[1], h[2], v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt_now, ct, mu, fn,
+        spring_dt * grow, u0 - un * n0, u1 - un * n1, u2 - un * n2, end,
+    )  # fmt: skip
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    if rolling and mu_r > 0.0:
+        m0, m1, m2 = rolling_torque(w[0], w[1], w[2], n0, n1, n2, mu_r, r_eff, fn, i_eff, step_dt)
+    # F_t acts at the contact point x_i - r_i n (on j: x_j + r_j n, with -F_t)
+    return (
+        fn * n0 + g0, fn * n1 + g1, fn * n2 + g2,
+        n1 * g2 - n2 * g1, n2 * g0 - n0 * g2, n0 * g1 - n1 * g0,
+        m0, m1, m2, x0, x1, x2,
+    )  # fmt: skip

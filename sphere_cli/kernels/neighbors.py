@@ -28,6 +28,8 @@ Capacity: a row that would exceed C (or R) stores what fits and records its true
 caller sees count > C, grows the list and rebuilds (no contact is ever dropped silently).
 """
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -43,20 +45,37 @@ def minimum_image(d, length, periodic):
     return d
 
 
+@njit(cache=True, inline="always")
+def cell_number(pos, i, lower, cell_size, ncell):
+    """The cell of particle i, numbered with z fastest (clamped to the grid, so escaped
+    particles still bin); also the GPU's (kernels/cuda_dem.py)."""
+    flat = 0
+    for a in range(3):
+        c = int(math.floor((pos[i, a] - lower[a]) / cell_size[a]))
+        if c < 0:
+            c = 0
+        elif c >= ncell[a]:
+            c = ncell[a] - 1
+        flat = flat * ncell[a] + c
+    return flat
+
+
+@njit(cache=True, inline="always")
+def insert_ascending(nbr, i, count, j):
+    """Put j into row i of nbr, whose first `count` slots are ascending, keeping them so: a
+    row sorted by j fixes the order of the force sums (also the GPU's rows, kernels/cuda_dem.py)."""
+    k = count
+    while k > 0 and nbr[i, k - 1] > j:
+        nbr[i, k] = nbr[i, k - 1]
+        k -= 1
+    nbr[i, k] = j
+
+
 @njit(cache=True)
 def cell_index(pos, lower, cell_size, ncell, cell_of):
-    """Cell of each particle (clamped to the grid, so escaped particles still bin)."""
-    n = pos.shape[0]
-    for i in range(n):
-        flat = 0
-        for a in range(3):
-            c = int(np.floor((pos[i, a] - lower[a]) / cell_size[a]))
-            if c < 0:
-                c = 0
-            elif c >= ncell[a]:
-                c = ncell[a] - 1
-            flat = flat * ncell[a] + c
-        cell_of[i] = flat
+    """Cell of each particle (cell_number)."""
+    for i in range(pos.shape[0]):
+        cell_of[i] = cell_number(pos, i, lower, cell_size, ncell)
 
 
 @njit(cache=True)
@@ -111,8 +130,9 @@ def _axis_offsets(n, periodic):
 
 
 @njit(cache=True, inline="always")
-def _wrap_cell(g, n, periodic):
-    """Cell g along an axis of n cells, wrapped if periodic; -1 if it lies off the grid."""
+def wrap_cell(g, n, periodic):
+    """Cell g along an axis of n cells, wrapped if periodic; -1 if it lies off the grid (also
+    the GPU's, kernels/cuda_dem.py)."""
     if g < 0 or g >= n:
         if not periodic:
             return -1
@@ -171,11 +191,11 @@ def build_lists(
         ri = radius[i]
         count = 0
         for ox in offx:
-            gx = _wrap_cell(cx + ox, ncell[0], px)
+            gx = wrap_cell(cx + ox, ncell[0], px)
             if gx < 0:
                 continue
             for oy in offy:
-                gy = _wrap_cell(cy + oy, ncell[1], py)
+                gy = wrap_cell(cy + oy, ncell[1], py)
                 if gy < 0:
                     continue
                 column = (gx * ncell[1] + gy) * nz
@@ -197,12 +217,7 @@ def build_lists(
                         reach = ri + radius[j] + skin
                         if dx * dx + dy * dy + dz * dz < reach * reach:
                             if count < cap:
-                                # insertion keeps the row sorted by j: a fixed summation order
-                                k = count
-                                while k > 0 and nbr[i, k - 1] > j:
-                                    nbr[i, k] = nbr[i, k - 1]
-                                    k -= 1
-                                nbr[i, k] = j
+                                insert_ascending(nbr, i, count, j)
                             count += 1
         nbr_count[i] = count
         # clear the unused tail, so the buffer holds nothing from older builds (checkpoints of

@@ -47,6 +47,9 @@ def _has_steps_kernel(hook) -> bool:
 
 
 class CompiledSteps:
+    # a single step is taken by the hooks (the loop's call costs more than it saves)
+    whole_steps = False
+
     def __init__(self, search: NeighborSearch, contact: PairContactForces, walls, extra):
         self.search, self.contact, self.walls, self.extra = search, contact, walls, extra
 

@@ -87,7 +87,12 @@ class Scene:
         if problems:  # a programming error: the order above breaks physics/module.py ORDER
             raise RuntimeError("; ".join(problems))
         self.step = Step(self.modules, particles=self.state.particles.count > 0)
-        self.step.compiled = CompiledSteps.of(self.step)
+        if self.case.simulation.device == "cuda":
+            from ..physics.device_steps import DeviceSteps  # the CPU path imports no CUDA package
+
+            self.step.compiled = DeviceSteps.of(self)
+        else:
+            self.step.compiled = CompiledSteps.of(self.step)
 
     def compute_initial_forces(self) -> None:
         """Forces of the initial state, for the first half kick: no time has passed, so the

@@ -1,0 +1,335 @@
+"""The DEM steps on a CUDA GPU (`[simulation] device = "cuda"`): the kernels of
+kernels/cuda_dem.py in the order of the step (kick-drift, the neighbour list rebuilt on the
+device when some particle has moved half the skin, the pair contacts, the kick), with the state
+kept on the device for a whole call of simulation.advance and copied back at its end, so that
+frames, observables, checkpoints and the stability check read the host arrays as on the CPU.
+
+It takes the place of physics/compiled_steps.py for the scenes it covers: particles, their pair
+contacts (both laws, friction, rolling, several materials), gravity, fixed plane walls and
+periodic boundaries. A case with anything else in its step (moving or stress-controlled walls, a
+fluid, stages, the energy budget) is refused
+with the modules named; so is a machine without a usable GPU. Results agree with the CPU to
+round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
+CPU rounds twice (docs/user-guide.md, "The GPU").
+
+The host's neighbour list is a half list with packed springs (kernels/neighbors.py); the device
+holds full rows with the springs at the owner's slot (kernels/cuda_dem.py). The two are
+converted at the upload and the download, so a checkpoint written from a GPU run resumes on
+the CPU and the other way round.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CaseError
+from ..kernels.neighbors import row_starts
+from ..kernels.walls import FIXED
+from ..state import State
+from .compiled_steps import CompiledSteps
+from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
+
+# threads per block: any size gives the same results (each thread sums its own particle)
+THREADS = 128
+# the modules the GPU step runs (fixed walls only; the Observer, "observables" or "" where it has
+# no state, only measures, from the host arrays)
+SUPPORTED = ("particles", "neighbors", "contact", "walls", "observables", "")
+# what a module the GPU does not run is, for the message that refuses it
+NAMES = {
+    "wall_motion": "walls that move or keep a stress ([[walls]] velocity or stress)",
+    "fluid": "a fluid ([fluid])",
+    "stages": "stages ([[stages]])",
+    "energy_budget": "the energy budget (output.observables)",
+}
+# row and cell slots added on growth, beyond the longest seen
+ROW_HEADROOM = 4
+CELL_SLOTS = 8
+
+
+def _cuda():
+    """numba.cuda, or a CaseError naming the key when no GPU can be used here."""
+    try:
+        from numba import cuda
+
+        usable = cuda.is_available()
+    except Exception as exc:  # a broken CUDA installation: its own message
+        usable, why = False, f"{type(exc).__name__}: {exc}"
+    else:
+        why = "numba.cuda finds no CUDA GPU with a working driver"
+    if not usable:
+        raise CaseError(
+            f'simulation.device = "cuda": no GPU can be used here ({why}). The GPU needs an NVIDIA '
+            "GPU, its driver and the CUDA extra (pip install 'sphere-cli[cuda]'); "
+            'device = "cpu" (the default) runs the same case on the processor.'
+        )
+    return cuda
+
+
+def _gpu_name(cuda) -> str:
+    from numba import config
+
+    if config.ENABLE_CUDASIM:
+        return "Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1)"
+    name = cuda.get_current_device().name
+    return name.decode() if isinstance(name, bytes) else str(name)
+
+
+@dataclass
+class Rows:
+    """A neighbour list on the device: full rows and each pair's slot in its partner's row."""
+
+    nbr: object
+    count: object
+    mate: object
+
+
+class DeviceSteps:
+    # takes any number of whole steps, list rebuilds included (simulation.advance)
+    whole_steps = True
+
+    def __init__(self, scene, cuda):
+        self.cuda = cuda
+        self.search: NeighborSearch = scene.neighbors
+        self.contact = scene.contact
+        self.springs = self.search.springs
+        self.walls = scene.walls  # fixed plane walls, or None
+        self.rows = self.spare = None
+        self.on_device_at = None  # the host step the device state is for (None: upload)
+        self.builds = 0
+        self.device_name = _gpu_name(cuda)  # for run.log
+
+    @classmethod
+    def of(cls, scene) -> DeviceSteps:
+        """The GPU steps of a scene, or a CaseError saying what the GPU does not run yet."""
+        extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
+        walls = scene.state.walls
+        if walls is not None and (walls.mode != FIXED).any() and NAMES["wall_motion"] not in extra:
+            extra.append(NAMES["wall_motion"])
+        if scene.state.particles.count == 0:
+            extra.append("no particles (a fluid-only case)")
+        if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
+            raise CaseError(
+                f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, fixed '
+                "walls and periodic boundaries; this case also has: "
+                f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
+            )
+        if not scene.neighbors.dense:
+            raise CaseError(
+                f'simulation.device = "cuda": the box holds {int(np.prod(scene.neighbors.ncell))} search '
+                f"cells for {scene.state.particles.count} particles; the GPU's search stores every "
+                'cell. Make domain smaller around the particles, or use device = "cpu".'
+            )
+        return cls(scene, _cuda())
+
+    # --- host <-> device ------------------------------------------------------------------
+
+    def _launch(self, kernel, size: int, *args) -> None:
+        threads = min(THREADS, 32 * math.ceil(max(size, 1) / 32))
+        kernel[math.ceil(max(size, 1) / threads), threads](*args)
+
+    def upload(self, state: State) -> None:
+        """The particles, the box, the contact table and the host's list with its springs."""
+        to = self.cuda.to_device
+        p, box, nl = state.particles, state.box, state.neighbors
+        self.d = {
+            name: to(getattr(p, name))
+            for name in (
+                "pos", "vel", "angvel", "force", "torque", "vel_pred", "angvel_pred", "radius",
+                "inv_mass", "inv_inertia", "mass", "material",
+            )
+        }  # fmt: skip
+        self.d.update(
+            lower=to(box.lower),
+            length=to(box.length),
+            periodic=to(box.periodic),
+            body_acc=to(box.body_acc),
+            table=to(self.contact.table),
+            ref_pos=to(nl.ref_pos),
+            cell_size=to(self.search.cell_size),
+            ncell=to(self.search.ncell),
+            worst=to(np.zeros(1)),
+            longest=to(np.zeros(2, dtype=np.int32)),
+        )
+        cells = int(np.prod(self.search.ncell))
+        self.cell_of = self.cuda.device_array(p.count, dtype=np.int64)
+        self.cell_count = self.cuda.device_array(cells, dtype=np.int32)
+        self.cell_members = self.cuda.device_array((cells, CELL_SLOTS), dtype=np.int32)
+        if self.walls is not None:
+            w = state.walls
+            self.wall_springs = w.hist.shape[0] > 0  # none without friction
+            self.d.update(
+                wall_axis=to(w.axis),
+                wall_sign=to(w.sign),
+                wall_coord=to(w.coord),
+                wall_vel=to(w.vel),
+                wall_vel_pred=to(w.vel_pred),
+                wall_table=to(w.table),
+                wall_hist=to(w.hist if self.wall_springs else np.zeros((1, 1, 3))),
+                inertia=to(p.inertia),
+            )
+        self.rows, self.hist = self._full_rows(nl, p.count)
+        self.spare = self._allocate(p.count, self.rows.nbr.shape[1])
+        self.hist_next = self._springs(p.count, self.rows.nbr.shape[1])
+        self.on_device_at = state.clock.step
+
+    def _allocate(self, n: int, width: int) -> Rows:
+        cuda = self.cuda
+        return Rows(
+            cuda.device_array((n, width), dtype=np.int32),
+            cuda.device_array(n, dtype=np.int32),
+            cuda.device_array((n, width), dtype=np.int32),
+        )
+
+    def _springs(self, n: int, width: int, host: np.ndarray | None = None):
+        """A buffer of springs for rows of `width` slots (a placeholder without springs)."""
+        if not self.springs:
+            return self.cuda.to_device(np.zeros((1, 1, 3)))
+        return self.cuda.to_device(np.zeros((n, width, 3)) if host is None else host)
+
+    def _full_rows(self, nl, n: int) -> tuple[Rows, object]:
+        """The host's half rows as full rows on the device, and the springs, each at its owner's
+        slot."""
+        listed = listed_slots(nl.nbr, nl.nbr_count)
+        owner = np.repeat(np.arange(n), listed.sum(axis=1))
+        partner = nl.nbr[listed].astype(np.int64)
+        rows = np.concatenate([owner, partner])
+        cols = np.concatenate([partner, owner])
+        order = np.lexsort((cols, rows))
+        count = np.bincount(rows, minlength=n)
+        first = np.concatenate([[0], np.cumsum(count)[:-1]])
+        slot = np.empty(rows.size, dtype=np.int64)
+        slot[order] = np.arange(rows.size) - np.repeat(first, count)
+        width = int(count.max(initial=0)) + ROW_HEADROOM
+        nbr = np.zeros((n, width), dtype=np.int32)
+        nbr[rows, slot] = cols
+        mate = np.zeros((n, width), dtype=np.int32)
+        mate[rows, slot] = np.concatenate([slot[owner.size :], slot[: owner.size]])
+        made = self._allocate(n, width)
+        made.nbr.copy_to_device(nbr)
+        made.count.copy_to_device(count.astype(np.int32))
+        made.mate.copy_to_device(mate)
+        hist = np.zeros((n, width, 3))
+        if self.springs:
+            hist[owner, slot[: owner.size]] = nl.hist[: owner.size]
+        return made, self._springs(n, width, hist)
+
+    def download(self, state: State) -> None:
+        """The particles' arrays and the list (as half rows with packed springs) back into the
+        host's arrays."""
+        p, nl = state.particles, state.neighbors
+        for name in ("pos", "vel", "angvel", "force", "torque", "vel_pred", "angvel_pred"):
+            self.d[name].copy_to_host(getattr(p, name))
+        self.d["ref_pos"].copy_to_host(nl.ref_pos)
+        if self.walls is not None and self.wall_springs:
+            # a new array: the wall module derives its mask of set springs again (physics/walls.py)
+            state.walls.hist = self.d["wall_hist"].copy_to_host()
+        nbr = self.rows.nbr.copy_to_host()
+        count = self.rows.count.copy_to_host()
+        n = count.size
+        owned = (np.arange(nbr.shape[1])[None, :] < count[:, None]) & (nbr > np.arange(n)[:, None])
+        half = owned.sum(axis=1)
+        width = max(nl.nbr.shape[1], int(half.max(initial=0)), INITIAL_CAPACITY)
+        nl.nbr = np.zeros((n, width), dtype=np.int32)
+        nl.nbr[np.nonzero(owned)[0], (np.cumsum(owned, axis=1) - 1)[owned]] = nbr[owned]
+        nl.nbr_count = half.astype(np.int32)
+        pairs = int(row_starts(nl.nbr_count, width, nl.start))
+        if self.springs:
+            nl.hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
+            nl.hist[:pairs] = self.hist.copy_to_host()[owned]
+        nl.builds += self.builds
+        self.builds = 0
+        self.search._spare_like(nl)
+        self.search._reverse(nl)
+
+    # --- the step -------------------------------------------------------------------------
+
+    def run(self, state: State, steps: int) -> tuple[int, bool]:
+        """Take `steps` whole steps on the device; the host arrays hold the result."""
+        from ..kernels import cuda_dem as k
+
+        if self.on_device_at != state.clock.step:
+            self.upload(state)
+        d, n = self.d, state.particles.count
+        dt = state.clock.dt
+        zero = np.zeros(1)
+        moved2 = 0.0
+        for _ in range(steps):
+            d["worst"].copy_to_device(zero)
+            self._launch(
+                k.kick_drift, n, d["pos"], d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"],
+                d["inv_inertia"], d["lower"], d["length"], d["periodic"], dt, d["vel_pred"],
+                d["angvel_pred"], d["ref_pos"], d["worst"],
+            )  # fmt: skip
+            moved2 = float(d["worst"].copy_to_host()[0])
+            if moved2 > self.search.threshold2:
+                self.rebuild(state)
+            rows = self.rows
+            self._launch(
+                k.pair_forces, n, d["pos"], d["vel"], d["angvel"], d["vel_pred"], d["angvel_pred"],
+                d["radius"], d["inv_mass"], d["inv_inertia"], d["material"], d["mass"], d["body_acc"],
+                rows.nbr, rows.count, rows.mate, self.hist, self.hist_next, self.springs, d["table"],
+                self.contact.law_code, self.contact.rolling, d["length"], d["periodic"], dt, dt,
+                d["force"], d["torque"],
+            )  # fmt: skip
+            self.hist, self.hist_next = self.hist_next, self.hist
+            if self.walls is not None:
+                self._launch(
+                    k.wall_forces, n, d["pos"], d["vel"], d["angvel"], d["vel_pred"], d["angvel_pred"],
+                    d["radius"], d["mass"], d["inertia"], d["inv_mass"], d["material"], d["wall_axis"],
+                    d["wall_sign"], d["wall_coord"], d["wall_vel"], d["wall_vel_pred"], d["wall_table"],
+                    d["wall_hist"], self.wall_springs, self.contact.law_code, self.contact.rolling, dt, dt,
+                    d["force"], d["torque"],
+                )  # fmt: skip
+            self._launch(
+                k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"], dt
+            )
+        self.download(state)
+        state.neighbors.moved2 = moved2
+        self.on_device_at = state.clock.step + steps
+        return steps, False
+
+    def rebuild(self, state: State) -> None:
+        """A new list from the positions, into the spare rows (grown until every row and cell
+        fits), the springs carried into the free buffer (hist_next, whose springs are the last
+        step's); then the spare rows become the list."""
+        from ..kernels import cuda_dem as k
+
+        d, n, skin = self.d, state.particles.count, state.neighbors.skin
+        while True:
+            d["longest"].copy_to_device(np.zeros(2, dtype=np.int32))
+            self._launch(k.clear, self.cell_count.size, self.cell_count)
+            self._launch(
+                k.bin_particles, n, d["pos"], d["lower"], d["cell_size"], d["ncell"], self.cell_of,
+                self.cell_count, self.cell_members, d["longest"],
+            )  # fmt: skip
+            self._launch(
+                k.build_rows, n, d["pos"], d["radius"], d["length"], d["periodic"], d["ncell"], self.cell_of,
+                self.cell_count, self.cell_members, skin, self.spare.nbr, self.spare.count,
+                d["longest"],
+            )  # fmt: skip
+            row, cell = (int(v) for v in d["longest"].copy_to_host())
+            if cell > self.cell_members.shape[1]:
+                shape = (self.cell_count.size, cell + CELL_SLOTS)
+                self.cell_members = self.cuda.device_array(shape, np.int32)
+                continue
+            if row > self.spare.nbr.shape[1]:
+                self.spare = self._allocate(n, row + ROW_HEADROOM)
+                continue
+            break
+        new = self.spare
+        self._launch(k.find_mates, n, new.nbr, new.count, new.mate)
+        width = new.nbr.shape[1]
+        grown = width != self.rows.nbr.shape[1]
+        if self.springs:
+            carried = self._springs(n, width) if grown else self.hist_next
+            old = self.rows
+            self._launch(k.carry_springs, n, old.nbr, old.count, self.hist, new.nbr, new.count, carried)
+            self.hist, self.hist_next = carried, self._springs(n, width) if grown else self.hist
+        self.spare, self.rows = self.rows, new
+        if grown:  # the spare grows with the list
+            self.spare = self._allocate(n, width)
+        d["ref_pos"].copy_to_device(d["pos"])
+        self.builds += 1

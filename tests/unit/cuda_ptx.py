@@ -1,0 +1,63 @@
+"""Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py) for an H200 (compute capability
+9.0) with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot
+tell whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
+numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds
+in its code.
+
+The argument types are those physics/device_steps.py passes."""
+
+from numba import cuda
+from numba import types as t
+
+from sphere_cli.kernels import cuda_dem
+
+V = t.float64[:]  # (N,) or (3,)
+M = t.float64[:, :]  # (N,3)
+H = t.float64[:, :, :]  # springs (N,F,3), contact table (M,M,6)
+I1, I2, L1 = t.int32[:], t.int32[:, :], t.int64[:]
+B = t.uint8[:]  # periodic axes
+F, INT, BOOL = t.float64, t.int64, t.boolean
+
+SIGNATURES = {
+    "kick_drift": (M, M, M, M, M, V, V, V, V, B, F, M, M, M, V),
+    "kick": (M, M, M, M, V, V, F),
+    "clear": (I1,),
+    "bin_particles": (M, V, V, L1, L1, I1, I2, I1),
+    "build_rows": (M, V, V, B, L1, L1, I1, I2, F, I2, I1, I1),
+    "find_mates": (I2, I1, I2),
+    "carry_springs": (I2, I1, H, I2, I1, H),
+    "pair_forces": (
+        M,
+        M,
+        M,
+        M,
+        M,
+        V,
+        V,
+        V,
+        I1,
+        V,
+        V,
+        I2,
+        I1,
+        I2,
+        H,
+        H,
+        BOOL,
+        H,
+        INT,
+        BOOL,
+        V,
+        B,
+        F,
+        F,
+        M,
+        M,
+    ),  # fmt: skip
+    "wall_forces": (M, M, M, M, M, V, V, V, V, I1, L1, V, V, M, M, H, H, BOOL, INT, BOOL, F, F, M, M),
+}
+
+if __name__ == "__main__":
+    for name, signature in SIGNATURES.items():
+        ptx, _ = cuda.compile_ptx(getattr(cuda_dem, name).py_func, signature, cc=(9, 0))
+        print(name, ptx.count("fma.rn.f64"))

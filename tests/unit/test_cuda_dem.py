@@ -1,0 +1,290 @@
+"""The GPU step (physics/device_steps.py, kernels/cuda_dem.py) against the CPU's, run under
+Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set in tests/conftest.py) so that it is tested
+on machines without a GPU; on a GPU machine, NUMBA_ENABLE_CUDASIM=0 runs the same tests on the
+device.
+
+The scene: 40 spheres of two materials in a periodic box, thrown at random so that they collide,
+slide, roll and cross the periodic faces, for enough steps that the list is rebuilt on the
+device. The simulator runs the kernels' arithmetic in double precision without fused
+multiply-adds, as the CPU does: the positions, velocities, forces and springs must be bitwise the
+CPU's. On a GPU the compiler fuses multiplies and adds (one rounding instead of two), and
+the contacts amplify such differences step after step (a chaotic system): the tolerance there is
+relative 1e-9 after these few hundred steps, far above 1e-16 per operation and far below any
+physical change.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numba import config as numba_config
+from test_contact_blocks import HERTZ_MATERIALS
+
+from sphere_cli.config.load import parse_case
+from sphere_cli.errors import CaseError
+from sphere_cli.physics.compiled_steps import CompiledSteps
+from sphere_cli.physics.neighbors import spring_rows
+from sphere_cli.scene.builder import build_scene
+from sphere_cli.simulation import advance
+
+BOX = 0.008
+COUNT = 40
+SIMULATED = bool(numba_config.ENABLE_CUDASIM)
+# bitwise under the simulator; round-off amplified by the contacts on a GPU (module docstring)
+RTOL = 0.0 if SIMULATED else 1e-9
+
+
+def _placement(path, seed: int = 3) -> None:
+    rng = np.random.default_rng(seed)
+    side = 4
+    grid = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) / side
+    pos = (grid[:COUNT] + rng.uniform(-0.01, 0.01, (COUNT, 3))) * BOX
+    radius = rng.uniform(0.00095, 0.00104, COUNT)
+    # towards the centre, and at random: they keep colliding
+    vel = 40.0 * (0.5 * BOX - pos) + rng.normal(0.0, 0.1, (COUNT, 3))
+    rows = ["x,y,z,r,vx,vy,vz"] + [
+        ",".join(repr(float(v)) for v in (*p, r, *u)) for p, r, u in zip(pos, radius, vel, strict=True)
+    ]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def _case(path, device: str, hertz: bool = True, extra: str = "") -> str:
+    contact = (
+        'model = "hertz-mindlin"\nrestitution = 0.5\nfriction = 0.4\nrolling_friction = 0.05'
+        if hertz
+        else 'model = "linear"\nnormal_stiffness = 2000.0\nrestitution = 0.5\nfriction = 0.4'
+    )
+    materials = (
+        HERTZ_MATERIALS
+        if hertz
+        else """
+        [[materials]]
+        name = "a"
+        density = 2500.0
+        [[materials]]
+        name = "b"
+        density = 7800.0
+        normal_stiffness = 5000.0
+        """
+    )
+    return (
+        textwrap.dedent(
+            f"""
+            [simulation]
+            duration = 1.0
+            dt = 1.0e-5
+            stability = "contact"
+            device = "{device}"
+            [domain]
+            upper = [{BOX}, {BOX}, {BOX}]
+            periodic = [true, true, true]
+            gravity = [0.0, 0.0, -9.81]
+            [particles]
+            material = {{ a = 0.5, b = 0.5 }}
+            overlap_tolerance = 0.5
+            placement = {{ method = "file", path = "{path}" }}
+            [contact]
+            """
+        )
+        + contact
+        + textwrap.dedent(materials)
+        + extra
+    )
+
+
+def _pairs(scene) -> dict:
+    """Each listed pair's spring, keyed by (i, j): the list's layout may differ, its pairs not."""
+    nl = scene.state.neighbors
+    rows = spring_rows(nl)
+    return {
+        (i, int(nl.nbr[i, k])): rows[i, k]
+        for i in range(nl.nbr.shape[0])
+        for k in range(min(int(nl.nbr_count[i]), nl.nbr.shape[1]))
+        if rows[i, k].any()
+    }
+
+
+FLOOR_AND_LID = '\n[[walls]]\nface = "z-"\nmaterial = "b"\n[[walls]]\nface = "z+"\n'
+
+
+def _scenes(tmp_path, seed: int = 3, hertz: bool = True, walls: bool = False):
+    """The scene on the GPU and on the CPU; with walls, a floor and a lid instead of the periodic
+    z axis (the spheres pressed against both at first, then falling onto the floor)."""
+    path = tmp_path / "spheres.csv"
+    _placement(path, seed)
+    texts = [_case(path, device, hertz, FLOOR_AND_LID if walls else "") for device in ("cuda", "cpu")]
+    if walls:
+        texts = [text.replace("[true, true, true]", "[true, true, false]") for text in texts]
+    return tuple(build_scene(parse_case(text)) for text in texts)
+
+
+def _compare(gpu, cpu) -> None:
+    for name in ("pos", "vel", "angvel", "force", "torque"):
+        a, b = getattr(gpu.state.particles, name), getattr(cpu.state.particles, name)
+        np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max(), err_msg=name)
+    a, b = _pairs(gpu), _pairs(cpu)
+    assert a.keys() == b.keys()
+    scale = max(np.abs(v).max() for v in b.values())
+    for key, value in b.items():
+        np.testing.assert_allclose(a[key], value, rtol=RTOL, atol=RTOL * scale, err_msg=str(key))
+
+
+@pytest.mark.parametrize(
+    "hertz, walls", [(True, False), (False, False), (True, True)], ids=["hertz-rolling", "linear", "walls"]
+)
+def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
+    gpu, cpu = _scenes(tmp_path, hertz=hertz, walls=walls)
+    assert type(gpu.step.compiled).__name__ == "DeviceSteps"
+    builds = cpu.state.neighbors.builds
+    contacts = []
+    for steps in (1, 59, 60):  # a single step, then runs that end between list builds
+        advance(gpu, steps)
+        advance(cpu, steps)
+        _compare(gpu, cpu)
+        contacts.append(len(_pairs(cpu)))
+    # the scene did what the test needs: the list rebuilt on the device, contacts with springs
+    # all along
+    assert gpu.state.neighbors.builds - builds >= 2
+    assert min(contacts) >= 5, contacts
+    if walls:  # wall springs too, each bitwise (the CPU's layout: (N,W,3))
+        assert np.count_nonzero(cpu.state.walls.hist.any(axis=2)) >= 3
+        np.testing.assert_allclose(gpu.state.walls.hist, cpu.state.walls.hist, rtol=RTOL, atol=RTOL * 1e-3)
+    assert gpu.state.clock.step == cpu.state.clock.step == 120
+
+
+def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
+    """Cells of one slot, and spare rows of one slot for the next build: the builds overflow,
+    the device grows the arrays and builds again, and nothing is dropped (still the CPU's
+    result)."""
+    from sphere_cli.physics import device_steps
+
+    monkeypatch.setattr(device_steps, "CELL_SLOTS", 1)
+    gpu, cpu = _scenes(tmp_path, seed=11)
+    advance(gpu, 1)
+    advance(cpu, 1)
+    device = gpu.step.compiled
+    width = device.rows.nbr.shape[1]
+    device.spare = device._allocate(COUNT, 1)
+    builds = gpu.state.neighbors.builds
+    advance(gpu, 60)
+    advance(cpu, 60)
+    _compare(gpu, cpu)  # every pair kept: the narrow rows grew
+    assert gpu.state.neighbors.builds > builds
+    assert device.cell_members.shape[1] > 1
+    assert device.rows.nbr.shape[1] >= width
+
+
+def test_a_gpu_checkpoint_continues_on_the_cpu(tmp_path):
+    """The host's list after a GPU call is a valid CPU list: continuing on the CPU from it gives
+    the CPU's own result (the springs carried in the CPU's layout)."""
+    gpu, cpu = _scenes(tmp_path, seed=5)
+    advance(gpu, 120)
+    advance(cpu, 120)
+    gpu.step.compiled = CompiledSteps.of(gpu.step)  # the GPU scene now steps on the CPU
+    advance(gpu, 100)
+    advance(cpu, 100)
+    _compare(gpu, cpu)
+
+
+def test_what_the_gpu_does_not_run_is_refused_by_name(tmp_path):
+    path = tmp_path / "spheres.csv"
+    _placement(path)
+    walls = '\n[[walls]]\nface = "z-"\n[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = 0.01\n'
+    text = _case(path, "cuda", extra=walls).replace("[true, true, true]", "[true, true, false]")
+    with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: walls that move'):
+        build_scene(parse_case(text))
+
+
+def test_no_gpu_is_a_case_error_naming_the_key(tmp_path, monkeypatch):
+    from numba import cuda
+
+    monkeypatch.setattr(cuda, "is_available", lambda: False)
+    path = tmp_path / "spheres.csv"
+    _placement(path)
+    with pytest.raises(CaseError, match=r'simulation.device = "cuda": no GPU can be used here'):
+        build_scene(parse_case(_case(path, "cuda")))
+
+
+def test_every_kernel_compiles_for_a_gpu():
+    """NVIDIA's compiler (numba-cuda's NVVM, the CUDA extra: make test-cuda) compiles every
+    kernel for an H200 (tests/unit/cuda_ptx.py); a kernel of cuda_dem.py it does not list fails."""
+    pytest.importorskip("numba_cuda", reason="the CUDA extra is not installed (make test-cuda)")
+    import sphere_cli.kernels.cuda_dem as kernels
+
+    helper = Path(__file__).with_name("cuda_ptx.py")
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": str(Path(__file__).parents[2])}
+    done = subprocess.run([sys.executable, str(helper)], env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    compiled = {line.split()[0] for line in done.stdout.splitlines()}
+    launched = {
+        name
+        for name, value in vars(kernels).items()
+        if not name.startswith("_") and hasattr(value, "py_func") and hasattr(value, "__getitem__")
+    }
+    assert launched and launched <= compiled, launched - compiled
+
+
+def _final(run_dir: Path) -> dict:
+    import h5py
+
+    with h5py.File(run_dir / "trajectory.h5", "r") as f:
+        frames = f["particles/trajectory"]
+        final = {name: frames[name]["value"][-1] for name in ("position", "velocity", "force")}
+        # measured on the host from the list as the GPU left it
+        for name in ("contacts", "elastic_energy"):
+            final[name] = f["observables"][name]["value"][-1]
+        return final
+
+
+def test_a_gpu_run_resumes_on_the_cpu_as_a_cpu_run(tmp_path):
+    """sphere run --device cuda, then sphere resume --device cpu from its checkpoint: the
+    trajectory ends where a run on the CPU alone ends (bitwise under the simulator), so the
+    checkpoint written from the GPU's state holds the whole state, springs included."""
+    from sphere_cli import api
+
+    path = tmp_path / "spheres.csv"
+    _placement(path, seed=9)
+    case = tmp_path / "case.toml"
+    case.write_text(
+        _case(path, "cpu").replace("duration = 1.0", "duration = 0.0008")
+        + "\n[output.frames]\nevery_time = 0.0004\n[output.checkpoints]\nevery_time = 0.0004\n"
+    )
+    api.run(case, tmp_path / "gpu", device="cuda", until=0.0004)
+    api.resume(tmp_path / "gpu", device="cpu")
+    api.run(case, tmp_path / "cpu")
+    gpu, cpu = _final(tmp_path / "gpu"), _final(tmp_path / "cpu")
+    assert cpu["contacts"] > 0
+    for name in gpu:
+        np.testing.assert_allclose(gpu[name], cpu[name], rtol=RTOL, atol=RTOL * np.abs(cpu[name]).max())
+    assert "steps on the GPU" in (tmp_path / "gpu" / "run.log").read_text()
+
+
+def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):
+    """The real CUDA target (no simulator) on a machine without a GPU: exit 65, the key named,
+    no traceback, no run directory left behind."""
+    path = tmp_path / "spheres.csv"
+    _placement(path)
+    case = tmp_path / "case.toml"
+    case.write_text(_case(path, "cpu"))
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    probe = "from numba import cuda; print(cuda.is_available())"
+    has_gpu = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
+    if has_gpu.stdout.strip() == "True":
+        pytest.skip("this machine has a GPU")
+    sphere = Path(sys.executable).with_name("sphere")
+    done = subprocess.run(
+        [str(sphere), "run", str(case), "-o", str(tmp_path / "run"), "--device", "cuda", "-q"],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 65, done.stderr
+    assert 'simulation.device = "cuda": no GPU can be used here' in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "run").exists()
