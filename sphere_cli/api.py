@@ -254,6 +254,8 @@ def _resume_locked(
         return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
     if ck is None:
         raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
+    if device is None:  # the device the run was on (a --device given to sphere run is not in case.toml)
+        loaded = _with_simulation(loaded, device=ck.resolved.get("simulation", {}).get("device"))
     resolved = run_record(loaded)
     phash = physics_hash(resolved)
     if phash != ck.physics_hash:

@@ -276,6 +276,24 @@ def bench_dem(
     _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output, fixed_cost_sizes=fixed))
 
 
+@bench_app.command("gpu")
+def bench_gpu(
+    sizes: str = typer.Option("100000,1000000,10000000", "--sizes", help="Particle counts, comma-separated."),
+    steps: int = typer.Option(200, "--steps", min=1, help="Steps per timing."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per row (the median is reported)."),
+    states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
+    output: Path = OUTPUT_OPTION,
+) -> None:
+    """The DEM step on a CUDA GPU (simulation.device = "cuda") on the canonical scene: particle-steps
+    per second, bytes on the GPU per particle, each kernel's share (needs a GPU and the CUDA extra)."""
+    from .bench.gpu import run_gpu_benchmark
+
+    chosen = tuple(s.strip() for s in states.split(",") if s.strip())
+    if not set(chosen) <= {"loose", "settled"}:
+        raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
+    _bench(lambda: run_gpu_benchmark(_numbers(sizes, "--sizes"), steps, repeats, chosen, output))
+
+
 @bench_app.command("fluid")
 def bench_fluid(
     cells: int = CELLS_OPTION,

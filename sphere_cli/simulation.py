@@ -56,9 +56,11 @@ class StepSchedule:
         self.last_wall = now
 
 
-def advance(scene, steps: int) -> bool:
+def advance(scene, steps: int, sync: bool = True) -> bool:
     """Advance the scene by `steps` steps with no output (library use and tests), or until the
-    last stage ends. Returns True if a stage ended on the last step taken.
+    last stage ends. Returns True if a stage ended on the last step taken. On a GPU
+    (physics/device_steps.py) the host's arrays hold the result once `sync` brings it back (the
+    run loop brings it back only when it reads them: `to_host`).
 
     Where the scene's step allows it (physics/compiled_steps.py), whole runs of steps up to the
     next after_step hook are taken in one compiled call; the step that makes the neighbour list
@@ -107,7 +109,15 @@ def advance(scene, steps: int) -> bool:
         clock.step += 1
         taken += 1
         after()
+    if sync:
+        to_host(scene)
     return scene.stages is not None and scene.stages.ended
+
+
+def to_host(scene) -> None:
+    """The state into the host's arrays, where steps run elsewhere (a GPU)."""
+    if scene.step.compiled is not None:
+        scene.step.compiled.to_host(scene.state)
 
 
 def check_stable(scene) -> None:
@@ -197,25 +207,30 @@ class Loop:
                 1 if scene.stages is not None else min(self._next_stop(clock.step) - clock.step, self.burst)
             )
             burst_start = wallclock.monotonic()
-            stage_ended = advance(scene, burst)
+            stage_ended = advance(scene, burst, sync=False)
             elapsed = wallclock.monotonic() - burst_start
             self.burst = max(1, min(MAX_BURST, int(BURST_SECONDS * burst / max(elapsed, 1e-9))))
             step = clock.step
             if self.progress.rate_start is None:
                 self.progress.first_step_done(step)
             if stage_ended:
+                to_host(scene)
                 self._stage_ended(scene)
             if step % self.check_every == 0:
+                to_host(scene)
                 check_stable(scene)
             now = wallclock.monotonic()
             if self.frames.due(step, now):
+                to_host(scene)
                 check_stable(scene)  # no frame with NaNs reaches the trajectory
                 self.output.frame(scene)
                 self.frames.done(now)
             if self.observations is not None and self.observations.due(step, now):
+                to_host(scene)
                 self.output.observe(scene)
                 self.observations.done(now)
             if self.checkpoints.due(step, now) and step < self.end_step:
+                to_host(scene)
                 check_stable(scene)
                 self.output.checkpoint(scene)
                 self.checkpoints.done(now)
@@ -224,6 +239,7 @@ class Loop:
                 self.status.done(now)
         if self.stop.interrupted:
             raise KeyboardInterrupt
+        to_host(scene)
         check_stable(scene)
         self.output.frame(scene)
         if self.observations is not None:

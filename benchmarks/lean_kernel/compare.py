@@ -19,7 +19,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from sphere_cli.bench.dem import _settled_scene
+from sphere_cli.bench.dem import settled_scene
 from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, LINEAR, MU
 from sphere_cli.physics.module import Module
 from sphere_cli.simulation import advance
@@ -95,8 +95,8 @@ class LeanKernel(Module):
 
 def main(n: int, steps: int, rounds: int) -> None:
     numba.set_num_threads(1)
-    ours = _settled_scene(n, print)
-    lean = _settled_scene(n, print)
+    ours = settled_scene(n, print)
+    lean = settled_scene(n, print)
     kernel = LeanKernel(load_library(), lean)
     lean.motion, lean.contact = kernel, None
     lean.walls = None  # the lean kernel does the walls itself

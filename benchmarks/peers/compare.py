@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from sphere_cli.bench import machine
-from sphere_cli.bench.dem import _settled_scene
+from sphere_cli.bench.dem import settled_scene
 from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, MU
 from sphere_cli.simulation import advance
 
@@ -106,7 +106,7 @@ def run_peer(program: str, script: Path, variables: dict, ranks: int, workdir: P
 
 
 def main(n: int, steps: int, rounds: int, threads: list[int]) -> dict:
-    scene = _settled_scene(n, print)
+    scene = settled_scene(n, print)
     p = scene.state.particles
     workdir = Path(tempfile.mkdtemp(prefix="sphere-peers-"))
     variables = write_data(scene, workdir / "bed.data") | {"warmup": WARMUP, "steps": steps}

@@ -105,37 +105,48 @@ keep = 1
 """
 
 
-def settled_cache_dir(n: int) -> Path:
+def on_device(text: str, device: str) -> str:
+    """A case's text with simulation.device set (the CPU's text unchanged)."""
+    return (
+        text if device == "cpu" else text.replace("[simulation]\n", f'[simulation]\ndevice = "{device}"\n', 1)
+    )
+
+
+def settled_cache_dir(n: int, device: str = "cpu") -> Path:
     """Where the settled bed of N spheres is kept: the user cache, keyed by the text of the
-    settling case (N and every parameter) and the checkpoint format (a cache another format wrote
-    is settled again). A change of the code's defaults is not seen: delete the folder to settle
-    again."""
-    text = canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS, SETTLE_SPACING)
+    settling case (N, every parameter and the device that settles it) and the checkpoint format
+    (a cache another format wrote is settled again). A change of the code's defaults is not seen:
+    delete the folder to settle again."""
+    text = on_device(canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS, SETTLE_SPACING), device)
     text += f"# checkpoint format {FORMAT}\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return base / "sphere" / "bench" / f"settled-{n}-{digest[:12]}"
 
 
-def _settled_scene(n: int, log):
+def settled_scene(n: int, log, device: str = "cpu"):
+    """The canonical scene from its settled bed, settled on `device` (the GPU settles the beds of
+    sphere bench gpu, too large for the CPU)."""
     from .. import api
 
-    run_dir = settled_cache_dir(n)
+    run_dir = settled_cache_dir(n, device)
     ck = newest_valid_checkpoint(run_dir / "checkpoints") if run_dir.is_dir() else None
     if ck is None or ck.step * ck.dt < SETTLE_TIME * (1 - 1e-6):
         log(f"settling N = {n} for {SETTLE_TIME} s of simulated time (cached in {run_dir}) ...")
         if ck is None:
             run_dir.parent.mkdir(parents=True, exist_ok=True)
             case_path = run_dir.parent / f"canonical-{n}.toml"
-            case_path.write_text(canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS, SETTLE_SPACING))
+            case_path.write_text(
+                on_device(canonical_case(n, SETTLE_TIME, SETTLE_CHECKPOINTS, SETTLE_SPACING), device)
+            )
             api.run(case_path, run_dir, overwrite=True)
         else:
             api.resume(run_dir)
         ck = newest_valid_checkpoint(run_dir / "checkpoints")
-    return build_scene(parse_case(canonical_case(n)), restart=ck)
+    return build_scene(parse_case(on_device(canonical_case(n), device)), restart=ck)
 
 
-def _time_steps(scene, steps: int, repeats: int) -> list[float]:
+def time_steps(scene, steps: int, repeats: int) -> list[float]:
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -190,14 +201,14 @@ def run_benchmark(
             if state_name == "loose":
                 scene = build_scene(parse_case(canonical_case(n)))
             else:
-                scene = _settled_scene(n, log)
+                scene = settled_scene(n, log)
             contacts = _mean_contacts(scene)
             for t in threads:
                 if t > max_threads:
                     continue
                 numba.set_num_threads(t)
                 advance(scene, 5)
-                times = _time_steps(scene, steps, repeats)
+                times = time_steps(scene, steps, repeats)
                 median = statistics.median(times)
                 row = {
                     "n": n,
@@ -242,7 +253,7 @@ def _fixed_cost(sizes, log) -> dict:
     for n in sizes:
         scene = build_scene(parse_case(canonical_case(n)))
         advance(scene, 20)
-        seconds.append(min(_time_steps(scene, max(20, 200_000 // n), 7)) / max(20, 200_000 // n))
+        seconds.append(min(time_steps(scene, max(20, 200_000 // n), 7)) / max(20, 200_000 // n))
     numba.set_num_threads(threads)
     slope, intercept = np.polyfit(sizes, seconds, 1)
     log(
@@ -256,7 +267,7 @@ def _sparse_row(log) -> dict:
     scene = build_scene(parse_case(SPARSE_CASE))
     search = scene.neighbors
     cells = search.cell_start.nbytes + search.cell_key.nbytes
-    seconds = min(_time_steps(scene, SPARSE_STEPS, 3))
+    seconds = min(time_steps(scene, SPARSE_STEPS, 3))
     log(
         f"sparse scene (1 sphere of 0.5 mm in a 1 m cube, {search.ncell.prod():.3g} cells of the search): "
         f"{SPARSE_STEPS} steps in {seconds:.3f} s, {cells} B of cell index"

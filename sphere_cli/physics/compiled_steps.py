@@ -78,6 +78,10 @@ class CompiledSteps:
             return None
         return cls(step.prepare[0].__self__, contact, walls, extra)
 
+    @staticmethod
+    def to_host(state: State) -> None:
+        """Nothing to bring back: the state is the host's arrays (physics/device_steps.py)."""
+
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         """Take up to `steps` whole steps; stop early after a kick-drift that makes the neighbour
         list stale. Returns (the whole steps taken, True if that kick-drift ended the call: the

@@ -1,8 +1,9 @@
 """The DEM steps on a CUDA GPU (`[simulation] device = "cuda"`): the kernels of
 kernels/cuda_dem.py in the order of the step (kick-drift, the neighbour list rebuilt on the
 device when some particle has moved half the skin, the pair contacts, the kick), with the state
-kept on the device for a whole call of simulation.advance and copied back at its end, so that
-frames, observables, checkpoints and the stability check read the host arrays as on the CPU.
+kept on the device across calls of simulation.advance and copied back only when the host reads it
+(`to_host`: at the end of a library call of advance, and before the run loop's frames,
+observables, checkpoints and stability checks), which then read the host arrays as on the CPU.
 
 It takes the place of physics/compiled_steps.py for the scenes it covers: particles, their pair
 contacts (both laws, friction, rolling, several materials), gravity, fixed plane walls and
@@ -21,6 +22,7 @@ the CPU and the other way round.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,23 +51,50 @@ ROW_HEADROOM = 4
 CELL_SLOTS = 8
 
 
+def _no_gpu(why: str) -> CaseError:
+    return CaseError(
+        f'simulation.device = "cuda": no GPU can be used here ({why}). The GPU needs an NVIDIA '
+        "GPU, its driver and the CUDA extra (pip install 'sphere-cli[cuda]'); "
+        'device = "cpu" (the default) runs the same case on the processor.'
+    )
+
+
 def _cuda():
-    """numba.cuda, or a CaseError naming the key when no GPU can be used here."""
+    """numba.cuda, or a CaseError naming the key when no GPU can be used here: none found, or
+    one that cannot compile and run a kernel (a driver without the compiler the CUDA extra
+    brings), tried before the run directory is written."""
     try:
         from numba import cuda
 
         usable = cuda.is_available()
     except Exception as exc:  # a broken CUDA installation: its own message
-        usable, why = False, f"{type(exc).__name__}: {exc}"
-    else:
-        why = "numba.cuda finds no CUDA GPU with a working driver"
+        raise _no_gpu(f"{type(exc).__name__}: {exc}") from None
     if not usable:
-        raise CaseError(
-            f'simulation.device = "cuda": no GPU can be used here ({why}). The GPU needs an NVIDIA '
-            "GPU, its driver and the CUDA extra (pip install 'sphere-cli[cuda]'); "
-            'device = "cpu" (the default) runs the same case on the processor.'
-        )
+        raise _no_gpu("numba.cuda finds no CUDA GPU with a working driver")
+    try:
+        from ..kernels import cuda_dem
+
+        probe = cuda.to_device(np.ones(1, dtype=np.int32))
+        cuda_dem.clear[1, 1](probe)
+        if probe.copy_to_host()[0] != 0:
+            raise RuntimeError("a kernel ran without effect")
+    except Exception as exc:
+        raise _no_gpu(f"a first kernel failed: {type(exc).__name__}: {exc}") from None
     return cuda
+
+
+def _on_gpu(work):
+    """Run `work` (host calls into numba.cuda); a CUDA error (out of memory above all) becomes a
+    CaseError naming the key instead of a traceback."""
+    try:
+        return work()
+    except Exception as exc:
+        if not type(exc).__module__.startswith(("numba.cuda", "numba_cuda", "cuda")):
+            raise
+        raise CaseError(
+            f'simulation.device = "cuda": the GPU failed: {type(exc).__name__}: {exc} (out of memory: '
+            'a GPU with more memory, fewer particles, or device = "cpu")'
+        ) from None
 
 
 def _gpu_name(cuda) -> str:
@@ -100,6 +129,8 @@ class DeviceSteps:
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
         self.device_name = _gpu_name(cuda)  # for run.log
+        self.timings = None  # {kernel: seconds} while profiling (_launch)
+        self.host_stale = False  # steps taken on the device since the last download
 
     @classmethod
     def of(cls, scene) -> DeviceSteps:
@@ -110,6 +141,9 @@ class DeviceSteps:
             extra.append(NAMES["wall_motion"])
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
+        # any other module that acts between steps (the named ones are reported above)
+        between = [m for m, _ in scene.step.after_step if m.name in SUPPORTED]
+        extra += [f"{m.name or type(m).__name__} after its steps" for m in between]
         if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
             raise CaseError(
                 f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, fixed '
@@ -128,7 +162,30 @@ class DeviceSteps:
 
     def _launch(self, kernel, size: int, *args) -> None:
         threads = min(THREADS, 32 * math.ceil(max(size, 1) / 32))
+        if self.timings is None:
+            kernel[math.ceil(max(size, 1) / threads), threads](*args)
+            return
+        # profiling (sphere bench gpu): each kernel waited for, its time added to its name's
+        self.cuda.synchronize()
+        started = time.perf_counter()
         kernel[math.ceil(max(size, 1) / threads), threads](*args)
+        self.cuda.synchronize()
+        name = kernel.py_func.__name__
+        self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - started
+
+    def device_bytes(self) -> int:
+        """The bytes this keeps on the device (sphere bench gpu's memory per particle)."""
+        arrays = [
+            *self.d.values(),
+            self.cell_of,
+            self.cell_count,
+            self.cell_members,
+            self.hist,
+            self.hist_next,
+        ]
+        for rows in (self.rows, self.spare):
+            arrays += [rows.nbr, rows.count, rows.mate]
+        return sum(a.nbytes for a in arrays)
 
     def upload(self, state: State) -> None:
         """The particles, the box, the contact table and the host's list with its springs."""
@@ -184,10 +241,11 @@ class DeviceSteps:
         )
 
     def _springs(self, n: int, width: int, host: np.ndarray | None = None):
-        """A buffer of springs for rows of `width` slots (a placeholder without springs)."""
+        """A buffer of springs for rows of `width` slots (a placeholder without springs); left
+        unset without `host`: every slot read is written first (by the forces or the carry)."""
         if not self.springs:
             return self.cuda.to_device(np.zeros((1, 1, 3)))
-        return self.cuda.to_device(np.zeros((n, width, 3)) if host is None else host)
+        return self.cuda.device_array((n, width, 3)) if host is None else self.cuda.to_device(host)
 
     def _full_rows(self, nl, n: int) -> tuple[Rows, object]:
         """The host's half rows as full rows on the device, and the springs, each at its owner's
@@ -247,7 +305,16 @@ class DeviceSteps:
     # --- the step -------------------------------------------------------------------------
 
     def run(self, state: State, steps: int) -> tuple[int, bool]:
-        """Take `steps` whole steps on the device; the host arrays hold the result."""
+        """Take `steps` whole steps on the device; the host arrays are stale until to_host."""
+        return _on_gpu(lambda: self._run(state, steps))
+
+    def to_host(self, state: State) -> None:
+        """Bring the state back into the host's arrays, if steps were taken since."""
+        if self.host_stale:
+            _on_gpu(lambda: self.download(state))
+            self.host_stale = False
+
+    def _run(self, state: State, steps: int) -> tuple[int, bool]:
         from ..kernels import cuda_dem as k
 
         if self.on_device_at != state.clock.step:
@@ -266,6 +333,7 @@ class DeviceSteps:
             moved2 = float(d["worst"].copy_to_host()[0])
             if moved2 > self.search.threshold2:
                 self.rebuild(state)
+                moved2 = 0.0  # as the host's rebuild leaves it
             rows = self.rows
             self._launch(
                 k.pair_forces, n, d["pos"], d["vel"], d["angvel"], d["vel_pred"], d["angvel_pred"],
@@ -286,7 +354,7 @@ class DeviceSteps:
             self._launch(
                 k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"], dt
             )
-        self.download(state)
+        self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = state.clock.step + steps
         return steps, False

@@ -488,8 +488,10 @@ register(
             "and averaged over the second half of the run"
         ),
         run=bedload_band,
-        ladder=(1.0, 3.0),
-        quick_ladder=(1.0,),
+        ladder=(1.0, 2.0, 3.0),
+        # averages over the second half of a run: from 2 s on they are of the steady transport
+        # the laws describe; the 1 s run's (0.5-1 s) is of the bed still starting to move
+        quick_ladder=(2.0,),
         resolution="simulated seconds",
         error_labels={
             "band": "max(Q* of Wong-Parker / Q*, Q* / Q* of Meyer-Peter-Mueller): at most 1 inside the band"
@@ -498,7 +500,15 @@ register(
             "not a convergence case: the steady transport of a bed that takes about 1 s to reach it "
             "(Q* rises from 0.19 over 0.5-1 s to 0.25 over 1-3 s)"
         ),
-        tolerances=(Tolerance("band", 1.0, source="the band of the two laws, the spread of published data"),),
+        tolerances=(
+            Tolerance(
+                "band",
+                1.0,
+                2.0,
+                source="the band of the two laws, the spread of published data, for steady transport "
+                "(averaged over 1 s or more after the first second)",
+            ),
+        ),
         repeats=1,
     )
 )

@@ -15,6 +15,7 @@ physical change.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -129,10 +130,14 @@ def _compare(gpu, cpu) -> None:
         a, b = getattr(gpu.state.particles, name), getattr(cpu.state.particles, name)
         np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max(), err_msg=name)
     a, b = _pairs(gpu), _pairs(cpu)
-    assert a.keys() == b.keys()
     scale = max(np.abs(v).max() for v in b.values())
-    for key, value in b.items():
-        np.testing.assert_allclose(a[key], value, rtol=RTOL, atol=RTOL * scale, err_msg=str(key))
+    if SIMULATED:
+        assert a.keys() == b.keys()
+    # on a GPU a contact touching or parting within round-off may exist on one side only: its
+    # spring is then of the order of that round-off's travel, tiny against the others
+    for key in a.keys() | b.keys():
+        one, other = a.get(key, np.zeros(3)), b.get(key, np.zeros(3))
+        np.testing.assert_allclose(one, other, rtol=RTOL, atol=max(RTOL, 1e-6 * (not SIMULATED)) * scale)
 
 
 @pytest.mark.parametrize(
@@ -243,9 +248,10 @@ def _final(run_dir: Path) -> dict:
 
 
 def test_a_gpu_run_resumes_on_the_cpu_as_a_cpu_run(tmp_path):
-    """sphere run --device cuda, then sphere resume --device cpu from its checkpoint: the
-    trajectory ends where a run on the CPU alone ends (bitwise under the simulator), so the
-    checkpoint written from the GPU's state holds the whole state, springs included."""
+    """sphere run --device cuda, sphere resume (still on the GPU), then sphere resume --device
+    cpu from its checkpoint: the trajectory ends where a run on the CPU alone ends (bitwise
+    under the simulator), so the checkpoint written from the GPU's state holds the whole state,
+    springs included."""
     from sphere_cli import api
 
     path = tmp_path / "spheres.csv"
@@ -256,13 +262,14 @@ def test_a_gpu_run_resumes_on_the_cpu_as_a_cpu_run(tmp_path):
         + "\n[output.frames]\nevery_time = 0.0004\n[output.checkpoints]\nevery_time = 0.0004\n"
     )
     api.run(case, tmp_path / "gpu", device="cuda", until=0.0004)
+    api.resume(tmp_path / "gpu", until=0.0006)  # on the device it ran on, without --device
     api.resume(tmp_path / "gpu", device="cpu")
     api.run(case, tmp_path / "cpu")
     gpu, cpu = _final(tmp_path / "gpu"), _final(tmp_path / "cpu")
     assert cpu["contacts"] > 0
     for name in gpu:
         np.testing.assert_allclose(gpu[name], cpu[name], rtol=RTOL, atol=RTOL * np.abs(cpu[name]).max())
-    assert "steps on the GPU" in (tmp_path / "gpu" / "run.log").read_text()
+    assert (tmp_path / "gpu" / "run.log").read_text().count("steps on the GPU") == 2
 
 
 def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):
@@ -288,3 +295,35 @@ def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):
     assert 'simulation.device = "cuda": no GPU can be used here' in done.stderr
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
+    """sphere bench gpu on a tiny loose bed (its figures mean nothing under the simulator; the
+    test is that a session with a GPU can run it at once)."""
+    from typer.testing import CliRunner
+
+    from sphere_cli.cli import app
+
+    result = CliRunner().invoke(
+        app,
+        [
+            "bench",
+            "gpu",
+            "--sizes",
+            "40",
+            "--steps",
+            "3",
+            "--repeats",
+            "1",
+            "--states",
+            "loose",
+            "-o",
+            str(tmp_path),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    row = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"][0]
+    assert row["n"] == 40 and row["particle_steps_per_second"] > 0
+    assert 200 < row["device_bytes_per_particle"] < 5000
+    assert set(row["kernel_shares"]) == {"kick_drift", "pair_forces", "wall_forces", "kick"}
+    assert abs(sum(row["kernel_shares"].values()) - 1.0) < 1e-9

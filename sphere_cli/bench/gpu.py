@@ -1,0 +1,70 @@
+"""`sphere bench gpu`: the DEM step on a CUDA GPU (simulation.device = "cuda",
+physics/device_steps.py) on the canonical scene of `sphere bench dem` (bench/dem.py), loose and
+settled (the settled beds settled on the GPU itself, cached like the CPU's): particle-steps per
+second in double precision, the bytes kept on the device per particle, and each kernel's share
+of a step (from a second, profiled run that waits for each kernel: its total is longer than the
+timed run's). A timing is one call of advance: the state goes to the device once and comes back
+at the end, as in a run between two outputs. Never part of the tests' timings.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+
+from ..config.load import parse_case
+from ..scene.builder import build_scene
+from ..simulation import advance
+from . import machine
+from .dem import canonical_case, on_device, settled_scene, time_steps
+
+
+def run_gpu_benchmark(
+    sizes=(100_000, 1_000_000, 10_000_000),
+    steps: int = 200,
+    repeats: int = 3,
+    states=("loose", "settled"),
+    out_dir: Path = Path("bench-results"),
+    log=print,
+) -> dict:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results = {"machine": machine(), "steps": steps, "repeats": repeats, "rows": []}
+    for n in sizes:
+        for state in states:
+            if state == "loose":
+                scene = build_scene(parse_case(on_device(canonical_case(n), "cuda")))
+            else:
+                scene = settled_scene(n, log, device="cuda")
+            device = scene.step.compiled
+            advance(scene, 5)  # compiles the kernels (cached after a first run), uploads
+            times = time_steps(scene, steps, repeats)
+            device.timings = {}
+            advance(scene, steps)
+            profiled, device.timings = device.timings, None
+            total = sum(profiled.values())
+            median = statistics.median(times)
+            row = {
+                "n": n,
+                "state": state,
+                "gpu": device.device_name,
+                "steps": steps,
+                "seconds": median,
+                "all_seconds": times,
+                "particle_steps_per_second": n * steps / median,
+                "best_particle_steps_per_second": n * steps / min(times),
+                "device_bytes_per_particle": device.device_bytes() / n,
+                "neighbor_rebuilds": scene.state.neighbors.builds,
+                "kernel_shares": {name: seconds / total for name, seconds in sorted(profiled.items())},
+            }
+            results["rows"].append(row)
+            shares = ", ".join(f"{name} {share:.0%}" for name, share in row["kernel_shares"].items())
+            log(
+                f"N = {n:>8} {state:>7}  {row['particle_steps_per_second'] / 1e6:8.1f} M particle-steps/s "
+                f"(median of {repeats} x {steps} steps; "
+                f"best {row['best_particle_steps_per_second'] / 1e6:.1f} M; "
+                f"{row['device_bytes_per_particle']:.0f} B/particle on the GPU); {shares}"
+            )
+    (out_dir / "bench-gpu.json").write_text(json.dumps(results, indent=2))
+    log(f"results written to {out_dir / 'bench-gpu.json'}")
+    return results
