@@ -154,7 +154,7 @@ class DeviceSteps:
             raise CaseError(
                 f'simulation.device = "cuda": the box holds {int(np.prod(scene.neighbors.ncell))} search '
                 f"cells for {scene.state.particles.count} particles; the GPU's search stores every "
-                'cell. Make domain smaller around the particles, or use device = "cpu".'
+                'cell. Make the domain smaller around the particles, or use device = "cpu".'
             )
         return cls(scene, _cuda())
 
@@ -162,13 +162,14 @@ class DeviceSteps:
 
     def _launch(self, kernel, size: int, *args) -> None:
         threads = min(THREADS, max(size, 1))  # a small scene: no idle threads (the simulator's cost)
+        launch = kernel[math.ceil(max(size, 1) / threads), threads]
         if self.timings is None:
-            kernel[math.ceil(max(size, 1) / threads), threads](*args)
+            launch(*args)
             return
         # profiling (sphere bench gpu): each kernel waited for, its time added to its name's
         self.cuda.synchronize()
         started = time.perf_counter()
-        kernel[math.ceil(max(size, 1) / threads), threads](*args)
+        launch(*args)
         self.cuda.synchronize()
         name = kernel.py_func.__name__
         self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - started
