@@ -30,7 +30,7 @@ import math
 
 from numba import config, cuda
 
-from . import contact_probe, neighbors
+from . import contact_probe, motion, neighbors
 from .laws import D_N, D_T, HERTZ_MINDLIN, K_N, K_T, MU, MU_R, contact_response, reduced
 from .neighbors import minimum_image, wrap_cell
 
@@ -45,6 +45,7 @@ def _on_arrays(function):
 cell_number = _on_arrays(neighbors.cell_number)
 insert_ascending = _on_arrays(neighbors.insert_ascending)
 wall_normal = _on_arrays(contact_probe.wall_normal)
+unstable_reason = _on_arrays(motion.unstable_reason)
 
 
 @cuda.jit(device=True, inline=True)
@@ -402,3 +403,12 @@ def wall_forces(
     torque[i, 0] += t0
     torque[i, 1] += t1
     torque[i, 2] += t2
+
+
+@cuda.jit
+def find_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt, first):
+    """The lowest index of a particle that has gone bad (kernels/motion.py unstable_reason) into
+    first[0] (set to N by the caller): a min, the same whatever the order of the threads."""
+    i = cuda.grid(1)
+    if i < pos.shape[0] and unstable_reason(pos, vel, angvel, radius, lower, upper, periodic, dt, i):
+        cuda.atomic.min(first, 0, i)

@@ -93,22 +93,32 @@ def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt):
         half_kick(v, w, f, t, inv_mass, inv_inertia, half, np.uint64(i))
 
 
+@njit(cache=True, inline="always")
+def unstable_reason(pos, vel, angvel, radius, lower, upper, periodic, dt, i):
+    """Why particle i has gone bad: 1 = not finite, 2 = moves more than half its radius in one
+    step (contacts would be missed), 3 = has left the box on a non-periodic axis; 0 if it has
+    not (also the GPU's check, kernels/cuda_dem.py)."""
+    speed2 = 0.0
+    for a in range(3):
+        if not (math.isfinite(pos[i, a]) and math.isfinite(vel[i, a]) and math.isfinite(angvel[i, a])):
+            return 1
+        speed2 += vel[i, a] * vel[i, a]
+    if speed2 * dt * dt > 0.25 * radius[i] * radius[i]:
+        return 2
+    for a in range(3):
+        if not periodic[a] and (pos[i, a] < lower[a] - radius[i] or pos[i, a] > upper[a] + radius[i]):
+            return 3
+    return 0
+
+
 @njit(cache=True)
 def first_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt):
-    """Index of the first particle that is not finite, moves more than half its radius in one
-    step (contacts would be missed), or has left the box on a non-periodic axis; -1 if none.
-    Returns (index, reason) with reason 1 = not finite, 2 = too fast, 3 = outside the box."""
+    """(index, reason) of the first particle that has gone bad (unstable_reason); (-1, 0) if
+    none."""
     for i in range(pos.shape[0]):
-        speed2 = 0.0
-        for a in range(3):
-            if not (math.isfinite(pos[i, a]) and math.isfinite(vel[i, a]) and math.isfinite(angvel[i, a])):
-                return i, 1
-            speed2 += vel[i, a] * vel[i, a]
-        if speed2 * dt * dt > 0.25 * radius[i] * radius[i]:
-            return i, 2
-        for a in range(3):
-            if not periodic[a] and (pos[i, a] < lower[a] - radius[i] or pos[i, a] > upper[a] + radius[i]):
-                return i, 3
+        reason = unstable_reason(pos, vel, angvel, radius, lower, upper, periodic, dt, i)
+        if reason:
+            return i, reason
     return -1, 0
 
 

@@ -82,6 +82,11 @@ class CompiledSteps:
     def to_host(state: State) -> None:
         """Nothing to bring back: the state is the host's arrays (physics/device_steps.py)."""
 
+    @staticmethod
+    def known_stable(state: State) -> bool:
+        """False: the host checks its own arrays (simulation.check_stable)."""
+        return False
+
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         """Take up to `steps` whole steps; stop early after a kick-drift that makes the neighbour
         list stale. Returns (the whole steps taken, True if that kick-drift ended the call: the

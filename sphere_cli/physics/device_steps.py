@@ -201,6 +201,7 @@ class DeviceSteps:
         }  # fmt: skip
         self.d.update(
             lower=to(box.lower),
+            upper=to(box.upper),
             length=to(box.length),
             periodic=to(box.periodic),
             body_acc=to(box.body_acc),
@@ -314,6 +315,25 @@ class DeviceSteps:
         if self.host_stale:
             _on_gpu(lambda: self.download(state))
             self.host_stale = False
+
+    def known_stable(self, state: State) -> bool:
+        """True if the state on the device has no particle gone bad (checked there, without
+        bringing the state back); False where the host must look (simulation.check_stable):
+        something has gone bad, or the host's arrays are current anyway."""
+        if not self.host_stale:
+            return False
+        return _on_gpu(lambda: self._stable_on_device(state))
+
+    def _stable_on_device(self, state: State) -> bool:
+        from ..kernels import cuda_dem as k
+
+        d, n = self.d, state.particles.count
+        first = self.cuda.to_device(np.full(1, n, dtype=np.int64))
+        self._launch(
+            k.find_unstable, n, d["pos"], d["vel"], d["angvel"], d["radius"], d["lower"], d["upper"],
+            d["periodic"], state.clock.dt, first,
+        )  # fmt: skip
+        return int(first.copy_to_host()[0]) == n
 
     def _run(self, state: State, steps: int) -> tuple[int, bool]:
         from ..kernels import cuda_dem as k

@@ -54,6 +54,7 @@ SIGNATURES = {
         M,
         M,
     ),  # fmt: skip
+    "find_unstable": (M, M, M, V, V, V, B, F, L1),
     "wall_forces": (M, M, M, M, M, V, V, V, V, I1, L1, V, V, M, M, H, H, BOOL, INT, BOOL, F, F, M, M),
 }
 

@@ -197,6 +197,30 @@ def test_a_gpu_checkpoint_continues_on_the_cpu(tmp_path):
     _compare(gpu, cpu)
 
 
+def test_the_gpu_checks_stability_in_place_and_reports_as_the_cpu(tmp_path):
+    """The stability check runs on the device without bringing the state back; a particle gone
+    bad brings it back and stops the run with the CPU's message."""
+    from sphere_cli.errors import NumericalError
+    from sphere_cli.simulation import check_stable
+
+    gpu, cpu = _scenes(tmp_path)
+    advance(gpu, 3, sync=False)
+    advance(cpu, 3)
+    check_stable(gpu)
+    assert gpu.step.compiled.host_stale  # checked on the device: nothing came back
+    gpu.step.compiled.to_host(gpu.state)
+    gpu.step.compiled.on_device_at = None  # the host is changed below: upload again
+    messages = []
+    for scene in (gpu, cpu):
+        scene.state.particles.vel[7] = [0.0, 300.0, 0.0]  # 3 mm a step: beyond half a radius
+        advance(scene, 1, sync=False)
+        with pytest.raises(NumericalError) as caught:
+            check_stable(scene)
+        messages.append(str(caught.value))
+    assert "particle 7" in messages[0] and "more than half its radius" in messages[0]
+    assert messages[0] == messages[1]
+
+
 def test_what_the_gpu_does_not_run_is_refused_by_name(tmp_path):
     path = tmp_path / "spheres.csv"
     _placement(path)
