@@ -60,9 +60,9 @@ def _no_gpu(why: str) -> CaseError:
 
 
 def _cuda():
-    """numba.cuda, or a CaseError naming the key when no GPU can be used here: none found, or
-    one that cannot compile and run a kernel (a driver without the compiler the CUDA extra
-    brings), tried before the run directory is written."""
+    """(numba.cuda, kernels/cuda_dem.py), or a CaseError naming the key when no GPU can be used
+    here: none found, or one that cannot compile and run a kernel (a driver without the compiler
+    the CUDA extra brings), tried before the run directory is written."""
     try:
         from numba import cuda
 
@@ -80,7 +80,7 @@ def _cuda():
             raise RuntimeError("a kernel ran without effect")
     except Exception as exc:
         raise _no_gpu(f"a first kernel failed: {type(exc).__name__}: {exc}") from None
-    return cuda
+    return cuda, cuda_dem
 
 
 def _on_gpu(work):
@@ -119,8 +119,9 @@ class DeviceSteps:
     # takes any number of whole steps, list rebuilds included (simulation.advance)
     whole_steps = True
 
-    def __init__(self, scene, cuda):
+    def __init__(self, scene, cuda, kernels):
         self.cuda = cuda
+        self.k = kernels  # kernels/cuda_dem.py, imported only where a GPU is used
         self.search: NeighborSearch = scene.neighbors
         self.contact = scene.contact
         self.springs = self.search.springs
@@ -156,7 +157,7 @@ class DeviceSteps:
                 f"cells for {scene.state.particles.count} particles; the GPU's search stores every "
                 'cell. Make the domain smaller around the particles, or use device = "cpu".'
             )
-        return cls(scene, _cuda())
+        return cls(scene, *_cuda())
 
     # --- host <-> device ------------------------------------------------------------------
 
@@ -325,8 +326,7 @@ class DeviceSteps:
         return _on_gpu(lambda: self._stable_on_device(state))
 
     def _stable_on_device(self, state: State) -> bool:
-        from ..kernels import cuda_dem as k
-
+        k = self.k
         d, n = self.d, state.particles.count
         first = self.cuda.to_device(np.full(1, n, dtype=np.int64))
         self._launch(
@@ -336,8 +336,7 @@ class DeviceSteps:
         return int(first.copy_to_host()[0]) == n
 
     def _run(self, state: State, steps: int) -> tuple[int, bool]:
-        from ..kernels import cuda_dem as k
-
+        k = self.k
         if self.on_device_at != state.clock.step:
             self.upload(state)
         d, n = self.d, state.particles.count
@@ -384,8 +383,7 @@ class DeviceSteps:
         """A new list from the positions, into the spare rows (grown until every row and cell
         fits), the springs carried into the free buffer (hist_next, whose springs are the last
         step's); then the spare rows become the list."""
-        from ..kernels import cuda_dem as k
-
+        k = self.k
         d, n, skin = self.d, state.particles.count, state.neighbors.skin
         while True:
             d["longest"].copy_to_device(np.zeros(2, dtype=np.int32))
