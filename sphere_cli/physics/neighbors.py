@@ -66,7 +66,7 @@ class NeighborSearch(Module):
         # the pairs carry tangential springs (nl.hist) only when some contact has friction;
         # without, nl.hist has no rows and the kernels read none
         self.springs = springs
-        self.ncell = search_cells(box.length, float(p.radius.max()), nl.skin)
+        self.ncell = search_cells(box.length, float(p.radius.max(initial=0.0)), nl.skin)
         self.cell_size = box.length / self.ncell
         self.cell_of = np.zeros(p.count, dtype=np.int64)
         cells = float(np.prod(self.ncell.astype(float)))
@@ -77,6 +77,12 @@ class NeighborSearch(Module):
         self.threshold2 = (0.5 * nl.skin) ** 2
         self.builds_since_growth = QUIET_BUILDS + 1  # no growth seen yet (a restore sets the checkpoint's)
         self._spare_like(nl)
+
+    @staticmethod
+    def longest(needed: int) -> int:
+        """The longest row that sets the rows' width: this list's own (a scene split across
+        ranks sets the longest over every rank: physics/rank_steps.py)."""
+        return needed
 
     def _spare_like(self, nl: NeighborList):
         self.spare_nbr = np.zeros_like(nl.nbr)
@@ -114,7 +120,7 @@ class NeighborSearch(Module):
                 self.spare_nbr,
                 self.spare_count,
             )
-            needed = int(self.spare_count.max()) if p.count else 0
+            needed = self.longest(int(self.spare_count.max()) if p.count else 0)
             if needed <= nl.nbr.shape[1]:
                 break
             self._grow(nl, needed)
@@ -181,6 +187,10 @@ class NeighborSearch(Module):
         layout does not depend on how the springs are packed (no springs without friction)."""
         nl = state.neighbors
         arrays = {name: getattr(nl, name) for name in NeighborList.PROGNOSTIC if name != "hist"}
+        # the slots past a row's end hold what earlier builds left there: zeros instead, so that
+        # a checkpoint holds the list and nothing else (one written on many ranks is bitwise one
+        # rank's)
+        arrays["nbr"] = np.where(listed_slots(nl.nbr, nl.nbr_count), nl.nbr, 0).astype(nl.nbr.dtype)
         if self.springs:
             arrays["hist"] = spring_rows(nl)
         arrays["skin"] = np.float64(nl.skin)
