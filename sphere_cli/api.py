@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import ranks
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict, run_record
 from .config.schema import NON_PHYSICS_KEYS, Case
 from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
@@ -102,6 +103,8 @@ def _drive(
     gpu = getattr(scene.step.compiled, "device_name", None)
     if gpu is not None:
         log.info("steps on the GPU (simulation.device = cuda): %s", gpu)
+    if hasattr(scene.step.compiled, "world"):
+        log.info("steps %s", scene.step.compiled.describe())
     log.info("time step limit %.6g s: %s", scene.dt_limit, scene.dt_limit_reason)
     log.info("stability bound %.6g s: %s", scene.dt_bound, scene.dt_bound_reason)
     if scene.fluid is not None:
@@ -153,7 +156,7 @@ def run(
 ) -> RunResult:
     """Run a case in a new run directory. `origin`: the case file whose folder resolves the
     case's relative paths, if not the case's own (a sweep member's: sphere_cli/sweep.py)."""
-    refuse_many_ranks()
+    refuse_many_ranks(joined=ranks.current() is not None)
     loaded = _with_simulation(load_case(case_path), duration=until, device=device)
     if origin is not None:
         loaded = dataclasses.replace(loaded, origin=Path(origin))
@@ -218,7 +221,7 @@ def resume(
     show_progress: bool = False,
     device: str | None = None,
 ) -> RunResult:
-    refuse_many_ranks()
+    refuse_many_ranks(joined=ranks.current() is not None)
     rundir = RunDirectory(Path(run_dir))
     if not rundir.is_run():
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")

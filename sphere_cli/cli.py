@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 
@@ -109,6 +110,22 @@ DEVICE_OPTION = typer.Option(
 )
 
 
+@contextmanager
+def _ranks():
+    """Under an MPI launcher, rank 0 runs the command and the other ranks follow it
+    (sphere_cli/ranks.py), ending with its exit code; on one rank, nothing."""
+    from . import ranks
+
+    try:
+        world = ranks.start()
+    except SphereError as exc:
+        _fail(exc)
+    if world is not None and not world.leads:
+        raise typer.Exit(world.follow())
+    with ranks.leading(world):
+        yield
+
+
 @app.command()
 def run(
     case: Path = typer.Argument(..., metavar="CASE", help="Case file (TOML)."),
@@ -132,23 +149,25 @@ def run(
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress output."),
     device: Device | None = DEVICE_OPTION,
 ) -> None:
-    """Run a case: build the scene, advance it, write trajectory and checkpoints."""
-    try:
-        result = api.run(
-            case,
-            output,
-            overwrite=overwrite,
-            max_wall_time=_wall_time(max_wall_time),
-            handle_signals=True,
-            show_progress=not quiet,
-            until=until,
-            device=None if device is None else device.value,
-        )
-    except SphereError as exc:
-        _fail(exc)
-    except KeyboardInterrupt:
-        _interrupted()
-    _report(result)
+    """Run a case: build the scene, advance it, write trajectory and checkpoints. Under an MPI
+    launcher (mpiexec -n 4 sphere run CASE) the scene's steps are split across the ranks."""
+    with _ranks():
+        try:
+            result = api.run(
+                case,
+                output,
+                overwrite=overwrite,
+                max_wall_time=_wall_time(max_wall_time),
+                handle_signals=True,
+                show_progress=not quiet,
+                until=until,
+                device=None if device is None else device.value,
+            )
+        except SphereError as exc:
+            _fail(exc)
+        except KeyboardInterrupt:
+            _interrupted()
+        _report(result)
 
 
 @app.command()
@@ -166,21 +185,22 @@ def resume(
     device: Device | None = DEVICE_OPTION,
 ) -> None:
     """Continue a run from its newest checkpoint that verifies (bitwise identical continuation on
-    the device it ran on)."""
-    try:
-        result = api.resume(
-            run_dir,
-            until=until,
-            max_wall_time=_wall_time(max_wall_time),
-            handle_signals=True,
-            show_progress=not quiet,
-            device=None if device is None else device.value,
-        )
-    except SphereError as exc:
-        _fail(exc)
-    except KeyboardInterrupt:
-        _interrupted()
-    _report(result)
+    the device it ran on, and on any number of MPI ranks)."""
+    with _ranks():
+        try:
+            result = api.resume(
+                run_dir,
+                until=until,
+                max_wall_time=_wall_time(max_wall_time),
+                handle_signals=True,
+                show_progress=not quiet,
+                device=None if device is None else device.value,
+            )
+        except SphereError as exc:
+            _fail(exc)
+        except KeyboardInterrupt:
+            _interrupted()
+        _report(result)
 
 
 @app.command()
@@ -218,7 +238,7 @@ def plot(
 bench_app = typer.Typer(
     no_args_is_help=True,
     rich_markup_mode=None,
-    help="Benchmarks (never part of the tests): dem, fluid, darcy, vans1d, grid, compile.",
+    help="Benchmarks (never part of the tests): dem, ranks, gpu, fluid, darcy, vans1d, grid, compile.",
 )
 app.add_typer(bench_app, name="bench")
 
@@ -292,6 +312,33 @@ def bench_gpu(
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
     _bench(lambda: run_gpu_benchmark(_numbers(sizes, "--sizes"), steps, repeats, chosen, output))
+
+
+@bench_app.command("ranks")
+def bench_ranks(
+    sizes: str = typer.Option("100000", "--sizes", help="Particle counts, comma-separated."),
+    rank_counts: str = typer.Option(
+        "1,2", "--ranks", help="MPI rank counts, comma-separated (the first is the base)."
+    ),
+    steps: int = typer.Option(100, "--steps", min=1, help="Steps per timing."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per rank count and round (median)."),
+    rounds: int = typer.Option(3, "--rounds", min=1, help="Rounds, the rank counts alternating."),
+    output: Path = OUTPUT_OPTION,
+) -> None:
+    """The settled canonical bed on several MPI ranks (one thread each), side by side: particle-steps
+    per second and the speed-up over the first rank count, round by round (needs mpiexec)."""
+    from .bench.ranks import run_ranks_benchmark
+
+    counts = _numbers(rank_counts, "--ranks")
+    _bench(lambda: run_ranks_benchmark(_numbers(sizes, "--sizes"), counts, steps, repeats, rounds, output))
+
+
+@bench_app.command("ranks-member", hidden=True)
+def bench_ranks_member(n: int, steps: int, repeats: int) -> None:
+    """One rank count of `sphere bench ranks` (started by it under mpiexec)."""
+    from .bench.ranks import member
+
+    _bench(lambda: member(n, steps, repeats))
 
 
 @bench_app.command("fluid")

@@ -117,18 +117,19 @@ class StopFlag:
             self.reason = reason
 
 
-def refuse_many_ranks() -> None:
-    """A run started as several MPI ranks (mpiexec -n 4 sphere run ...) would be that many copies
-    of one scene racing for one run directory: refused before anything is written. One scene
-    runs in one process, on its threads; independent scenes run as a sweep."""
+def refuse_many_ranks(joined: bool) -> None:
+    """A run that an MPI launcher started as several ranks without their joining into one scene
+    (a library call or a sweep member under mpiexec -n 4; the `sphere run` and `sphere resume`
+    commands join them: sphere_cli/ranks.py) would be that many copies of one scene racing for
+    one run directory: refused before anything is written."""
     for name in MPI_SIZE_VARIABLES:
         value = os.environ.get(name, "")
-        if value.isdigit() and int(value) > 1:
+        if value.isdigit() and int(value) > 1 and not joined:
             raise UsageError(
-                f"started as {value} MPI ranks ({name}={value}): a scene runs in one process, on "
-                "its threads (simulation.threads, NUMBA_NUM_THREADS); a scene split across ranks "
-                "is not available yet. Start one process (no mpiexec -n / srun -n), or run "
-                "independent cases with `sphere sweep`"
+                f"started as {value} MPI ranks ({name}={value}) outside `sphere run` / `sphere resume`: "
+                "each rank would run the whole scene into one run directory. Split one scene across "
+                "ranks with `mpiexec -n N sphere run CASE`; run independent cases with `sphere sweep`; "
+                "or start one process"
             )
 
 

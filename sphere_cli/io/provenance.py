@@ -10,6 +10,8 @@ import sys
 from datetime import UTC, datetime
 from importlib import metadata
 
+from .. import ranks
+
 
 def _version(package: str) -> str:
     try:
@@ -35,6 +37,7 @@ def provenance() -> dict:
         "numpy": _version("numpy"),
         "h5py": _version("h5py"),
         "threads": int(numba.get_num_threads()),
+        "mpi_ranks": ranks.count(),
         "threading_layer": os.environ.get("NUMBA_THREADING_LAYER", "default"),
         "host": socket.gethostname(),
         "user": _user(),

@@ -31,6 +31,7 @@ import warnings
 from datetime import UTC, datetime
 from pathlib import Path
 
+from .. import ranks
 from ..errors import OutputError, RunBusy, UsageError
 from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
@@ -304,7 +305,7 @@ class RunDirectory:
             log.removeHandler(handler)
 
     def write_status(self, info: dict) -> None:
-        info = {**info, "updated": datetime.now(UTC).isoformat(timespec="seconds")}
+        info = {**info, "ranks": ranks.count(), "updated": datetime.now(UTC).isoformat(timespec="seconds")}
         try:
             write_text_atomic(self.status_path, json.dumps(info, indent=2) + "\n")
         except OSError as exc:

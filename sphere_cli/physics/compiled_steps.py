@@ -29,7 +29,7 @@ def _own(hook, name: str) -> bool:
     return owner is not None and getattr(hook, "__func__", None) is getattr(type(owner), name, None)
 
 
-def _is(hook, cls, name: str) -> bool:
+def is_hook_of(hook, cls, name: str) -> bool:
     """True if `hook` is cls's own method `name`, bound to an instance of exactly cls."""
     return type(getattr(hook, "__self__", None)) is cls and _own(hook, name)
 
@@ -59,18 +59,18 @@ class CompiledSteps:
         forces = list(step.forces)
         if not (
             len(step.kick_drift) == 1
-            and _is(step.kick_drift[0], Motion, "kick_drift")
+            and is_hook_of(step.kick_drift[0], Motion, "kick_drift")
             and len(step.prepare) == 1
-            and _is(step.prepare[0], NeighborSearch, "prepare")
+            and is_hook_of(step.prepare[0], NeighborSearch, "prepare")
             and forces
-            and _is(forces[0], PairContactForces, "forces")
+            and is_hook_of(forces[0], PairContactForces, "forces")
             and len(step.kick) == 1
-            and _is(step.kick[0], Motion, "kick")
+            and is_hook_of(step.kick[0], Motion, "kick")
             and not step.finish_step
         ):
             return None
         contact, walls, extra = forces.pop(0).__self__, None, None
-        if forces and _is(forces[0], PlaneWallForces, "forces"):
+        if forces and is_hook_of(forces[0], PlaneWallForces, "forces"):
             walls = forces.pop(0).__self__
         if forces and _has_steps_kernel(forces[0]):
             extra = forces.pop(0).__self__

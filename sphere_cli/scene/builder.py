@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import ranks
 from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
@@ -87,7 +88,12 @@ class Scene:
         if problems:  # a programming error: the order above breaks physics/module.py ORDER
             raise RuntimeError("; ".join(problems))
         self.step = Step(self.modules, particles=self.state.particles.count > 0)
-        if self.case.simulation.device == "cuda":
+        world = ranks.current()
+        if world is not None and self.state.particles.count:
+            from ..physics.rank_steps import RankSteps
+
+            self.step.compiled = RankSteps.of(self, world)
+        elif self.case.simulation.device == "cuda":
             from ..physics.device_steps import DeviceSteps  # the CPU path imports no CUDA package
 
             self.step.compiled = DeviceSteps.of(self)

@@ -28,6 +28,8 @@ from cli_test_support import (
     sphere_inproc,
 )
 
+from sphere_cli import api
+from sphere_cli.errors import UsageError
 from sphere_cli.runtime import refuse_many_ranks
 
 # --- the case file alone ------------------------------------------------------------------------
@@ -461,40 +463,34 @@ def test_existing_run_directory_needs_overwrite(tmp_path):
 
 
 @pytest.mark.parametrize("variable", ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MV2_COMM_WORLD_SIZE"])
-def test_a_run_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, variable):
-    """`mpiexec -n 2 sphere run` (the variable each launcher sets in every rank): two copies of one
-    scene would race for one run directory; refused before anything is written."""
+def test_a_library_run_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, variable):
+    """api.run under `mpiexec -n 2` (the variable each launcher sets in every rank), outside the
+    `sphere run` command that joins the ranks into one scene (tests/cli/test_ranks.py): two
+    copies of one scene would race for one run directory; refused before anything is written."""
     (tmp_path / "case.toml").write_text(TINY)
     monkeypatch.setenv(variable, "2")
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 2, f"{variable}=2", "one process", "sphere sweep")
+    with pytest.raises(UsageError, match=f"{variable}=2.*mpiexec -n N sphere run.*sphere sweep"):
+        api.run(tmp_path / "case.toml", tmp_path / "out")
     assert not (tmp_path / "out").exists()
-    assert_clean_error(sphere_inproc("resume", "out", cwd=tmp_path), 2, f"{variable}=2")
+    with pytest.raises(UsageError, match=f"{variable}=2"):
+        api.resume(tmp_path / "out")
     monkeypatch.setenv(variable, "1")  # one rank: an ordinary run
-    refuse_many_ranks()
+    refuse_many_ranks(joined=False)
 
 
-def test_mpiexec_with_two_ranks_is_refused_by_every_rank(tmp_path):
-    """The real launcher (the mpich wheel of the test extra): `mpiexec -n 2 sphere run` stops
-    in both ranks with the message, and writes nothing; one rank is an ordinary process."""
+def test_mpiexec_refuses_library_runs_in_every_rank(tmp_path):
+    """The real launcher (the mpich wheel of the test extra): a script calling api.run started
+    on 2 ranks stops in both with the message and writes nothing."""
     mpiexec = Path(sys.executable).with_name("mpiexec")
     if not mpiexec.is_file():
         pytest.skip("no mpiexec beside this Python (the test extra installs the mpich wheel on Linux)")
     (tmp_path / "case.toml").write_text(TINY)
-    command = [str(mpiexec), "-n", "2", sys.executable, "-m", "sphere_cli", "run", "case.toml", "-o", "out"]
+    script = "from sphere_cli import api; api.run('case.toml', 'out')"
+    command = [str(mpiexec), "-n", "2", sys.executable, "-c", script]
     done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode != 0
-    assert done.stderr.count("sphere: error: started as 2 MPI ranks") == 2, done.stderr
-    assert "Traceback" not in done.stderr and not (tmp_path / "out").exists()
-    one = [
-        str(mpiexec),
-        "-n",
-        "1",
-        sys.executable,
-        "-c",
-        "from sphere_cli.runtime import refuse_many_ranks as r; r()",
-    ]
-    assert subprocess.run(one, capture_output=True, timeout=120).returncode == 0
+    assert done.stderr.count("UsageError: started as 2 MPI ranks") == 2, done.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_overwrite_refuses_a_directory_that_is_not_a_run(tmp_path):

@@ -1,0 +1,652 @@
+"""The DEM steps of one scene split across MPI ranks (sphere_cli/ranks.py): slabs of search
+cells, ghosts one cell wide, particles moving between ranks only at neighbour-list builds, and
+results bitwise those of one rank, whatever the rank count.
+
+**Slabs.** The box is cut along the axis with the most search cells (physics/neighbors.py
+search_cells) into one slab of whole cells per rank, cut where the particles are shared evenly
+(a cut never changes a result). A rank owns the particles whose position at the last list build
+lies in its slab, and holds as ghosts those within one cell of it: every pair listed at that
+build then lies within one rank's particles, own or ghost, until the next build.
+
+**Same bits.** A rank keeps its particles in ascending global index and runs the one-rank step
+on them (Motion, NeighborSearch, PairContactForces, PlaneWallForces), so each owned particle
+sums m g, its pairs (j, i) and its own row in the order one rank does (kernels/contact.py), and
+each pair across a cut is computed on both sides with the same inputs and spring. A ghost's
+force misses its pairs beyond the ghosts: after the forces, each owner sends its ghosts' force
+and torque, so that every rank's kick, and next drift, of a ghost is its owner's, bit for bit.
+The largest displacement that decides a rebuild is the maximum over ranks (exact in any order).
+
+**At a build** the owners send each particle, with its half row of springs by global index and
+its wall springs, to the ranks that own or hold it next; each rank rebuilds its list from
+those rows, carrying the springs as one rank does (NeighborSearch.rebuild). The rows' width
+follows the longest row over all ranks, so a checkpoint's layout is one rank's.
+
+**The host.** The lead keeps the whole scene (physics/rank_steps is its scene.step.compiled,
+like a GPU's physics/device_steps.py): `to_host` gathers the owners' particles and rows into it
+before frames, observables and checkpoints, so files are those of one rank and a checkpoint
+resumes on any rank count. The steps run one at a time in Python with mpi4py's messages (an
+exchange of ghost forces and one reduction a step).
+
+**Moving walls** are stepped on every rank alike; the particles' force on them is summed in
+one rank's order over the ranks (`_wall_kick`). **Stages** run at the lead on its whole scene,
+gathered after every step; a stage that begins is shared out again.
+
+It covers the particles, their pair contacts (both laws, friction, rolling, materials),
+gravity, walls of every mode, stages and periodic boundaries. A fluid, the energy budget or the
+GPU is refused with what it is named.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import UsageError
+from ..kernels.motion import first_unstable
+from ..kernels.neighbors import row_starts
+from ..kernels.walls import wall_areas, wall_kick, wall_totals
+from ..state import Clock, NeighborList, Particles, State, Walls
+from .compiled_steps import is_hook_of
+from .contact import PairContactForces
+from .motion import Motion
+from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
+from .walls import PlaneWallForces, WallMotion
+
+# per-particle arrays a particle carries between ranks (Particles; the predicted velocities
+# too: the kick-drift of a build's step set them, and the forces read them)
+CARRIED = (*Particles.PROGNOSTIC, "vel_pred", "angvel_pred")
+# the modules split across ranks (the stages and the Observer act on the lead's whole scene)
+SUPPORTED = ("wall_motion", "particles", "neighbors", "contact", "walls", "stages", "observables", "")
+NAMES = {
+    "fluid": "a fluid ([fluid])",
+    "energy_budget": "the energy budget (output.observables)",
+}
+# the walls' arrays every rank keeps, each the same on every rank (all but the per-particle
+# springs, forces and glued spheres)
+WALL_FIELDS = (
+    "faces", "axis", "sign", "coord", "table", "vel", "acc", "shift", "force", "area", "mode", "control",
+    "vel_pred", "record", "fluid_force",
+)  # fmt: skip
+# those a step changes when walls move (brought back to the lead's scene with the particles)
+MOVING_FIELDS = ("coord", "vel", "acc", "shift", "force", "area", "vel_pred")
+
+
+@dataclass
+class Template:
+    """What a follower needs to run its part of a scene (sent once by the lead)."""
+
+    box: object
+    dt: float
+    step: int
+    tables: object
+    table: np.ndarray  # the contact table now (a stage sets its friction)
+    springs: bool
+    skin: float
+    threshold2: float
+    walls: dict | None  # WALL_FIELDS of the lead's walls, or None
+    moving: bool  # some wall moves (WallMotion)
+    attached: np.ndarray  # (K,) global indices of the spheres glued to walls
+    attached_wall: np.ndarray  # (K,) their wall
+    axis: int  # the cut axis
+    lower: float  # the box's lower corner along it [m]
+    cell: float  # search cells' width along it [m]
+    cells: int  # search cells along it
+    periodic: bool  # the cut axis is periodic
+    capacity: int  # the rows' width
+    builds: int  # list builds so far
+    builds_since_growth: int
+
+
+@dataclass
+class Part:
+    """The particles a rank holds, own and ghosts, in ascending global index, with the modules
+    that step them."""
+
+    gid: np.ndarray  # (n,) int64 global index of each
+    owned: np.ndarray  # (n,) bool
+    state: State
+    search: NeighborSearch
+    contact: PairContactForces
+    walls: PlaneWallForces | None
+    wall_motion: WallMotion | None
+    glued: np.ndarray  # (k,) local indices of the glued spheres held here
+    glued_order: np.ndarray  # (k,) their places in the lead's list of glued spheres
+    send: dict  # rank -> local indices of own particles that are ghosts there, ascending
+    receive: dict  # rank -> local indices of the ghosts it owns, ascending
+
+
+def _plain_step(scene) -> bool:
+    """True if the scene's hooks are exactly those the ranks run (RankSteps._steps), none
+    replaced by a wrapper."""
+    step = scene.step
+    moving = () if scene.wall_motion is None else (scene.wall_motion,)
+    forces = (scene.contact,) + (() if scene.walls is None else (scene.walls,))
+    expected = {
+        "kick_drift": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
+        "prepare": [(scene.neighbors, NeighborSearch)],
+        "forces": [(m, PairContactForces if m is scene.contact else PlaneWallForces) for m in forces],
+        "kick": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
+    }
+    for hook, modules in expected.items():
+        hooks = getattr(step, hook)
+        if len(hooks) != len(modules):
+            return False
+        for bound, (module, cls) in zip(hooks, modules, strict=True):
+            if getattr(bound, "__self__", None) is not module or not is_hook_of(bound, cls, hook):
+                return False
+    return not step.finish_step and all(m is scene.stages for m, _ in step.after_step)
+
+
+def _refusal(scene) -> str | None:
+    """What of the scene's step the ranks do not run, in words (None: they run all of it)."""
+    extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
+    if scene.state.particles.count == 0:
+        extra.append("no particles (a fluid-only case)")
+    if scene.case.simulation.device != "cpu":
+        extra.append(f'simulation.device = "{scene.case.simulation.device}"')
+    if not extra and (scene.neighbors is None or not _plain_step(scene)):
+        extra.append("other step hooks")
+    return ", ".join(extra) or None
+
+
+class RankSteps:
+    """scene.step.compiled on every rank of a split run (the lead's holds the whole scene)."""
+
+    # takes any number of whole steps, list builds included (simulation.advance)
+    whole_steps = True
+
+    def __init__(self, world, template: Template):
+        self.world = world
+        self.t = template
+        self.part: Part | None = None
+        self.pids: list[int] = []
+        self.slabs = np.zeros(world.size + 1, dtype=np.int64)  # first cell of each rank's slab
+        self.at_step = None  # the lead: the host step the ranks' particles are for (None: send)
+        self.host_stale = False  # the lead: steps taken since the last gather
+        self.host_search = None  # the lead: its scene's NeighborSearch
+        self.contact = None  # the lead: its scene's PairContactForces (a stage sets its table)
+        self.stages = None  # the lead: its scene's Stages
+        self.gather_each_run = False
+
+    # --- set-up ----------------------------------------------------------------------------
+
+    @classmethod
+    def of(cls, scene, world) -> RankSteps:
+        """The lead's rank steps of a scene, or a UsageError saying what does not run split."""
+        refused = _refusal(scene)
+        if refused is not None:
+            raise UsageError(
+                f"started as {world.size} MPI ranks: a scene split across ranks runs the particles, "
+                "their pair contacts, gravity, walls (fixed, moving, stress-controlled), stages and "
+                f"periodic boundaries; this case also has: {refused}. Run it as one process (threads: "
+                "simulation.threads)."
+            )
+        search, state = scene.neighbors, scene.state
+        axis = int(np.argmax(search.ncell))  # the first of the axes with the most cells
+        if search.ncell[axis] < world.size:
+            raise UsageError(
+                f"started as {world.size} MPI ranks: the box is {int(search.ncell[axis])} search cells "
+                f"wide along its widest axis ({'xyz'[axis]}) and each rank needs a slab at least one cell "
+                f"wide; use at most {int(search.ncell[axis])} ranks"
+            )
+        template = Template(
+            box=state.box,
+            dt=state.clock.dt,
+            step=state.clock.step,
+            tables=scene.contact.tables,
+            table=scene.contact.table,
+            springs=search.springs,
+            skin=state.neighbors.skin,
+            threshold2=search.threshold2,
+            walls=None,
+            moving=scene.wall_motion is not None,
+            attached=np.zeros(0, dtype=np.int64),
+            attached_wall=np.zeros(0, dtype=np.int64),
+            axis=axis,
+            lower=float(state.box.lower[axis]),
+            cell=float(search.cell_size[axis]),
+            cells=int(search.ncell[axis]),
+            periodic=bool(state.box.periodic[axis]),
+            capacity=state.neighbors.nbr.shape[1],
+            builds=state.neighbors.builds,
+            builds_since_growth=search.builds_since_growth,
+        )
+        steps = cls(world, template)
+        steps.host_search = search
+        steps.contact = scene.contact
+        steps.stages = scene.stages
+        # the stages read the state after every step: it comes back to the lead each time
+        steps.gather_each_run = bool(scene.step.after_step)
+        world.order("start", template)
+        steps.pids = world.pids()
+        return steps
+
+    @classmethod
+    def following(cls, world, template: Template) -> RankSteps:
+        """A follower's rank steps, from the lead's "start"."""
+        steps = cls(world, template)
+        steps.pids = world.pids()
+        return steps
+
+    def describe(self) -> str:
+        """For run.log: ranks, cut axis and processes."""
+        return (
+            f"split across {self.world.size} MPI ranks, slabs of search cells along {'xyz'[self.t.axis]} "
+            f"(process ids by rank: {' '.join(map(str, self.pids))})"
+        )
+
+    # --- the lead's side (simulation.advance and check_stable call these) --------------------
+
+    def _send_out(self, state: State) -> None:
+        """The lead's whole scene shared out to the ranks (at the first steps, and again
+        whenever the host's state is not the ranks' own)."""
+        t = self.t
+        t.step, t.capacity, t.builds = state.clock.step, state.neighbors.nbr.shape[1], state.neighbors.builds
+        t.builds_since_growth = self.host_search.builds_since_growth
+        t.table = self.contact.table
+        walls = state.walls
+        if walls is not None:
+            t.walls = {name: getattr(walls, name) for name in WALL_FIELDS}
+            t.attached, t.attached_wall = walls.attached, walls.attached_wall
+        self.world.order("share", t)
+        n = state.particles.count
+        self._share([_pack(state, np.arange(n), np.arange(n), t.springs, state.neighbors.ref_pos)], {})
+        self.at_step = state.clock.step
+
+    def run(self, state: State, steps: int) -> tuple[int, bool]:
+        def work():
+            # again from the lead's scene when it is not the ranks' (a stage that began has set
+            # walls, friction and perhaps moved glued spheres)
+            if self.at_step != state.clock.step or (self.stages is not None and self.stages.ended):
+                self._send_out(state)
+            self.world.order("steps", steps)
+            self._steps(steps)
+
+        self.world.together(work)
+        self.at_step = state.clock.step + steps
+        self.host_stale = True
+        if self.gather_each_run:
+            self.to_host(state)
+        return steps, False
+
+    def to_host(self, state: State) -> None:
+        """The owners' particles, rows and wall springs into the lead's scene."""
+        if not self.host_stale:
+            return
+
+        def work():
+            self.world.order("gather")
+            capacity = self.part.state.neighbors.nbr.shape[1]
+            _unpack_into_host(state, self._gather(), capacity, self.t.springs)
+
+        self.world.together(work)
+        if self.t.moving:  # the walls, the same on every rank: the lead's own
+            for name in MOVING_FIELDS:
+                getattr(state.walls, name)[...] = getattr(self.part.state.walls, name)
+        self.host_search.builds_since_growth = self.part.search.builds_since_growth
+        self.host_search._spare_like(state.neighbors)
+        self.host_stale = False
+
+    def known_stable(self, state: State) -> bool:
+        """True when no rank holds a particle gone bad (then the host checks itself, to report
+        the first as one rank does)."""
+        if not self.host_stale:
+            return False
+
+        def work():
+            self.world.order("stable")
+            return self._stable()
+
+        return self.world.together(work)
+
+    # --- every rank -------------------------------------------------------------------------
+
+    def carry_out(self, command: str, *args) -> None:
+        """A follower carries out the lead's command."""
+        if command == "steps":
+            self._steps(*args)
+        elif command == "gather":
+            self._gather()
+        elif command == "stable":
+            self._stable()
+        elif command == "share":
+            self.t = args[0]
+            self._share([], {})
+        else:
+            raise RuntimeError(f"unknown command {command!r} from the lead")
+
+    def _steps(self, steps: int) -> None:
+        """The one-rank step on this rank's particles (physics/module.py order), with the ghosts'
+        forces from their owners and the rebuild decided over every rank."""
+        comm, mpi = self.world.comm, self.world.mpi
+        motion = Motion()
+        for _ in range(steps):
+            part = self.part
+            state = part.state
+            if part.wall_motion is not None:
+                part.wall_motion.kick_drift(state)
+            if state.particles.count:
+                motion.kick_drift(state)
+            moved2 = comm.allreduce(state.neighbors.moved2, op=mpi.MAX)
+            state.neighbors.moved2 = moved2
+            if moved2 > self.t.threshold2:
+                self._rebuild()
+                part = self.part
+                state = part.state
+            if state.particles.count:
+                part.contact.forces(state)
+                if part.walls is not None:
+                    part.walls.forces(state)
+            self._ghost_forces()
+            if part.wall_motion is not None:
+                self._wall_kick(state)
+            if state.particles.count:
+                motion.kick(state)
+            state.clock.step += 1
+
+    def _ghost_forces(self) -> None:
+        """Each owner sends the force and torque of its particles that are ghosts elsewhere."""
+        part, comm = self.part, self.world.comm
+        p = part.state.particles
+        requests, inbox = [], {}
+        for rank, local in part.receive.items():
+            inbox[rank] = np.empty((local.size, 6))
+            requests.append(comm.Irecv(inbox[rank], source=rank, tag=1))
+        outbox = []
+        for rank, local in part.send.items():
+            outbox.append(np.concatenate((p.force[local], p.torque[local]), axis=1))
+            requests.append(comm.Isend(outbox[-1], dest=rank, tag=1))
+        self.world.mpi.Request.Waitall(requests)
+        for rank, local in part.receive.items():
+            p.force[local] = inbox[rank][:, :3]
+            p.torque[local] = inbox[rank][:, 3:]
+
+    def _wall_kick(self, state: State) -> None:
+        """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
+        in global particle order (the particles without force on a moving wall add exact
+        zeros, left out), then the glued spheres in the lead's order (kernels/walls.py
+        wall_totals)."""
+        part, w, p, box = self.part, state.walls, state.particles, state.box
+        wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
+        own = np.flatnonzero(part.owned)
+        pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
+        glued = part.owned[part.glued]
+        local = part.glued[glued]
+        mine = (part.gid[pushing], w.pforce[pushing], part.glued_order[glued], p.force[local], p.mass[local])
+        every = self.world.comm.allgather(mine)
+        gid, pforce, order, total, mass = (np.concatenate([x[k] for x in every]) for k in range(5))
+        by_index, by_glue = np.argsort(gid, kind="stable"), np.argsort(order, kind="stable")
+        wall_totals(
+            np.ascontiguousarray(pforce[by_index]),
+            w.record,
+            np.arange(order.size, dtype=np.int64),
+            self.t.attached_wall[order[by_glue]],
+            np.ascontiguousarray(total[by_glue]),
+            np.ascontiguousarray(mass[by_glue]),
+            box.body_acc,
+            w.fluid_force,
+            w.force,
+        )
+        dt = state.clock.dt
+        wall_kick(
+            w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc, (state.clock.step + 1) * dt, dt
+        )
+
+    def _stable(self) -> bool:
+        state = self.part.state
+        p, box = state.particles, state.box
+        i, _ = first_unstable(
+            p.pos, p.vel, p.angvel, p.radius, box.lower, box.upper, box.periodic, state.clock.dt
+        )
+        first = int(self.part.gid[i]) if i >= 0 else np.iinfo(np.int64).max
+        return self.world.comm.allreduce(first, op=self.world.mpi.MIN) == np.iinfo(np.int64).max
+
+    def _gather(self) -> list | None:
+        """The owned particles of every rank, at the lead (None elsewhere)."""
+        part = self.part
+        own = np.flatnonzero(part.owned)
+        packed = _pack(part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos)
+        return self.world.comm.gather(packed, root=0)
+
+    def _rebuild(self) -> None:
+        """A list build: ownership from the positions now, particles sent to their new owners
+        and holders with their rows, and the list rebuilt there carrying the springs."""
+        part = self.part
+        own = np.flatnonzero(part.owned)
+        state = part.state
+        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos)
+        self.t.capacity = state.neighbors.nbr.shape[1]
+        self.t.builds = state.neighbors.builds
+        self.t.builds_since_growth = part.search.builds_since_growth
+        self.t.step = state.clock.step
+        if state.walls is not None:  # moving walls have moved since the last share
+            self.t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
+        self._share([packed], {"moved2": state.neighbors.moved2})
+        self.part.search.rebuild(self.part.state)
+
+    def _share(self, packs: list, fresh: dict) -> None:
+        """Collective: the particles in `packs` (this rank's own, or the whole scene at the
+        lead) go to the ranks that own or hold them by the cells of their `ref` positions; this
+        rank's part is made of what it receives."""
+        world = self.world
+        mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
+        cell = self._cells(mine["ref"]) if mine else np.zeros(0, dtype=np.int64)
+        self._cut(cell)
+        owner = np.searchsorted(self.slabs, cell, side="right") - 1
+        neighbours = [self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)]
+        outgoing = []
+        for rank in range(world.size):
+            held = (neighbours[0] == rank) | (neighbours[1] == rank) | (neighbours[2] == rank)
+            outgoing.append(_select(mine, np.flatnonzero(held)))
+        kept, outgoing[world.rank] = outgoing[world.rank], {}  # what stays is not pickled
+        arrived = world.comm.alltoall(outgoing)
+        arrived[world.rank] = kept
+        received = _merge(arrived)
+        order = np.argsort(received["gid"], kind="stable")
+        received = _select(received, order)
+        self.part = self._make_part(received, fresh)
+
+    def _cells(self, ref: np.ndarray) -> np.ndarray:
+        """Each position's search cell along the cut axis (kernels/neighbors.py cell_number)."""
+        t = self.t
+        cell = np.floor((ref[:, t.axis] - t.lower) / t.cell).astype(np.int64)
+        return np.clip(cell, 0, t.cells - 1)
+
+    def _owner_of_cell(self, cell: np.ndarray) -> np.ndarray:
+        """The rank owning each cell; a cell past an open end: -1."""
+        t = self.t
+        if t.periodic:
+            cell = cell % t.cells
+        owner = np.searchsorted(self.slabs, cell, side="right") - 1
+        return np.where((cell < 0) | (cell >= t.cells), -1, owner)
+
+    def _cut(self, cell: np.ndarray) -> None:
+        """Slab boundaries where the particles are shared evenly (counted over every rank),
+        each slab at least one cell wide."""
+        t, size = self.t, self.world.size
+        counts = np.bincount(cell, minlength=t.cells).astype(np.int64)
+        total = np.empty_like(counts)
+        self.world.comm.Allreduce(counts, total, op=self.world.mpi.SUM)
+        work = np.cumsum(total)
+        cuts = np.searchsorted(work, np.arange(1, size) * (work[-1] / size), side="right")
+        cuts = np.maximum.accumulate(np.maximum(cuts, np.arange(1, size)))
+        cuts = np.minimum(cuts, t.cells - size + np.arange(1, size))
+        self.slabs = np.concatenate(([0], cuts, [t.cells])).astype(np.int64)
+
+    def _make_part(self, rec: dict, fresh: dict) -> Part:
+        t, world = self.t, self.world
+        n = rec["gid"].size
+        cell = self._cells(rec["ref"])
+        owner = np.searchsorted(self.slabs, cell, side="right") - 1
+        owned = owner == world.rank
+        particles = Particles(**{name: rec[name] for name in CARRIED})
+        # each row's partners by local index, those this rank does not hold left out (they lie
+        # beyond the ghosts: out of reach of every particle here)
+        row = np.repeat(np.arange(n), rec["row_count"])
+        where = np.minimum(np.searchsorted(rec["gid"], rec["partner"]), max(n - 1, 0))
+        keep = rec["gid"][where] == rec["partner"] if n else np.zeros(0, dtype=bool)
+        row, where = row[keep], where[keep]
+        count = np.bincount(row, minlength=n).astype(np.int32)
+        slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+        nbr = np.zeros((n, t.capacity), dtype=np.int32)
+        nbr[row, slot] = where
+        springs = np.zeros((n, t.capacity, 3))
+        if t.springs:
+            springs[row, slot] = rec["spring"][keep]
+        start = np.zeros(n + 1, dtype=np.int64)
+        row_starts(count, t.capacity, start)
+        hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
+        if t.springs:
+            hist[: start[-1]] = springs[listed_slots(nbr, count)]
+        nl = NeighborList(
+            skin=t.skin,
+            nbr=nbr,
+            nbr_count=count,
+            start=start,
+            hist=hist,
+            ref_pos=np.ascontiguousarray(rec["ref"]),
+            rev=np.zeros((n, t.capacity), dtype=np.int32),
+            rev_count=np.zeros(n, dtype=np.int32),
+            builds=t.builds,
+            moved2=fresh.get("moved2", 0.0),
+        )
+        walls = None
+        # the glued spheres held here, and their places in the lead's list
+        where = np.minimum(np.searchsorted(rec["gid"], t.attached), max(n - 1, 0))
+        present = rec["gid"][where] == t.attached if n else np.zeros(t.attached.size, dtype=bool)
+        glued, glued_order = where[present], np.flatnonzero(present)
+        if t.walls is not None:
+            nw = len(t.walls["faces"])
+            walls = Walls(
+                **{name: (list(v) if name == "faces" else np.array(v)) for name, v in t.walls.items()},
+                hist=np.ascontiguousarray(rec["wall_hist"]) if t.springs else np.zeros((0, nw, 3)),
+                attached=glued.astype(np.int64),
+                attached_wall=t.attached_wall[glued_order],
+                pforce=np.zeros((n if t.moving else 0, nw, 3)),
+            )
+        clock = Clock(dt=t.dt, step=t.step)
+        state = State(clock=clock, box=t.box, particles=particles, neighbors=nl, walls=walls)
+        search = NeighborSearch(state, t.springs)
+        search.builds_since_growth = t.builds_since_growth
+        search.longest = self._longest
+        NeighborSearch._reverse(nl)
+        contact = PairContactForces(t.tables)
+        contact.table[...] = t.table  # the friction of the stage under way
+        part = Part(
+            gid=rec["gid"],
+            owned=owned,
+            state=state,
+            search=search,
+            contact=contact,
+            walls=None if walls is None else PlaneWallForces(contact),
+            wall_motion=WallMotion() if t.moving else None,
+            glued=glued,
+            glued_order=glued_order,
+            send={},
+            receive={},
+        )
+        self.part = part
+        self._exchange_lists()
+        return part
+
+    def _longest(self, needed: int) -> int:
+        """The longest row over every rank (each rank's rows then widen and narrow alike)."""
+        return self.world.comm.allreduce(needed, op=self.world.mpi.MAX)
+
+    def _exchange_lists(self) -> None:
+        """Which own particles each rank holds as ghosts, and which ghosts each rank owns, both
+        in ascending global index (each side derives the other's list from the same cells)."""
+        part = self.part
+        cell = self._cells(part.state.neighbors.ref_pos)
+        owner = np.searchsorted(self.slabs, cell, side="right") - 1
+        me = self.world.rank
+        holders = [self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)]
+        part.send, part.receive = {}, {}
+        for rank in range(self.world.size):
+            if rank == me:
+                continue
+            held = (holders[0] == rank) | (holders[1] == rank) | (holders[2] == rank)
+            send = np.flatnonzero(part.owned & held)
+            receive = np.flatnonzero(owner == rank)
+            if send.size:
+                part.send[rank] = send
+            if receive.size:
+                part.receive[rank] = receive
+
+
+def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray) -> dict:
+    """The particles `idx` of a state (global indices gid[idx]) with their half rows by global
+    index and their springs: what a rank sends of them."""
+    p, nl, walls = state.particles, state.neighbors, state.walls
+    rec = {name: getattr(p, name)[idx] for name in CARRIED}
+    rec["gid"] = gid[idx].astype(np.int64)
+    rec["ref"] = ref[idx]
+    cap = nl.nbr.shape[1]
+    count = np.minimum(nl.nbr_count[idx], cap)
+    rec["row_count"] = count.astype(np.int64)
+    slots = np.arange(cap)[None, :] < count[:, None]
+    rec["partner"] = gid[nl.nbr[idx][slots]].astype(np.int64)
+    if springs:
+        k = np.arange(cap)[None, :]
+        rec["spring"] = nl.hist[(nl.start[idx][:, None] + k)[slots]]
+        if walls is not None:
+            rec["wall_hist"] = walls.hist[idx]
+    return rec
+
+
+def _merge(packs: list) -> dict:
+    """One pack of several (in the order given)."""
+    packs = [p for p in packs if p]
+    if not packs:
+        return {}
+    return {name: np.concatenate([p[name] for p in packs]) for name in packs[0]}
+
+
+def _select(rec: dict, idx: np.ndarray) -> dict:
+    """The particles idx of a pack, their rows with them."""
+    if not rec:
+        return {}
+    rows = _rows(rec["row_count"], idx)
+    out = {}
+    for name, value in rec.items():
+        out[name] = value[rows] if name in ("partner", "spring") else value[idx]
+    return out
+
+
+def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """The entries of a pack's concatenated rows (partner, spring) that belong to its particles
+    idx, in that order."""
+    first = np.cumsum(row_count) - row_count
+    counts = row_count[idx]
+    before = np.cumsum(counts) - counts
+    return np.arange(int(counts.sum())) - np.repeat(before, counts) + np.repeat(first[idx], counts)
+
+
+def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool) -> None:
+    """The gathered owners' particles into the lead's whole scene (its list in one rank's layout)."""
+    rec = _merge(packs)
+    gid = rec["gid"]
+    p, nl = state.particles, state.neighbors
+    for name in CARRIED:
+        getattr(p, name)[gid] = rec[name]
+    nl.ref_pos[gid] = rec["ref"]
+    n = p.count
+    cap = capacity
+    nbr = np.zeros((n, cap), dtype=np.int32)
+    count = np.zeros(n, dtype=np.int32)
+    count[gid] = rec["row_count"]
+    slots = listed_slots(nbr, count)
+    rows = _rows(rec["row_count"], np.argsort(gid, kind="stable"))
+    nbr[slots] = rec["partner"][rows]
+    nl.nbr, nl.nbr_count = nbr, count
+    nl.start = np.zeros(n + 1, dtype=np.int64)
+    row_starts(count, cap, nl.start)
+    if springs:
+        hist = np.zeros((int(SPRING_ROOM * nl.start[-1]) + 64, 3))
+        hist[: nl.start[-1]] = rec["spring"][rows]
+        nl.hist = hist
+        if state.walls is not None:
+            state.walls.hist[gid] = rec["wall_hist"]
+    nl.rev = np.zeros((n, cap), dtype=np.int32)
+    NeighborSearch._reverse(nl)

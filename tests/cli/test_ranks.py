@@ -1,0 +1,334 @@
+"""One scene split across MPI ranks (sphere_cli/ranks.py, physics/rank_steps.py), run with the real
+launcher: the mpich wheel's `mpiexec` (test extra) starting `sphere run` / `sphere resume`.
+
+A split run must be bitwise a one-rank run, whatever the rank count: its trajectory (every
+dataset h5py reads, provenance aside) and its checkpoints. The scenes are chosen so that ranks
+matter: beads sliding fast across a periodic cut axis (each crosses every rank boundary many
+times, carrying its pair and wall springs), and a bed settling in a box with walls on the cut
+axis (an open cut axis, particles pressed against the end walls).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint
+
+MPIEXEC = Path(sys.executable).with_name("mpiexec")
+REPO = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.skipif(
+    not MPIEXEC.is_file() or shutil.which("mpiexec", path=str(MPIEXEC.parent)) is None,
+    reason="no mpiexec beside this Python (the test extra installs the mpich wheel on Linux)",
+)
+
+# 120 beads on a floor in a periodic box 12 mm long, sliding at 0.8 m/s along x (the cut axis:
+# five search cells) with spin, friction and rolling resistance: in 0.04 s each crosses the box
+# about 2.7 times, so on four ranks it changes rank about ten times, with its springs.
+SLIDING = """\
+[simulation]
+duration = 0.04
+dt = "auto"
+
+[domain]
+lower = [0.0, 0.0, 0.0]
+upper = [0.012, 0.006, 0.008]
+periodic = [true, true, false]
+gravity = [0.0, 0.0, -9.81]
+
+[particles]
+count = 120
+density = 2500.0
+seed = 3
+radius = { distribution = "uniform", min = 0.0005, max = 0.0006 }
+placement = { method = "random" }
+velocity = [0.8, 0.0, 0.0]
+angular_velocity = [0.0, 200.0, 50.0]
+
+[contact]
+model = "linear"
+normal_stiffness = 2.0e3
+restitution = 0.5
+friction = 0.5
+rolling_friction = 0.1
+
+[[walls]]
+face = "z-"
+friction = 0.4
+
+[output]
+status_every_seconds = 0.2
+
+[output.frames]
+every_time = 0.01
+
+[output.checkpoints]
+every_time = 0.01
+keep = 10
+
+[output.observables]
+quantities = ["energy", "contacts", "coordination", "stress"]
+"""
+
+# 200 Hertz-Mindlin spheres of two materials thrown onto the floor of a box with walls on every
+# side but the top, from a loose random packing (solid fraction 0.2): the bed piles up within the
+# first milliseconds, so pairs across the cuts touch; the cut axis x is open, its end slabs
+# against walls.
+SETTLING = """\
+[simulation]
+duration = 0.01
+dt = "auto"
+
+[domain]
+lower = [0.0, 0.0, 0.0]
+upper = [0.016, 0.006, 0.012]
+
+[particles]
+count = 200
+seed = 11
+radius = { distribution = "uniform", min = 0.0005, max = 0.0007 }
+placement = { method = "random", region_upper = [0.016, 0.006, 0.009] }
+velocity = [0.0, 0.0, -0.3]
+material = { glass = 0.5, steel = 0.5 }
+
+[contact]
+model = "hertz-mindlin"
+restitution = 0.4
+friction = 0.3
+
+[[materials]]
+name = "glass"
+density = 2500.0
+youngs_modulus = 5.0e6
+poisson_ratio = 0.22
+
+[[materials]]
+name = "steel"
+density = 7800.0
+youngs_modulus = 1.5e7
+poisson_ratio = 0.3
+
+[[walls]]
+face = "z-"
+[[walls]]
+face = "x-"
+[[walls]]
+face = "x+"
+[[walls]]
+face = "y-"
+[[walls]]
+face = "y+"
+
+[output.frames]
+every_time = 0.005
+
+[output.checkpoints]
+every_time = 0.005
+keep = 10
+"""
+
+
+def sphere(*args, ranks: int = 1, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    """`sphere ARGS` as one process, or on `ranks` ranks through mpiexec."""
+    command = [sys.executable, "-m", "sphere_cli", *args]
+    if ranks > 1:
+        command = [str(MPIEXEC), "-n", str(ranks), *command]
+    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE", "NUMBA_NUM_THREADS": "1"}
+    return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def datasets(path: Path) -> dict:
+    """Every dataset of an HDF5 file, by name (the provenance records aside: host, command, ...)."""
+    out = {}
+    with h5py.File(path, "r") as f:
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and "provenance" not in name and "resumes" not in name:
+                out[name] = obj[()]
+
+        f.visititems(visit)
+    return out
+
+
+def assert_bitwise(a: Path, b: Path) -> None:
+    one, other = datasets(a), datasets(b)
+    assert one.keys() == other.keys(), sorted(set(one) ^ set(other))
+    for name, value in one.items():
+        if isinstance(value, np.ndarray):
+            assert value.shape == other[name].shape and value.tobytes() == other[name].tobytes(), name
+        else:
+            assert value == other[name], name
+
+
+def assert_runs_bitwise(one: Path, split: Path) -> None:
+    """Trajectories, and every checkpoint the split run wrote, bitwise those of one rank."""
+    assert_bitwise(one / "trajectory.h5", split / "trajectory.h5")
+    written = list_checkpoints(split / "checkpoints")
+    assert written
+    for path in written:
+        assert_bitwise(one / "checkpoints" / path.name, path)
+
+
+def run_ok(result: subprocess.CompletedProcess) -> None:
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.fixture(scope="module")
+def sliding(tmp_path_factory) -> Path:
+    """The sliding beads' case, and its one-rank run `one`, stopped at t = 0.02 s (a frame is
+    written there) and resumed to the end."""
+    root = tmp_path_factory.mktemp("sliding")
+    (root / "case.toml").write_text(SLIDING)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.02", cwd=root))
+    run_ok(sphere("resume", "one", "-q", cwd=root))
+    return root
+
+
+def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
+    """2 ranks to t = 0.02 s, then on 4 ranks and on 1 to the end: every frame and checkpoint is
+    one rank's, springs included (each bead has crossed the rank boundaries many times)."""
+    root = sliding
+    run_ok(sphere("run", "case.toml", "-o", "two", "-q", "--until", "0.02", ranks=2, cwd=root))
+    log = (root / "two" / "run.log").read_text()
+    assert "split across 2 MPI ranks" in log
+    status = json.loads((root / "two" / "status.json").read_text())
+    assert status["ranks"] == 2
+    with h5py.File(root / "two" / "trajectory.h5", "r") as f:
+        assert f["sphere/provenance"].attrs["mpi_ranks"] == 2
+    shutil.copytree(root / "two", root / "then-one")
+    run_ok(sphere("resume", "two", "-q", ranks=4, cwd=root))
+    assert "split across 4 MPI ranks" in (root / "two" / "run.log").read_text()
+    run_ok(sphere("resume", "then-one", "-q", cwd=root))
+    for resumed in ("two", "then-one"):
+        assert_runs_bitwise(root / "one", root / resumed)
+    springs = datasets(
+        root / "one" / list_checkpoints(root / "one" / "checkpoints")[-1].relative_to(root / "one")
+    )
+    assert np.count_nonzero(springs["sphere/state/neighbors/hist"]) > 0  # pairs with history
+    assert np.count_nonzero(springs["sphere/state/walls/hist"]) > 0
+
+
+def test_a_bed_settling_between_walls_is_one_ranks_on_three(tmp_path):
+    (tmp_path / "case.toml").write_text(SETTLING)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "three", "-q", ranks=3, cwd=tmp_path))
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "three")
+
+
+def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_two(tmp_path):
+    """configs/direct-shear.toml, its stages shortened: deposit (frictionless, a kinetic-energy
+    stop), consolidate (the top wall approaches, then keeps 1 kPa) and shear (the rough top wall
+    moves sideways): the moving walls' forces are summed over the ranks in one rank's order, and
+    the walls, the glued spheres and the friction set by each stage reach every rank."""
+    text = (REPO / "configs" / "direct-shear.toml").read_text()
+    for old, new in (("duration = 0.15", "duration = 0.02"), ("min_time = 0.06", "min_time = 0.01")):
+        text = text.replace(old, new)
+    text = text.replace("duration = 0.05", "duration = 0.008").replace("duration = 0.08", "duration = 0.008")
+    (tmp_path / "case.toml").write_text(text)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path))
+    log = (tmp_path / "two" / "run.log").read_text()
+    assert "now: consolidate" in log and "now: shear" in log and "now: finished" in log
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "two")
+    with h5py.File(tmp_path / "one" / "trajectory.h5", "r") as f:
+        top = f["observables/wall_position/value"][:, 1]
+        assert top[-1] < top[0] - 0.001  # the top wall came down onto the bed
+
+
+def _wait_for(condition, process, seconds: float = 120.0) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+
+
+def _pids(log: Path, launches: int) -> list[int]:
+    """The ranks' process ids that run.log gives for the `launches`-th split start (none yet: [])."""
+    lines = [line for line in log.read_text().splitlines() if "process ids by rank:" in line]
+    if len(lines) < launches:
+        return []
+    return [int(x) for x in lines[launches - 1].split("process ids by rank:")[1].strip(" )").split()]
+
+
+def test_stops_and_a_killed_rank_leave_a_checkpoint_that_resumes(sliding, tmp_path):
+    """--max-wall-time, then SIGTERM to the launcher (a batch system's stop): every rank ends with
+    75 and a checkpoint. Then a rank killed (SIGKILL) mid-run: every rank exits and the newest
+    checkpoint verifies. The run resumes on one rank to one rank's end, bitwise."""
+    shutil.copy(sliding / "case.toml", tmp_path / "case.toml")
+    stopped = sphere("run", "case.toml", "-o", "run", "-q", "--max-wall-time", "2", ranks=2, cwd=tmp_path)
+    assert stopped.returncode == 75, stopped.stderr
+    first = newest_valid_checkpoint(tmp_path / "run" / "checkpoints")
+    assert first is not None and first.step > 0
+
+    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE", "NUMBA_NUM_THREADS": "1"}
+    command = [str(MPIEXEC), "-n", "2", sys.executable, "-m", "sphere_cli", "resume", "run", "-q"]
+    log = tmp_path / "run" / "run.log"
+
+    def resumed(launches: int) -> tuple[subprocess.Popen, list[int]]:
+        """A 2-rank resume under way, past its first step, and its ranks' process ids."""
+        launcher = subprocess.Popen(command, cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+        _wait_for(lambda: _pids(log, launches), launcher)
+        start = newest_valid_checkpoint(tmp_path / "run" / "checkpoints").step
+        _wait_for(lambda: _status(tmp_path).get("step", 0) > start, launcher)
+        return launcher, _pids(log, launches)
+
+    launcher, _ = resumed(2)
+    launcher.send_signal(signal.SIGTERM)
+    _, err = launcher.communicate(timeout=120)
+    assert launcher.returncode == 75, err
+    assert "Traceback" not in err
+    second = newest_valid_checkpoint(tmp_path / "run" / "checkpoints")
+    assert second.step > first.step
+
+    launcher, pids = resumed(3)
+    os.kill(pids[1], signal.SIGKILL)
+    launcher.communicate(timeout=120)
+    assert launcher.returncode != 0
+    deadline = time.monotonic() + 60
+    while any(Path(f"/proc/{pid}").exists() for pid in pids):  # no rank outlives the killed one
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert newest_valid_checkpoint(tmp_path / "run" / "checkpoints").step >= second.step
+    run_ok(sphere("resume", "run", "-q", cwd=tmp_path))
+    final = list_checkpoints(tmp_path / "run" / "checkpoints")[-1]
+    assert_bitwise(sliding / "one" / "checkpoints" / final.name, final)
+
+
+def _status(root: Path) -> dict:
+    try:
+        return json.loads((root / "run" / "status.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def test_what_does_not_run_split_is_refused_by_name(tmp_path):
+    """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
+    naming it, with nothing written; more ranks than cells along the cut axis too."""
+    observed = '[output.observables]\nquantities = ["energy_budget"]\n\n[output.frames]'
+    budget = SETTLING.replace("[output.frames]", observed)
+    (tmp_path / "budget.toml").write_text(budget)
+    result = sphere("run", "budget.toml", "-o", "out", ranks=2, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("sphere: error: started as 2 MPI ranks") == 1, result.stderr
+    assert "the energy budget" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "narrow.toml").write_text(
+        SETTLING.replace("[0.016, 0.006, 0.012]", "[0.004, 0.004, 0.004]")
+        .replace("[0.016, 0.006, 0.009]", "[0.004, 0.004, 0.004]")
+        .replace("count = 200", "count = 5")
+    )
+    result = sphere("run", "narrow.toml", "-o", "out", ranks=3, cwd=tmp_path)
+    assert result.returncode == 2 and "use at most" in result.stderr, result.stderr
+    assert not (tmp_path / "out").exists()
