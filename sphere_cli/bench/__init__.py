@@ -1,6 +1,7 @@
 """`sphere bench dem|fluid|darcy|vans1d|grid|compile`: benchmarks, never part of the tests' timings.
 
     dem      particle-steps per second on the canonical DEM scene (dem.py)
+    ranks    its settled bed on several MPI ranks, side by side (ranks.py)
     fluid    the porous Navier-Stokes fluid coupled to a DEM bed (fluid.py)
     darcy    the Darcy model coupled to the DEM (darcy.py)
     vans1d   the 1D VANS bedload case (vans1d.py)

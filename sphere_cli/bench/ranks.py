@@ -1,0 +1,106 @@
+"""`sphere bench ranks`: the canonical settled bed of `sphere bench dem` (bench/dem.py) stepped on
+1, 2, ... MPI ranks (physics/rank_steps.py), one thread each, side by side: the rank counts
+alternate round by round (this machine's speed drifts by tens of per cent between minutes), and
+each round's speed-up over one rank is reported with its spread.
+
+A timing is one call of advance as the run loop makes it between two outputs: the ranks' steps
+and one gather of the state at the lead. Each rank count runs in its own `mpiexec -n K python -m
+sphere_cli bench ranks-member` process group, which prints its timings as one JSON line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+from ..errors import MissingInputError
+from . import machine
+from .dem import settled_scene, time_steps
+
+
+def mpiexec() -> str:
+    """The launcher beside this Python (the mpich wheel), else the first on PATH."""
+    beside = Path(sys.executable).with_name("mpiexec")
+    found = str(beside) if beside.is_file() else shutil.which("mpiexec")
+    if found is None:
+        raise MissingInputError(
+            "sphere bench ranks: no mpiexec beside this Python or on PATH (pip install mpich, or load "
+            "your site's MPI module)"
+        )
+    return found
+
+
+def member(n: int, steps: int, repeats: int) -> None:
+    """One rank count's timings (run under mpiexec; the lead prints them)."""
+    from .. import ranks
+    from ..simulation import advance
+
+    world = ranks.start()
+    if world is not None and not world.leads:
+        raise SystemExit(world.follow())
+    with ranks.leading(world):
+        scene = settled_scene(n, log=lambda *_: None)
+        advance(scene, 2)  # kernels loaded, the scene shared out
+        times = time_steps(scene, steps, repeats)
+        print(json.dumps({"ranks": ranks.count(), "n": n, "steps": steps, "seconds": times}), flush=True)
+
+
+def run_ranks_benchmark(
+    sizes=(100_000,),
+    rank_counts=(1, 2),
+    steps: int = 100,
+    repeats: int = 3,
+    rounds: int = 3,
+    out_dir: Path = Path("bench-results"),
+    log=print,
+) -> dict:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    launcher = mpiexec()
+    results = {"machine": machine(), "steps": steps, "repeats": repeats, "rounds": rounds, "rows": []}
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
+    for n in sizes:
+        settled_scene(n, log)  # settled once here (cached), before any timing
+        seconds = {k: [] for k in rank_counts}
+        for round_ in range(rounds):
+            for k in rank_counts:
+                command = [
+                    launcher,
+                    "-n",
+                    str(k),
+                    sys.executable,
+                    "-m",
+                    "sphere_cli",
+                    "bench",
+                    "ranks-member",
+                ]
+                command += [str(n), str(steps), str(repeats)]
+                done = subprocess.run(command, capture_output=True, text=True, env=env)
+                if done.returncode != 0:
+                    raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
+                timing = json.loads(done.stdout.strip().splitlines()[-1])
+                seconds[k].append(statistics.median(timing["seconds"]))
+                log(f"N = {n}, round {round_ + 1}, {k} rank(s): {n * steps / seconds[k][-1] / 1e6:.2f} M/s")
+        for k in rank_counts:
+            speedups = [one / many for one, many in zip(seconds[rank_counts[0]], seconds[k], strict=True)]
+            row = {
+                "n": n,
+                "ranks": k,
+                "threads_per_rank": 1,
+                "seconds": seconds[k],
+                "particle_steps_per_second": n * steps / statistics.median(seconds[k]),
+                "speedup_over_first": statistics.median(speedups),
+                "speedup_range": [min(speedups), max(speedups)],
+            }
+            results["rows"].append(row)
+            log(
+                f"N = {n}: {k} rank(s) {row['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s, "
+                f"{row['speedup_over_first']:.2f} x {rank_counts[0]} rank(s) "
+                f"({min(speedups):.2f}-{max(speedups):.2f}, round by round)"
+            )
+    (out_dir / "ranks.json").write_text(json.dumps(results, indent=2) + "\n")
+    return results
