@@ -13,9 +13,13 @@ mpi4py is imported only when the launcher started more than one rank.
 from __future__ import annotations
 
 import os
+import pickle
 import signal
 import sys
+import time
 from contextlib import contextmanager
+
+import numpy as np
 
 from .errors import UsageError
 from .runtime import MPI_SIZE_VARIABLES, usable_cores
@@ -23,6 +27,12 @@ from .runtime import MPI_SIZE_VARIABLES, usable_cores
 # the exit code of a rank that failed on its own (aborts every rank), and of a stop on request
 FAILED = 70
 STOPPED = 75
+# a follower looks for the lead's next command without pause for WAIT_SPIN, then sleeps WAIT_SLEEP
+# between looks [s]; after a stop signal it waits LEAD_GRACE for the lead before taking it for
+# dead [s]
+WAIT_SPIN = 0.01
+WAIT_SLEEP = 0.0005
+LEAD_GRACE = 600.0
 
 
 def launched_size() -> int:
@@ -52,7 +62,33 @@ class World:
 
     def order(self, *command) -> None:
         """The lead tells every follower what to do next (they wait in `follow`)."""
-        self.comm.bcast(command, root=0)
+        data = np.frombuffer(pickle.dumps(command), dtype=np.uint8)
+        self.comm.Ibcast(np.array([data.size], dtype=np.int64), root=0).Wait()
+        self.comm.Bcast(data, root=0)
+
+    def _next_order(self, signalled: list) -> tuple:
+        """A follower waits for the lead's next command, sleeping between looks (the lead may
+        write files or compile for minutes). After a stop signal the lead checkpoints and ends
+        the run; a lead that says nothing for LEAD_GRACE seconds after one has died (a launcher
+        that does not end the other ranks then: srun without --kill-on-bad-exit)."""
+        size = np.zeros(1, dtype=np.int64)
+        request = self.comm.Ibcast(size, root=0)  # the command's length, then the command
+        waiting = time.monotonic()
+        while True:
+            if request.Test():
+                data = np.empty(int(size[0]), dtype=np.uint8)
+                self.comm.Bcast(data, root=0)
+                return pickle.loads(data.tobytes())
+            if signalled and time.monotonic() - signalled[-1] > LEAD_GRACE:
+                print(
+                    f"sphere: error: rank {self.rank}: no word from rank 0 for {LEAD_GRACE:.0f} s after a "
+                    "stop signal; it has died. Its newest checkpoint is intact: resume the run.",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                self.abort(STOPPED)
+            if time.monotonic() - waiting > WAIT_SPIN:  # between steps a command follows at once
+                time.sleep(WAIT_SLEEP)
 
     def pids(self) -> list[int]:
         """Every rank's process id, in rank order (for run.log: a rank to signal or kill)."""
@@ -81,13 +117,13 @@ class World:
         from .physics.rank_steps import RankSteps
 
         # SIGTERM (scancel, a time limit) and Ctrl-C reach every rank: the lead checkpoints and
-        # ends the run, so the followers must outlive the signal
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+        # ends the run, so the followers outlive the signal, noting when it came
+        signalled: list[float] = []
+        for number in (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1):
+            signal.signal(number, lambda *_: signalled.append(time.monotonic()))
         try:
             while True:
-                command, *args = self.comm.bcast(None, root=0)
+                command, *args = self._next_order(signalled)
                 if command == "end":
                     return int(args[0])
                 if command == "start":
@@ -127,9 +163,17 @@ def start() -> World | None:
     except ImportError:
         raise UsageError(
             f"started as {size} MPI ranks, but mpi4py is not installed: pip install 'sphere-cli[mpi]' "
-            "(on a cluster, build it against the site's MPI: see the user guide, 'Many nodes')"
+            "(on a cluster, build it against the site's MPI: user guide, section 7)"
         ) from None
-    _world = World(MPI)
+    except Exception as exc:  # an MPI library that cannot start
+        raise UsageError(f"started as {size} MPI ranks, but MPI did not start: {exc}") from None
+    world = World(MPI)
+    if world.size != size:
+        raise UsageError(
+            f"the launcher started {size} ranks but MPI sees {world.size}: mpi4py loads another MPI "
+            "than the launcher's (use the mpiexec of the MPI mpi4py was built with)"
+        )
+    _world = world
     if "NUMBA_NUM_THREADS" not in os.environ:
         import numba
 

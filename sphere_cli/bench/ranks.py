@@ -3,9 +3,10 @@
 alternate round by round (this machine's speed drifts by tens of per cent between minutes), and
 each round's speed-up over one rank is reported with its spread.
 
-A timing is one call of advance as the run loop makes it between two outputs: the ranks' steps
-and one gather of the state at the lead. Each rank count runs in its own `mpiexec -n K python -m
-sphere_cli bench ranks-member` process group, which prints its timings as one JSON line.
+A timing is one call of advance as the run loop makes it between two outputs (the ranks'
+steps); the gather of the state at the lead that an output then needs is timed apart. Each rank
+count runs in its own `mpiexec -n K python -m sphere_cli bench ranks-member` process group,
+which prints its timings as one JSON line.
 """
 
 from __future__ import annotations
@@ -16,11 +17,12 @@ import shutil
 import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from ..errors import MissingInputError
 from . import machine
-from .dem import settled_scene, time_steps
+from .dem import settled_scene
 
 
 def mpiexec() -> str:
@@ -38,7 +40,7 @@ def mpiexec() -> str:
 def member(n: int, steps: int, repeats: int) -> None:
     """One rank count's timings (run under mpiexec; the lead prints them)."""
     from .. import ranks
-    from ..simulation import advance
+    from ..simulation import advance, to_host
 
     world = ranks.start()
     if world is not None and not world.leads:
@@ -46,8 +48,16 @@ def member(n: int, steps: int, repeats: int) -> None:
     with ranks.leading(world):
         scene = settled_scene(n, log=lambda *_: None)
         advance(scene, 2)  # kernels loaded, the scene shared out
-        times = time_steps(scene, steps, repeats)
-        print(json.dumps({"ranks": ranks.count(), "n": n, "steps": steps, "seconds": times}), flush=True)
+        times, gathers = [], []
+        for _ in range(repeats):
+            started = time.perf_counter()
+            advance(scene, steps, sync=False)
+            stepped = time.perf_counter()
+            to_host(scene)
+            times.append(stepped - started)
+            gathers.append(time.perf_counter() - stepped)
+        timing = {"ranks": ranks.count(), "n": n, "steps": steps, "seconds": times, "gather_seconds": gathers}
+        print(json.dumps(timing), flush=True)
 
 
 def run_ranks_benchmark(
@@ -66,6 +76,7 @@ def run_ranks_benchmark(
     for n in sizes:
         settled_scene(n, log)  # settled once here (cached), before any timing
         seconds = {k: [] for k in rank_counts}
+        gathers = {k: [] for k in rank_counts}
         for round_ in range(rounds):
             for k in rank_counts:
                 command = [
@@ -84,6 +95,7 @@ def run_ranks_benchmark(
                     raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
                 timing = json.loads(done.stdout.strip().splitlines()[-1])
                 seconds[k].append(statistics.median(timing["seconds"]))
+                gathers[k].append(statistics.median(timing["gather_seconds"]))
                 log(f"N = {n}, round {round_ + 1}, {k} rank(s): {n * steps / seconds[k][-1] / 1e6:.2f} M/s")
         for k in rank_counts:
             speedups = [one / many for one, many in zip(seconds[rank_counts[0]], seconds[k], strict=True)]
@@ -95,12 +107,14 @@ def run_ranks_benchmark(
                 "particle_steps_per_second": n * steps / statistics.median(seconds[k]),
                 "speedup_over_first": statistics.median(speedups),
                 "speedup_range": [min(speedups), max(speedups)],
+                "gather_seconds": statistics.median(gathers[k]),
             }
             results["rows"].append(row)
             log(
                 f"N = {n}: {k} rank(s) {row['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s, "
                 f"{row['speedup_over_first']:.2f} x {rank_counts[0]} rank(s) "
-                f"({min(speedups):.2f}-{max(speedups):.2f}, round by round)"
+                f"({min(speedups):.2f}-{max(speedups):.2f}, round by round); the state to rank 0 for "
+                f"an output: {row['gather_seconds'] * 1e3:.0f} ms"
             )
     (out_dir / "ranks.json").write_text(json.dumps(results, indent=2) + "\n")
     return results

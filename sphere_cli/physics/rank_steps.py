@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from ..errors import UsageError
@@ -96,6 +97,7 @@ class Template:
     capacity: int  # the rows' width
     builds: int  # list builds so far
     builds_since_growth: int
+    threads: int | None  # simulation.threads (None: each rank its share of its node's cores)
 
 
 @dataclass
@@ -211,6 +213,7 @@ class RankSteps:
             capacity=state.neighbors.nbr.shape[1],
             builds=state.neighbors.builds,
             builds_since_growth=search.builds_since_growth,
+            threads=scene.case.simulation.threads,
         )
         steps = cls(world, template)
         steps.host_search = search
@@ -227,6 +230,8 @@ class RankSteps:
         """A follower's rank steps, from the lead's "start"."""
         steps = cls(world, template)
         steps.pids = world.pids()
+        if template.threads is not None:
+            numba.set_num_threads(min(template.threads, numba.config.NUMBA_NUM_THREADS))
         return steps
 
     def describe(self) -> str:
@@ -285,6 +290,7 @@ class RankSteps:
             for name in MOVING_FIELDS:
                 getattr(state.walls, name)[...] = getattr(self.part.state.walls, name)
         self.host_search.builds_since_growth = self.part.search.builds_since_growth
+        state.neighbors.builds = self.part.state.neighbors.builds
         self.host_search._spare_like(state.neighbors)
         self.host_stale = False
 
@@ -462,17 +468,31 @@ class RankSteps:
         return np.where((cell < 0) | (cell >= t.cells), -1, owner)
 
     def _cut(self, cell: np.ndarray) -> None:
-        """Slab boundaries where the particles are shared evenly (counted over every rank),
-        each slab at least one cell wide."""
+        """Slab boundaries where each rank holds about as many particles, its ghosts counted
+        (counted over every rank), each slab at least one cell wide: cuts nearest the even
+        shares of the particles, then each moved by a cell where that lowers the larger of the
+        two slabs it bounds."""
         t, size = self.t, self.world.size
         counts = np.bincount(cell, minlength=t.cells).astype(np.int64)
         total = np.empty_like(counts)
         self.world.comm.Allreduce(counts, total, op=self.world.mpi.SUM)
-        work = np.cumsum(total)
-        cuts = np.searchsorted(work, np.arange(1, size) * (work[-1] / size), side="right")
-        cuts = np.maximum.accumulate(np.maximum(cuts, np.arange(1, size)))
-        cuts = np.minimum(cuts, t.cells - size + np.arange(1, size))
-        self.slabs = np.concatenate(([0], cuts, [t.cells])).astype(np.int64)
+        work = np.concatenate(([0], np.cumsum(total)))  # particles in cells [0, c)
+        targets = np.arange(1, size) * (work[-1] / size)
+        above = np.clip(np.searchsorted(work, targets), 1, t.cells - 1)
+        below_is_nearer = np.abs(work[above - 1] - targets) <= np.abs(work[above] - targets)
+        nearer = np.where(below_is_nearer, above - 1, above)
+        k = np.arange(1, size)
+        cuts = np.maximum.accumulate(np.maximum(nearer, k) - k) + k  # each slab a cell or more
+        cuts = np.minimum(cuts, t.cells - size + k)
+        slabs = np.concatenate(([0], cuts, [t.cells])).astype(np.int64)
+        for k in range(1, size):
+            best = _held(total, slabs, k, t.periodic)
+            for shift in (-1, 1):
+                trial = slabs.copy()
+                trial[k] += shift
+                if trial[k - 1] < trial[k] < trial[k + 1] and _held(total, trial, k, t.periodic) < best:
+                    slabs, best = trial, _held(total, trial, k, t.periodic)
+        self.slabs = slabs
 
     def _make_part(self, rec: dict, fresh: dict) -> Part:
         t, world = self.t, self.world
@@ -573,6 +593,20 @@ class RankSteps:
                 part.send[rank] = send
             if receive.size:
                 part.receive[rank] = receive
+
+
+def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> int:
+    """The larger of the particles held (own and ghosts) by the two slabs that cut k bounds."""
+    cells = counts.size
+
+    def held(r: int) -> int:
+        first, end = slabs[r], slabs[r + 1]
+        ghosts = [first - 1, end]
+        if periodic:
+            ghosts = [c % cells for c in ghosts]
+        return int(counts[first:end].sum()) + sum(int(counts[c]) for c in ghosts if 0 <= c < cells)
+
+    return max(held(k - 1), held(k))
 
 
 def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray) -> dict:

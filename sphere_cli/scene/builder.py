@@ -87,9 +87,11 @@ class Scene:
         problems = order_problems(self.modules)
         if problems:  # a programming error: the order above breaks physics/module.py ORDER
             raise RuntimeError("; ".join(problems))
+        if self.step.compiled is not None:  # steps it took and has not brought back
+            self.step.compiled.to_host(self.state)
         self.step = Step(self.modules, particles=self.state.particles.count > 0)
         world = ranks.current()
-        if world is not None and self.state.particles.count:
+        if world is not None:
             from ..physics.rank_steps import RankSteps
 
             self.step.compiled = RankSteps.of(self, world)

@@ -232,7 +232,7 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
     moves sideways): the moving walls' forces are summed over the ranks in one rank's order, and
     the walls, the glued spheres and the friction set by each stage reach every rank."""
     text = (REPO / "configs" / "direct-shear.toml").read_text()
-    for old, new in (("duration = 0.15", "duration = 0.02"), ("min_time = 0.06", "min_time = 0.01")):
+    for old, new in (("duration = 0.15", "duration = 0.012"), ("min_time = 0.06", "min_time = 0.006")):
         text = text.replace(old, new)
     text = text.replace("duration = 0.05", "duration = 0.008").replace("duration = 0.08", "duration = 0.008")
     (tmp_path / "case.toml").write_text(text)
