@@ -68,6 +68,12 @@ class FluidModule(Module):
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
 
+    def particle_arrays(self, state) -> dict | None:
+        """{name: (holder, attribute)} of the arrays it keeps per particle, which travel with the
+        particles between MPI ranks (physics/rank_steps.py); None: the model does not run split
+        across ranks."""
+        return None
+
     def dt_limit(self) -> tuple[float, str]:
         """The coupling's limit on dt (coupling_limit); a model adds its own."""
         return self.coupling_limit()

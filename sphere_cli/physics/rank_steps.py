@@ -28,16 +28,21 @@ resumes on any rank count. The steps run one at a time in Python with mpi4py's m
 exchange of ghost forces and one reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
-one rank's order over the ranks (`_wall_kick`). **Stages** run at the lead on its whole scene,
-gathered after every step; a stage that begins is shared out again.
+one rank's order over the ranks (`_wall_kick`). **Stages** and a **fluid's own step** run at
+the lead on its whole scene, gathered after every run of steps; when a stage begins or the fluid
+has stepped, the lead's scene is shared out again. A fluid whose force on a particle depends on
+that particle and the fluid's own arrays alone (the 1D VANS column) runs its force on every
+rank, with its per-particle arrays (`particle_arrays`) travelling with the particles.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
-gravity, walls of every mode, stages and periodic boundaries. A fluid, the energy budget or the
-GPU is refused with what it is named.
+gravity, walls of every mode, stages, periodic boundaries and the 1D VANS fluid. The
+Navier-Stokes and Darcy fluids, the energy budget and the GPU are refused with what they are
+named.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numba
@@ -57,18 +62,28 @@ from .walls import PlaneWallForces, WallMotion
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
 # too: the kick-drift of a build's step set them, and the forces read them)
 CARRIED = (*Particles.PROGNOSTIC, "vel_pred", "angvel_pred")
-# the modules split across ranks (the stages and the Observer act on the lead's whole scene)
-SUPPORTED = ("wall_motion", "particles", "neighbors", "contact", "walls", "stages", "observables", "")
-NAMES = {
-    "fluid": "a fluid ([fluid])",
-    "energy_budget": "the energy budget (output.observables)",
-}
+# the modules split across ranks (the stages, a fluid's own step and the Observer act on the
+# lead's whole scene)
+SUPPORTED = (
+    "wall_motion",
+    "particles",
+    "neighbors",
+    "contact",
+    "walls",
+    "fluid",
+    "stages",
+    "observables",
+    "",
+)
+NAMES = {"energy_budget": "the energy budget (output.observables)"}
 # the walls' arrays every rank keeps, each the same on every rank (all but the per-particle
 # springs, forces and glued spheres)
 WALL_FIELDS = (
     "faces", "axis", "sign", "coord", "table", "vel", "acc", "shift", "force", "area", "mode", "control",
     "vel_pred", "record", "fluid_force",
 )  # fmt: skip
+# the prefix of a fluid's per-particle arrays in a pack
+FLUID = "fluid:"
 # those a step changes when walls move (brought back to the lead's scene with the particles)
 MOVING_FIELDS = ("coord", "vel", "acc", "shift", "force", "area", "vel_pred")
 
@@ -98,6 +113,8 @@ class Template:
     builds: int  # list builds so far
     builds_since_growth: int
     threads: int | None  # simulation.threads (None: each rank its share of its node's cores)
+    fluid: object = None  # the lead's fluid module (FluidModule with particle_arrays), or None
+    fluid_state: object = None  # its state.fluid
 
 
 @dataclass
@@ -112,6 +129,7 @@ class Part:
     contact: PairContactForces
     walls: PlaneWallForces | None
     wall_motion: WallMotion | None
+    fluid: object  # this rank's copy of the fluid module (its particles' arrays), or None
     glued: np.ndarray  # (k,) local indices of the glued spheres held here
     glued_order: np.ndarray  # (k,) their places in the lead's list of glued spheres
     send: dict  # rank -> local indices of own particles that are ghosts there, ascending
@@ -123,11 +141,15 @@ def _plain_step(scene) -> bool:
     replaced by a wrapper."""
     step = scene.step
     moving = () if scene.wall_motion is None else (scene.wall_motion,)
-    forces = (scene.contact,) + (() if scene.walls is None else (scene.walls,))
+    forces = [(scene.contact, PairContactForces)]
+    if scene.walls is not None:
+        forces.append((scene.walls, PlaneWallForces))
+    if scene.fluid is not None:
+        forces.append((scene.fluid, type(scene.fluid)))
     expected = {
         "kick_drift": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
         "prepare": [(scene.neighbors, NeighborSearch)],
-        "forces": [(m, PairContactForces if m is scene.contact else PlaneWallForces) for m in forces],
+        "forces": forces,
         "kick": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
     }
     for hook, modules in expected.items():
@@ -137,7 +159,7 @@ def _plain_step(scene) -> bool:
         for bound, (module, cls) in zip(hooks, modules, strict=True):
             if getattr(bound, "__self__", None) is not module or not is_hook_of(bound, cls, hook):
                 return False
-    return not step.finish_step and all(m is scene.stages for m, _ in step.after_step)
+    return not step.finish_step and all(m is scene.stages or m is scene.fluid for m, _ in step.after_step)
 
 
 def _refusal(scene) -> str | None:
@@ -145,6 +167,8 @@ def _refusal(scene) -> str | None:
     extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
     if scene.state.particles.count == 0:
         extra.append("no particles (a fluid-only case)")
+    if scene.fluid is not None and scene.fluid.particle_arrays(scene.state) is None:
+        extra.append(f'a {scene.fluid.model} fluid (fluid.model = "vans1d" runs split, the others not yet)')
     if scene.case.simulation.device != "cpu":
         extra.append(f'simulation.device = "{scene.case.simulation.device}"')
     if not extra and (scene.neighbors is None or not _plain_step(scene)):
@@ -169,6 +193,7 @@ class RankSteps:
         self.host_search = None  # the lead: its scene's NeighborSearch
         self.contact = None  # the lead: its scene's PairContactForces (a stage sets its table)
         self.stages = None  # the lead: its scene's Stages
+        self.fluid = None  # the lead: its scene's fluid module
         self.gather_each_run = False
 
     # --- set-up ----------------------------------------------------------------------------
@@ -219,6 +244,7 @@ class RankSteps:
         steps.host_search = search
         steps.contact = scene.contact
         steps.stages = scene.stages
+        steps.fluid = scene.fluid
         # the stages read the state after every step: it comes back to the lead each time
         steps.gather_each_run = bool(scene.step.after_step)
         world.order("start", template)
@@ -254,16 +280,18 @@ class RankSteps:
         if walls is not None:
             t.walls = {name: getattr(walls, name) for name in WALL_FIELDS}
             t.attached, t.attached_wall = walls.attached, walls.attached_wall
+        t.fluid, t.fluid_state = self.fluid, state.fluid
         self.world.order("share", t)
         n = state.particles.count
-        self._share([_pack(state, np.arange(n), np.arange(n), t.springs, state.neighbors.ref_pos)], {})
+        every = np.arange(n)
+        self._share([_pack(state, every, every, t.springs, state.neighbors.ref_pos, self.fluid)], {})
         self.at_step = state.clock.step
 
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         def work():
             # again from the lead's scene when it is not the ranks' (a stage that began has set
             # walls, friction and perhaps moved glued spheres)
-            if self.at_step != state.clock.step or (self.stages is not None and self.stages.ended):
+            if self.at_step != state.clock.step or self._host_changed(state):
                 self._send_out(state)
             self.world.order("steps", steps)
             self._steps(steps)
@@ -275,6 +303,14 @@ class RankSteps:
             self.to_host(state)
         return steps, False
 
+    def _host_changed(self, state: State) -> bool:
+        """True when the lead's scene has changed since the ranks' last steps: a stage began
+        (walls, friction, glued spheres moved), or the fluid took its step (its profiles, the
+        particles' drag and fluctuations)."""
+        if self.stages is not None and self.stages.ended:
+            return True
+        return self.fluid is not None and state.clock.step % self.fluid.coupling_steps == 0
+
     def to_host(self, state: State) -> None:
         """The owners' particles, rows and wall springs into the lead's scene."""
         if not self.host_stale:
@@ -283,7 +319,7 @@ class RankSteps:
         def work():
             self.world.order("gather")
             capacity = self.part.state.neighbors.nbr.shape[1]
-            _unpack_into_host(state, self._gather(), capacity, self.t.springs)
+            _unpack_into_host(state, self._gather(), capacity, self.t.springs, self.fluid)
 
         self.world.together(work)
         if self.t.moving:  # the walls, the same on every rank: the lead's own
@@ -344,6 +380,8 @@ class RankSteps:
                 part.contact.forces(state)
                 if part.walls is not None:
                     part.walls.forces(state)
+                if part.fluid is not None:
+                    part.fluid.forces(state)
             self._ghost_forces()
             if part.wall_motion is not None:
                 self._wall_kick(state)
@@ -412,7 +450,7 @@ class RankSteps:
         """The owned particles of every rank, at the lead (None elsewhere)."""
         part = self.part
         own = np.flatnonzero(part.owned)
-        packed = _pack(part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos)
+        packed = _pack(part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos, part.fluid)
         return self.world.comm.gather(packed, root=0)
 
     def _rebuild(self) -> None:
@@ -421,7 +459,7 @@ class RankSteps:
         part = self.part
         own = np.flatnonzero(part.owned)
         state = part.state
-        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos)
+        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos, part.fluid)
         self.t.capacity = state.neighbors.nbr.shape[1]
         self.t.builds = state.neighbors.builds
         self.t.builds_since_growth = part.search.builds_since_growth
@@ -547,6 +585,11 @@ class RankSteps:
             )
         clock = Clock(dt=t.dt, step=t.step)
         state = State(clock=clock, box=t.box, particles=particles, neighbors=nl, walls=walls)
+        fluid = None
+        if t.fluid is not None:  # the fluid's own arrays shared, its particles' arrays this rank's
+            fluid, state.fluid = copy.copy(t.fluid), copy.copy(t.fluid_state)
+            for name, (holder, attribute) in fluid.particle_arrays(state).items():
+                setattr(holder, attribute, np.ascontiguousarray(rec[FLUID + name]))
         search = NeighborSearch(state, t.springs)
         search.builds_since_growth = t.builds_since_growth
         search.longest = self._longest
@@ -561,6 +604,7 @@ class RankSteps:
             contact=contact,
             walls=None if walls is None else PlaneWallForces(contact),
             wall_motion=WallMotion() if t.moving else None,
+            fluid=fluid,
             glued=glued,
             glued_order=glued_order,
             send={},
@@ -609,9 +653,9 @@ def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> int:
     return max(held(k - 1), held(k))
 
 
-def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray) -> dict:
+def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray, fluid) -> dict:
     """The particles `idx` of a state (global indices gid[idx]) with their half rows by global
-    index and their springs: what a rank sends of them."""
+    index, their springs and the fluid's arrays of them: what a rank sends of them."""
     p, nl, walls = state.particles, state.neighbors, state.walls
     rec = {name: getattr(p, name)[idx] for name in CARRIED}
     rec["gid"] = gid[idx].astype(np.int64)
@@ -626,6 +670,9 @@ def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np
         rec["spring"] = nl.hist[(nl.start[idx][:, None] + k)[slots]]
         if walls is not None:
             rec["wall_hist"] = walls.hist[idx]
+    if fluid is not None:
+        for name, (holder, attribute) in fluid.particle_arrays(state).items():
+            rec[FLUID + name] = getattr(holder, attribute)[idx]
     return rec
 
 
@@ -657,7 +704,7 @@ def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return np.arange(int(counts.sum())) - np.repeat(before, counts) + np.repeat(first[idx], counts)
 
 
-def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool) -> None:
+def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, fluid) -> None:
     """The gathered owners' particles into the lead's whole scene (its list in one rank's layout)."""
     rec = _merge(packs)
     gid = rec["gid"]
@@ -665,6 +712,9 @@ def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool) -
     for name in CARRIED:
         getattr(p, name)[gid] = rec[name]
     nl.ref_pos[gid] = rec["ref"]
+    if fluid is not None:
+        for name, (holder, attribute) in fluid.particle_arrays(state).items():
+            getattr(holder, attribute)[gid] = rec[FLUID + name]
     n = p.count
     cap = capacity
     nbr = np.zeros((n, cap), dtype=np.int32)

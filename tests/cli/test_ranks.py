@@ -246,6 +246,21 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
         assert top[-1] < top[0] - 0.001  # the top wall came down onto the bed
 
 
+def test_bedload_with_turbulent_fluctuations_is_one_ranks_on_three(tmp_path):
+    """configs/bedload.toml (a 1D VANS fluid over a bed of 1 000 beads) with turbulent
+    fluctuations: the fluid steps at rank 0 on the whole bed, its profiles reach every rank, and
+    each particle's drag and fluctuation travel with it between ranks."""
+    text = (REPO / "configs" / "bedload.toml").read_text()
+    text = text.replace("cells = 70 ", "fluctuations = { bed_elevation = 0.012 }\ncells = 70 ")
+    (tmp_path / "case.toml").write_text(text)
+    shutil.copy(REPO / "configs" / "bedload-bed.csv", tmp_path)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.03", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "three", "-q", "--until", "0.03", ranks=3, cwd=tmp_path))
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "three")
+    state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
+    assert np.count_nonzero(state["sphere/state/fluid/fluctuation"]) > 100  # drawn, and compared
+
+
 def _wait_for(condition, process, seconds: float = 120.0) -> None:
     deadline = time.monotonic() + seconds
     while not condition():
@@ -315,7 +330,8 @@ def _status(root: Path) -> dict:
 
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
-    naming it, with nothing written; more ranks than cells along the cut axis too."""
+    naming it, with nothing written; a Navier-Stokes fluid and more ranks than cells along the
+    cut axis too."""
     observed = '[output.observables]\nquantities = ["energy_budget"]\n\n[output.frames]'
     budget = SETTLING.replace("[output.frames]", observed)
     (tmp_path / "budget.toml").write_text(budget)
@@ -323,6 +339,9 @@ def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     assert result.returncode == 2, result.stderr
     assert result.stderr.count("sphere: error: started as 2 MPI ranks") == 1, result.stderr
     assert "the energy budget" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()
+    result = sphere("run", str(REPO / "configs" / "fluid-settling.toml"), "-o", "out", ranks=2, cwd=tmp_path)
+    assert result.returncode == 2 and "a navier-stokes fluid" in result.stderr, result.stderr
     assert not (tmp_path / "out").exists()
     (tmp_path / "narrow.toml").write_text(
         SETTLING.replace("[0.016, 0.006, 0.012]", "[0.004, 0.004, 0.004]")

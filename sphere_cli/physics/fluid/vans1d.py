@@ -262,6 +262,15 @@ class Vans1d(FluidModule):
             return 0.0
         return flow.viscous_sublayer * cfg.viscosity / u_star
 
+    def particle_arrays(self, state) -> dict:
+        """Per particle: which feel the fluid and count in its profiles, the drag of the last
+        force evaluation (the stability check reads it), and the fluctuations when drawn. The
+        profiles themselves are the fluid's own, kept whole on every MPI rank."""
+        held = {name: (state.fluid, name) for name in ("selected", "counted", "drag_coef", "drag_x")}
+        if self.fluctuating:
+            held.update({name: (self, name) for name in ("fluct", "fluct_lifetime", "fluct_draws")})
+        return held
+
     def dt_limit(self) -> tuple[float, str]:
         return min(self._dt_limit, self.coupling_limit(), key=lambda limit: limit[0])
 
