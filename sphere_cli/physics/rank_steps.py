@@ -29,8 +29,8 @@ exchange of ghost forces and one reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
 one rank's order over the ranks (`_wall_kick`). **Stages** and a **fluid's own step** run at
-the lead on its whole scene, gathered after every run of steps; when a stage begins or the fluid
-has stepped, the lead's scene is shared out again. A fluid whose force on a particle depends on
+the lead on its whole scene, gathered for the steps where they read it (a stage that may end,
+a fluid step); when a stage begins or the fluid has stepped, it is shared out again. A fluid whose force on a particle depends on
 that particle and the fluid's own arrays alone (the 1D VANS column) runs its force on every
 rank, with its per-particle arrays (`particle_arrays`) travelling with the particles.
 
@@ -194,7 +194,6 @@ class RankSteps:
         self.contact = None  # the lead: its scene's PairContactForces (a stage sets its table)
         self.stages = None  # the lead: its scene's Stages
         self.fluid = None  # the lead: its scene's fluid module
-        self.gather_each_run = False
 
     # --- set-up ----------------------------------------------------------------------------
 
@@ -245,8 +244,6 @@ class RankSteps:
         steps.contact = scene.contact
         steps.stages = scene.stages
         steps.fluid = scene.fluid
-        # the stages read the state after every step: it comes back to the lead each time
-        steps.gather_each_run = bool(scene.step.after_step)
         world.order("start", template)
         steps.pids = world.pids()
         return steps
@@ -299,9 +296,16 @@ class RankSteps:
         self.world.together(work)
         self.at_step = state.clock.step + steps
         self.host_stale = True
-        if self.gather_each_run:
+        if self._read_after(state.clock.step + steps, state.clock):
             self.to_host(state)
         return steps, False
+
+    def _read_after(self, step: int, clock) -> bool:
+        """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
+        step, or a stage that may end there (tested only there)."""
+        if self.fluid is not None and step % self.fluid.coupling_steps == 0:
+            return True
+        return self.stages is not None and self.stages.may_end_at(step, clock)
 
     def _host_changed(self, state: State) -> bool:
         """True when the lead's scene has changed since the ranks' last steps: a stage began

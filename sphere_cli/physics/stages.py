@@ -120,6 +120,18 @@ class Stages(Module):
             self.begin(state, self.index + 1)
             self.ended = True
 
+    def may_end_at(self, step: int, clock) -> bool:
+        """True if after_step at `step` may end the current stage (its duration ends there, or a
+        stop_when condition is tested there): the only steps where it reads the state, or
+        changes it (physics/rank_steps.py brings the state back to the lead for these)."""
+        if self.finished:
+            return False
+        stage = self.stages[self.index]
+        elapsed = step - self.start_step
+        if stage.duration is not None and elapsed >= clock.steps_in(stage.duration):
+            return True
+        return stage.stop_when is not None and elapsed % stage.check_every == 0
+
     def _condition_met(self, state: State, stop, elapsed: int) -> bool:
         if stop.kinetic_energy_below is not None and elapsed * state.clock.dt >= stop.min_time:
             p = state.particles
