@@ -328,6 +328,24 @@ def _status(root: Path) -> dict:
         return {}
 
 
+def test_a_particle_gone_bad_on_a_rank_stops_every_rank_as_one_rank_stops(tmp_path):
+    """The bed thrown upwards out of its open top: the stability check, run on every rank,
+    stops the run with exit 70 and one rank's message (the same step, particle, position and
+    velocity), status.json says failed, and the newest checkpoint verifies."""
+    (tmp_path / "case.toml").write_text(
+        SETTLING.replace("velocity = [0.0, 0.0, -0.3]", "velocity = [0.0, 0.0, 3.0]")
+    )
+    one = sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path)
+    two = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
+    for result in (one, two):
+        assert result.returncode == 70, result.stderr
+        assert "left the box through an open face" in result.stderr and "Traceback" not in result.stderr
+    errors = [line for line in two.stderr.splitlines() if line.startswith("sphere: error:")]
+    assert errors == [line for line in one.stderr.splitlines() if line.startswith("sphere: error:")]
+    assert json.loads((tmp_path / "two" / "status.json").read_text())["state"] == "failed"
+    assert newest_valid_checkpoint(tmp_path / "two" / "checkpoints") is not None
+
+
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
     naming it, with nothing written; a Navier-Stokes fluid and more ranks than cells along the
