@@ -30,9 +30,10 @@ exchange of ghost forces and one reduction a step).
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
 one rank's order over the ranks (`_wall_kick`). **Stages** and a **fluid's own step** run at
 the lead on its whole scene, gathered for the steps where they read it (a stage that may end,
-a fluid step); when a stage begins or the fluid has stepped, it is shared out again. A fluid whose force on a particle depends on
-that particle and the fluid's own arrays alone (the 1D VANS column) runs its force on every
-rank, with its per-particle arrays (`particle_arrays`) travelling with the particles.
+a fluid step); when a stage begins or the fluid has stepped, it is shared out again. A fluid
+whose force on a particle depends on that particle and the fluid's own arrays alone (the 1D
+VANS column) runs its force on every rank, with its per-particle arrays (`particle_arrays`)
+travelling with the particles.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the 1D VANS fluid. The
@@ -367,6 +368,7 @@ class RankSteps:
         forces from their owners and the rebuild decided over every rank."""
         comm, mpi = self.world.comm, self.world.mpi
         motion = Motion()
+        moved, largest = np.zeros(1), np.zeros(1)
         for _ in range(steps):
             part = self.part
             state = part.state
@@ -374,8 +376,9 @@ class RankSteps:
                 part.wall_motion.kick_drift(state)
             if state.particles.count:
                 motion.kick_drift(state)
-            moved2 = comm.allreduce(state.neighbors.moved2, op=mpi.MAX)
-            state.neighbors.moved2 = moved2
+            moved[0] = state.neighbors.moved2
+            comm.Allreduce(moved, largest, op=mpi.MAX)
+            moved2 = state.neighbors.moved2 = float(largest[0])
             if moved2 > self.t.threshold2:
                 self._rebuild()
                 part = self.part
@@ -553,14 +556,11 @@ class RankSteps:
         slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
         nbr = np.zeros((n, t.capacity), dtype=np.int32)
         nbr[row, slot] = where
-        springs = np.zeros((n, t.capacity, 3))
-        if t.springs:
-            springs[row, slot] = rec["spring"][keep]
         start = np.zeros(n + 1, dtype=np.int64)
         row_starts(count, t.capacity, start)
         hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
-        if t.springs:
-            hist[: start[-1]] = springs[listed_slots(nbr, count)]
+        if t.springs:  # the kept pairs, row after row, are the packed springs' order
+            hist[: start[-1]] = rec["spring"][keep]
         nl = NeighborList(
             skin=t.skin,
             nbr=nbr,
