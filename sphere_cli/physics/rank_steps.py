@@ -484,12 +484,8 @@ class RankSteps:
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
         cell = self._cells(mine["ref"]) if mine else np.zeros(0, dtype=np.int64)
         self._cut(cell)
-        owner = np.searchsorted(self.slabs, cell, side="right") - 1
-        neighbours = [self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)]
-        outgoing = []
-        for rank in range(world.size):
-            held = (neighbours[0] == rank) | (neighbours[1] == rank) | (neighbours[2] == rank)
-            outgoing.append(_select(mine, np.flatnonzero(held)))
+        _, holders = self._owners(cell)
+        outgoing = [_select(mine, np.flatnonzero((holders == r).any(axis=0))) for r in range(world.size)]
         kept, outgoing[world.rank] = outgoing[world.rank], {}  # what stays is not pickled
         arrived = world.comm.alltoall(outgoing)
         arrived[world.rank] = kept
@@ -503,6 +499,12 @@ class RankSteps:
         t = self.t
         cell = np.floor((ref[:, t.axis] - t.lower) / t.cell).astype(np.int64)
         return np.clip(cell, 0, t.cells - 1)
+
+    def _owners(self, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rank owning each cell (n,), and the ranks holding a particle in it (3, n): the
+        owners of that cell and of the cells on either side (-1 past an open end)."""
+        owner = self._owner_of_cell(cell)
+        return owner, np.stack((self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)))
 
     def _owner_of_cell(self, cell: np.ndarray) -> np.ndarray:
         """The rank owning each cell; a cell past an open end: -1."""
@@ -542,9 +544,7 @@ class RankSteps:
     def _make_part(self, rec: dict, fresh: dict) -> Part:
         t, world = self.t, self.world
         n = rec["gid"].size
-        cell = self._cells(rec["ref"])
-        owner = np.searchsorted(self.slabs, cell, side="right") - 1
-        owned = owner == world.rank
+        owned = self._owner_of_cell(self._cells(rec["ref"])) == world.rank
         particles = Particles(**{name: rec[name] for name in CARRIED})
         # each row's partners by local index, those this rank does not hold left out (they lie
         # beyond the ghosts: out of reach of every particle here)
@@ -626,16 +626,12 @@ class RankSteps:
         """Which own particles each rank holds as ghosts, and which ghosts each rank owns, both
         in ascending global index (each side derives the other's list from the same cells)."""
         part = self.part
-        cell = self._cells(part.state.neighbors.ref_pos)
-        owner = np.searchsorted(self.slabs, cell, side="right") - 1
-        me = self.world.rank
-        holders = [self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)]
+        owner, holders = self._owners(self._cells(part.state.neighbors.ref_pos))
         part.send, part.receive = {}, {}
         for rank in range(self.world.size):
-            if rank == me:
+            if rank == self.world.rank:
                 continue
-            held = (holders[0] == rank) | (holders[1] == rank) | (holders[2] == rank)
-            send = np.flatnonzero(part.owned & held)
+            send = np.flatnonzero(part.owned & (holders == rank).any(axis=0))
             receive = np.flatnonzero(owner == rank)
             if send.size:
                 part.send[rank] = send
