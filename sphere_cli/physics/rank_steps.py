@@ -282,7 +282,7 @@ class RankSteps:
         self.world.order("share", t)
         n = state.particles.count
         every = np.arange(n)
-        self._share([_pack(state, every, every, t.springs, state.neighbors.ref_pos, self.fluid)], {})
+        self._share([_pack(state, every, every, t.springs, state.neighbors.ref_pos, self.fluid)])
         self.at_step = state.clock.step
 
     def run(self, state: State, steps: int) -> tuple[int, bool]:
@@ -359,7 +359,7 @@ class RankSteps:
             self._stable()
         elif command == "share":
             self.t = args[0]
-            self._share([], {})
+            self._share([])
         else:
             raise RuntimeError(f"unknown command {command!r} from the lead")
 
@@ -473,13 +473,13 @@ class RankSteps:
         self.t.step = state.clock.step
         if state.walls is not None:  # moving walls have moved since the last share
             self.t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
-        self._share([packed], {"moved2": state.neighbors.moved2})
+        self._share([packed], state.neighbors.moved2)
         self.part.search.rebuild(self.part.state)
 
-    def _share(self, packs: list, fresh: dict) -> None:
+    def _share(self, packs: list, moved2: float = 0.0) -> None:
         """Collective: the particles in `packs` (this rank's own, or the whole scene at the
         lead) go to the ranks that own or hold them by the cells of their `ref` positions; this
-        rank's part is made of what it receives."""
+        rank's part is made of what it receives (`moved2`: the displacement a build is for)."""
         world = self.world
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
         cell = self._cells(mine["ref"]) if mine else np.zeros(0, dtype=np.int64)
@@ -492,7 +492,7 @@ class RankSteps:
         received = _merge(arrived)
         order = np.argsort(received["gid"], kind="stable")
         received = _select(received, order)
-        self.part = self._make_part(received, fresh)
+        self.part = self._make_part(received, moved2)
 
     def _cells(self, ref: np.ndarray) -> np.ndarray:
         """Each position's search cell along the cut axis (kernels/neighbors.py cell_number)."""
@@ -541,7 +541,7 @@ class RankSteps:
                     slabs, best = trial, _held(total, trial, k, t.periodic)
         self.slabs = slabs
 
-    def _make_part(self, rec: dict, fresh: dict) -> Part:
+    def _make_part(self, rec: dict, moved2: float) -> Part:
         t, world = self.t, self.world
         n = rec["gid"].size
         owned = self._owner_of_cell(self._cells(rec["ref"])) == world.rank
@@ -571,7 +571,7 @@ class RankSteps:
             rev=np.zeros((n, t.capacity), dtype=np.int32),
             rev_count=np.zeros(n, dtype=np.int32),
             builds=t.builds,
-            moved2=fresh.get("moved2", 0.0),
+            moved2=moved2,
         )
         walls = None
         # the glued spheres held here, and their places in the lead's list
@@ -614,18 +614,16 @@ class RankSteps:
             send={},
             receive={},
         )
-        self.part = part
-        self._exchange_lists()
+        self._exchange_lists(part)
         return part
 
     def _longest(self, needed: int) -> int:
         """The longest row over every rank (each rank's rows then widen and narrow alike)."""
         return self.world.comm.allreduce(needed, op=self.world.mpi.MAX)
 
-    def _exchange_lists(self) -> None:
+    def _exchange_lists(self, part: Part) -> None:
         """Which own particles each rank holds as ghosts, and which ghosts each rank owns, both
         in ascending global index (each side derives the other's list from the same cells)."""
-        part = self.part
         owner, holders = self._owners(self._cells(part.state.neighbors.ref_pos))
         part.send, part.receive = {}, {}
         for rank in range(self.world.size):
