@@ -183,10 +183,11 @@ class PlaneWallForces(Module):
     def _spring_mask(self, hist: np.ndarray, n: int) -> np.ndarray:
         """The bit mask of possibly non-zero springs of `hist` for the n particles, derived again
         whenever the state's hist is a new array (start, restore); none without friction (hist
-        has no rows)."""
+        has no rows). A spring of -0.0 counts as set, as it is in the run that set it: the end of
+        its contact then clears it to +0.0 there too (a resumed run stays bitwise)."""
         if self._springs_of is not hist:
             if hist.shape[0]:
-                held = np.any(hist != 0.0, axis=2).astype(np.uint64)
+                held = np.any((hist != 0.0) | np.signbit(hist), axis=2).astype(np.uint64)
             else:
                 held = np.zeros((n, hist.shape[1]), dtype=np.uint64)
             self._springs = (held << np.arange(hist.shape[1], dtype=np.uint64)).sum(axis=1, dtype=np.uint64)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sphere_cli.config.load import load_case, parse_case
@@ -100,3 +101,15 @@ def test_the_architecture_hook_table_is_the_protocol():
         default = getattr(protocol.Module, hook)
         defining = [cls.__name__ for cls in MODULES if getattr(cls, hook) is not default]
         assert sorted(listed) == sorted(defining), hook
+
+
+def test_a_restored_wall_spring_of_minus_zero_counts_as_set():
+    """A wall contact can leave its spring at -0.0 (a sliding-free contact); the run that set it
+    clears it to +0.0 when the contact ends. The mask of set springs derived from a restored
+    (or, on MPI ranks, a received) hist marks it too, so a resumed run clears it alike."""
+    scene = scene_of(ROOT / "configs" / "direct-shear.toml")
+    hist = np.zeros((3, 2, 3))
+    hist[1, 0] = (-0.0, -0.0, 0.0)
+    hist[2, 1, 2] = 1e-9
+    mask = scene.walls._spring_mask(hist, 3)
+    assert list(mask) == [0, 1, 2]
