@@ -9,6 +9,7 @@ it adds its forces after the contacts and walls, may take over the particles' se
 
 from __future__ import annotations
 
+import copy
 import importlib
 import math
 
@@ -73,6 +74,19 @@ class FluidModule(Module):
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split
         across ranks."""
         return None
+
+    def ghost_arrays(self) -> tuple[str, ...]:
+        """The names of particle_arrays, each (n, k), that its forces write from more than the
+        particle and the fluid's own arrays (the other forces on it): a ghost's owner sends
+        them with the force after each step's forces (physics/rank_steps.py)."""
+        return ()
+
+    def rank_copy(self, whole) -> FluidModule:
+        """A copy of the module for one MPI rank's particles (physics/rank_steps.py): the
+        holders of its particle_arrays its own, the fluid's own arrays shared. whole(*arrays):
+        the arrays of every rank's own particles, in one rank's order, for a sum over all the
+        particles in its step."""
+        return copy.copy(self)
 
     def dt_limit(self) -> tuple[float, str]:
         """The coupling's limit on dt (coupling_limit); a model adds its own."""

@@ -30,15 +30,19 @@ exchange of ghost forces and one reduction a step).
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
 one rank's order over the ranks (`_wall_kick`). **Stages** and a **fluid's own step** run at
 the lead on its whole scene, gathered for the steps where they read it (a stage that may end,
-a fluid step); when a stage begins or the fluid has stepped, it is shared out again. A fluid
-whose force on a particle depends on that particle and the fluid's own arrays alone (the 1D
-VANS column) runs its force on every rank, with its per-particle arrays (`particle_arrays`)
-travelling with the particles.
+a fluid step); when a stage begins or the fluid has stepped, it is shared out again, the
+fluid's own arrays (profiles, grids) whole on every rank. Its force and kick run on every rank,
+its per-particle arrays (`particle_arrays`) travelling with the particles; those its force
+writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's f_other)
+go to the ghosts with the force, and a sum over all particles inside its step (the
+Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
+own particles in global order (`_whole`). The fluid's step itself (porosity, pressure solve)
+runs at the lead alone: the grids are not cut.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
-gravity, walls of every mode, stages, periodic boundaries and the 1D VANS fluid. The
-Navier-Stokes and Darcy fluids, the energy budget and the GPU are refused with what they are
-named.
+gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
+(1D VANS, Darcy, Navier-Stokes). The energy budget, a fluid without particles and the GPU are
+refused with what they are named.
 """
 
 from __future__ import annotations
@@ -85,8 +89,9 @@ WALL_FIELDS = (
 )  # fmt: skip
 # the prefix of a fluid's per-particle arrays in a pack
 FLUID = "fluid:"
-# those a step changes when walls move (brought back to the lead's scene with the particles)
-MOVING_FIELDS = ("coord", "vel", "acc", "shift", "force", "area", "vel_pred")
+# those a step changes: moving walls, a fluid's push (brought back to the lead's scene with the
+# particles)
+STEPPED_WALL_FIELDS = ("coord", "vel", "acc", "shift", "force", "area", "vel_pred", "fluid_force")
 
 
 @dataclass
@@ -142,6 +147,9 @@ def _plain_step(scene) -> bool:
     replaced by a wrapper."""
     step = scene.step
     moving = () if scene.wall_motion is None else (scene.wall_motion,)
+    fluid_kicks = scene.fluid is not None and "kick" in scene.fluid.takes_over
+    kicks = [(m, WallMotion) for m in moving]
+    kicks.append((scene.fluid, type(scene.fluid)) if fluid_kicks else (scene.motion, Motion))
     forces = [(scene.contact, PairContactForces)]
     if scene.walls is not None:
         forces.append((scene.walls, PlaneWallForces))
@@ -151,7 +159,7 @@ def _plain_step(scene) -> bool:
         "kick_drift": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
         "prepare": [(scene.neighbors, NeighborSearch)],
         "forces": forces,
-        "kick": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
+        "kick": kicks,
     }
     for hook, modules in expected.items():
         hooks = getattr(step, hook)
@@ -169,7 +177,7 @@ def _refusal(scene) -> str | None:
     if scene.state.particles.count == 0:
         extra.append("no particles (a fluid-only case)")
     if scene.fluid is not None and scene.fluid.particle_arrays(scene.state) is None:
-        extra.append(f'a {scene.fluid.model} fluid (fluid.model = "vans1d" runs split, the others not yet)')
+        extra.append(f"a {scene.fluid.model} fluid, which does not run split")
     if scene.case.simulation.device != "cpu":
         extra.append(f'simulation.device = "{scene.case.simulation.device}"')
     if not extra and (scene.neighbors is None or not _plain_step(scene)):
@@ -205,8 +213,9 @@ class RankSteps:
         if refused is not None:
             raise UsageError(
                 f"started as {world.size} MPI ranks: a scene split across ranks runs the particles, "
-                "their pair contacts, gravity, walls (fixed, moving, stress-controlled), stages and "
-                f"periodic boundaries; this case also has: {refused}. Run it as one process (threads: "
+                "their pair contacts, gravity, walls (fixed, moving, stress-controlled), stages, "
+                "periodic boundaries and the fluids coupled to particles; this case also has: "
+                f"{refused}. Run it as one process (threads: "
                 "simulation.threads)."
             )
         search, state = scene.neighbors, scene.state
@@ -327,8 +336,8 @@ class RankSteps:
             _unpack_into_host(state, self._gather(), capacity, self.t.springs, self.fluid)
 
         self.world.together(work)
-        if self.t.moving:  # the walls, the same on every rank: the lead's own
-            for name in MOVING_FIELDS:
+        if state.walls is not None:  # the walls, the same on every rank: the lead's own
+            for name in STEPPED_WALL_FIELDS:
                 getattr(state.walls, name)[...] = getattr(self.part.state.walls, name)
         self.host_search.builds_since_growth = self.part.search.builds_since_growth
         state.neighbors.builds = self.part.state.neighbors.builds
@@ -337,8 +346,9 @@ class RankSteps:
 
     def known_stable(self, state: State) -> bool:
         """True when no rank holds a particle gone bad (then the host checks itself, to report
-        the first as one rank does)."""
-        if not self.host_stale:
+        the first as one rank does). With a fluid the host checks (its checks read the
+        particles with the fluid)."""
+        if not self.host_stale or self.fluid is not None:
             return False
 
         def work():
@@ -369,6 +379,7 @@ class RankSteps:
         comm, mpi = self.world.comm, self.world.mpi
         motion = Motion()
         moved, largest = np.zeros(1), np.zeros(1)
+        fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
         for _ in range(steps):
             part = self.part
             state = part.state
@@ -387,31 +398,43 @@ class RankSteps:
                 part.contact.forces(state)
                 if part.walls is not None:
                     part.walls.forces(state)
-                if part.fluid is not None:
-                    part.fluid.forces(state)
+            if part.fluid is not None:  # (on a rank without particles too: a fluid may push a wall)
+                part.fluid.forces(state)
             self._ghost_forces()
             if part.wall_motion is not None:
                 self._wall_kick(state)
-            if state.particles.count:
+            if fluid_kicks:  # on every rank, its sums over all particles (rank_copy) a collective
+                part.fluid.kick(state)
+            elif state.particles.count:
                 motion.kick(state)
             state.clock.step += 1
 
     def _ghost_forces(self) -> None:
-        """Each owner sends the force and torque of its particles that are ghosts elsewhere."""
+        """Each owner sends the force and torque of its particles that are ghosts elsewhere, and
+        the fluid's ghost_arrays of them."""
         part, comm = self.part, self.world.comm
         p = part.state.particles
+        sent = [p.force, p.torque]
+        if part.fluid is not None:
+            arrays = part.fluid.particle_arrays(part.state)
+            for name in part.fluid.ghost_arrays():
+                holder, attribute = arrays[name]
+                sent.append(getattr(holder, attribute))
+        width = sum(c.shape[1] for c in sent)  # each (n, k)
         requests, inbox = [], {}
         for rank, local in part.receive.items():
-            inbox[rank] = np.empty((local.size, 6))
+            inbox[rank] = np.empty((local.size, width))
             requests.append(comm.Irecv(inbox[rank], source=rank, tag=1))
         outbox = []
         for rank, local in part.send.items():
-            outbox.append(np.concatenate((p.force[local], p.torque[local]), axis=1))
+            outbox.append(np.concatenate([c[local] for c in sent], axis=1))
             requests.append(comm.Isend(outbox[-1], dest=rank, tag=1))
         self.world.mpi.Request.Waitall(requests)
         for rank, local in part.receive.items():
-            p.force[local] = inbox[rank][:, :3]
-            p.torque[local] = inbox[rank][:, 3:]
+            first = 0
+            for c in sent:
+                c[local] = inbox[rank][:, first : first + c.shape[1]]
+                first += c.shape[1]
 
     def _wall_kick(self, state: State) -> None:
         """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
@@ -443,6 +466,15 @@ class RankSteps:
         wall_kick(
             w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc, (state.clock.step + 1) * dt, dt
         )
+
+    def _whole(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Collective: the arrays (n, ...) of this rank's particles, of every rank's own
+        particles, in global index order (the order one rank sums them in)."""
+        part = self.part
+        own = np.flatnonzero(part.owned)
+        every = self.world.comm.allgather((part.gid[own], *(a[own] for a in arrays)))
+        order = np.argsort(np.concatenate([x[0] for x in every]), kind="stable")
+        return tuple(np.concatenate([x[k] for x in every])[order] for k in range(1, len(arrays) + 1))
 
     def _stable(self) -> bool:
         state = self.part.state
@@ -591,7 +623,7 @@ class RankSteps:
         state = State(clock=clock, box=t.box, particles=particles, neighbors=nl, walls=walls)
         fluid = None
         if t.fluid is not None:  # the fluid's own arrays shared, its particles' arrays this rank's
-            fluid, state.fluid = copy.copy(t.fluid), copy.copy(t.fluid_state)
+            fluid, state.fluid = t.fluid.rank_copy(self._whole), copy.copy(t.fluid_state)
             for name, (holder, attribute) in fluid.particle_arrays(state).items():
                 setattr(holder, attribute, np.ascontiguousarray(rec[FLUID + name]))
         search = NeighborSearch(state, t.springs)

@@ -10,6 +10,7 @@ axis (an open cut axis, particles pressed against the end walls).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
@@ -261,6 +262,75 @@ def test_bedload_with_turbulent_fluctuations_is_one_ranks_on_three(tmp_path):
     assert np.count_nonzero(state["sphere/state/fluid/fluctuation"]) > 100  # drawn, and compared
 
 
+def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
+    """configs/fluid-settling.toml as a bed: 500 beads in a touching lattice settle in water onto
+    the floor, the cut axis z through the bed. The fluid steps at rank 0 on the whole bed every
+    10 steps; the drag and the implicit kick run on every rank. A ghost's drag needs its owner's
+    other forces (its contacts beyond the ghosts) and each particle's self-induced velocity the
+    drag coefficients of its whole fluid cell, summed over every rank in one rank's order. Run
+    on 2 ranks to t = 3 ms, then resumed on 4: one rank's run-then-resume, bit for bit."""
+    text = (REPO / "configs" / "fluid-settling.toml").read_text()
+    for old, new in (
+        ("count = 200", "count = 500"),
+        (
+            '{ distribution = "uniform", min = 0.0003, max = 0.0004 }',
+            '{ distribution = "fixed", value = 0.0004 }',
+        ),
+        (
+            '"random", region_lower = [0.0, 0.0, 0.008], region_upper = [0.01, 0.01, 0.02] }',
+            '"lattice", spacing = 1.0, jitter = 0.05, region_upper = [0.01, 0.01, 0.006] }',
+        ),
+        ("duration = 0.1", "duration = 0.006"),
+        ("every_time = 0.01", "every_time = 0.001"),
+        ("every_time = 0.05\nkeep = 2", "every_time = 0.003\nkeep = 10"),
+    ):
+        assert old in text, old
+        text = text.replace(old, new)
+    (tmp_path / "case.toml").write_text(text)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.003", cwd=tmp_path))
+    run_ok(sphere("resume", "one", "-q", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "split", "-q", "--until", "0.003", ranks=2, cwd=tmp_path))
+    run_ok(sphere("resume", "split", "-q", ranks=4, cwd=tmp_path))
+    log = (tmp_path / "split" / "run.log").read_text()
+    assert "split across 2 MPI ranks" in log and "split across 4 MPI ranks" in log
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "split")
+    state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
+    assert np.count_nonzero(state["sphere/state/neighbors/hist"]) > 1000  # a bed in contact
+    assert np.count_nonzero(state["sphere/state/fluid/drag_self_induced"]) > 0
+
+
+def oedometer() -> str:
+    """tests/physics/test_darcy_coupled.py's undrained oedometer, 1.5 ms of it: 128 spheres in 8
+    touching layers between a floor and a top wall held at 2 kPa, the Darcy grid following the
+    wall, which the pore pressure under it pushes up (no gravity)."""
+    spec = importlib.util.spec_from_file_location(
+        "darcy_coupled", REPO / "tests/physics/test_darcy_coupled.py"
+    )
+    cases = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cases)
+    text = cases.OEDOMETER.format(stress=2000.0, compressibility=1e-7, top='{ type = "no-flow" }')
+    assert "duration = 1.0" in text
+    outputs = "\n[output.frames]\nevery_time = 0.0005\n[output.checkpoints]\nevery_time = 0.0005\nkeep = 10\n"
+    return (
+        text.replace("duration = 1.0", "duration = 0.0015")
+        + outputs
+        + '[output.observables]\nquantities = ["stress"]\n'
+    )
+
+
+def test_a_darcy_oedometer_with_the_pore_pressure_on_its_wall_is_one_ranks_on_two(tmp_path):
+    """The pore pressure steps at rank 0 on the whole bed, its field reaches every rank, and
+    each rank adds its push on the stress-controlled top wall (the wall's force observable
+    included)."""
+    (tmp_path / "case.toml").write_text(oedometer())
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path))
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "two")
+    with h5py.File(tmp_path / "one" / "trajectory.h5", "r") as f:
+        pushed = f["observables/wall_force/value"][-1, 1, 2]
+    assert pushed > 0.5 * 2000.0 * 0.004**2  # the pore pressure carries most of the load
+
+
 def _wait_for(condition, process, seconds: float = 120.0) -> None:
     deadline = time.monotonic() + seconds
     while not condition():
@@ -348,8 +418,8 @@ def test_a_particle_gone_bad_on_a_rank_stops_every_rank_as_one_rank_stops(tmp_pa
 
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
-    naming it, with nothing written; a Navier-Stokes fluid and more ranks than cells along the
-    cut axis too."""
+    naming it, with nothing written; a fluid without particles and more ranks than cells along
+    the cut axis too."""
     observed = '[output.observables]\nquantities = ["energy_budget"]\n\n[output.frames]'
     budget = SETTLING.replace("[output.frames]", observed)
     (tmp_path / "budget.toml").write_text(budget)
@@ -358,8 +428,14 @@ def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     assert result.stderr.count("sphere: error: started as 2 MPI ranks") == 1, result.stderr
     assert "the energy budget" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "out").exists()
-    result = sphere("run", str(REPO / "configs" / "fluid-settling.toml"), "-o", "out", ranks=2, cwd=tmp_path)
-    assert result.returncode == 2 and "a navier-stokes fluid" in result.stderr, result.stderr
+    alone = "[simulation]\nduration = 0.01\ndt = 0.001\n\n[domain]\nupper = [0.01, 0.01, 0.02]\n\n[fluid]\n"
+    (tmp_path / "alone.toml").write_text(
+        alone
+        + 'model = "darcy"\ngrid = { cells = [1, 1, 8] }\n'
+        + 'permeability = { model = "constant", value = 1e-10 }'
+    )
+    result = sphere("run", "alone.toml", "-o", "out", ranks=2, cwd=tmp_path)
+    assert result.returncode == 2 and "no particles (a fluid-only case)" in result.stderr, result.stderr
     assert not (tmp_path / "out").exists()
     (tmp_path / "narrow.toml").write_text(
         SETTLING.replace("[0.016, 0.006, 0.012]", "[0.004, 0.004, 0.004]")

@@ -324,6 +324,11 @@ class Darcy(FluidModule):
             self.pore.periodic, self.pore.config.density, self.gravity, p.force,
         )  # fmt: skip
 
+    def particle_arrays(self, state) -> dict:
+        """Nothing kept per particle: its force on one is that of the pore pressure where the
+        particle is (the fluid's own arrays, kept whole on every MPI rank)."""
+        return {}
+
     # -- restart ---------------------------------------------------------------------------------
 
     def prognostic_state(self, state) -> dict[str, np.ndarray]:

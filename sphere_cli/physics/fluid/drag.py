@@ -46,6 +46,9 @@ LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
 
 
 class FluidParticleDrag:
+    # the arrays kept per particle (and `disturbance` where `corrected`)
+    PER_PARTICLE = ("cell_of", "wrapped", "coef", "f_other", "f_drag", "impulse")
+
     def __init__(
         self,
         config: DragConfig,
@@ -102,6 +105,9 @@ class FluidParticleDrag:
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
+        # on MPI ranks: whole(*arrays), the arrays of every rank's own particles in one rank's
+        # order (physics/rank_steps.py); None on one rank, which holds them all
+        self.whole = None
 
     @property
     def inv_cell_volume(self) -> float:
@@ -156,7 +162,8 @@ class FluidParticleDrag:
         p = state.particles
         if self.corrected:
             self._follow_grid(state.clock.dt)
-            cell_coefficients(self.cell_of, self.coef, self.cell_coef)
+            every = (self.cell_of, self.coef) if self.whole is None else self.whole(self.cell_of, self.coef)
+            cell_coefficients(*every, self.cell_coef)
         drag_kick(
             p.vel,
             p.angvel,

@@ -13,6 +13,7 @@ schedule.
 
 from __future__ import annotations
 
+import copy
 import math
 import warnings
 from dataclasses import dataclass
@@ -579,6 +580,22 @@ class NavierStokes(FluidModule):
 
     def kick(self, state) -> None:
         self.drag.kick(state, self.fs)
+
+    def particle_arrays(self, state) -> dict:
+        """The drag's arrays per particle (its cell, coefficient, the other forces, the drag of
+        the next half kick, the impulse not yet handed to the fluid, the self-induced velocity);
+        the fluid's own fields are kept whole on every MPI rank."""
+        names = self.drag.PER_PARTICLE + (("disturbance",) if self.drag.corrected else ())
+        return {f"drag_{name}": (self.drag, name) for name in names}
+
+    def ghost_arrays(self) -> tuple[str, ...]:
+        return ("drag_f_other",)  # every force on the particle but the drag (its contacts)
+
+    def rank_copy(self, whole) -> NavierStokes:
+        twin = copy.copy(self)
+        twin.drag = copy.copy(self.drag)
+        twin.drag.whole = whole
+        return twin
 
     def after_step(self, state) -> None:
         clock = state.clock
