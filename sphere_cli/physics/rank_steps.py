@@ -297,9 +297,13 @@ class RankSteps:
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         def work():
             # again from the lead's scene when it is not the ranks' (a stage that began has set
-            # walls, friction and perhaps moved glued spheres)
-            if self.at_step != state.clock.step or self._host_changed(state):
+            # walls, friction and perhaps moved glued spheres); after the fluid's step, its own
+            # arrays and its particles' (the particles themselves unchanged)
+            if self.at_step != state.clock.step or (self.stages is not None and self.stages.ended):
                 self._send_out(state)
+            elif self.fluid is not None and state.clock.step % self.fluid.coupling_steps == 0:
+                self.world.order("fluid", self.fluid, state.fluid)
+                self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
             self._steps(steps)
 
@@ -316,14 +320,6 @@ class RankSteps:
         if self.fluid is not None and step % self.fluid.coupling_steps == 0:
             return True
         return self.stages is not None and self.stages.may_end_at(step, clock)
-
-    def _host_changed(self, state: State) -> bool:
-        """True when the lead's scene has changed since the ranks' last steps: a stage began
-        (walls, friction, glued spheres moved), or the fluid took its step (its profiles, the
-        particles' drag and fluctuations)."""
-        if self.stages is not None and self.stages.ended:
-            return True
-        return self.fluid is not None and state.clock.step % self.fluid.coupling_steps == 0
 
     def to_host(self, state: State) -> None:
         """The owners' particles, rows and wall springs into the lead's scene."""
@@ -367,6 +363,8 @@ class RankSteps:
             self._gather()
         elif command == "stable":
             self._stable()
+        elif command == "fluid":
+            self._take_fluid(*args)
         elif command == "share":
             self.t = args[0]
             self._share([])
@@ -408,6 +406,17 @@ class RankSteps:
             elif state.particles.count:
                 motion.kick(state)
             state.clock.step += 1
+
+    def _take_fluid(self, module, fluid_state) -> None:
+        """The lead's fluid after its step: its own arrays whole, its particles' arrays those of
+        this rank's particles (and the fluid of the parts its next list builds make)."""
+        part = self.part
+        self.t.fluid, self.t.fluid_state = module, fluid_state
+        part.state.fluid = copy.copy(fluid_state)
+        fluid = module.rank_copy(self._whole)
+        for holder, attribute in fluid.particle_arrays(part.state).values():
+            setattr(holder, attribute, np.ascontiguousarray(getattr(holder, attribute)[part.gid]))
+        part.fluid = fluid
 
     def _ghost_forces(self) -> None:
         """Each owner sends the force and torque of its particles that are ghosts elsewhere, and
