@@ -478,12 +478,23 @@ class RankSteps:
 
     def _whole(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         """Collective: the arrays (n, ...) of this rank's particles, of every rank's own
-        particles, in global index order (the order one rank sums them in)."""
-        part = self.part
+        particles, in global index order (the order one rank sums them in). They travel as
+        columns of doubles beside the global index (integers below 2^53 are exact there)."""
+        part, comm = self.part, self.world.comm
         own = np.flatnonzero(part.owned)
-        every = self.world.comm.allgather((part.gid[own], *(a[own] for a in arrays)))
-        order = np.argsort(np.concatenate([x[0] for x in every]), kind="stable")
-        return tuple(np.concatenate([x[k] for x in every])[order] for k in range(1, len(arrays) + 1))
+        columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
+        mine = np.concatenate(columns, axis=1, dtype=np.float64)
+        counts = np.array(comm.allgather(mine.size), dtype=np.int64)
+        every = np.empty(int(counts.sum()))
+        comm.Allgatherv(mine.ravel(), [every, counts])
+        every = every.reshape(-1, mine.shape[1])
+        every = every[np.argsort(every[:, 0], kind="stable")]
+        out, first = [], 1
+        for a in arrays:
+            width = columns[len(out) + 1].shape[1]
+            out.append(every[:, first : first + width].astype(a.dtype).reshape(-1, *a.shape[1:]))
+            first += width
+        return tuple(out)
 
     def _stable(self) -> bool:
         state = self.part.state
