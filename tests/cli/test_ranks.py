@@ -268,7 +268,7 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     10 steps; the drag and the implicit kick run on every rank. A ghost's drag needs its owner's
     other forces (its contacts beyond the ghosts) and each particle's self-induced velocity the
     drag coefficients of its whole fluid cell, summed over every rank in one rank's order. Run
-    on 2 ranks to t = 3 ms, then resumed on 4: one rank's run-then-resume, bit for bit."""
+    on 2 ranks to t = 2 ms, then resumed on 4: one rank's run-then-resume, bit for bit."""
     text = (REPO / "configs" / "fluid-settling.toml").read_text()
     for old, new in (
         ("count = 200", "count = 500"),
@@ -280,16 +280,16 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
             '"random", region_lower = [0.0, 0.0, 0.008], region_upper = [0.01, 0.01, 0.02] }',
             '"lattice", spacing = 1.0, jitter = 0.05, region_upper = [0.01, 0.01, 0.006] }',
         ),
-        ("duration = 0.1", "duration = 0.006"),
+        ("duration = 0.1", "duration = 0.004"),
         ("every_time = 0.01", "every_time = 0.001"),
-        ("every_time = 0.05\nkeep = 2", "every_time = 0.003\nkeep = 10"),
+        ("every_time = 0.05\nkeep = 2", "every_time = 0.002\nkeep = 10"),
     ):
         assert old in text, old
         text = text.replace(old, new)
     (tmp_path / "case.toml").write_text(text)
-    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.003", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.002", cwd=tmp_path))
     run_ok(sphere("resume", "one", "-q", cwd=tmp_path))
-    run_ok(sphere("run", "case.toml", "-o", "split", "-q", "--until", "0.003", ranks=2, cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "split", "-q", "--until", "0.002", ranks=2, cwd=tmp_path))
     run_ok(sphere("resume", "split", "-q", ranks=4, cwd=tmp_path))
     log = (tmp_path / "split" / "run.log").read_text()
     assert "split across 2 MPI ranks" in log and "split across 4 MPI ranks" in log
