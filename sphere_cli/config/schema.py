@@ -75,6 +75,17 @@ class Simulation(Strict):
             "--device` overrides this key."
         ),
     )
+    rank_balance: Literal["particles", "time"] = Field(
+        "particles",
+        description=(
+            "How a scene split across MPI ranks (`mpiexec -n N sphere run`) cuts its slabs at each "
+            'neighbour-list build: "particles", each rank holding as many particles (ghosts '
+            'counted); "time", as much work, each rank\'s particles weighted by its measured force '
+            "time per particle since the last build (for beds whose cost per particle differs "
+            "between regions: dense and loose, walls). Affects speed only: results are the same for "
+            "any cut. Ignored on one rank."
+        ),
+    )
     blowup_check_every: Count = Field(
         100,
         ge=1,
@@ -833,5 +844,6 @@ NON_PHYSICS_KEYS = (
     ("simulation", "threads"),
     ("simulation", "neighbor_skin"),
     ("simulation", "device"),
+    ("simulation", "rank_balance"),
     ("output",),
 )

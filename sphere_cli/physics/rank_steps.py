@@ -4,7 +4,8 @@ results bitwise those of one rank, whatever the rank count.
 
 **Slabs.** The box is cut along the axis with the most search cells (physics/neighbors.py
 search_cells) into one slab of whole cells per rank, cut where the particles are shared evenly
-(a cut never changes a result). A rank owns the particles whose position at the last list build
+(or, with simulation.rank_balance = "time", the measured work) at each list build (a cut never
+changes a result). A rank owns the particles whose position at the last list build
 lies in its slab, and holds as ghosts those within one cell of it: every pair listed at that
 build then lies within one rank's particles, own or ghost, until the next build.
 
@@ -48,6 +49,7 @@ refused with what they are named.
 from __future__ import annotations
 
 import copy
+import time
 from dataclasses import dataclass
 
 import numba
@@ -119,6 +121,7 @@ class Template:
     builds: int  # list builds so far
     builds_since_growth: int
     threads: int | None  # simulation.threads (None: each rank its share of its node's cores)
+    balance: str  # simulation.rank_balance: the slabs cut by particles held, or by measured work
     fluid: object = None  # the lead's fluid module (FluidModule with particle_arrays), or None
     fluid_state: object = None  # its state.fluid
 
@@ -197,6 +200,7 @@ class RankSteps:
         self.part: Part | None = None
         self.pids: list[int] = []
         self.slabs = np.zeros(world.size + 1, dtype=np.int64)  # first cell of each rank's slab
+        self.busy = 0.0  # seconds in this rank's forces since the last cut (rank_balance = "time")
         self.at_step = None  # the lead: the host step the ranks' particles are for (None: send)
         self.host_stale = False  # the lead: steps taken since the last gather
         self.host_search = None  # the lead: its scene's NeighborSearch
@@ -248,6 +252,7 @@ class RankSteps:
             builds=state.neighbors.builds,
             builds_since_growth=search.builds_since_growth,
             threads=scene.case.simulation.threads,
+            balance=scene.case.simulation.rank_balance,
         )
         steps = cls(world, template)
         steps.host_search = search
@@ -269,9 +274,10 @@ class RankSteps:
 
     def describe(self) -> str:
         """For run.log: ranks, cut axis and processes."""
+        by = "measured work" if self.t.balance == "time" else "particles held"
         return (
             f"split across {self.world.size} MPI ranks, slabs of search cells along {'xyz'[self.t.axis]} "
-            f"(process ids by rank: {' '.join(map(str, self.pids))})"
+            f"cut by {by} (process ids by rank: {' '.join(map(str, self.pids))})"
         )
 
     # --- the lead's side (simulation.advance and check_stable call these) --------------------
@@ -392,12 +398,14 @@ class RankSteps:
                 self._rebuild()
                 part = self.part
                 state = part.state
+            started = time.perf_counter()
             if state.particles.count:
                 part.contact.forces(state)
                 if part.walls is not None:
                     part.walls.forces(state)
             if part.fluid is not None:  # (on a rank without particles too: a fluid may push a wall)
                 part.fluid.forces(state)
+            self.busy += time.perf_counter() - started
             self._ghost_forces()
             if part.wall_motion is not None:
                 self._wall_kick(state)
@@ -570,12 +578,18 @@ class RankSteps:
         """Slab boundaries where each rank holds about as many particles, its ghosts counted
         (counted over every rank), each slab at least one cell wide: cuts nearest the even
         shares of the particles, then each moved by a cell where that lowers the larger of the
-        two slabs it bounds."""
+        two slabs it bounds. With rank_balance = "time" each rank counts its particles (`cell`:
+        the cells of those it sends) by its force time per particle held since the last cut, so
+        that the shares are of measured work (the first cut, before any step, by particles)."""
         t, size = self.t, self.world.size
-        counts = np.bincount(cell, minlength=t.cells).astype(np.int64)
+        weight = 1.0
+        if t.balance == "time" and self.part is not None and self.part.gid.size and self.busy > 0.0:
+            weight = self.busy / self.part.gid.size
+        self.busy = 0.0
+        counts = np.bincount(cell, minlength=t.cells) * weight
         total = np.empty_like(counts)
         self.world.comm.Allreduce(counts, total, op=self.world.mpi.SUM)
-        work = np.concatenate(([0], np.cumsum(total)))  # particles in cells [0, c)
+        work = np.concatenate(([0], np.cumsum(total)))  # particles (or work) in cells [0, c)
         targets = np.arange(1, size) * (work[-1] / size)
         above = np.clip(np.searchsorted(work, targets), 1, t.cells - 1)
         below_is_nearer = np.abs(work[above - 1] - targets) <= np.abs(work[above] - targets)
@@ -689,16 +703,17 @@ class RankSteps:
                 part.receive[rank] = receive
 
 
-def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> int:
-    """The larger of the particles held (own and ghosts) by the two slabs that cut k bounds."""
+def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> float:
+    """The larger of the particles (or work) held, own and ghosts, by the two slabs that cut k
+    bounds."""
     cells = counts.size
 
-    def held(r: int) -> int:
+    def held(r: int) -> float:
         first, end = slabs[r], slabs[r + 1]
         ghosts = [first - 1, end]
         if periodic:
             ghosts = [c % cells for c in ghosts]
-        return int(counts[first:end].sum()) + sum(int(counts[c]) for c in ghosts if 0 <= c < cells)
+        return float(counts[first:end].sum()) + sum(float(counts[c]) for c in ghosts if 0 <= c < cells)
 
     return max(held(k - 1), held(k))
 

@@ -84,11 +84,12 @@ quantities = ["energy", "contacts", "coordination", "stress"]
 # 200 Hertz-Mindlin spheres of two materials thrown onto the floor of a box with walls on every
 # side but the top, from a loose random packing (solid fraction 0.2): the bed piles up within the
 # first milliseconds, so pairs across the cuts touch; the cut axis x is open, its end slabs
-# against walls.
+# against walls. Its slabs are cut by measured work (rank_balance, ignored on one rank).
 SETTLING = """\
 [simulation]
 duration = 0.01
 dt = "auto"
+rank_balance = "time"
 
 [domain]
 lower = [0.0, 0.0, 0.0]
@@ -224,6 +225,7 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three(tmp_path):
     (tmp_path / "case.toml").write_text(SETTLING)
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
     run_ok(sphere("run", "case.toml", "-o", "three", "-q", ranks=3, cwd=tmp_path))
+    assert "cut by measured work" in (tmp_path / "three" / "run.log").read_text()
     assert_runs_bitwise(tmp_path / "one", tmp_path / "three")
 
 
@@ -268,7 +270,8 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     10 steps; the drag and the implicit kick run on every rank. A ghost's drag needs its owner's
     other forces (its contacts beyond the ghosts) and each particle's self-induced velocity the
     drag coefficients of its whole fluid cell, summed over every rank in one rank's order. Run
-    on 2 ranks to t = 2 ms, then resumed on 4: one rank's run-then-resume, bit for bit."""
+    on 2 ranks to t = 2 ms, then resumed on 4 with the slabs cut by measured work: one rank's
+    run-then-resume, bit for bit."""
     text = (REPO / "configs" / "fluid-settling.toml").read_text()
     for old, new in (
         ("count = 200", "count = 500"),
@@ -290,9 +293,12 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.002", cwd=tmp_path))
     run_ok(sphere("resume", "one", "-q", cwd=tmp_path))
     run_ok(sphere("run", "case.toml", "-o", "split", "-q", "--until", "0.002", ranks=2, cwd=tmp_path))
+    edited = tmp_path / "split" / "case.toml"  # a resume may change how the slabs are cut
+    edited.write_text(edited.read_text().replace("[simulation]", '[simulation]\nrank_balance = "time"'))
     run_ok(sphere("resume", "split", "-q", ranks=4, cwd=tmp_path))
     log = (tmp_path / "split" / "run.log").read_text()
     assert "split across 2 MPI ranks" in log and "split across 4 MPI ranks" in log
+    assert "cut by measured work" in log
     assert_runs_bitwise(tmp_path / "one", tmp_path / "split")
     state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
     assert np.count_nonzero(state["sphere/state/neighbors/hist"]) > 1000  # a bed in contact
