@@ -420,11 +420,16 @@ class RankSteps:
         this rank's particles (and the fluid of the parts its next list builds make)."""
         part = self.part
         self.t.fluid, self.t.fluid_state = module, fluid_state
-        part.state.fluid = copy.copy(fluid_state)
-        fluid = module.rank_copy(self._whole)
-        for holder, attribute in fluid.particle_arrays(part.state).values():
-            setattr(holder, attribute, np.ascontiguousarray(getattr(holder, attribute)[part.gid]))
-        part.fluid = fluid
+        part.fluid = self._fluid_for(part.state, lambda _, whole: whole[part.gid])
+
+    def _fluid_for(self, state: State, pick):
+        """The lead's fluid (the template's) for a rank's particles: its own arrays shared,
+        state.fluid a copy, each of its particle_arrays pick(name, the lead's array)."""
+        state.fluid = copy.copy(self.t.fluid_state)
+        fluid = self.t.fluid.rank_copy(self._whole)
+        for name, (holder, attribute) in fluid.particle_arrays(state).items():
+            setattr(holder, attribute, np.ascontiguousarray(pick(name, getattr(holder, attribute))))
+        return fluid
 
     def _ghost_forces(self) -> None:
         """Each owner sends the force and torque of its particles that are ghosts elsewhere, and
@@ -656,10 +661,8 @@ class RankSteps:
         clock = Clock(dt=t.dt, step=t.step)
         state = State(clock=clock, box=t.box, particles=particles, neighbors=nl, walls=walls)
         fluid = None
-        if t.fluid is not None:  # the fluid's own arrays shared, its particles' arrays this rank's
-            fluid, state.fluid = t.fluid.rank_copy(self._whole), copy.copy(t.fluid_state)
-            for name, (holder, attribute) in fluid.particle_arrays(state).items():
-                setattr(holder, attribute, np.ascontiguousarray(rec[FLUID + name]))
+        if t.fluid is not None:  # its particles' arrays those received
+            fluid = self._fluid_for(state, lambda name, _: rec[FLUID + name])
         search = NeighborSearch(state, t.springs)
         search.builds_since_growth = t.builds_since_growth
         search.longest = self._longest
