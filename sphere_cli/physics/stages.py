@@ -109,14 +109,9 @@ class Stages(Module):
     def after_step(self, state: State) -> None:
         """Test the current stage's end; `ended` tells whether a stage ended at this step."""
         self.ended = False
-        if self.finished:
-            return
-        stage = self.stages[self.index]
+        over, tested = self._due(state.clock.step, state.clock)
         elapsed = state.clock.step - self.start_step
-        done = stage.duration is not None and elapsed >= state.clock.steps_in(stage.duration)
-        if not done and stage.stop_when is not None and elapsed % stage.check_every == 0:
-            done = self._condition_met(state, stage.stop_when, elapsed)
-        if done:
+        if over or (tested and self._condition_met(state, self.stages[self.index].stop_when, elapsed)):
             self.begin(state, self.index + 1)
             self.ended = True
 
@@ -124,13 +119,17 @@ class Stages(Module):
         """True if after_step at `step` may end the current stage (its duration ends there, or a
         stop_when condition is tested there): the only steps where it reads the state, or
         changes it (physics/rank_steps.py brings the state back to the lead for these)."""
+        return any(self._due(step, clock))
+
+    def _due(self, step: int, clock) -> tuple[bool, bool]:
+        """At `step`: (the current stage's duration is over, its stop_when is tested); both
+        False once every stage has finished."""
         if self.finished:
-            return False
+            return False, False
         stage = self.stages[self.index]
         elapsed = step - self.start_step
-        if stage.duration is not None and elapsed >= clock.steps_in(stage.duration):
-            return True
-        return stage.stop_when is not None and elapsed % stage.check_every == 0
+        over = stage.duration is not None and elapsed >= clock.steps_in(stage.duration)
+        return over, stage.stop_when is not None and elapsed % stage.check_every == 0
 
     def _condition_met(self, state: State, stop, elapsed: int) -> bool:
         if stop.kinetic_energy_below is not None and elapsed * state.clock.dt >= stop.min_time:
