@@ -307,7 +307,7 @@ class RankSteps:
             # arrays and its particles' (the particles themselves unchanged)
             if self.at_step != state.clock.step or (self.stages is not None and self.stages.ended):
                 self._send_out(state)
-            elif self.fluid is not None and state.clock.step % self.fluid.coupling_steps == 0:
+            elif self._fluid_steps_at(state.clock.step):
                 self.world.order("fluid", self.fluid, state.fluid)
                 self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
@@ -323,9 +323,11 @@ class RankSteps:
     def _read_after(self, step: int, clock) -> bool:
         """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
         step, or a stage that may end there (tested only there)."""
-        if self.fluid is not None and step % self.fluid.coupling_steps == 0:
-            return True
-        return self.stages is not None and self.stages.may_end_at(step, clock)
+        return self._fluid_steps_at(step) or (self.stages is not None and self.stages.may_end_at(step, clock))
+
+    def _fluid_steps_at(self, step: int) -> bool:
+        """True if the fluid takes its own step in the after_step of `step`."""
+        return self.fluid is not None and step % self.fluid.coupling_steps == 0
 
     def to_host(self, state: State) -> None:
         """The owners' particles, rows and wall springs into the lead's scene."""
