@@ -103,13 +103,45 @@ def _time_series(parent: h5py.Group, name: str, shape: tuple, dtype, unit: str) 
         set_unit(v, unit)
 
 
-def _append(g: h5py.Group, step: int, time: float, value) -> None:
-    k = g["step"].shape[0]
-    for name in ("step", "time", "value"):
-        g[name].resize(k + 1, axis=0)
-    g["step"][k] = step
-    g["time"][k] = time
-    g["value"][k] = value
+def _append(g: h5py.Group, step: int, time: float, value, once: bool = False):
+    """One sample at the end of the series `g`; `once`: not if a sample of this step or a later
+    one is there (the end sample of a resumed run). Returns the value dataset's low-level id
+    (None where nothing was written). Through h5py's low-level calls: a frame or an observables
+    sample appends to tens of series, and h5py's high-level lookup, resize and write took 5 x as
+    long (about 1 ms a series on this project's machine; a small scene's run spent most of its
+    time there)."""
+    gid = g.id
+    steps, times, values = (h5py.h5d.open(gid, name) for name in (b"step", b"time", b"value"))
+    k = steps.shape[0]
+    if once and k and _read_row(steps, k - 1)[0] >= step:
+        return None
+    for series, row in ((steps, step), (times, time), (values, value)):
+        _write_row(series, k, row)
+    return values
+
+
+def _row_space(series, k: int):
+    """The file's selection of row k of `series` and the memory space of one row."""
+    shape = series.shape[1:]
+    file_space = series.get_space()
+    file_space.select_hyperslab((k, *(0 for _ in shape)), (1, *shape))
+    return file_space, h5py.h5s.create_simple((1, *shape))
+
+
+def _write_row(series, k: int, row) -> None:
+    """Write `row` as row k of the dataset `series` (a DatasetID), extending it to k + 1 rows."""
+    series.set_extent((k + 1, *series.shape[1:]))
+    file_space, memory_space = _row_space(series, k)
+    series.write(
+        memory_space, file_space, np.ascontiguousarray(row, dtype=series.dtype).reshape(1, *series.shape[1:])
+    )
+
+
+def _read_row(series, k: int) -> np.ndarray:
+    file_space, memory_space = _row_space(series, k)
+    row = np.empty((1, *series.shape[1:]), dtype=series.dtype)
+    series.read(memory_space, file_space, row)
+    return row.reshape(-1)
 
 
 def frame_clock(f: h5py.File) -> h5py.Group:
@@ -188,17 +220,25 @@ class Trajectory:
                     _cut_frames(f, step - 1)
                 part = f[GROUP]
                 clock = frame_clock(f)
-                if clock["step"].shape[0] and clock["step"][-1] >= step:
+                frame = clock["step"].shape[0]
+                if frame and clock["step"][-1] >= step:
                     return  # this step is already recorded (e.g. the end frame of a resumed run)
+                shown = []  # (series, its value dataset) of the frame's views
                 for field in self.fields:
-                    _append(part[field], step, time, getattr(state.particles, FIELD_SOURCE[field]))
+                    series = part[field]
+                    values = _append(series, step, time, getattr(state.particles, FIELD_SOURCE[field]))
+                    shown.append((series.name, values))
                 if isinstance(part["box/edges"], h5py.Group):  # a dataset in files before 2026-12
                     _append(part["box/edges"], step, time, state.box.length)
                 if fluid:
                     grid = scene.fluid.grid()
                     for name, (value, _unit) in fluid.items():
-                        _append(f["fluid"][name], step, time, _file_order(value, grid))
-                _add_views(f, clock["step"].shape[0] - 1)
+                        values = _append(f["fluid"][name], step, time, _file_order(value, grid))
+                        if is_grid_field(np.asarray(value), grid):
+                            shown.append((f"/fluid/{name}", values))
+                # a new frame has no views yet (a failed try's were cut above)
+                for series, values in shown:
+                    _create_view(f, values, frame, xdmf_view(series, frame))
 
         self._with_retries(f"the frame of step {step}", "cannot append a frame", write)
 
@@ -212,14 +252,12 @@ class Trajectory:
                 obs = f["observables"]
                 if retry:  # a failed try may have written some of the series
                     _cut_to([obs[name] for name in observables if name in obs], clock.step - 1)
+                present = set(obs)
                 for name, (value, unit) in observables.items():
                     value = np.asarray(value, dtype=np.float64)
-                    if name not in obs:
+                    if name not in present:
                         _time_series(obs, name, value.shape, np.float64, unit)
-                    group = obs[name]
-                    if group["step"].shape[0] and group["step"][-1] >= clock.step:
-                        continue  # already recorded (the end sample of a resumed run)
-                    _append(group, clock.step, clock.time, value)
+                    _append(obs[name], clock.step, clock.time, value, once=True)
 
         self._with_retries(f"the observables of step {clock.step}", "cannot append observables", write)
 
@@ -375,12 +413,22 @@ def _add_views(f: h5py.File, frame: int) -> None:
         series += [f"/fluid/{n}" for n, g in f["fluid"].items() if g["value"].shape[1:4] == cells]
     for path in series:
         view = xdmf_view(path, frame)
-        if view in f:
-            continue
-        value = f[path]["value"]
-        layout = h5py.VirtualLayout(shape=value.shape[1:], dtype=value.dtype)
-        layout[...] = h5py.VirtualSource(".", value.name, shape=value.shape, dtype=value.dtype)[frame]
-        f.create_virtual_dataset(view, layout)
+        if view not in f:
+            _create_view(f, f[path]["value"].id, frame, view)
+
+
+def _create_view(f: h5py.File, values, frame: int, view: str) -> None:
+    """The virtual dataset `view` mapping to row `frame` of the dataset `values` (a DatasetID;
+    '.' is this file, wherever it is moved), parent groups created as needed. Through h5py's
+    low-level calls: its VirtualLayout took half of a small scene's frame."""
+    row = values.shape[1:]
+    source = values.get_space()
+    source.select_hyperslab((frame, *(0 for _ in row)), (1, *row))
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_virtual(h5py.h5s.create_simple(row), b".", h5py.h5i.get_name(values), source)
+    lcpl = h5py.h5p.create(h5py.h5p.LINK_CREATE)
+    lcpl.set_create_intermediate_group(True)
+    h5py.h5d.create(f.id, view.encode(), values.get_type(), h5py.h5s.create_simple(row), dcpl=dcpl, lcpl=lcpl)
 
 
 def _frame_groups(f: h5py.File):
