@@ -130,6 +130,7 @@ def _drive(
         return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate)
     except NumericalError as exc:
         log.error("%s", exc)
+        output.close(scene)
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
         raise
     except OutputError as exc:
@@ -137,6 +138,7 @@ def _drive(
         raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
+        output.close(scene)
         raise
     finally:
         progress.close()

@@ -245,7 +245,7 @@ class Loop:
             raise KeyboardInterrupt
         to_host(scene)
         check_stable(scene)
-        self.output.frame(scene)
+        self.output.frame(scene, last=True)
         if self.observations is not None:
             self.output.observe(scene)
         self.output.checkpoint(scene)

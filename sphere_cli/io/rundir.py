@@ -43,6 +43,10 @@ from .xdmf import frame_grid, write_xdmf
 MARKER = ".sphere-run"
 # how long `lock` waits for a lock held by someone else before saying the run is in use [s]
 LOCK_PATIENCE = 0.2
+# The ParaView sidecar lists every frame and is replaced whole, so rewriting it at each frame
+# costs in proportion to the frames so far (quadratic in a run); during a run it is rewritten at
+# most this often [s] (wall clock), and always with the run's end frame
+XDMF_REFRESH_SECONDS = 2.0
 # what sphere writes at the top of a run directory (atomic writes leave ".<name>.tmp" for an instant)
 OWN_FILES = re.compile(
     r"^(\.sphere-run|case\.toml|trajectory\.h5|trajectory\.xmf|status\.json|run\.log"
@@ -379,13 +383,28 @@ class RunOutput:
         self.keep = scene.case.output.checkpoints.keep
         self.last_checkpoint: Path | None = None
         self.xdmf_grids: list[tuple[str, str]] = []  # the sidecar's grids of each frame so far
+        self.xdmf_written: float | None = None  # time.monotonic() of the sidecar's last write
+        self.xdmf_behind = False  # frames in the trajectory that the sidecar does not list yet
         self.observables_follow_frames = scene.case.output.observables.follows_frames
 
-    def frame(self, scene) -> None:
+    def frame(self, scene, last: bool = False) -> None:
+        """A frame, its observables if they follow the frames, and the sidecar: rewritten with
+        `last` (the run's end frame) or when it is XDMF_REFRESH_SECONDS old."""
         self.trajectory.append(scene)
-        self._refresh_xdmf(scene)
+        self.xdmf_behind = True
+        if last or self.xdmf_written is None or time.monotonic() - self.xdmf_written >= XDMF_REFRESH_SECONDS:
+            self._refresh_xdmf(scene)
         if self.observables_follow_frames:
             self.observe(scene)
+
+    def close(self, scene) -> None:
+        """The sidecar brought up to the trajectory's frames where a run ends without its end
+        frame (a numerical failure); an error here is logged, not raised over the run's own."""
+        if self.xdmf_behind:
+            try:
+                self._refresh_xdmf(scene)
+            except OutputError as exc:
+                self.log.error("%s", exc)
 
     def first(self, scene) -> None:
         """The frame and observables of the starting state."""
@@ -422,6 +441,7 @@ class RunOutput:
             write_xdmf(self.rundir.xdmf, grids)
         except OSError as exc:
             raise OutputError(f"{self.rundir.xdmf}: cannot write the ParaView sidecar ({exc})") from None
+        self.xdmf_written, self.xdmf_behind = time.monotonic(), False
 
     def checkpoint(self, scene) -> None:
         step = scene.state.clock.step

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import json
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import h5py
 import pytest
 from cli_test_support import assert_clean_error, line_of, sphere
 
@@ -136,9 +138,10 @@ def test_blow_up_exits_70_and_the_last_checkpoint_resumes(tmp_path: Path):
     "contact" to run at all; dt = "auto" stays below it). Within a few steps a sphere
     moves more than half its radius per step: the check that runs before every checkpoint (here
     every 5 steps) stops the run with exit 70 naming the step, time and particle; status.json
-    says failed. The newest checkpoint predates the failure and verifies; `sphere resume` from it
-    fails again at exactly the same step (the run is deterministic), and `sphere resume --until`
-    a time before the failure completes (exit 0)."""
+    says failed, the ParaView sidecar lists every frame written. The newest checkpoint predates
+    the failure and verifies; `sphere resume` from it fails again at exactly the same step (the
+    run is deterministic), and `sphere resume --until` a time before the failure completes
+    (exit 0)."""
     d = 2.0 * R - OVERLAP
     length = 2.0 * (R - OVERLAP) + d
     x0 = R - OVERLAP
@@ -158,6 +161,12 @@ def test_blow_up_exits_70_and_the_last_checkpoint_resumes(tmp_path: Path):
     assert 0 < failed_step <= 100
     status = json.loads((tmp_path / "run" / "status.json").read_text())
     assert status["state"] == "failed" and status["step"] == failed_step
+    # the ParaView sidecar lists every frame written before the failure (it is rewritten at most
+    # every few seconds during a run, and brought up to date when the run fails)
+    with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
+        frames = f["particles/trajectory/position/step"].shape[0]
+    grids = ET.parse(tmp_path / "run" / "trajectory.xmf").getroot().findall(".//Grid[@GridType='Uniform']")
+    assert frames > 2 and len(grids) == frames
 
     ckpts = list_checkpoints(tmp_path / "run" / "checkpoints")
     newest = read_checkpoint(ckpts[-1])  # verifies (checksums, completeness)
