@@ -87,7 +87,7 @@ stress_amplitude = {AMPLITUDE}
 frequency = {FREQUENCY}
 phase = {PHASE}
 [output.frames]
-every_steps = 40
+every_steps = 160
 [output.checkpoints]
 every_time = 1.0
 """

@@ -28,7 +28,9 @@ def _failures(record: dict) -> str:
 
 @pytest.mark.parametrize("name", CASES)
 def test_quick_case_meets_tolerance_and_order(name):
-    record = run_case(cases()[name], quick=True, repeats=3)
+    # two repeats suffice to show determinism (they, and the first rung's untimed call, must
+    # agree bitwise); the third of `sphere verify` only steadies the reported timings
+    record = run_case(cases()[name], quick=True, repeats=2)
     assert record["passed"], _failures(record)
     assert len(record["rows"]) == len(cases()[name].quick_ladder)
     assert record["checks"], "a case with no checks cannot fail"
