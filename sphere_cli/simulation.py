@@ -74,7 +74,7 @@ def advance(scene, steps: int, sync: bool = True) -> bool:
 
     def after() -> None:
         for module, hook in after_step:
-            if clock.step % module.coupling_steps == 0:
+            if module.after_due(clock.step, clock):
                 hook(state)
 
     taken = 0
@@ -82,9 +82,7 @@ def advance(scene, steps: int, sync: bool = True) -> bool:
         drifted = False
         if compiled is not None:
             # no after_step hook runs before the last of these steps
-            run = min(
-                [steps - taken] + [m.coupling_steps - clock.step % m.coupling_steps for m, _ in after_step]
-            )
+            run = min([steps - taken] + [m.steps_to_after(clock.step, clock) for m, _ in after_step])
             if run > 1 or compiled.whole_steps:
                 done, drifted = compiled.run(state, run)
                 if done:
@@ -111,7 +109,7 @@ def advance(scene, steps: int, sync: bool = True) -> bool:
         after()
     if sync:
         to_host(scene)
-    return scene.stages is not None and scene.stages.ended
+    return scene.stages is not None and scene.stages.ended_at == clock.step
 
 
 def to_host(scene) -> None:
@@ -189,6 +187,9 @@ class Loop:
         for n in every:
             if n:
                 stop = min(stop, (step // n + 1) * n)
+        stages = self.scene.stages
+        if stages is not None and not stages.finished:  # a stage ends only where it may end
+            stop = min(stop, step + stages.steps_to_after(step, self.scene.state.clock))
         return stop
 
     def run(self) -> str:
@@ -208,9 +209,7 @@ class Loop:
             # up to the next step the loop must look at, in bursts of about BURST_SECONDS so that
             # stop requests and wall-clock schedules are seen as promptly as step by step; with
             # stages, one step at a time (a stage may end at any step)
-            burst = (
-                1 if scene.stages is not None else min(self._next_stop(clock.step) - clock.step, self.burst)
-            )
+            burst = min(self._next_stop(clock.step) - clock.step, self.burst)
             burst_start = wallclock.monotonic()
             stage_ended = advance(scene, burst, sync=False)
             elapsed = wallclock.monotonic() - burst_start

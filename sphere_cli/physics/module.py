@@ -13,7 +13,8 @@ One step of velocity Verlet, in the order the loop runs the hooks:
     4. kick         second half kick (walls, then particles, or a fluid that takes it over)
     5. finish_step  what needs the full-step velocities (the energy budget)
     6. the clock advances one step
-    7. after_step   every `coupling_steps` steps: the fluid's own step, the stages' end test
+    7. after_step   where `after_due`: the fluid's own step (every `coupling_steps` steps), the
+                    stages' end test (where a stage's duration ends or its stop_when is tested)
 
 Beside the step: `prognostic_state`/`restore` (everything a bitwise restart needs, written to
 the checkpoint group `name`), `observables` (scalars and arrays of the output schedule) and
@@ -73,7 +74,16 @@ class Module:
         """After the second half kick, before the clock advances."""
 
     def after_step(self, state) -> None:
-        """After the clock advances, every `coupling_steps` steps."""
+        """After the clock advances, at the steps where after_due."""
+
+    def after_due(self, step: int, clock) -> bool:
+        """True if after_step runs after `step` (the clock's step once it has advanced)."""
+        return step % self.coupling_steps == 0
+
+    def steps_to_after(self, step: int, clock) -> int:
+        """The steps from `step` to the next one where after_due (>= 1): the loop takes them in
+        one compiled call (physics/compiled_steps.py)."""
+        return self.coupling_steps - step % self.coupling_steps
 
     def prognostic_state(self, state) -> dict[str, np.ndarray]:
         """Everything a bitwise restart needs (scalars as 0-d arrays)."""
@@ -135,7 +145,8 @@ class Step:
         self.forces = bound("forces")
         self.kick = bound("kick")
         self.finish_step = bound("finish_step")
-        # with the module: its coupling_steps is read at each step (a fluid sets it in start())
+        # with the module: its after_due is asked at each step (a fluid sets its coupling_steps
+        # in start())
         self.after_step = tuple((m, m.after_step) for m in modules if defines(m, "after_step"))
         self.stateful = {m.name: m for m in modules if defines(m, "prognostic_state") and m.name}
         self.observed = tuple(m.observables for m in modules if defines(m, "observables"))

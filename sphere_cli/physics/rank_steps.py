@@ -305,7 +305,8 @@ class RankSteps:
             # again from the lead's scene when it is not the ranks' (a stage that began has set
             # walls, friction and perhaps moved glued spheres); after the fluid's step, its own
             # arrays and its particles' (the particles themselves unchanged)
-            if self.at_step != state.clock.step or (self.stages is not None and self.stages.ended):
+            stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
+            if self.at_step != state.clock.step or stage_began:
                 self._send_out(state)
             elif self._fluid_steps_at(state.clock.step):
                 self.world.order("fluid", self.fluid, state.fluid)
@@ -323,7 +324,7 @@ class RankSteps:
     def _read_after(self, step: int, clock) -> bool:
         """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
         step, or a stage that may end there (tested only there)."""
-        return self._fluid_steps_at(step) or (self.stages is not None and self.stages.may_end_at(step, clock))
+        return self._fluid_steps_at(step) or (self.stages is not None and self.stages.after_due(step, clock))
 
     def _fluid_steps_at(self, step: int) -> bool:
         """True if the fluid takes its own step in the after_step of `step`."""

@@ -54,7 +54,7 @@ class Stages(Module):
         self.wall_mu = None if walls_state is None else walls_state.table[..., MU].copy()
         nw = 0 if walls_state is None else len(walls_state.faces)
         self.index = 0
-        self.ended = False  # a stage ended at the step just taken
+        self.ended_at = -1  # the step where a stage last ended (-1: none yet in this process)
         self.start_step = 0
         self.start_coord = np.zeros(nw)
         self.start_shift = np.zeros((nw, 3))
@@ -107,19 +107,32 @@ class Stages(Module):
             )
 
     def after_step(self, state: State) -> None:
-        """Test the current stage's end; `ended` tells whether a stage ended at this step."""
-        self.ended = False
+        """Test the current stage's end; `ended_at` is this step if a stage ended at it."""
         over, tested = self._due(state.clock.step, state.clock)
         elapsed = state.clock.step - self.start_step
         if over or (tested and self._condition_met(state, self.stages[self.index].stop_when, elapsed)):
             self.begin(state, self.index + 1)
-            self.ended = True
+            self.ended_at = state.clock.step
 
-    def may_end_at(self, step: int, clock) -> bool:
+    def after_due(self, step: int, clock) -> bool:
         """True if after_step at `step` may end the current stage (its duration ends there, or a
         stop_when condition is tested there): the only steps where it reads the state, or
         changes it (physics/rank_steps.py brings the state back to the lead for these)."""
         return any(self._due(step, clock))
+
+    def steps_to_after(self, step: int, clock) -> int:
+        """The steps from `step` to the next one where the current stage may end (a large number
+        once every stage has finished)."""
+        if self.finished:
+            return 1 << 62
+        stage = self.stages[self.index]
+        elapsed = step - self.start_step
+        ahead = [1 << 62]
+        if stage.duration is not None:
+            ahead.append(max(1, clock.steps_in(stage.duration) - elapsed))
+        if stage.stop_when is not None:
+            ahead.append(stage.check_every - elapsed % stage.check_every)
+        return min(ahead)
 
     def _due(self, step: int, clock) -> tuple[bool, bool]:
         """At `step`: (the current stage's duration is over, its stop_when is tested); both
