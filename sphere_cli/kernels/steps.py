@@ -8,8 +8,14 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
-chunk), chunk_pair_forces, wall_forces (None without walls) and kick. Returns (the complete
-steps taken, the last squared displacement, whether a drift beyond the skin ended the loop).
+chunk), chunk_pair_forces, wall_forces (None without walls) and kick; motion, None where no wall
+moves, else (the argument tuples of wall_kick_drift, wall_areas, wall_totals and of wall_kick
+but its time and dt, the wall positions the list of particles near walls was made at, half the
+skin [m], the clock's step at the call, dt [s]): the walls move before the particles drift and
+are kicked before them, as their hooks run (physics/walls.py WallMotion). Returns (the complete
+steps taken, the last squared displacement, whether a drift ended the loop: a particle beyond
+half the skin, or a wall as far from where the near-wall list was made, which the wall hook
+then makes again).
 A fluid whose force on the particles is one kernel has its own loop calling `contacts` and that
 kernel (kernels/fluid/profile_forces.py vans1d_steps): a kernel passed as an argument would key
 Numba's cache by an object that differs in every process, so it would compile on every run."""
@@ -19,7 +25,7 @@ from numba import njit
 from .contact import chunk_pair_forces, cross_chunk_pairs
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .serial import serial_twin
-from .walls import wall_forces, wall_forces_serial
+from .walls import wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift, wall_totals
 
 
 @njit(cache=True)
@@ -33,13 +39,31 @@ def contacts(cross, pairs, walls):
 
 
 @njit(cache=True)
-def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks):
+def walls_moved(coord, listed_at, reach):
+    """True if a wall is `reach` [m] or more from where the near-wall list was made (the test of
+    physics/walls.py PlaneWallForces._near_walls)."""
+    for w in range(coord.shape[0]):
+        if abs(coord[w] - listed_at[w]) >= reach:
+            return True
+    return False
+
+
+@njit(cache=True)
+def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion):
     moved2 = 0.0
     for done in range(steps):
+        if motion is not None:
+            wall_kick_drift(*motion[0])
         moved2 = kick_drift(*drift)
         if moved2 > threshold2:
             return done, moved2, True
+        if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
+            return done, moved2, True
         contacts(cross, pairs, walls)
+        if motion is not None:
+            wall_areas(*motion[1])
+            wall_totals(*motion[2])
+            wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
         kick(*kicks)
     return steps, moved2, False
 

@@ -5,10 +5,12 @@ It applies when the step is exactly: the particles' kick-drift, the neighbour se
 contacts, optionally the plane-wall contacts and one more force from a module that has a
 compiled loop with that force in it (`steps_kernel`, and `force_arguments` for its kernel: the
 1D VANS fluid's force on the particles), the particles' kick, and nothing after the kick
-(physics/module.py). Anything else in the step (moving walls, the energy budget, a fluid with
-another force or its own kick, a hook replaced by a wrapper) keeps the step-by-step loop.
-simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
-coupling, stages every step), so those run in Python.
+(physics/module.py); with the plane walls and no such force, the walls' motion (moving or
+stress-controlled walls, their kick-drift and kick around the particles') may be in it too.
+Anything else in the step (the energy budget, a fluid with another force or its own kick, a
+hook replaced by a wrapper) keeps the step-by-step loop. simulation.advance bounds each call by
+the next step where an after_step hook runs (a fluid's coupling, a step where a stage may end),
+so those run in Python.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from .contact import PairContactForces
 from .module import Step
 from .motion import Motion
 from .neighbors import NeighborSearch
-from .walls import PlaneWallForces
+from .walls import PlaneWallForces, WallMotion
 
 
 def _own(hook, name: str) -> bool:
@@ -50,22 +52,33 @@ class CompiledSteps:
     # a single step is taken by the hooks (the loop's call costs more than it saves)
     whole_steps = False
 
-    def __init__(self, search: NeighborSearch, contact: PairContactForces, walls, extra):
+    def __init__(
+        self, search: NeighborSearch, contact: PairContactForces, walls, extra, moving: bool = False
+    ):
         self.search, self.contact, self.walls, self.extra = search, contact, walls, extra
+        self.moving = moving  # the walls' motion in the loop
 
     @classmethod
     def of(cls, step: Step) -> CompiledSteps | None:
         """The compiled steps for this step's hooks, or None where they do not apply."""
-        forces = list(step.forces)
+        forces, kick_drift, kick = list(step.forces), list(step.kick_drift), list(step.kick)
+        moving = (
+            len(kick_drift) == 2
+            and is_hook_of(kick_drift[0], WallMotion, "kick_drift")
+            and len(kick) == 2
+            and is_hook_of(kick[0], WallMotion, "kick")
+        )
+        if moving:
+            kick_drift, kick = kick_drift[1:], kick[1:]
         if not (
-            len(step.kick_drift) == 1
-            and is_hook_of(step.kick_drift[0], Motion, "kick_drift")
+            len(kick_drift) == 1
+            and is_hook_of(kick_drift[0], Motion, "kick_drift")
             and len(step.prepare) == 1
             and is_hook_of(step.prepare[0], NeighborSearch, "prepare")
             and forces
             and is_hook_of(forces[0], PairContactForces, "forces")
-            and len(step.kick) == 1
-            and is_hook_of(step.kick[0], Motion, "kick")
+            and len(kick) == 1
+            and is_hook_of(kick[0], Motion, "kick")
             and not step.finish_step
         ):
             return None
@@ -74,9 +87,9 @@ class CompiledSteps:
             walls = forces.pop(0).__self__
         if forces and _has_steps_kernel(forces[0]):
             extra = forces.pop(0).__self__
-        if forces:
+        if forces or (moving and (walls is None or extra is not None)):
             return None
-        return cls(step.prepare[0].__self__, contact, walls, extra)
+        return cls(step.prepare[0].__self__, contact, walls, extra, moving)
 
     @staticmethod
     def to_host(state: State) -> None:
@@ -97,8 +110,14 @@ class CompiledSteps:
         threshold2 = self.search.threshold2
         serial = use_serial(state.particles.count)  # without parallel regions (kernels/serial.py)
         if self.extra is None:
+            motion = None
+            if self.moving:
+                clock = state.clock
+                # walls.kernel_arguments above made the near-wall list at the walls' positions now
+                listed_at, reach = self.walls.near_list_made_at(state)
+                motion = (*WallMotion.kernel_arguments(state), listed_at, reach, clock.step, clock.dt)
             loop = dem_steps_serial if serial else dem_steps
-            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks)
+            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion)
         else:
             extra = self.extra.force_arguments(state)
             twin = getattr(self.extra, "serial_steps_kernel", None)

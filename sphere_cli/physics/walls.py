@@ -230,6 +230,11 @@ class PlaneWallForces(Module):
             self._pieces = self._cut(self._near[: self._near_count], w.hist)
         return self._near[: self._near_count]
 
+    def near_list_made_at(self, state: State) -> tuple[np.ndarray, float]:
+        """The wall positions the near-wall list was made at, and how far [m] a wall may move
+        from them before it is made again (half the neighbour skin; for kernels/steps.py)."""
+        return self._near_coord, 0.5 * state.neighbors.skin
+
     def _threads_blocks(self) -> None:
         threads = numba.get_num_threads()
         if self._blocks.shape[0] != threads:
@@ -406,48 +411,26 @@ class WallMotion(Module):
 
     name = "wall_motion"
 
+    @staticmethod
+    def kernel_arguments(state: State) -> tuple:
+        """The arguments of wall_kick_drift, wall_areas, wall_totals and of wall_kick but its time
+        and dt (kernels/walls.py; also for kernels/steps.py)."""
+        w, p, box = state.walls, state.particles, state.box
+        return (
+            (w.axis, w.sign, w.mode, w.control, w.coord, w.vel, w.acc, w.vel_pred, w.shift, state.clock.dt,
+             w.attached, w.attached_wall, p.vel),
+            (w.axis, w.sign, w.coord, box.lower, box.upper, w.area),
+            (w.pforce, w.record, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.fluid_force,
+             w.force),
+            (w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc),
+        )  # fmt: skip
+
     def kick_drift(self, state: State) -> None:
-        w = state.walls
-        wall_kick_drift(
-            w.axis,
-            w.sign,
-            w.mode,
-            w.control,
-            w.coord,
-            w.vel,
-            w.acc,
-            w.vel_pred,
-            w.shift,
-            state.clock.dt,
-            w.attached,
-            w.attached_wall,
-            state.particles.vel,
-        )
+        wall_kick_drift(*self.kernel_arguments(state)[0])
 
     def kick(self, state: State) -> None:
-        w, p, box = state.walls, state.particles, state.box
-        wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
-        wall_totals(
-            w.pforce,
-            w.record,
-            w.attached,
-            w.attached_wall,
-            p.force,
-            p.mass,
-            box.body_acc,
-            w.fluid_force,
-            w.force,
-        )
+        _, areas, totals, kick = self.kernel_arguments(state)
+        wall_areas(*areas)
+        wall_totals(*totals)
         dt = state.clock.dt
-        wall_kick(
-            w.axis,
-            w.sign,
-            w.mode,
-            w.control,
-            w.force,
-            w.area,
-            w.vel,
-            w.acc,
-            (state.clock.step + 1) * dt,
-            dt,
-        )
+        wall_kick(*kick, (state.clock.step + 1) * dt, dt)

@@ -83,11 +83,71 @@ def test_compiled_steps_are_the_step_by_step_loop_bitwise(name, threads):
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
-@pytest.mark.parametrize("config", ["direct-shear", "fluidized-bed"])
-def test_moving_walls_and_3d_fluids_keep_the_step_by_step_loop(config):
-    """Moving walls (direct shear) have hooks of their own in the step; the Navier-Stokes force
-    on the particles is more than one kernel call, and its implicit drag takes over the kick."""
-    assert build_scene(load_case(CONFIGS / f"{config}.toml")).step.compiled is None
+def _direct_shear():
+    """configs/direct-shear.toml with its stages shortened: deposit (walls fixed, a kinetic-energy
+    stop tested every check_every steps), consolidate (the rough top wall approaches, then
+    keeps 1 kPa: stress-controlled) and shear (it also moves sideways); glued spheres on both
+    walls. About 8 000 steps."""
+    text = (CONFIGS / "direct-shear.toml").read_text()
+    for old, new in (("duration = 0.15", "duration = 0.012"), ("min_time = 0.06", "min_time = 0.006")):
+        text = text.replace(old, new)
+    text = text.replace("duration = 0.05", "duration = 0.008").replace("duration = 0.08", "duration = 0.008")
+    return parse_case(text)
+
+
+def _walls_driven():
+    """64 spheres at rest without gravity between six walls: the top wall comes down at 2 m/s,
+    the x+ wall is pushed in by a stress of 200 +- 100 Pa at 100 Hz (its target depends on the
+    time). No particle moves before a wall reaches it, so only the walls' own motion makes the
+    near-wall list again. 2 500 steps."""
+    text = canonical_case(64, spacing=1.05).replace("[domain]\n", "[domain]\ngravity = [0.0, 0.0, 0.0]\n")
+    text = text.replace('face = "z+"', 'face = "z+"\nmode = "velocity"\nvelocity = 2.0')
+    text = text.replace(
+        'face = "x+"',
+        'face = "x+"\nmode = "stress"\nstress = 200.0\nstress_amplitude = 100.0\nfrequency = 100.0',
+    )
+    return parse_case(text)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("name", ["direct-shear", "walls-driven"])
+def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_bitwise(name, threads):
+    """The walls' motion runs inside the compiled loop (their kick-drift before the particles',
+    their kick before the particles', at the step's time), which ends where a stage may end
+    (simulation.advance) and where a wall has moved half the skin from where the near-wall list
+    was made."""
+    make = _direct_shear if name == "direct-shear" else _walls_driven
+    numba.set_num_threads(threads)
+    try:
+        compiled, stepwise = build_scene(make()), build_scene(make())
+        assert compiled.step.compiled is not None and compiled.step.compiled.moving
+        stepwise.step.compiled = None
+        for scene in (compiled, stepwise):
+            if name == "direct-shear":
+                while not scene.finished:
+                    advance(scene, 10**9)
+            else:
+                advance(scene, 2500)
+        assert compiled.state.clock.step == stepwise.state.clock.step >= 2500
+        assert compiled.state.neighbors.builds == stepwise.state.neighbors.builds
+        a, b = _state(compiled), _state(stepwise)
+        w, v = compiled.state.walls, stepwise.state.walls
+        for wall in "coord", "vel", "acc", "shift", "force", "area":
+            a[f"wall {wall}"], b[f"wall {wall}"] = getattr(w, wall), getattr(v, wall)
+        if name == "direct-shear":
+            assert abs(w.shift[1, 0]) > 1e-4  # the top wall has sheared the bed
+        else:  # both walls have reached the spheres
+            assert np.count_nonzero(np.abs(w.force[[1, 5]]).max(axis=1)) == 2, w.force
+        for key in a:
+            assert np.array_equal(a[key], b[key]), key
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+
+
+def test_3d_fluids_keep_the_step_by_step_loop():
+    """The Navier-Stokes force on the particles is more than one kernel call, and its implicit
+    drag takes over the kick."""
+    assert build_scene(load_case(CONFIGS / "fluidized-bed.toml")).step.compiled is None
 
 
 def test_a_wrapped_hook_keeps_the_step_by_step_loop():
