@@ -130,8 +130,8 @@ def _drive(
         return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate)
     except NumericalError as exc:
         log.error("%s", exc)
-        output.close(scene)
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
+        output.close(scene)
         raise
     except OutputError as exc:
         log.error("%s", exc)

@@ -206,9 +206,9 @@ class Loop:
             if self.max_wall_seconds is not None and wallclock.monotonic() - started >= self.max_wall_seconds:
                 self.stop.request("wall-time budget (--max-wall-time) reached")
                 break
-            # up to the next step the loop must look at, in bursts of about BURST_SECONDS so that
-            # stop requests and wall-clock schedules are seen as promptly as step by step; with
-            # stages, one step at a time (a stage may end at any step)
+            # up to the next step the loop must look at (_next_stop: a schedule's, or one where a
+            # stage may end), in bursts of about BURST_SECONDS so that stop requests and
+            # wall-clock schedules are seen as promptly as step by step
             burst = min(self._next_stop(clock.step) - clock.step, self.burst)
             burst_start = wallclock.monotonic()
             stage_ended = advance(scene, burst, sync=False)

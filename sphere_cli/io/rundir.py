@@ -385,12 +385,15 @@ class RunOutput:
         self.xdmf_grids: list[tuple[str, str]] = []  # the sidecar's grids of each frame so far
         self.xdmf_written: float | None = None  # time.monotonic() of the sidecar's last write
         self.xdmf_behind = False  # frames in the trajectory that the sidecar does not list yet
+        self.appending = False  # a frame's append has begun and not ended
         self.observables_follow_frames = scene.case.output.observables.follows_frames
 
     def frame(self, scene, last: bool = False) -> None:
         """A frame, its observables if they follow the frames, and the sidecar: rewritten with
         `last` (the run's end frame) or when it is XDMF_REFRESH_SECONDS old."""
+        self.appending = True  # an interruption now may leave a frame without its views
         self.trajectory.append(scene)
+        self.appending = False
         self.xdmf_behind = True
         if last or self.xdmf_written is None or time.monotonic() - self.xdmf_written >= XDMF_REFRESH_SECONDS:
             self._refresh_xdmf(scene)
@@ -399,12 +402,14 @@ class RunOutput:
 
     def close(self, scene) -> None:
         """The sidecar brought up to the trajectory's frames where a run ends without its end
-        frame (a numerical failure); an error here is logged, not raised over the run's own."""
-        if self.xdmf_behind:
+        frame (a numerical failure, an interruption), unless a frame was being appended (its
+        views may be missing: `sphere resume` rewrites the sidecar). Best effort: any error
+        here is logged, never raised over the run's own."""
+        if self.xdmf_behind and not self.appending:
             try:
                 self._refresh_xdmf(scene)
-            except OutputError as exc:
-                self.log.error("%s", exc)
+            except Exception as exc:  # the file may be damaged in any way inside h5py
+                self.log.error("%s: the ParaView sidecar not brought up to date (%s)", self.rundir.xdmf, exc)
 
     def first(self, scene) -> None:
         """The frame and observables of the starting state."""

@@ -115,8 +115,14 @@ def _append(g: h5py.Group, step: int, time: float, value, once: bool = False):
     k = steps.shape[0]
     if once and k and _read_row(steps, k - 1)[0] >= step:
         return None
-    for series, row in ((steps, step), (times, time), (values, value)):
-        _write_row(series, k, row)
+    rows = [
+        (series, _row_data(series, row)) for series, row in ((steps, step), (times, time), (values, value))
+    ]
+    # all three grow before any is written, so a reader sees them of one length most of the time
+    for series, data in rows:
+        series.set_extent((k + 1, *data.shape))
+    for series, data in rows:
+        _write_row(series, k, data)
     return values
 
 
@@ -128,13 +134,23 @@ def _row_space(series, k: int):
     return file_space, h5py.h5s.create_simple((1, *shape))
 
 
-def _write_row(series, k: int, row) -> None:
-    """Write `row` as row k of the dataset `series` (a DatasetID), extending it to k + 1 rows."""
-    series.set_extent((k + 1, *series.shape[1:]))
+def _row_data(series, row) -> np.ndarray:
+    """`row` as a contiguous array of the dataset `series`'s type and row shape. Axes of length
+    one may be added or left out (a value given as a 1-element array, as h5py's own write took
+    it); any other shape is a programming error (ValueError), as it was there."""
+    data = np.ascontiguousarray(row, dtype=series.dtype)
+    shape = series.shape[1:]
+    if data.shape != shape:
+        if [n for n in data.shape if n != 1] != [n for n in shape if n != 1]:
+            raise ValueError(f"a row of shape {data.shape} for a series of rows {shape}")
+        data = data.reshape(shape)
+    return data
+
+
+def _write_row(series, k: int, data: np.ndarray) -> None:
+    """Write `data` (_row_data) as row k of the dataset `series` (a DatasetID)."""
     file_space, memory_space = _row_space(series, k)
-    series.write(
-        memory_space, file_space, np.ascontiguousarray(row, dtype=series.dtype).reshape(1, *series.shape[1:])
-    )
+    series.write(memory_space, file_space, data.reshape(1, *data.shape))
 
 
 def _read_row(series, k: int) -> np.ndarray:
@@ -232,9 +248,10 @@ class Trajectory:
                     _append(part["box/edges"], step, time, state.box.length)
                 if fluid:
                     grid = scene.fluid.grid()
+                    cells = None if grid is None else tuple(int(n) for n in grid.shape)[::-1]
                     for name, (value, _unit) in fluid.items():
                         values = _append(f["fluid"][name], step, time, _file_order(value, grid))
-                        if is_grid_field(np.asarray(value), grid):
+                        if _has_views(values.shape, cells):
                             shown.append((f"/fluid/{name}", values))
                 # a new frame has no views yet (a failed try's were cut above)
                 for series, values in shown:
@@ -410,11 +427,17 @@ def _add_views(f: h5py.File, frame: int) -> None:
     ]
     if "fluid" in f and "shape" in f["fluid"].attrs:
         cells = tuple(int(n) for n in f["fluid"].attrs["shape"][::-1])
-        series += [f"/fluid/{n}" for n, g in f["fluid"].items() if g["value"].shape[1:4] == cells]
+        series += [f"/fluid/{n}" for n, g in f["fluid"].items() if _has_views(g["value"].shape, cells)]
     for path in series:
         view = xdmf_view(path, frame)
         if view not in f:
             _create_view(f, f[path]["value"].id, frame, view)
+
+
+def _has_views(shape: tuple, cells: tuple | None) -> bool:
+    """True for a fluid series of the given (frames, ...) shape that ParaView shows, frame by
+    frame: a field on the grid of `cells` (nz, ny, nx; None without a 3D grid)."""
+    return cells is not None and tuple(shape[1:4]) == cells
 
 
 def _create_view(f: h5py.File, values, frame: int, view: str) -> None:

@@ -10,10 +10,12 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 from sphere_cli import api
 from sphere_cli.io.checkpoint import list_checkpoints
+from sphere_cli.io.trajectory import _append, _time_series
 
 CASE = """
     title = "output layout"
@@ -148,3 +150,17 @@ def test_a_case_warning_prints_once_and_stays_out_of_the_root_logger(capsys):
     warn("fluid.top.period = 1.0: example")
     assert capsys.readouterr().err.count("fluid.top.period = 1.0: example") == 1
     assert logging.getLogger("sphere.case").propagate is False
+
+
+def test_a_series_row_of_the_wrong_shape_is_refused_before_anything_is_written(tmp_path):
+    """The rows are written through h5py's low-level calls (io/trajectory.py): a row that does
+    not have the series' row shape (a grid field left in memory order, say) is a programming
+    error, refused before the series grows, as h5py's own write refused it."""
+    with h5py.File(tmp_path / "t.h5", "w") as f:
+        _time_series(f, "field", (2, 3, 4), np.float64, "m")
+        _append(f["field"], 7, 0.5, np.arange(24.0).reshape(2, 3, 4))
+        with pytest.raises(ValueError, match=r"\(4, 3, 2\)"):
+            _append(f["field"], 8, 0.6, np.zeros((4, 3, 2)))
+        assert f["field/value"].shape == (1, 2, 3, 4)
+        assert f["field/value"][0].tolist() == np.arange(24.0).reshape(2, 3, 4).tolist()
+        assert f["field/step"][...].tolist() == [7] and f["field/time"][...].tolist() == [0.5]
