@@ -308,7 +308,7 @@ class RankSteps:
             stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
             if self.at_step != state.clock.step or stage_began:
                 self._send_out(state)
-            elif self._fluid_steps_at(state.clock.step):
+            elif self._fluid_steps_at(state.clock.step, state.clock):
                 self.world.order("fluid", self.fluid, state.fluid)
                 self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
@@ -324,11 +324,13 @@ class RankSteps:
     def _read_after(self, step: int, clock) -> bool:
         """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
         step, or a stage that may end there (tested only there)."""
-        return self._fluid_steps_at(step) or (self.stages is not None and self.stages.after_due(step, clock))
+        return self._fluid_steps_at(step, clock) or (
+            self.stages is not None and self.stages.after_due(step, clock)
+        )
 
-    def _fluid_steps_at(self, step: int) -> bool:
+    def _fluid_steps_at(self, step: int, clock) -> bool:
         """True if the fluid takes its own step in the after_step of `step`."""
-        return self.fluid is not None and step % self.fluid.coupling_steps == 0
+        return self.fluid is not None and self.fluid.after_due(step, clock)
 
     def to_host(self, state: State) -> None:
         """The owners' particles, rows and wall springs into the lead's scene."""
