@@ -469,7 +469,8 @@ class RankSteps:
         zeros, left out), then the glued spheres in the lead's order (kernels/walls.py
         wall_totals)."""
         part, w, p, box = self.part, state.walls, state.particles, state.box
-        wall_areas(w.axis, w.sign, w.coord, box.lower, box.upper, w.area)
+        _, areas, _, kick = WallMotion.kernel_arguments(state)
+        wall_areas(*areas)
         own = np.flatnonzero(part.owned)
         pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
         glued = part.owned[part.glued]
@@ -490,9 +491,7 @@ class RankSteps:
             w.force,
         )
         dt = state.clock.dt
-        wall_kick(
-            w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc, (state.clock.step + 1) * dt, dt
-        )
+        wall_kick(*kick, (state.clock.step + 1) * dt, dt)
 
     def _whole(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         """Collective: the arrays (n, ...) of this rank's particles, of every rank's own
