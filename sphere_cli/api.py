@@ -193,8 +193,12 @@ def run(
 
 
 def _starting(rundir: RunDirectory, show_progress: bool) -> None:
-    """status.json and the terminal say what happens before the first step."""
+    """status.json and the terminal say what happens before the first step; on several ranks,
+    each learns where to record an error that aborts them all."""
     rundir.write_starting()
+    world = ranks.current()
+    if world is not None:
+        world.record_failures_in(rundir.path.resolve())
     if show_progress:
         print(
             "[sphere] building the scene and compiling the kernels (cached after a first run) ...",

@@ -4,8 +4,9 @@ commands it sends the others.
 Rank 0 leads. It builds the scene, writes every file (run directory, logs, trajectory,
 checkpoints) and runs the loop of simulation.py, as a one-rank run does; only the steps run split
 across the ranks (physics/rank_steps.py). The other ranks follow: they wait for the lead's
-commands and end with the lead's exit code. A rank that fails inside the steps aborts every rank
-(MPI_Abort); the newest checkpoint, written by the lead between steps, stays intact.
+commands and end with the lead's exit code. A rank that fails inside the steps records its error
+in the run's run.log and status.json and aborts every rank (MPI_Abort); the newest checkpoint,
+written by the lead between steps, stays intact.
 
 mpi4py is imported only when the launcher started more than one rank.
 """
@@ -18,6 +19,7 @@ import signal
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -55,6 +57,7 @@ class World:
         # ranks on this node (they share its cores)
         self.node_size = self.comm.Split_type(mpi.COMM_TYPE_SHARED).Get_size()
         self.steps = None  # the rank steps of the scene (physics/rank_steps.py), once started
+        self.run_path: str | None = None  # where a failing rank records its error (record_failures_in)
 
     @property
     def leads(self) -> bool:
@@ -80,13 +83,11 @@ class World:
                 self.comm.Bcast(data, root=0)
                 return pickle.loads(data.tobytes())
             if signalled and time.monotonic() - signalled[-1] > LEAD_GRACE:
-                print(
+                self._fail(
                     f"sphere: error: rank {self.rank}: no word from rank 0 for {LEAD_GRACE:.0f} s after a "
                     "stop signal; it has died. Its newest checkpoint is intact: resume the run.",
-                    file=sys.stderr,
-                    flush=True,
+                    STOPPED,
                 )
-                self.abort(STOPPED)
             if time.monotonic() - waiting > WAIT_SPIN:  # between steps a command follows at once
                 time.sleep(WAIT_SLEEP)
 
@@ -97,6 +98,25 @@ class World:
     def abort(self, code: int = FAILED) -> None:
         self.comm.Abort(code)
 
+    def record_failures_in(self, run_path) -> None:
+        """The lead's run directory, told to every rank: a rank that fails alone records its error
+        there (run.log, status.json) before it aborts them all, as a one-rank run would."""
+        self.run_path = str(run_path)
+        if self.leads:
+            self.order("record_in", self.run_path)
+
+    def _fail(self, message: str, code: int) -> None:
+        """Report an error that no other rank can hear (they wait in a message), then abort every
+        rank with `code`."""
+        print(message, file=sys.stderr, flush=True)
+        if self.run_path is not None:
+            from .io.rundir import RunDirectory
+
+            RunDirectory(Path(self.run_path)).record_abort(
+                message, "interrupted" if code == STOPPED else "failed"
+            )
+        self.abort(code)
+
     def together(self, work):
         """The lead's part of a collective step: should it fail midway, the followers wait in
         a message that will never come, so every rank is aborted with the error's exit code
@@ -105,9 +125,7 @@ class World:
             return work()
         except BaseException as exc:
             code = STOPPED if isinstance(exc, KeyboardInterrupt) else getattr(exc, "exit_code", FAILED)
-            message = f"sphere: error: rank 0, during the steps: {type(exc).__name__}: {exc}"
-            print(message, file=sys.stderr, flush=True)
-            self.abort(code)
+            self._fail(f"sphere: error: rank 0, during the steps: {type(exc).__name__}: {exc}", code)
             raise
 
     def follow(self) -> int:
@@ -126,14 +144,14 @@ class World:
                 command, *args = self._next_order(signalled)
                 if command == "end":
                     return int(args[0])
-                if command == "start":
+                if command == "record_in":
+                    self.run_path = args[0]
+                elif command == "start":
                     self.steps = RankSteps.following(self, *args)
                 else:
                     self.steps.carry_out(command, *args)
         except Exception as exc:
-            message = f"sphere: error: rank {self.rank}: {type(exc).__name__}: {exc}"
-            print(message, file=sys.stderr, flush=True)
-            self.abort(FAILED)
+            self._fail(f"sphere: error: rank {self.rank}: {type(exc).__name__}: {exc}", FAILED)
             raise
 
 

@@ -315,6 +315,22 @@ class RunDirectory:
         except OSError as exc:
             raise OutputError(f"{self.status_path}: cannot write status ({exc})") from None
 
+    def record_abort(self, message: str, state: str) -> None:
+        """A rank's error just before it aborts every rank (ranks.py): run.log gets the message and
+        status.json the state ("failed", or "interrupted" for a second Ctrl-C), its progress kept
+        (no rank writes again). Best effort: the message is on stderr already."""
+        try:
+            status = json.loads(self.status_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            status = {}
+        try:
+            self.logger().log(logging.ERROR if state == "failed" else logging.WARNING, "%s", message)
+            self.write_status({**status, "state": state, "error": message})
+        except OutputError:
+            pass
+        finally:
+            self.close_logger()
+
 
 class _WarningsToLog(logging.Handler):
     """While a run's log is open, every warning reaches run.log as well as stderr: Python

@@ -422,6 +422,54 @@ def test_a_particle_gone_bad_on_a_rank_stops_every_rank_as_one_rank_stops(tmp_pa
     assert newest_valid_checkpoint(tmp_path / "two" / "checkpoints") is not None
 
 
+# A lead that sends a command no follower knows, or fails itself, inside a collective step; argv:
+# the run directory, and which rank fails
+FAILING_RANK = """
+import sys
+from pathlib import Path
+
+from sphere_cli import ranks
+from sphere_cli.io.rundir import RunDirectory
+
+world = ranks.start()
+if not world.leads:
+    sys.exit(world.follow())
+rundir = RunDirectory(Path(sys.argv[1]))
+rundir.write_status({"state": "running", "step": 40, "time": 0.004})
+world.record_failures_in(rundir.path.resolve())
+if sys.argv[2] == "follower":
+    world.order("no such command")
+    world.together(world.comm.Barrier)
+else:
+    world.together(lambda: 1 / 0)
+"""
+
+
+@pytest.mark.parametrize(
+    ("failing", "message"),
+    [
+        ("follower", "sphere: error: rank 1: AttributeError"),
+        ("lead", "sphere: error: rank 0, during the steps: ZeroDivisionError"),
+    ],
+)
+def test_a_rank_that_fails_alone_records_its_error_before_every_rank_ends(tmp_path, failing, message):
+    """An error only one rank sees (a bug, memory) ends every rank with exit 70, and the run
+    directory says so as a one-rank run's would: the message in run.log, status.json failed with
+    the run's progress kept (sphere sweep reads it)."""
+    (tmp_path / "script.py").write_text(FAILING_RANK)
+    (tmp_path / "run").mkdir()
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    command = [str(MPIEXEC), "-n", "2", sys.executable, "script.py", "run", failing]
+    result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
+    assert result.returncode == 70, result.stdout + result.stderr
+    assert result.stderr.count(message) == 1, result.stderr
+    log = (tmp_path / "run" / "run.log").read_text()
+    assert f"ERROR {message}" in log, log
+    status = json.loads((tmp_path / "run" / "status.json").read_text())
+    assert status["state"] == "failed" and status["error"].startswith(message), status
+    assert status["step"] == 40 and status["ranks"] == 2
+
+
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
     naming it, with nothing written; a fluid without particles and more ranks than cells along
