@@ -19,7 +19,6 @@ import signal
 import sys
 import time
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 
@@ -112,9 +111,7 @@ class World:
         if self.run_path is not None:
             from .io.rundir import RunDirectory
 
-            RunDirectory(Path(self.run_path)).record_abort(
-                message, "interrupted" if code == STOPPED else "failed"
-            )
+            RunDirectory(self.run_path).record_abort(message, "interrupted" if code == STOPPED else "failed")
         self.abort(code)
 
     def together(self, work):
