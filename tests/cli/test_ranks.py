@@ -140,12 +140,24 @@ keep = 10
 """
 
 
+# one thread a rank; waits that sleep, not spin: up to four ranks share the runner's two cores
+# with the other test worker, and MPICH's busy polling would take the cores the ranks wait for
+# (its progress throttle sleeps 1 us after 100 polls that found nothing; the 4-rank resume test
+# took 52 s instead of 61 s beside a busy core)
+RANK_ENV = {
+    "OMP_WAIT_POLICY": "PASSIVE",
+    "NUMBA_NUM_THREADS": "1",
+    "MPIR_CVAR_CH4_PROGRESS_THROTTLE": "1",
+    "MPIR_CVAR_CH4_PROGRESS_THROTTLE_NO_PROGRESS_COUNT": "100",
+}
+
+
 def sphere(*args, ranks: int = 1, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     """`sphere ARGS` as one process, or on `ranks` ranks through mpiexec."""
     command = [sys.executable, "-m", "sphere_cli", *args]
     if ranks > 1:
         command = [str(MPIEXEC), "-n", str(ranks), *command]
-    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE", "NUMBA_NUM_THREADS": "1"}
+    env = {**os.environ, **RANK_ENV}
     return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
 
 
@@ -363,7 +375,7 @@ def test_stops_and_a_killed_rank_leave_a_checkpoint_that_resumes(sliding, tmp_pa
     first = newest_valid_checkpoint(tmp_path / "run" / "checkpoints")
     assert first is not None and first.step > 0
 
-    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE", "NUMBA_NUM_THREADS": "1"}
+    env = {**os.environ, **RANK_ENV}
     command = [str(MPIEXEC), "-n", "2", sys.executable, "-m", "sphere_cli", "resume", "run", "-q"]
     log = tmp_path / "run" / "run.log"
 
