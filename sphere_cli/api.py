@@ -14,7 +14,14 @@ import numpy as np
 from . import ranks
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict, run_record
 from .config.schema import NON_PHYSICS_KEYS, Case
-from .errors import MissingInputError, NumericalError, OutputError, ResumeRefused, StoppedEarly
+from .errors import (
+    MissingInputError,
+    NumericalError,
+    OutputError,
+    ResumeRefused,
+    SphereError,
+    StoppedEarly,
+)
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
 from .io.provenance import provenance
@@ -140,9 +147,29 @@ def _drive(
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
         output.close(scene)
         raise
+    except SphereError:
+        raise
+    except Exception as exc:
+        _record_internal_error(exc, scene, rundir, output, log)
+        raise
     finally:
         progress.close()
         rundir.close_logger()
+
+
+def _record_internal_error(exc: Exception, scene, rundir: RunDirectory, output: RunOutput, log) -> None:
+    """A fault of the program, not of the case, during the steps: its traceback goes to run.log
+    and status.json says "failed" (a batch job's monitor would otherwise see "running" for ever);
+    the frames written so far are closed as at any other stop. Best effort: the exception itself
+    is raised on whatever happens here."""
+    clock = scene.state.clock
+    error = f"internal error at step {clock.step}: {type(exc).__name__}: {exc}"
+    log.exception("%s (a bug: please report it with this log)", error)
+    try:
+        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": error})
+        output.close(scene)
+    except Exception as late:
+        log.error("while recording it: %s: %s", type(late).__name__, late)
 
 
 def run(

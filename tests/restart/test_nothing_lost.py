@@ -11,6 +11,7 @@ leaves every file as it was.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -524,3 +525,31 @@ def test_a_full_disk_stops_cleanly_and_resumes_bitwise(tmp_path, small_disk, sch
     assert result.returncode == 0, result.stderr
     assert_same_state(final_state(tmp_path / "whole"), final_state(run))
     _assert_same_trajectory(tmp_path / "whole", run)
+
+
+def test_a_fault_of_the_program_mid_run_is_recorded_and_the_run_resumes(case, whole, monkeypatch):
+    """An exception that is no error of the case (a bug) in the steps: run.log holds its
+    traceback, status.json says failed with the error, the frames written are readable and
+    the newest checkpoint resumes to the uninterrupted run's end, bitwise."""
+    from sphere_cli import simulation
+
+    real = simulation.advance
+
+    def advance_then_fail(scene, steps, sync=True):
+        if scene.state.clock.step >= 250:
+            raise ZeroDivisionError("planted fault")
+        return real(scene, steps, sync)
+
+    monkeypatch.setattr(simulation, "advance", advance_then_fail)
+    run_dir = case.parent / "faulty"
+    with pytest.raises(ZeroDivisionError, match="planted fault"):
+        api.run(case, run_dir)
+    status = json.loads((run_dir / "status.json").read_text())
+    assert status["state"] == "failed" and status["step"] >= 250
+    assert status["error"] == f"internal error at step {status['step']}: ZeroDivisionError: planted fault"
+    log = (run_dir / "run.log").read_text()
+    assert "ZeroDivisionError: planted fault" in log and "Traceback" in log
+    assert frames(run_dir).keys() <= frames(whole).keys() and max(frames(run_dir)) >= 200
+    monkeypatch.setattr(simulation, "advance", real)
+    api.resume(run_dir)
+    assert_same_state(final_state(run_dir), final_state(whole))
