@@ -14,7 +14,7 @@ from ..errors import MissingInputError, OutputError, ResumeRefused
 from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
-from .trajectory import frame_clock
+from .trajectory import complete_samples, frame_clock
 
 
 def summarize(path: Path) -> dict:
@@ -105,13 +105,12 @@ def _read_trajectory(path: Path) -> dict:
             obs = {
                 name: _last_sample(group)
                 for name, group in f["observables"].items()
-                if group["step"].shape[0]
+                if complete_samples(group)
             }
             steady = {}
             for name, group in f["observables"].items():
                 if group["value"].ndim == 1:
-                    # a run appending while we read may have lengthened one of the two already
-                    n = min(group["time"].shape[0], group["value"].shape[0])
+                    n = complete_samples(group)
                     estimate = steady_estimate(group["time"][:n], group["value"][:n])
                     if estimate is not None:
                         steady[name] = _describe_steady(estimate, group["value"].attrs.get("unit", ""))
@@ -207,14 +206,15 @@ def _describe_steady(e: dict, unit: str) -> str:
 def _last_sample(group: h5py.Group):
     """The last sample of an observable: a number, a small tensor as nested lists, or for a
     profile its shape, unit and range (the whole series: `sphere plot`, or the file itself)."""
-    value = group["value"][-1]
+    samples = complete_samples(group)
+    value = group["value"][samples - 1]
     unit = group["value"].attrs.get("unit", "")
     if value.ndim == 0:
         return value.item()
     if value.size <= 24:  # a tensor, or one row per wall
         return np.vectorize(lambda x: float(f"{x:.6g}"), otypes=[float])(value).tolist()
     return (
-        f"{value.shape[0]} layers x {value.shape[1:] or 'scalar'}, {group['step'].shape[0]} samples, "
+        f"{value.shape[0]} layers x {value.shape[1:] or 'scalar'}, {samples} samples, "
         f"last from {value.min():.4g} to {value.max():.4g}" + (f" {unit}" if unit else "")
     )
 

@@ -338,9 +338,15 @@ class TrajectoryLost(OutputError):
     """The trajectory file is missing or empty: a resume starts a new one."""
 
 
+def complete_samples(group: h5py.Group) -> int:
+    """The samples of an observable present in each of its step, time and value datasets (a
+    run appending while someone reads lengthens them one after the other)."""
+    return min(group[name].shape[0] for name in ("step", "time", "value"))
+
+
 def _valid_prefix(group: h5py.Group, step: int) -> int:
     """How many leading samples have step, time and value, steps strictly increasing, all <= step."""
-    n = min(group[name].shape[0] for name in ("step", "time", "value"))
+    n = complete_samples(group)
     steps = group["step"][:n]
     good = steps <= step
     good[1:] &= np.diff(steps) > 0

@@ -62,6 +62,26 @@ def test_inspect_shows_observables(observed_run):
     assert "4 layers" in result.stdout
 
 
+def test_inspect_reads_observables_a_run_is_appending_to(observed_run, tmp_path):
+    """A run appends an observable's step, time and value one after the other: inspect, reading
+    between two of those, shows the last sample complete in all three (or none yet)."""
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(observed_run, copy)
+    with h5py.File(copy / "trajectory.h5", "r+") as f:
+        obs = f["observables"]
+        last_pressure = float(obs["pressure/value"][-1])
+        for name in ("step", "time"):  # the next sample's step and time written, its value not
+            obs[f"pressure/{name}"].resize(obs[f"pressure/{name}"].shape[0] + 1, axis=0)
+        obs["coordination/value"].resize(0, axis=0)  # a first sample begun, no value yet
+    result = sphere_inproc("inspect", copy / "trajectory.h5")
+    assert result.code == 0, result.stderr
+    shown = result.stdout.split("last_observables:")[1].split("steady")[0]
+    assert f"  pressure: {last_pressure!r}\n" in shown
+    assert "  coordination:" not in shown and "  coordination_no_rattlers:" in shown
+
+
 def test_plot_writes_pngs(observed_run, tmp_path):
     pytest.importorskip("matplotlib")
     result = sphere_inproc("plot", observed_run, "-o", tmp_path / "plots")
