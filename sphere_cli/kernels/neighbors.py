@@ -298,3 +298,34 @@ def worst_overlap(pos, radius, nbr, nbr_count, length, periodic):
                 best_i = i
                 best_j = j
     return best_i, best_j, best
+
+
+@njit(cache=True, parallel=True)
+def count_half_rows(full_nbr, full_count, half_count):
+    """half_count[i]: the partners j > i among the first full_count[i] of full row i (the GPU's
+    rows hold both members of a pair, physics/device_steps.py); returns the longest."""
+    longest = 0
+    for i in prange(full_nbr.shape[0]):
+        m = 0
+        for k in range(full_count[i]):
+            if full_nbr[i, k] > i:
+                m += 1
+        half_count[i] = m
+        longest = max(longest, m)
+    return longest
+
+
+@njit(cache=True, parallel=True)
+def fill_half_rows(full_nbr, full_count, full_hist, springs, start, half_nbr, hist):
+    """The host's half rows from full rows, in their order (ascending): partners j > i into
+    half_nbr, and (springs) the spring at each such full slot packed into hist from start[i]."""
+    for i in prange(full_nbr.shape[0]):
+        m = 0
+        for k in range(full_count[i]):
+            j = full_nbr[i, k]
+            if j > i:
+                half_nbr[i, m] = j
+                if springs:
+                    for a in range(3):
+                        hist[start[i] + m, a] = full_hist[i, k, a]
+                m += 1

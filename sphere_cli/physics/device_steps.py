@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CaseError
-from ..kernels.neighbors import row_starts
+from ..kernels.neighbors import count_half_rows, fill_half_rows, row_starts
 from ..kernels.walls import FIXED
 from ..state import State
 from .compiled_steps import CompiledSteps
@@ -290,16 +290,15 @@ class DeviceSteps:
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
-        owned = (np.arange(nbr.shape[1])[None, :] < count[:, None]) & (nbr > np.arange(n)[:, None])
-        half = owned.sum(axis=1)
-        width = max(nl.nbr.shape[1], int(half.max(initial=0)), INITIAL_CAPACITY)
+        half = np.empty(n, dtype=np.int32)
+        width = max(nl.nbr.shape[1], count_half_rows(nbr, count, half), INITIAL_CAPACITY)
         nl.nbr = np.zeros((n, width), dtype=np.int32)
-        nl.nbr[np.nonzero(owned)[0], (np.cumsum(owned, axis=1) - 1)[owned]] = nbr[owned]
-        nl.nbr_count = half.astype(np.int32)
+        nl.nbr_count = half
         pairs = int(row_starts(nl.nbr_count, width, nl.start))
+        full_hist = self.hist.copy_to_host() if self.springs else np.zeros((1, 1, 3))
         if self.springs:
             nl.hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
-            nl.hist[:pairs] = self.hist.copy_to_host()[owned]
+        fill_half_rows(nbr, count, full_hist, self.springs, nl.start, nl.nbr, nl.hist)
         nl.builds += self.builds
         self.builds = 0
         self.search._spare_like(nl)
