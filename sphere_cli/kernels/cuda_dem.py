@@ -331,6 +331,16 @@ def pair_forces(
     torque[i, 2] = t2
 
 
+@cuda.jit(device=True, inline=True)
+def _cleared(hist, i, w):
+    """Whether spring hist[i, w] holds +0.0 in each component, the bits a cleared spring has (a
+    -0.0 is written over, as on the CPU)."""
+    for a in range(3):
+        if hist[i, w, a] != 0.0 or math.copysign(1.0, hist[i, w, a]) < 0.0:
+            return False
+    return True
+
+
 @cuda.jit
 def wall_forces(
     pos, vel, angvel, vel_pred, angvel_pred, radius, mass, inertia, inv_mass, material, wall_axis,
@@ -353,7 +363,10 @@ def wall_forces(
     for w in range(wall_axis.shape[0]):
         touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
         if not touching:
-            if springs:  # the spring of a contact that has ended is gone
+            # the spring of a contact that has ended is gone; one that is zero already is not
+            # written again (the rows of wall_hist are 144 bytes apart: six walls' stores from
+            # every thread made this kernel the step's slowest, bound by the L1)
+            if springs and not _cleared(wall_hist, i, w):
                 wall_hist[i, w, 0] = 0.0
                 wall_hist[i, w, 1] = 0.0
                 wall_hist[i, w, 2] = 0.0
