@@ -303,16 +303,13 @@ def worst_overlap(pos, radius, nbr, nbr_count, length, periodic):
 @njit(cache=True, parallel=True)
 def count_half_rows(full_nbr, full_count, half_count):
     """half_count[i]: the partners j > i among the first full_count[i] of full row i (the GPU's
-    rows hold both members of a pair, physics/device_steps.py); returns the longest."""
-    longest = 0
+    rows hold both members of a pair, physics/device_steps.py)."""
     for i in prange(full_nbr.shape[0]):
         m = 0
         for k in range(full_count[i]):
             if full_nbr[i, k] > i:
                 m += 1
         half_count[i] = m
-        longest = max(longest, m)
-    return longest
 
 
 @njit(cache=True, parallel=True)

@@ -291,7 +291,8 @@ class DeviceSteps:
         count = self.rows.count.copy_to_host()
         n = count.size
         half = np.empty(n, dtype=np.int32)
-        width = max(nl.nbr.shape[1], count_half_rows(nbr, count, half), INITIAL_CAPACITY)
+        count_half_rows(nbr, count, half)
+        width = max(nl.nbr.shape[1], int(half.max(initial=0)), INITIAL_CAPACITY)
         nl.nbr = np.zeros((n, width), dtype=np.int32)
         nl.nbr_count = half
         pairs = int(row_starts(nl.nbr_count, width, nl.start))

@@ -82,3 +82,29 @@ def test_rows_far_wider_than_needed_narrow_at_the_next_build(monkeypatch):
     advance(roomy, 200)
     assert np.array_equal(wide.state.particles.pos, roomy.state.particles.pos)
     assert np.array_equal(wide.state.particles.angvel, roomy.state.particles.angvel)
+
+
+def test_full_rows_become_the_hosts_half_rows_with_their_springs():
+    """The GPU's full rows (both members of each pair, ascending) back to half rows (j > i, in
+    the same order) and packed springs, as the copy back does (physics/device_steps.py): against
+    a slot-by-slot reading of the same rows, rows longer than the host's default width included."""
+    from sphere_cli.kernels.neighbors import count_half_rows, fill_half_rows, row_starts
+
+    n, width = 500, 40
+    rng = np.random.default_rng(4)
+    count = rng.integers(0, width + 1, n).astype(np.int32)
+    full = np.sort(rng.integers(0, n, (n, width)).astype(np.int32), axis=1)
+    springs = rng.random((n, width, 3))
+    half = np.empty(n, dtype=np.int32)
+    count_half_rows(full, count, half)
+    expected_rows = [[int(j) for j in full[i, : count[i]] if j > i] for i in range(n)]
+    assert half.tolist() == [len(row) for row in expected_rows] and half.max() > 16
+    rows = np.zeros((n, int(half.max())), dtype=np.int32)
+    start = np.zeros(n + 1, dtype=np.int64)
+    pairs = row_starts(half, rows.shape[1], start)
+    packed = np.zeros((pairs, 3))
+    fill_half_rows(full, count, springs, True, start, rows, packed)
+    expected_springs = [springs[i, k] for i in range(n) for k in range(count[i]) if full[i, k] > i]
+    assert all(rows[i, : half[i]].tolist() == expected_rows[i] for i in range(n))
+    assert not rows[np.arange(rows.shape[1])[None, :] >= half[:, None]].any()
+    np.testing.assert_array_equal(packed, np.array(expected_springs))
