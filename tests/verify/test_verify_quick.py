@@ -28,9 +28,9 @@ def _failures(record: dict) -> str:
 
 @pytest.mark.parametrize("name", CASES)
 def test_quick_case_meets_tolerance_and_order(name):
-    # two repeats suffice to show determinism (they, and the first rung's untimed call, must
-    # agree bitwise); the third of `sphere verify` only steadies the reported timings
-    record = run_case(cases()[name], quick=True, repeats=2)
+    # one repeat shows determinism: it and the first rung's untimed call must agree bitwise; the
+    # further repeats of `sphere verify` only steady the reported timings
+    record = run_case(cases()[name], quick=True, repeats=1)
     assert record["passed"], _failures(record)
     assert len(record["rows"]) == len(cases()[name].quick_ladder)
     assert record["checks"], "a case with no checks cannot fail"
@@ -73,8 +73,13 @@ def test_cli_verify_one_case_quick(tmp_path):
         assert png.stat().st_size < 200_000
 
 
-# the cases whose full ladder starts below their quick one (the others' coarsest rung runs above)
-BEYOND_QUICK = [name for name, case in cases().items() if min(case.ladder) not in case.quick_ladder]
+# the cases whose full ladder starts below their quick one (the others' coarsest rung runs above),
+# but for a ladder of run durations, whose shorter run is the start of the quick one
+BEYOND_QUICK = [
+    name
+    for name, case in cases().items()
+    if min(case.ladder) not in case.quick_ladder and case.resolution != "simulated seconds"
+]
 
 
 @pytest.mark.parametrize("name", BEYOND_QUICK)
