@@ -48,6 +48,15 @@ def _has_steps_kernel(hook) -> bool:
     return False
 
 
+def step_arguments(state: State, contact: PairContactForces, walls: PlaneWallForces | None) -> tuple:
+    """The argument tuples of the DEM step's kernels (kernels/steps.py): (kick_drift's, those of
+    cross_chunk_pairs and chunk_pair_forces, wall_forces' or None without walls, kick's), valid
+    until the next list build while the walls stay where they are."""
+    cross, pairs = contact.kernel_arguments(state)
+    wall = None if walls is None else walls.kernel_arguments(state)
+    return Motion.drift_arguments(state), cross, pairs, wall, Motion.kick_arguments(state)
+
+
 class CompiledSteps:
     # a single step is taken by the hooks (the loop's call costs more than it saves)
     whole_steps = False
@@ -104,9 +113,7 @@ class CompiledSteps:
         """Take up to `steps` whole steps; stop early after a kick-drift that makes the neighbour
         list stale. Returns (the whole steps taken, True if that kick-drift ended the call: the
         caller finishes that step with the hooks, from `prepare` on)."""
-        cross, pairs = self.contact.kernel_arguments(state)
-        walls = None if self.walls is None else self.walls.kernel_arguments(state)
-        drift, kicks = Motion.drift_arguments(state), Motion.kick_arguments(state)
+        drift, cross, pairs, walls, kicks = step_arguments(state, self.contact, self.walls)
         threshold2 = self.search.threshold2
         serial = use_serial(state.particles.count)  # without parallel regions (kernels/serial.py)
         if self.extra is None:

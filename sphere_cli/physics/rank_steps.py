@@ -62,7 +62,7 @@ from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import wall_areas, wall_kick, wall_totals
 from ..state import Clock, NeighborList, Particles, State, Walls
-from .compiled_steps import is_hook_of
+from .compiled_steps import is_hook_of, step_arguments
 from .contact import PairContactForces
 from .motion import Motion
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
@@ -439,14 +439,12 @@ class RankSteps:
         if not state.particles.count:
             return None, None, None
         serial = use_serial(state.particles.count)
-        cross, pairs = self.part.contact.kernel_arguments(state)
-        walls = None
-        if self.part.walls is not None and self.part.wall_motion is None:
-            walls = self.part.walls.kernel_arguments(state)
+        fixed_walls = self.part.walls if self.part.wall_motion is None else None
+        drift, cross, pairs, walls, kicks = step_arguments(state, self.part.contact, fixed_walls)
         return (
-            (kick_drift_serial if serial else kick_drift, Motion.drift_arguments(state)),
+            (kick_drift_serial if serial else kick_drift, drift),
             (contacts_serial if serial else contacts, (cross, pairs, walls)),
-            (kick_serial if serial else kick, Motion.kick_arguments(state)),
+            (kick_serial if serial else kick, kicks),
         )
 
     def _take_fluid(self, module, fluid_state) -> None:
