@@ -15,12 +15,11 @@ $(STAMP): pyproject.toml Makefile
 
 install: $(STAMP)
 
-# OpenMP threads that wait by spinning hold their cores: on a shared machine (a laptop with a
-# browser, a login node) that made the demo 20 times slower. Passive waiting unless the
-# environment asks otherwise (OMP_WAIT_POLICY=ACTIVE make demo, for a dedicated machine).
+# OpenMP threads that wait by spinning made the demo 20 times slower on a shared machine (a
+# laptop with a browser, a login node), and sleeping ones 6.6 times slower on free cores: sphere
+# samples the cores at the start and chooses (sphere_cli/runtime.py start_threads).
 demo: $(STAMP)
-	@echo "OpenMP threads wait passively (OMP_WAIT_POLICY=$${OMP_WAIT_POLICY:-PASSIVE}); OMP_WAIT_POLICY=ACTIVE for dedicated cores"
-	OMP_WAIT_POLICY=$${OMP_WAIT_POLICY:-PASSIVE} $(BIN)/sphere run configs/demo.toml -o $(DEMO_DIR) --overwrite
+	$(BIN)/sphere run configs/demo.toml -o $(DEMO_DIR) --overwrite
 	@echo
 	@echo "Output is in $(DEMO_DIR)/:"
 	@echo "  $(DEMO_DIR)/trajectory.h5   particle frames (H5MD); open $(DEMO_DIR)/trajectory.xmf in ParaView"

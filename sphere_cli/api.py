@@ -27,7 +27,7 @@ from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .runtime import StopFlag, refuse_many_ranks, set_threads, shared_cores_warning, signal_handlers
+from .runtime import StopFlag, refuse_many_ranks, signal_handlers, start_threads
 from .scene.builder import build_scene
 from .simulation import Loop
 
@@ -189,10 +189,9 @@ def run(
     loaded = _with_simulation(load_case(case_path), duration=until, device=device)
     if origin is not None:
         loaded = dataclasses.replace(loaded, origin=Path(origin))
-    set_threads(loaded.case)
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
-    note = shared_cores_warning()
+    note = start_threads(loaded.case)
     try:
         # the directory and status.json exist from the start: a batch job's monitor sees the run
         # while its first scene compiles the kernels (a minute or more on a machine's first run)
@@ -271,7 +270,6 @@ def _resume_locked(
 ) -> RunResult:
     loaded = dataclasses.replace(load_case(rundir.case), origin=rundir.case_origin())
     loaded = _with_simulation(loaded, duration=until, device=device)
-    set_threads(loaded.case)
     if rundir.xdmf.exists() and not rundir.xdmf.is_file():
         raise OutputError(f"{rundir.xdmf}: is not a file; remove or rename it, then resume again")
     remove_stale_temporaries(rundir.checkpoints)
@@ -282,7 +280,7 @@ def _resume_locked(
         log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_simulation(fresh, duration=until, device=device)
-        note = shared_cores_warning()
+        note = start_threads(fresh.case)
         _starting(rundir, show_progress)
         scene = build_scene(fresh)
         _log_note(log, note)
@@ -307,7 +305,7 @@ def _resume_locked(
             f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
-    note = shared_cores_warning()
+    note = start_threads(loaded.case)
     _starting(rundir, show_progress)
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)

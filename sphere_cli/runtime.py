@@ -5,7 +5,10 @@ busy processes.
 Numba's OpenMP threads spin while they wait for each other. On cores of their own that is the
 fastest way to wait; when another busy process holds one of those cores, every parallel region
 waits for a thread that is not running, and a run on 2 threads measured 25-30 x slower than on
-one (docs/performance.md). OMP_WAIT_POLICY=PASSIVE makes the threads sleep instead."""
+one (docs/performance.md). OMP_WAIT_POLICY=PASSIVE makes the threads sleep instead, which costs a
+wake-up at every parallel region when the cores are free (small scenes 4-7 x slower). So a run
+whose threads would share their cores, and whose user has not chosen a policy, is given the
+passive one before its threads start; a chosen policy is kept, with a warning."""
 
 from __future__ import annotations
 
@@ -65,16 +68,17 @@ def measure_busy_cores(seconds: float = SAMPLE_SECONDS, stat: str = "/proc/stat"
     return busy_cores(before, after)
 
 
-def shared_cores_note(
+def shared_cores(
     threads: int,
     cores: int | None = None,
     busy: float | None = None,
     wait_policy: str | None = None,
     layer: str | None = None,
-) -> str | None:
-    """The warning to give before a run on `threads` threads, or None. The arguments after
-    `threads` default to this machine's: its core count, the cores other processes keep busy
-    now (measured only when needed), OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
+) -> tuple[float, int] | None:
+    """(cores other processes keep busy, this machine's cores) when those leave fewer free cores
+    than the `threads` spinning threads of a run, else None. The arguments after `threads`
+    default to this machine's: its core count, the busy cores now (measured only when needed),
+    OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
     if threads < 2:
         return None
     if wait_policy is None:
@@ -91,12 +95,26 @@ def shared_cores_note(
         busy = measure_busy_cores()
         if busy is None:
             return None
-    free = cores - busy
-    if threads <= free + MARGIN_CORES:
+    if threads <= cores - busy + MARGIN_CORES:
         return None
+    return busy, cores
+
+
+def _fewer_free_cores(busy: float, cores: int, threads: int) -> str:
     return (
         f"other processes keep {busy:.1f} of this machine's {cores} cores busy, which leaves fewer "
-        f"than the {threads} threads of this run; OpenMP threads spin while they wait, so sharing "
+        f"than the {threads} threads of this run"
+    )
+
+
+def shared_cores_note(threads: int, **machine) -> str | None:
+    """The warning to give before a run on `threads` spinning threads that would share their
+    cores (shared_cores, which takes `machine`), or None."""
+    shared = shared_cores(threads, **machine)
+    if shared is None:
+        return None
+    return (
+        f"{_fewer_free_cores(*shared, threads)}; OpenMP threads spin while they wait, so sharing "
         "cores can slow the run many times over: set OMP_WAIT_POLICY=PASSIVE, or fewer threads "
         "(simulation.threads, NUMBA_NUM_THREADS)"
     )
@@ -141,12 +159,43 @@ def set_threads(case) -> None:
         numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
 
 
-def shared_cores_warning() -> str | None:
-    """Warn at once (stderr) when other busy processes share the run's cores
-    (shared_cores_note); returns the warning for the run's log. Called once the command is
-    known to go ahead and before any kernel runs, so that no thread of this run counts as busy."""
+def threads_started() -> bool:
+    """True once Numba's threading layer runs in this process (any thread count asked or set
+    starts it): OpenMP has then read OMP_WAIT_POLICY, and setting it changes nothing."""
     import numba
 
+    try:
+        numba.threading_layer()
+    except ValueError:  # "not initialized"
+        return False
+    return True
+
+
+def start_threads(case) -> str | None:
+    """The run's threads, with a wait policy for the cores they get. Where other busy processes
+    share those cores (shared_cores_note), OMP_WAIT_POLICY is unset and the threads have not
+    started in this process, the threads are made to wait passively (a note on stderr); where
+    the policy is the user's, or too late to set, a warning says what to do. Returns that line
+    for the run's log. Called once the command is known to go ahead and before any kernel runs,
+    so that no thread of this run counts as busy."""
+    import numba
+
+    chosen = os.environ.get("OMP_WAIT_POLICY", "").strip()
+    if not chosen and not threads_started():
+        allowed = numba.config.NUMBA_NUM_THREADS
+        threads = allowed if case.simulation.threads is None else min(case.simulation.threads, allowed)
+        shared = shared_cores(threads)
+        note = None
+        if shared is not None:
+            os.environ["OMP_WAIT_POLICY"] = "PASSIVE"  # read by OpenMP when it starts, below
+            note = (
+                f"{_fewer_free_cores(*shared, threads)}: its threads wait passively "
+                "(OMP_WAIT_POLICY=PASSIVE) instead of spinning; OMP_WAIT_POLICY=ACTIVE keeps them spinning"
+            )
+            print(f"sphere: note: {note}", file=sys.stderr)
+        set_threads(case)
+        return note
+    set_threads(case)
     note = shared_cores_note(numba.get_num_threads())
     if note is not None:
         print(f"sphere: warning: {note}", file=sys.stderr)

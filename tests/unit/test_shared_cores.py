@@ -1,6 +1,6 @@
-"""The warning before a run whose OpenMP threads would share their cores with other busy
-processes (sphere_cli/runtime.py): when it is given, how the busy cores are counted, and that a
-real busy process is seen."""
+"""A run whose OpenMP threads would share their cores with other busy processes
+(sphere_cli/runtime.py): when its threads are made to wait passively and when it is warned
+instead, how the busy cores are counted, and that a real busy process is seen."""
 
 from __future__ import annotations
 
@@ -9,10 +9,12 @@ import subprocess
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import pytest
 
-from sphere_cli.runtime import busy_cores, measure_busy_cores, shared_cores_note
+from sphere_cli import runtime
+from sphere_cli.runtime import busy_cores, measure_busy_cores, shared_cores_note, start_threads
 
 # first lines of /proc/stat: user nice system idle iowait irq softirq steal guest guest_nice
 LINE = "cpu  {user} 0 {system} {idle} {iowait} 0 {softirq} {steal} 0 0\nintr 1 2 3\n"
@@ -94,3 +96,46 @@ def test_a_busy_process_on_every_core_is_seen():
     # every core runs one spinning child; the lower bound leaves 40 % to a hypervisor's steal,
     # which is not counted as busy; no core is busier than all the time
     assert busy is not None and 0.6 * cores <= busy <= 1.02 * cores
+
+
+# a case whose thread count is NUMBA_NUM_THREADS (set_threads leaves the test's threads alone)
+ALL_THREADS = SimpleNamespace(simulation=SimpleNamespace(threads=None))
+
+
+@pytest.fixture
+def busy_machine(monkeypatch):
+    """Every core kept busy by others, as shared_cores would measure it."""
+    monkeypatch.setattr(runtime, "shared_cores", lambda threads, **machine: (2.0, 2))
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    return monkeypatch
+
+
+def test_threads_not_yet_started_are_made_to_wait_passively(busy_machine, capsys):
+    busy_machine.setattr(runtime, "threads_started", lambda: False)
+    note = start_threads(ALL_THREADS)
+    assert os.environ["OMP_WAIT_POLICY"] == "PASSIVE"  # set before OpenMP reads it
+    assert note.startswith("other processes keep 2.0 of this machine's 2 cores busy")
+    assert "wait passively (OMP_WAIT_POLICY=PASSIVE)" in note and "OMP_WAIT_POLICY=ACTIVE" in note
+    assert capsys.readouterr().err == f"sphere: note: {note}\n"
+
+
+@pytest.mark.parametrize("chosen, started", [("ACTIVE", False), ("", True)])
+def test_a_chosen_policy_or_started_threads_get_the_warning(busy_machine, capsys, chosen, started):
+    """The user's OMP_WAIT_POLICY is kept; threads already started (an earlier run in this
+    process) no longer read it: either way the run is warned."""
+    if chosen:
+        busy_machine.setenv("OMP_WAIT_POLICY", chosen)
+    busy_machine.setattr(runtime, "threads_started", lambda: started)
+    note = start_threads(ALL_THREADS)
+    assert os.environ.get("OMP_WAIT_POLICY", "") == chosen
+    assert "set OMP_WAIT_POLICY=PASSIVE" in note
+    assert capsys.readouterr().err == f"sphere: warning: {note}\n"
+
+
+def test_free_cores_leave_the_threads_spinning(monkeypatch, capsys):
+    monkeypatch.setattr(runtime, "shared_cores", lambda threads, **machine: None)
+    monkeypatch.setattr(runtime, "threads_started", lambda: False)
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    assert start_threads(ALL_THREADS) is None
+    assert "OMP_WAIT_POLICY" not in os.environ
+    assert capsys.readouterr().err == ""
