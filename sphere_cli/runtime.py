@@ -173,7 +173,7 @@ def threads_started() -> bool:
 
 def start_threads(case) -> str | None:
     """The run's threads, with a wait policy for the cores they get. Where other busy processes
-    share those cores (shared_cores_note), OMP_WAIT_POLICY is unset and the threads have not
+    share those cores (shared_cores), OMP_WAIT_POLICY is unset and the threads have not
     started in this process, the threads are made to wait passively (a note on stderr); where
     the policy is the user's, or too late to set, a warning says what to do. Returns that line
     for the run's log. Called once the command is known to go ahead and before any kernel runs,
