@@ -119,21 +119,14 @@ def test_the_fallback_resubmission_of_an_array_task_is_not_seeded_again(job, tmp
     assert not (tmp_path / "cases" / "bed-seed3-seed3.toml").exists()
 
 
-def test_make_demo_waits_passively_unless_told_otherwise():
-    """`make demo` on a shared machine: OpenMP threads that spin made it 20 times slower."""
+def test_make_demo_leaves_the_wait_policy_to_sphere():
+    """`make demo` sets no OMP_WAIT_POLICY of its own: sphere chooses from the cores' load at the
+    start (passive where other processes keep them busy: tests/cli/test_shared_cores_warning.py),
+    and one the user exports reaches it unchanged. Forcing PASSIVE made it 6.6 x slower on free
+    cores; forcing spinning, 20 x slower on a shared machine."""
     root = SCRIPT.parents[2]
     recipe = subprocess.run(["make", "-n", "demo"], cwd=root, capture_output=True, text=True)
     assert recipe.returncode == 0, recipe.stderr
     run = next(line for line in recipe.stdout.splitlines() if "sphere run configs/demo.toml" in line)
-    assert run.startswith("OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-PASSIVE} "), run
-    for policy, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
-        env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-        if policy:
-            env["OMP_WAIT_POLICY"] = policy
-        shell = subprocess.run(
-            ["sh", "-c", run.split(" ")[0] + " sh -c 'echo $OMP_WAIT_POLICY'"],
-            env=env,
-            capture_output=True,
-            text=True,
-        )
-        assert shell.stdout.strip() == expected
+    assert run.split(" ")[0].endswith("/sphere"), run
+    assert "OMP_WAIT_POLICY" not in recipe.stdout, recipe.stdout
