@@ -390,11 +390,10 @@ class RankSteps:
         comm, mpi = self.world.comm, self.world.mpi
         moved, largest = np.zeros(1), np.zeros(1)
         fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
-        kernels = self._kernels()
+        drift_call, contacts_call, kick_call = self._kernels()
         for _ in range(steps):
             part = self.part
             state = part.state
-            drift_call, contacts_call, kick_call = kernels
             if part.wall_motion is not None:
                 part.wall_motion.kick_drift(state)
             if state.particles.count:
@@ -406,8 +405,7 @@ class RankSteps:
                 self._rebuild()
                 part = self.part
                 state = part.state
-                kernels = self._kernels()
-                drift_call, contacts_call, kick_call = kernels
+                drift_call, contacts_call, kick_call = self._kernels()
             started = time.perf_counter()
             if state.particles.count:
                 if part.wall_motion is None:
