@@ -151,12 +151,21 @@ def refuse_many_ranks(joined: bool) -> None:
             )
 
 
+def run_threads(case) -> int:
+    """The run's thread count: `simulation.threads`, or all that NUMBA_NUM_THREADS allows, never
+    more (read from Numba's configuration: asking Numba itself would start its threads)."""
+    import numba
+
+    allowed = numba.config.NUMBA_NUM_THREADS
+    return allowed if case.simulation.threads is None else min(case.simulation.threads, allowed)
+
+
 def set_threads(case) -> None:
-    """The Numba threads of `simulation.threads`, never more than NUMBA_NUM_THREADS allows."""
+    """The Numba threads of `simulation.threads` (run_threads); left as they are without it."""
     if case.simulation.threads is not None:
         import numba
 
-        numba.set_num_threads(min(case.simulation.threads, numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(run_threads(case))
 
 
 def threads_started() -> bool:
@@ -182,8 +191,7 @@ def start_threads(case) -> str | None:
 
     chosen = os.environ.get("OMP_WAIT_POLICY", "").strip()
     if not chosen and not threads_started():
-        allowed = numba.config.NUMBA_NUM_THREADS
-        threads = allowed if case.simulation.threads is None else min(case.simulation.threads, allowed)
+        threads = run_threads(case)
         shared = shared_cores(threads)
         note = None
         if shared is not None:
