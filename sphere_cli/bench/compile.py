@@ -8,6 +8,8 @@ child from before `import sphere_cli` to the end of its first steps, taken both 
 time in the compiled loop (physics/compiled_steps.py) and one at a time through the hooks, so
 that every kernel of a dry run is compiled or loaded (the neighbour build and its sort, the pair
 and wall contacts, the kicks, the compiled loop). Python's start-up is not counted.
+With a spare core, a cold run compiles half of those in a helper process (compile_ahead.py),
+as any run does; its time is in the figure.
 """
 
 from __future__ import annotations

@@ -105,21 +105,7 @@ class NeighborSearch(Module):
         else:
             used = sort_occupied(self.cell_of, self.order, self.cell_key, self.cell_start)
         while True:
-            build_lists(
-                p.pos,
-                p.radius,
-                box.length,
-                box.periodic,
-                self.ncell,
-                self.cell_of,
-                self.cell_start,
-                self.cell_key,
-                used,
-                self.order,
-                nl.skin,
-                self.spare_nbr,
-                self.spare_count,
-            )
+            build_lists(*self.list_arguments(state, used))
             needed = self.longest(int(self.spare_count.max()) if p.count else 0)
             if needed <= nl.nbr.shape[1]:
                 break
@@ -153,6 +139,26 @@ class NeighborSearch(Module):
         nl.moved2 = 0.0
         nl.builds += 1
         self._reverse(nl)
+
+    def list_arguments(self, state: State, used: int = -1) -> tuple:
+        """The arguments of build_lists (kernels/neighbors.py) into the spare rows, the cells
+        sorted (`used`: the occupied cells of a sparse grid, -1 for a dense one)."""
+        box, p, nl = state.box, state.particles, state.neighbors
+        return (
+            p.pos,
+            p.radius,
+            box.length,
+            box.periodic,
+            self.ncell,
+            self.cell_of,
+            self.cell_start,
+            self.cell_key,
+            used,
+            self.order,
+            nl.skin,
+            self.spare_nbr,
+            self.spare_count,
+        )
 
     @staticmethod
     def _reverse(nl: NeighborList) -> None:

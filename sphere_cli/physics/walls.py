@@ -273,6 +273,16 @@ class PlaneWallForces(Module):
             state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces
         )
 
+    def argument_example(self, state: State) -> tuple:
+        """Arguments of wall_forces of the types kernel_arguments gives, made without listing
+        the particles near the walls (sphere_cli/compile_ahead.py compiles from their types)."""
+        hist = state.walls.hist
+        springs = np.zeros(state.particles.count, dtype=np.uint64)
+        p = state.particles
+        return self._arguments(
+            state, None, hist, p.force, p.torque, springs, self._near, self._reach, self._pieces
+        )
+
     def _arguments(
         self,
         state: State,

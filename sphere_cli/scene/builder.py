@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import ranks
+from .. import compile_ahead, ranks
 from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
@@ -249,12 +249,16 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         scene.budget = EnergyBudget(scene)
     scene.order_modules()
     if restart is None:
-        if stages is not None:
-            stages.begin(state, 0)
-        neighbors.rebuild(state)
-        _check_overlaps(loaded, state)
-        if fluid is not None:
-            fluid.initialize(state)
+        helper = compile_ahead.start(scene)
+        try:
+            if stages is not None:
+                stages.begin(state, 0)
+            neighbors.rebuild(state)
+            _check_overlaps(loaded, state)
+            if fluid is not None:
+                fluid.initialize(state)
+        finally:
+            compile_ahead.finish(helper)
         scene.compute_initial_forces()
         if scene.budget is not None:
             scene.budget.start()

@@ -1,0 +1,140 @@
+"""Kernels compiled in a helper process while this one compiles others, on an empty cache.
+
+A dry scene's first run waits some 25 s for Numba to compile its kernels, one after the other:
+Numba compiles under one lock per process. Where the cache holds none of them yet and a core is
+free, `start` hands the kick-drift, the kick and the plane walls' contacts (about 7 s of compile)
+to `python -m sphere_cli.compile_ahead`, which compiles them into the same cache, while this
+process compiles the pair sweep (about 9 s) and builds the neighbour list; `finish` waits for it
+before the first forces, which then load its kernels from the cache. The helper compiles the
+same code the run would, so results do not change; a helper that fails leaves the compiles to
+the run, as before. Only a fresh run on the CPU and one rank does this (docs/performance.md,
+"Compile time").
+"""
+
+from __future__ import annotations
+
+import importlib
+import pickle
+import subprocess
+import sys
+
+from . import runtime
+
+# the most a run waits for its helper [s] (it compiles in about 10 s on this project's machine)
+WAIT_SECONDS = 300.0
+
+
+def _cold(dispatcher) -> bool:
+    """True if Numba's cache holds no compiled version of this kernel for its source now."""
+    try:
+        return not dispatcher._cache._cache_file._load_index()
+    except Exception:  # noqa: BLE001 - a Numba without this layout: treat the cache as filled
+        return False
+
+
+def _named(dispatcher) -> tuple[str, str]:
+    """(module, attribute) by which the helper imports `dispatcher` (a serial twin shares its
+    kernel's Python function name, so the attribute is looked up, not taken from it)."""
+    module = dispatcher.py_func.__module__
+    for name, value in vars(importlib.import_module(module)).items():
+        if value is dispatcher:
+            return module, name
+    raise LookupError(f"{dispatcher} is not an attribute of {module}")
+
+
+def _signature(kernel, arguments: tuple) -> tuple:
+    """The signature a call of `kernel` with `arguments` compiles."""
+    return tuple(kernel.typeof_pyval(a) for a in arguments)
+
+
+def helper_jobs(scene) -> list[tuple]:
+    """(kernel, example arguments) of the kernels the helper compiles: the neighbour build, the
+    kick-drift, the kick and the plane walls' contacts, those the scene's step calls."""
+    from .kernels.motion import kick, kick_drift, kick_drift_serial, kick_serial
+    from .kernels.neighbors import build_lists
+    from .kernels.serial import use_serial
+    from .kernels.walls import wall_forces, wall_forces_serial
+    from .physics.motion import Motion
+
+    state, compiled = scene.state, scene.step.compiled
+    serial = use_serial(state.particles.count)
+    jobs = [
+        (build_lists, compiled.search.list_arguments(state)),
+        (kick_drift_serial if serial else kick_drift, Motion.drift_arguments(state)),
+        (kick_serial if serial else kick, Motion.kick_arguments(state)),
+    ]
+    if compiled.walls is not None:
+        jobs.append((wall_forces_serial if serial else wall_forces, compiled.walls.argument_example(state)))
+    return jobs
+
+
+def own_jobs(scene) -> list[tuple]:
+    """(kernel, arguments) of the pair sweep, which this process compiles meanwhile."""
+    from .kernels.contact import chunk_pair_forces, cross_chunk_pairs
+
+    cross, pairs = scene.step.compiled.contact.kernel_arguments(scene.state)
+    jobs = [] if cross is None else [(cross_chunk_pairs, cross)]
+    return [*jobs, (chunk_pair_forces, pairs)]
+
+
+def spare_core(busy: float | None, cores: int) -> bool:
+    """True if a core is free for the helper besides this process (`busy`: the cores other
+    processes keep busy, None where unknown)."""
+    return busy is not None and cores - busy >= 2 - runtime.MARGIN_CORES
+
+
+def start(scene, busy: float | None = None) -> subprocess.Popen | None:
+    """Start the helper for this scene's kernels and compile the pair sweep here (module
+    docstring); None where the cache already has the pair sweep, no core is spare (`busy`: the
+    busy cores, measured when not given), or the scene's step is not the compiled one-rank CPU
+    step."""
+    from .kernels.contact import chunk_pair_forces
+    from .physics.compiled_steps import CompiledSteps
+
+    if type(scene.step.compiled) is not CompiledSteps or not _cold(chunk_pair_forces):
+        return None
+    if not spare_core(runtime.measure_busy_cores() if busy is None else busy, runtime.usable_cores()):
+        return None
+    jobs = [(*_named(kernel), _signature(kernel, arguments)) for kernel, arguments in helper_jobs(scene)]
+    try:
+        helper = subprocess.Popen(
+            [sys.executable, "-m", "sphere_cli.compile_ahead"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        helper.stdin.write(pickle.dumps(jobs))
+        helper.stdin.close()
+    except OSError:
+        return None
+    try:
+        for kernel, arguments in own_jobs(scene):
+            kernel.compile(_signature(kernel, arguments))
+    except BaseException:
+        helper.kill()
+        helper.wait()
+        raise
+    return helper
+
+
+def finish(helper: subprocess.Popen | None) -> None:
+    """Wait for the helper (or stop it after WAIT_SECONDS: the run then compiles the rest)."""
+    if helper is None:
+        return
+    try:
+        helper.wait(timeout=WAIT_SECONDS)
+    except subprocess.TimeoutExpired:
+        helper.kill()
+        helper.wait()
+
+
+def main() -> int:
+    """The helper: compile each (module, attribute, signature) read from stdin (pickled)."""
+    jobs = pickle.load(sys.stdin.buffer)
+    for module, name, signature in jobs:
+        getattr(importlib.import_module(module), name).compile(signature)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

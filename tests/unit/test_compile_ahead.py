@@ -1,0 +1,82 @@
+"""Kernels compiled ahead in a helper process on an empty cache (sphere_cli/compile_ahead.py): the
+helper compiles exactly what the run then loads instead of compiling it, and nothing starts where
+the cache already holds the kernels or no core is spare."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from sphere_cli import compile_ahead
+from sphere_cli.bench.dem import canonical_case
+from sphere_cli.config.load import parse_case
+from sphere_cli.scene.builder import build_scene
+from sphere_cli.simulation import advance
+
+
+@pytest.mark.parametrize("n", [64, 256])  # the serial twins below 200 particles on one thread
+def test_the_jobs_are_the_kernels_the_run_compiles(n):
+    scene = build_scene(parse_case(canonical_case(n)))
+    jobs = compile_ahead.helper_jobs(scene) + compile_ahead.own_jobs(scene)
+    scene.step.compiled = None  # the hooks call each kernel itself (a cached loop calls its own copies)
+    advance(scene, 30)
+    assert len(jobs) >= 5  # the build, the kick-drift, the kick, the walls, the pair sweep
+    for kernel, arguments in jobs:
+        assert compile_ahead._signature(kernel, arguments) in kernel.signatures, kernel
+
+
+def test_nothing_starts_on_a_filled_cache():
+    scene = build_scene(parse_case(canonical_case(64)))  # its kernels are in the cache now
+    assert compile_ahead.start(scene, busy=0.0) is None
+
+
+@pytest.mark.parametrize(
+    ("busy", "cores", "spare"),
+    [(0.0, 2, True), (0.2, 2, True), (1.0, 2, False), (None, 8, False), (0.0, 1, False)],
+)
+def test_the_helper_needs_a_spare_core(busy, cores, spare):
+    assert compile_ahead.spare_core(busy, cores) is spare
+
+
+# a dry scene built on an empty cache with a spare core (the sample of busy cores replaced)
+COLD_RUN = """
+import json
+from sphere_cli import compile_ahead, runtime
+from sphere_cli.bench.dem import canonical_case
+from sphere_cli.config.load import parse_case
+from sphere_cli.scene.builder import build_scene
+from sphere_cli.simulation import advance
+
+runtime.measure_busy_cores = lambda: 0.0
+started = []
+start = compile_ahead.start
+compile_ahead.start = lambda scene: started.append(start(scene)) or started[-1]
+scene = build_scene(parse_case(canonical_case(256)))
+advance(scene, 5)
+helper = started[0]
+def counts(jobs, what):
+    return {k.py_func.__name__: sum(getattr(k.stats, what).values()) for k, _ in jobs}
+print(json.dumps({
+    "started": helper is not None,
+    "helper_exit": None if helper is None else helper.returncode,
+    "loaded": counts(compile_ahead.helper_jobs(scene), "cache_hits"),
+    "compiled": counts(compile_ahead.own_jobs(scene), "cache_misses"),
+}))
+"""
+
+
+def test_a_cold_run_loads_what_its_helper_compiled(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "NUMBA_NUM_THREADS": "1"}
+    command = [sys.executable, "-c", COLD_RUN]
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["started"] and report["helper_exit"] == 0
+    # each of the helper's kernels came from the cache here, the pair sweep was compiled here
+    assert set(report["loaded"]) == {"build_lists", "kick_drift", "kick", "wall_forces"}
+    assert all(hits == 1 for hits in report["loaded"].values()), report
+    assert report["compiled"] == {"chunk_pair_forces": 1}
