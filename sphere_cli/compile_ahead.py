@@ -1,22 +1,24 @@
 """Kernels compiled in a helper process while this one compiles others, on an empty cache.
 
-A dry scene's first run waits some 25 s for Numba to compile its kernels, one after the other:
-Numba compiles under one lock per process. Where the cache holds none of them yet and a core is
-free, `start` hands the kick-drift, the kick and the plane walls' contacts (about 7 s of compile)
-to `python -m sphere_cli.compile_ahead`, which compiles them into the same cache, while this
-process compiles the pair sweep (about 9 s) and builds the neighbour list; `finish` waits for it
-before the first forces, which then load its kernels from the cache. The helper compiles the
-same code the run would, so results do not change; a helper that fails leaves the compiles to
-the run, as before. Only a fresh run on the CPU and one rank does this (docs/performance.md,
-"Compile time").
+A dry scene's first run waited 23-26 s for Numba to compile its kernels, one after the other:
+Numba compiles one at a time in a process. Where the cache does not hold the pair sweep yet and
+a core is spare, `start` hands the neighbour build (first: the run needs it next), the
+kick-drift, the kick and the plane walls' contacts to `python -m sphere_cli.compile_ahead`,
+which compiles them into the same cache, while this process compiles the pair sweep; `finish`
+waits for the helper before the first forces, and the run loads its kernels from the cache.
+The helper compiles the code the run would, so results do not change; a helper that fails
+leaves the compiles to the run, as before. Only a new run (not a resumed one) on the CPU and
+one rank does this (docs/performance.md, "Compiled in two processes").
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 import pickle
 import subprocess
 import sys
+from pathlib import Path
 
 from . import runtime
 
@@ -97,11 +99,15 @@ def start(scene, busy: float | None = None) -> subprocess.Popen | None:
         return None
     jobs = [(*_named(kernel), _signature(kernel, arguments)) for kernel, arguments in helper_jobs(scene)]
     try:
+        # the helper imports this very package, wherever this process found it
+        found = str(Path(__file__).resolve().parents[1])
+        path = os.pathsep.join(filter(None, (found, os.environ.get("PYTHONPATH"))))
         helper = subprocess.Popen(
             [sys.executable, "-m", "sphere_cli.compile_ahead"],
             stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
+            env={**os.environ, "PYTHONPATH": path},
         )
         helper.stdin.write(pickle.dumps(jobs))
         helper.stdin.close()

@@ -9,7 +9,7 @@ time in the compiled loop (physics/compiled_steps.py) and one at a time through 
 that every kernel of a dry run is compiled or loaded (the neighbour build and its sort, the pair
 and wall contacts, the kicks, the compiled loop). Python's start-up is not counted.
 With a spare core, a cold run compiles half of those in a helper process (compile_ahead.py),
-as any run does; its time is in the figure.
+as any new run does; the first steps wait for it, so the figure includes it.
 """
 
 from __future__ import annotations
