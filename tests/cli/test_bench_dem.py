@@ -20,6 +20,10 @@ def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
     report = json.loads((tmp_path / "out" / "bench.json").read_text())
     assert report["steps"] == 3 and report["repeats"] == 2
     assert report["first_call_seconds"] > 0
+    # figures compare only on the same processor: it is named, with its caches and Numba's target
+    machine = report["machine"]
+    assert machine["processor"] and machine["compiled_for"] and machine["cpu_count"] >= 1
+    assert set(machine["caches"]) >= {"L1", "L2"}
     rows = report["rows"]
     assert [r["threads"] for r in rows] == [1, 2][: len(rows)] and rows
     for row in rows:
