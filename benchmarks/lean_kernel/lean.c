@@ -1,7 +1,8 @@
 /* A lean hand-written kernel of the canonical benchmark scene, the yardstick that docs/performance.md
  * compares sphere with: one material, linear spring-dashpot normal law (dashpot at the predicted
  * velocity, never attractive), tangential spring rotated into the contact plane with a Coulomb cap,
- * plane walls, gravity, velocity Verlet; scalar code, one thread. It works on sphere's own arrays
+ * the force of a contact's first and last step averaged over the step (sphere's contact window,
+ * kernels/laws.py), plane walls, gravity, velocity Verlet; scalar code, one thread. It works on sphere's own arrays
  * (positions, velocities, the half neighbour list and its packed springs), so the comparison is of
  * the kernels alone. Built and driven by compare.py; not part of sphere. */
 #include <math.h>
@@ -39,9 +40,10 @@ void lean_kick(int64_t n, double *vel, double *angvel, const double *force, cons
     }
 }
 
-/* The tangential spring x (rotated, grown by the slip vt dt, capped at mu fn); returns the force in g. */
+/* The tangential spring x (rotated, grown by the slip vt dt, capped at mu fn; a sticking force
+ * weighted by `end` at the parting); returns the force in g. */
 static inline void spring(double *x, const double vt[3], const double n[3], const double ut[3], double kt,
-                          double ct, double mu, double fn, double dt, double g[3]) {
+                          double ct, double mu, double fn, double dt, double end, double g[3]) {
     double x0 = x[0], x1 = x[1], x2 = x[2];
     double old2 = x0 * x0 + x1 * x1 + x2 * x2;
     if (old2 > 0.0) {
@@ -60,6 +62,9 @@ static inline void spring(double *x, const double vt[3], const double n[3], cons
         double r = cap / sqrt(ft2);
         f0 *= r; f1 *= r; f2 *= r;
         x0 = -f0 / kt; x1 = -f1 / kt; x2 = -f2 / kt;
+    } else {
+        double weight = ft2 * end * end > cap * cap ? cap / sqrt(ft2) : end;
+        f0 *= weight; f1 *= weight; f2 *= weight;
     }
     x[0] = x0; x[1] = x1; x[2] = x2;
     g[0] = f0; g[1] = f1; g[2] = f2;
@@ -73,6 +78,33 @@ static inline double slip(const double v[3], const double w[3], const double n[3
     double un = u0 * n[0] + u1 * n[1] + u2 * n[2];
     t[0] = u0 - un * n[0]; t[1] = u1 - un * n[1]; t[2] = u2 - un * n[2];
     return un;
+}
+
+/* The normal force of overlap delta (kn delta - cn un, never attractive) and the spring's growth
+ * and end weight: on the first step of a contact (its surfaces closed by more than delta over
+ * the step at vn) and on the last one (they will part within it at un), the elastic force is the
+ * mean over the step and the dashpot acts from the touch; *grow is the fraction of the step's
+ * slip that the contact has lasted, *end the part of the step a sticking force acts before the
+ * parting. */
+static inline double normal(double kn, double cn, double delta, double vn, double un, double dt, double *grow,
+                            double *end) {
+    double travel = 0.0, elastic = kn * delta, damper = cn * un;
+    *grow = 1.0;
+    *end = 1.0;
+    if (-vn * dt > delta) {
+        travel = -vn * dt;
+        *grow = delta / travel;
+    } else if (un * dt > delta) {
+        travel = un * dt;
+        *end = (delta + 0.5 * travel) / travel;
+    }
+    if (travel > 0.0) {
+        double x = delta + 0.5 * travel;
+        elastic = 0.5 * kn * x * x / travel;
+        if (*grow < 1.0) damper *= x / travel;
+    }
+    double fn = elastic - damper;
+    return fn < 0.0 ? 0.0 : fn;
 }
 
 /* Forces and torques of the scene: gravity, every listed pair (pair (i, nbr[i*C+k]) has its spring
@@ -111,11 +143,9 @@ void lean_forces(int64_t n, int64_t C, const double *pos, const double *vel, con
                 vp[a] = vel_pred[3 * i + a] - vel_pred[3 * j + a];
                 wp[a] = angvel_pred[3 * i + a] + angvel_pred[3 * j + a];
             }
-            slip(v, w, nn, r, vt);
-            double un = slip(vp, wp, nn, r, ut);
-            double fn = pp[0] * (2.0 * r - dist) - pp[2] * un;
-            if (fn < 0.0) fn = 0.0;
-            spring(x, vt, nn, ut, pp[1], pp[3], pp[4], fn, dt, gg);
+            double vn = slip(v, w, nn, r, vt), un = slip(vp, wp, nn, r, ut), grow, end;
+            double fn = normal(pp[0], pp[2], 2.0 * r - dist, vn, un, dt, &grow, &end);
+            spring(x, vt, nn, ut, pp[1], pp[3], pp[4], fn, dt * grow, end, gg);
             double c[3] = {r * (nn[1] * gg[2] - nn[2] * gg[1]), r * (nn[2] * gg[0] - nn[0] * gg[2]),
                            r * (nn[0] * gg[1] - nn[1] * gg[0])};
             for (int a = 0; a < 3; a++) {
@@ -136,11 +166,10 @@ void lean_forces(int64_t n, int64_t C, const double *pos, const double *vel, con
             }
             double nn[3] = {0.0, 0.0, 0.0}, vt[3], ut[3], gg[3];
             nn[a] = sign;
-            slip(vel + 3 * i, angvel + 3 * i, nn, r, vt);
+            double vn = slip(vel + 3 * i, angvel + 3 * i, nn, r, vt), grow, end;
             double un = slip(vel_pred + 3 * i, angvel_pred + 3 * i, nn, r, ut);
-            double fn = pw[0] * (r - gap) - pw[2] * un;
-            if (fn < 0.0) fn = 0.0;
-            spring(x, vt, nn, ut, pw[1], pw[3], pw[4], fn, dt, gg);
+            double fn = normal(pw[0], pw[2], r - gap, vn, un, dt, &grow, &end);
+            spring(x, vt, nn, ut, pw[1], pw[3], pw[4], fn, dt * grow, end, gg);
             f[0] += fn * nn[0] + gg[0]; f[1] += fn * nn[1] + gg[1]; f[2] += fn * nn[2] + gg[2];
             t[0] -= r * (nn[1] * gg[2] - nn[2] * gg[1]);
             t[1] -= r * (nn[2] * gg[0] - nn[0] * gg[2]);
