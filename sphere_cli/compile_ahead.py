@@ -8,7 +8,8 @@ which compiles them into the same cache, while this process compiles the pair sw
 waits for the helper before the first forces, and the run loads its kernels from the cache.
 The helper compiles the code the run would, so results do not change; a helper that fails
 leaves the compiles to the run, as before. Only a new run (not a resumed one) on the CPU and
-one rank does this (docs/performance.md, "Compiled in two processes").
+one rank does this, whether its steps run in the compiled loop or through the hooks (a
+Navier-Stokes or Darcy fluid): docs/performance.md, "Compiled in two processes".
 """
 
 from __future__ import annotations
@@ -58,15 +59,15 @@ def helper_jobs(scene) -> list[tuple]:
     from .kernels.walls import wall_forces, wall_forces_serial
     from .physics.motion import Motion
 
-    state, compiled = scene.state, scene.step.compiled
+    state = scene.state
     serial = use_serial(state.particles.count)
     jobs = [
-        (build_lists, compiled.search.list_arguments(state)),
+        (build_lists, scene.neighbors.list_arguments(state)),
         (kick_drift_serial if serial else kick_drift, Motion.drift_arguments(state)),
         (kick_serial if serial else kick, Motion.kick_arguments(state)),
     ]
-    if compiled.walls is not None:
-        jobs.append((wall_forces_serial if serial else wall_forces, compiled.walls.argument_example(state)))
+    if scene.walls is not None:
+        jobs.append((wall_forces_serial if serial else wall_forces, scene.walls.argument_example(state)))
     return jobs
 
 
@@ -74,7 +75,7 @@ def own_jobs(scene) -> list[tuple]:
     """(kernel, arguments) of the pair sweep, which this process compiles meanwhile."""
     from .kernels.contact import chunk_pair_forces, cross_chunk_pairs
 
-    cross, pairs = scene.step.compiled.contact.kernel_arguments(scene.state)
+    cross, pairs = scene.contact.kernel_arguments(scene.state)
     jobs = [] if cross is None else [(cross_chunk_pairs, cross)]
     return [*jobs, (chunk_pair_forces, pairs)]
 
@@ -88,12 +89,15 @@ def spare_core(busy: float | None, cores: int) -> bool:
 def start(scene, busy: float | None = None) -> subprocess.Popen | None:
     """Start the helper for this scene's kernels and compile the pair sweep here (module
     docstring); None where the cache already has the pair sweep, no core is spare (`busy`: the
-    busy cores, measured when not given), or the scene's step is not the compiled one-rank CPU
-    step."""
+    busy cores, measured when not given), or the steps are not the one-rank CPU steps (those of
+    physics/compiled_steps.py, or the hooks)."""
     from .kernels.contact import chunk_pair_forces
     from .physics.compiled_steps import CompiledSteps
 
-    if type(scene.step.compiled) is not CompiledSteps or not _cold(chunk_pair_forces):
+    compiled = scene.step.compiled
+    if compiled is not None and type(compiled) is not CompiledSteps:
+        return None  # on ranks or a GPU
+    if scene.contact is None or not _cold(chunk_pair_forces):
         return None
     if not spare_core(runtime.measure_busy_cores() if busy is None else busy, runtime.usable_cores()):
         return None
