@@ -8,9 +8,11 @@ A peer that is not installed is skipped, saying so (`make bench-peers` installs 
 
     python benchmarks/peers/compare.py [N] [steps per round] [rounds] [threads ...]
 
-Each thread count T compares sphere on T threads with each peer on T MPI ranks. Prints the
-particle-steps per second of each code and the ratios sphere / peer, round by round, with their
-median and range; writes them to bench-results/peers-N.json."""
+Each thread count T compares sphere on T threads with each peer on T MPI ranks; for T > 1,
+sphere on T MPI ranks of one thread (`sphere bench ranks`' member, the mpich wheel's mpiexec)
+runs in the same rounds too ("sphere ranks"). Prints the particle-steps per second of each code
+and the ratios sphere / peer, round by round, with their median and range; writes them to
+bench-results/peers-N.json."""
 
 import json
 import math
@@ -28,6 +30,7 @@ import numpy as np
 
 from sphere_cli.bench import machine
 from sphere_cli.bench.dem import settled_scene
+from sphere_cli.bench.ranks import mpiexec, time_on_ranks
 from sphere_cli.kernels.laws import D_N, D_T, K_N, K_T, MU
 from sphere_cli.simulation import advance
 
@@ -126,25 +129,30 @@ def main(n: int, steps: int, rounds: int, threads: list[int]) -> dict:
     for t in threads:
         numba.set_num_threads(t)
         advance(scene, 5)
-        rates = {"sphere": []} | {name: [] for name in peers}
+        ours = ["sphere"] + (["sphere ranks"] if t > 1 else [])
+        rates = {name: [] for name in ours} | {name: [] for name in peers}
         for _ in range(rounds):
             t0 = time.perf_counter()
             advance(scene, steps)
             rates["sphere"].append(n * steps / (time.perf_counter() - t0))
+            if t > 1:
+                timing = time_on_ranks(mpiexec(), t, n, steps, 1)
+                rates["sphere ranks"].append(n * steps / timing["seconds"][0])
             for name, (program, script) in peers.items():
                 seconds, thermo = run_peer(program, script, variables, t, workdir)
                 if int(thermo[1]) != n or not float(thermo[2]) < ke_limit:
                     sys.exit(f"{name} lost particles or the bed did not stay at rest: {thermo}")
                 rates[name].append(n * steps / seconds)
         for name, r in rates.items():
-            print(f"N = {n}, {t} thread(s)/rank(s), {name:8s}: median {np.median(r) / 1e6:.2f} M, "
+            print(f"N = {n}, {t} thread(s)/rank(s), {name:12s}: median {np.median(r) / 1e6:.2f} M, "
                   f"best {max(r) / 1e6:.2f} M particle-steps/s ({rounds} x {steps} steps)")  # fmt: skip
         row = {"threads": t, "rates": rates, "ratios": {}}
-        for name in peers:
-            ratio = np.array(rates["sphere"]) / np.array(rates[name])
-            row["ratios"][name] = ratio.tolist()
-            print(f"N = {n}, {t} thread(s)/rank(s): sphere / {name}, round by round: median "
-                  f"{np.median(ratio):.2f} (min {ratio.min():.2f}, max {ratio.max():.2f})")  # fmt: skip
+        for ours_name in ours:
+            for name in peers:
+                ratio = np.array(rates[ours_name]) / np.array(rates[name])
+                row["ratios"][f"{ours_name} / {name}"] = ratio.tolist()
+                print(f"N = {n}, {t} thread(s)/rank(s): {ours_name} / {name}, round by round: median "
+                      f"{np.median(ratio):.2f} (min {ratio.min():.2f}, max {ratio.max():.2f})")  # fmt: skip
         results["rows"].append(row)
     out = Path("bench-results")
     out.mkdir(exist_ok=True)

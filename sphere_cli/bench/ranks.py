@@ -60,6 +60,18 @@ def member(n: int, steps: int, repeats: int) -> None:
         print(json.dumps(timing), flush=True)
 
 
+def time_on_ranks(launcher: str, k: int, n: int, steps: int, repeats: int) -> dict:
+    """One `member` run on k ranks of one thread each, in its own process group: its timings
+    (also benchmarks/peers/compare.py, beside the peers' ranks)."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
+    command = [launcher, "-n", str(k), sys.executable, "-m", "sphere_cli", "bench", "ranks-member"]
+    command += [str(n), str(steps), str(repeats)]
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
 def run_ranks_benchmark(
     sizes=(100_000,),
     rank_counts=(1, 2),
@@ -72,28 +84,13 @@ def run_ranks_benchmark(
     out_dir.mkdir(parents=True, exist_ok=True)
     launcher = mpiexec()
     results = {"machine": machine(), "steps": steps, "repeats": repeats, "rounds": rounds, "rows": []}
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE"}
     for n in sizes:
         settled_scene(n, log)  # settled once here (cached), before any timing
         seconds = {k: [] for k in rank_counts}
         gathers = {k: [] for k in rank_counts}
         for round_ in range(rounds):
             for k in rank_counts:
-                command = [
-                    launcher,
-                    "-n",
-                    str(k),
-                    sys.executable,
-                    "-m",
-                    "sphere_cli",
-                    "bench",
-                    "ranks-member",
-                ]
-                command += [str(n), str(steps), str(repeats)]
-                done = subprocess.run(command, capture_output=True, text=True, env=env)
-                if done.returncode != 0:
-                    raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
-                timing = json.loads(done.stdout.strip().splitlines()[-1])
+                timing = time_on_ranks(launcher, k, n, steps, repeats)
                 seconds[k].append(statistics.median(timing["seconds"]))
                 gathers[k].append(statistics.median(timing["gather_seconds"]))
                 log(f"N = {n}, round {round_ + 1}, {k} rank(s): {n * steps / seconds[k][-1] / 1e6:.2f} M/s")

@@ -3,9 +3,12 @@ reports its rows; no timing is asserted (a shared machine makes any bound loose 
 
 from __future__ import annotations
 
+import json
 import re
+import statistics
 from pathlib import Path
 
+import numba
 from cli_test_support import assert_clean_error, sphere_inproc
 
 BEDLOAD = Path(__file__).parents[2] / "configs" / "bedload.toml"
@@ -56,3 +59,21 @@ def test_help_of_every_benchmark():
     for name in ("dem", "fluid", "darcy", "vans1d", "grid"):
         result = sphere_inproc("bench", name, "--help")
         assert result.code == 0 and "Usage" in result.stdout, name
+
+
+def test_ranks_bench_times_one_and_two_ranks_side_by_side(tmp_path, monkeypatch):
+    # the settled bed goes to this test's own cache (settled once: 0.15 s of 64 spheres); the
+    # ranks load the kernels this process has compiled
+    monkeypatch.setenv("NUMBA_CACHE_DIR", numba.config.CACHE_DIR)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    result = sphere_inproc(
+        "bench", "ranks", "--sizes", "64", "--ranks", "1,2", "--steps", "5", "--repeats", "1",
+        "--rounds", "2", "-o", tmp_path / "out",
+    )  # fmt: skip
+    assert result.code == 0, result.stdout + result.stderr
+    report = json.loads((tmp_path / "out" / "ranks.json").read_text())
+    one, two = report["rows"]
+    assert (one["ranks"], two["ranks"]) == (1, 2) and len(two["seconds"]) == 2
+    assert one["speedup_over_first"] == 1.0 and min(two["speedup_range"]) > 0
+    assert two["particle_steps_per_second"] == 64 * 5 / statistics.median(two["seconds"])
+    assert "N = 64: 2 rank(s)" in result.stdout
