@@ -121,8 +121,7 @@ def start(scene, busy: float | None = None) -> subprocess.Popen | None:
         for kernel, arguments in own_jobs(scene):
             kernel.compile(_signature(kernel, arguments))
     except BaseException:
-        helper.kill()
-        helper.wait()
+        stop(helper)
         raise
     return helper
 
@@ -134,6 +133,13 @@ def finish(helper: subprocess.Popen | None) -> None:
     try:
         helper.wait(timeout=WAIT_SECONDS)
     except subprocess.TimeoutExpired:
+        stop(helper)
+
+
+def stop(helper: subprocess.Popen | None) -> None:
+    """End the helper now (Numba writes each cache file whole, under a temporary name first, so
+    a kernel it had not finished is simply not in the cache)."""
+    if helper is not None:
         helper.kill()
         helper.wait()
 

@@ -257,8 +257,10 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
             _check_overlaps(loaded, state)
             if fluid is not None:
                 fluid.initialize(state)
-        finally:
-            compile_ahead.finish(helper)
+        except BaseException:
+            compile_ahead.stop(helper)  # a refused packing, an interrupt: nothing to wait for
+            raise
+        compile_ahead.finish(helper)
         scene.compute_initial_forces()
         if scene.budget is not None:
             scene.budget.start()

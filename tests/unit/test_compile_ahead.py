@@ -8,12 +8,14 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
 from sphere_cli import compile_ahead
 from sphere_cli.bench.dem import canonical_case
-from sphere_cli.config.load import parse_case
+from sphere_cli.config.load import load_case, parse_case
+from sphere_cli.errors import SphereError
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
@@ -80,3 +82,31 @@ def test_a_cold_run_loads_what_its_helper_compiled(tmp_path):
     assert set(report["loaded"]) == {"build_lists", "kick_drift", "kick", "wall_forces"}
     assert all(hits == 1 for hits in report["loaded"].values()), report
     assert report["compiled"] == {"chunk_pair_forces": 1}
+
+
+def test_a_refused_packing_stops_the_helper_at_once(monkeypatch, tmp_path):
+    # a helper still compiling when the packing is refused (two spheres half a radius into each other)
+    helper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    monkeypatch.setattr(compile_ahead, "start", lambda scene: helper)
+    (tmp_path / "two.csv").write_text("x,y,z\n0.010,0.01,0.01\n0.0115,0.01,0.01\n")
+    (tmp_path / "case.toml").write_text(OVERLAPPING)
+    started = time.perf_counter()
+    with pytest.raises(SphereError, match="overlap"):
+        build_scene(load_case(tmp_path / "case.toml"))
+    assert helper.poll() is not None and time.perf_counter() - started < 30
+
+
+OVERLAPPING = """
+[simulation]
+duration = 1e-3
+[domain]
+upper = [0.02, 0.02, 0.02]
+[particles]
+density = 2500.0
+radius = { distribution = "fixed", value = 1e-3 }
+placement = { method = "file", path = "two.csv" }
+[contact]
+model = "linear"
+normal_stiffness = 1.0e5
+restitution = 0.5
+"""
