@@ -72,7 +72,7 @@ class FluidColumn:
         self.damped = np.zeros(n + 1)  # the same, damped near the wall (van Driest) [m]
         self.u_star = np.zeros(1)  # friction velocity of the damping [m/s]
         self._coef = np.zeros(n + 1)
-        self._scratch = tuple(np.zeros(n) for _ in range(5))
+        self._work = np.zeros(n)  # the Thomas algorithm's eliminated upper coefficients
 
     @classmethod
     def regular(cls, bottom, top, cells, stretching=1.0, **kwargs) -> FluidColumn:
@@ -93,7 +93,7 @@ class FluidColumn:
         advance_fluid(
             self.faces, self.centres, self.u, solid, vel_p, exchange, self.mixing, self.damped, self.kappa,
             self.van_driest, self.u_star, self.rho, self.nu, float(source), self.top_no_slip,
-            self.lid_velocity, float(dt), int(steps), self._coef, *self._scratch,
+            self.lid_velocity, float(dt), int(steps), self._coef, self._work,
         )  # fmt: skip
 
     def shear_stress(self, solid: np.ndarray, out: np.ndarray) -> np.ndarray:
