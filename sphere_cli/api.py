@@ -27,7 +27,7 @@ from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .runtime import StopFlag, refuse_many_ranks, signal_handlers, start_threads
+from .runtime import StopFlag, refuse_many_ranks, set_threads, signal_handlers, start_threads
 from .scene.builder import build_scene
 from .simulation import Loop
 
@@ -338,10 +338,13 @@ def _changed_keys(old, new, prefix: str = "") -> list[str]:
 
 
 def run_in_memory(text: str, steps: int, base_dir: Path | None = None):
-    """Build a scene from TOML text and advance it `steps` steps (tests, notebooks)."""
+    """Build a scene from TOML text and advance it `steps` steps (tests, notebooks), on the
+    threads of its `simulation.threads` if it sets them (for this process from then on, as a
+    run's), else on the process's."""
     from .simulation import advance
 
     loaded = parse_case(text, None if base_dir is None else base_dir / "case.toml")
+    set_threads(loaded.case)
     scene = build_scene(loaded)
     advance(scene, steps)
     return scene

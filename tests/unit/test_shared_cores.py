@@ -139,3 +139,21 @@ def test_free_cores_leave_the_threads_spinning(monkeypatch, capsys):
     assert start_threads(ALL_THREADS) is None
     assert "OMP_WAIT_POLICY" not in os.environ
     assert capsys.readouterr().err == ""
+
+
+def test_a_case_run_in_memory_gets_its_threads():
+    # simulation.threads of a notebook's or a test's case is honoured, as by `sphere run`
+    import numba
+
+    from sphere_cli.api import run_in_memory
+    from sphere_cli.bench.dem import canonical_case
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: one thread either way")
+    before = numba.get_num_threads()
+    try:
+        text = canonical_case(8).replace("[simulation]\n", "[simulation]\nthreads = 1\n", 1)
+        run_in_memory(text, 2)
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(before)
