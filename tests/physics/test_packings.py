@@ -29,6 +29,7 @@ and 3 seeds give a stable answer at a quarter of the run time; doubling N change
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 
@@ -41,6 +42,7 @@ QUENCH_EVERY = 100
 QUENCH_STEPS = 30000
 CASE = """
 [simulation]
+threads = 1
 duration = 10.0
 dt = {dt}
 stability = "contact"
@@ -86,6 +88,16 @@ def _packing(friction: float, seed: int) -> dict:
     keys = ("packing_fraction_interior", "coordination_no_rattlers", "rattler_fraction", "kinetic_per_mgd")
     print(f"mu = {friction}, seed {seed}: " + ", ".join(f"{k} {obs[k]:.4g}" for k in keys))
     return obs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """The cases' `threads = 1` sets this process's Numba threads: the next test file gets its own
+    back. (1000 spheres on two threads that wait passively, as `make test` has them, ran 5 x
+    slower on an idle machine: a wake-up at every parallel region.)"""
+    before = numba.get_num_threads()
+    yield
+    numba.set_num_threads(before)
 
 
 @pytest.fixture(scope="module")
