@@ -74,22 +74,25 @@ def damp_mixing_length(mixing, kappa, a_plus, u_star, nu, out):
             out[f] = mixing[f]
 
 
+@njit(cache=True, inline="always")
+def face_coefficient(rho, eps, nu, mixing, below, above, h):
+    """rho eps (nu + nu_t) / h of a face between the values below and above it, h apart, with
+    nu_t = l^2 |du/dz| (l: the face's mixing length)."""
+    grad = (above - below) / h
+    return rho * eps * (nu + mixing * mixing * abs(grad)) / h
+
+
 @njit(cache=True)
 def face_coefficients(faces, centres, u, solid, mixing, rho, nu, top_no_slip, lid_velocity, coef):
     """rho (1-solid) (nu + nu_t) / h at each face, h the distance between the values it links."""
     n = centres.shape[0]
-    h = centres[0] - faces[0]
-    grad = u[0] / h
-    coef[0] = rho * (1.0 - solid[0]) * (nu + mixing[0] * mixing[0] * abs(grad)) / h
+    coef[0] = face_coefficient(rho, 1.0 - solid[0], nu, mixing[0], 0.0, u[0], centres[0] - faces[0])
     for f in range(1, n):
-        h = centres[f] - centres[f - 1]
-        grad = (u[f] - u[f - 1]) / h
         eps = 1.0 - 0.5 * (solid[f - 1] + solid[f])
-        coef[f] = rho * eps * (nu + mixing[f] * mixing[f] * abs(grad)) / h
+        coef[f] = face_coefficient(rho, eps, nu, mixing[f], u[f - 1], u[f], centres[f] - centres[f - 1])
     if top_no_slip:
         h = faces[n] - centres[n - 1]
-        grad = (lid_velocity - u[n - 1]) / h
-        coef[n] = rho * (1.0 - solid[n - 1]) * (nu + mixing[n] * mixing[n] * abs(grad)) / h
+        coef[n] = face_coefficient(rho, 1.0 - solid[n - 1], nu, mixing[n], u[n - 1], lid_velocity, h)
     else:
         coef[n] = 0.0
 
@@ -119,31 +122,28 @@ def advance_fluid(
 ):
     """`steps` implicit Euler steps of dt with solid, vel_p, exchange held fixed. Each step
     assembles row k of lower[k] u[k-1] + diag[k] u[k] + upper[k] u[k+1] = rhs[k] and eliminates
-    it at once (Thomas algorithm, forward), in one pass with the face coefficients (those of
-    face_coefficients): the rows are not stored, only the eliminated upper coefficients (work),
+    it at once (Thomas algorithm, forward), in one pass with the face coefficients
+    (face_coefficient): the rows are not stored, only the eliminated upper coefficients (work),
     and u takes the forward values in place, then the solution (backward). The same operations
     in the same order as assembling first (38 % less time on 900 layers: one pass instead of
     four over the column)."""
     n = centres.shape[0]
     for _ in range(steps):
-        h = centres[0] - faces[0]
-        coef[0] = rho * (1.0 - solid[0]) * (nu + damped[0] * damped[0] * abs(u[0] / h)) / h
+        coef[0] = face_coefficient(rho, 1.0 - solid[0], nu, damped[0], 0.0, u[0], centres[0] - faces[0])
         lower = 0.0
         eliminated = 0.0  # work[k-1]
         forward = 0.0  # the forward value of u[k-1]
         for k in range(n):
             old = u[k]
             if k < n - 1:
-                h = centres[k + 1] - centres[k]
-                grad = (u[k + 1] - old) / h
                 eps_face = 1.0 - 0.5 * (solid[k] + solid[k + 1])
-                coef[k + 1] = rho * eps_face * (nu + damped[k + 1] * damped[k + 1] * abs(grad)) / h
+                h = centres[k + 1] - centres[k]
+                coef[k + 1] = face_coefficient(rho, eps_face, nu, damped[k + 1], old, u[k + 1], h)
                 upper = -coef[k + 1]
             else:
                 if top_no_slip:
                     h = faces[n] - centres[n - 1]
-                    grad = (lid_velocity - old) / h
-                    coef[n] = rho * (1.0 - solid[n - 1]) * (nu + damped[n] * damped[n] * abs(grad)) / h
+                    coef[n] = face_coefficient(rho, 1.0 - solid[n - 1], nu, damped[n], old, lid_velocity, h)
                 else:
                     coef[n] = 0.0
                 upper = 0.0
