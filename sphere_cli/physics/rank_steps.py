@@ -60,13 +60,13 @@ from ..kernels.motion import first_unstable, kick, kick_drift, kick_drift_serial
 from ..kernels.neighbors import row_starts
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
-from ..kernels.walls import wall_areas, wall_kick, wall_totals
+from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
 from ..state import Clock, NeighborList, Particles, State, Walls
 from .compiled_steps import is_hook_of, step_arguments
 from .contact import PairContactForces
 from .motion import Motion
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
-from .walls import PlaneWallForces, WallMotion
+from .walls import PlaneWallForces, WallMotion, push_scratch
 
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
 # too: the kick-drift of a build's step set them, and the forces read them)
@@ -114,6 +114,7 @@ class Template:
     moving: bool  # some wall moves (WallMotion)
     attached: np.ndarray  # (K,) global indices of the spheres glued to walls
     attached_wall: np.ndarray  # (K,) their wall
+    count: int  # the scene's particles, on every rank together
     axis: int  # the cut axis
     lower: float  # the box's lower corner along it [m]
     cell: float  # search cells' width along it [m]
@@ -245,6 +246,7 @@ class RankSteps:
             moving=scene.wall_motion is not None,
             attached=np.zeros(0, dtype=np.int64),
             attached_wall=np.zeros(0, dtype=np.int64),
+            count=state.particles.count,
             axis=axis,
             lower=float(state.box.lower[axis]),
             cell=float(search.cell_size[axis]),
@@ -490,9 +492,8 @@ class RankSteps:
 
     def _wall_kick(self, state: State) -> None:
         """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
-        in global particle order (the particles without force on a moving wall add exact
-        zeros, left out), then the glued spheres in the lead's order (kernels/walls.py
-        wall_totals)."""
+        in its tree over global particle indices (kernels/walls.py particle_pushes), from the
+        rows that are not zero, then the glued spheres in the lead's order."""
         part, w, p, box = self.part, state.walls, state.particles, state.box
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
@@ -504,8 +505,13 @@ class RankSteps:
         every = self.world.comm.allgather(mine)
         gid, pforce, order, total, mass = (np.concatenate([x[k] for x in every]) for k in range(5))
         by_index, by_glue = np.argsort(gid, kind="stable"), np.argsort(order, kind="stable")
-        wall_totals(
-            np.ascontiguousarray(pforce[by_index]),
+        psum, pushes = push_scratch(w, self.t.count)
+        sparse_particle_pushes(
+            np.ascontiguousarray(gid[by_index]), np.ascontiguousarray(pforce[by_index]), self.t.count,
+            w.record, psum, pushes,
+        )  # fmt: skip
+        finish_wall_totals(
+            pushes,
             w.record,
             np.arange(order.size, dtype=np.int64),
             self.t.attached_wall[order[by_glue]],

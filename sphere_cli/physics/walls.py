@@ -51,6 +51,7 @@ from ..kernels.walls import (
     FIXED,
     STRESS,
     VELOCITY,
+    chunk_count,
     near_walls,
     wall_areas,
     wall_forces,
@@ -108,6 +109,16 @@ class WallScales:
         `fluid` [N/m] of a pore fluid pushing it (in parallel): 2/omega (its damping is
         implicit, kernels/walls.py)."""
         return verlet_limit(self.stiffness_per_area[w] * area + fluid, 0.0, 0.0, self.mass(spec, area))
+
+
+def push_scratch(walls: Walls, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The scratch of the tree sum of `count` particles' forces on the walls (kernels/walls.py
+    particle_pushes), made once, and again only for more particles."""
+    chunks = chunk_count(count)
+    if walls.psum is None or walls.psum.shape[1] < chunks:
+        walls.psum = np.zeros((2, chunks, len(walls.faces), 3))
+        walls.push_total = np.zeros((len(walls.faces), 3))
+    return walls.psum, walls.push_total
 
 
 def bed_height(walls: Walls, w: int, coord, box) -> float:
@@ -367,6 +378,7 @@ class PlaneWallForces(Module):
         wall_totals(
             pforce,
             every,
+            *push_scratch(w, p.count),
             w.attached,
             w.attached_wall,
             p.force,
@@ -430,8 +442,8 @@ class WallMotion(Module):
             (w.axis, w.sign, w.mode, w.control, w.coord, w.vel, w.acc, w.vel_pred, w.shift, state.clock.dt,
              w.attached, w.attached_wall, p.vel),
             (w.axis, w.sign, w.coord, box.lower, box.upper, w.area),
-            (w.pforce, w.record, w.attached, w.attached_wall, p.force, p.mass, box.body_acc, w.fluid_force,
-             w.force),
+            (w.pforce, w.record, *push_scratch(w, p.count), w.attached, w.attached_wall, p.force, p.mass,
+             box.body_acc, w.fluid_force, w.force),
             (w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc),
         )  # fmt: skip
 
