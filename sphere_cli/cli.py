@@ -302,6 +302,11 @@ def bench_gpu(
     steps: int = typer.Option(200, "--steps", min=1, help="Steps per timing."),
     repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per row (the median is reported)."),
     states: str = typer.Option("loose,settled", "--states", help="loose and/or settled."),
+    walls: str = typer.Option(
+        "fixed",
+        "--walls",
+        help="fixed and/or moving: moving adds loose rows whose lid keeps a stress and slides.",
+    ),
     output: Path = OUTPUT_OPTION,
 ) -> None:
     """The DEM step on a CUDA GPU (simulation.device = "cuda") on the canonical scene: particle-steps
@@ -311,7 +316,10 @@ def bench_gpu(
     chosen = tuple(s.strip() for s in states.split(",") if s.strip())
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
-    _bench(lambda: run_gpu_benchmark(_numbers(sizes, "--sizes"), steps, repeats, chosen, output))
+    lids = tuple(s.strip() for s in walls.split(",") if s.strip())
+    if not lids or not set(lids) <= {"fixed", "moving"}:
+        raise typer.BadParameter(f"--walls {walls!r}: expected fixed and/or moving")
+    _bench(lambda: run_gpu_benchmark(_numbers(sizes, "--sizes"), steps, repeats, chosen, output, walls=lids))
 
 
 @bench_app.command("ranks")

@@ -6,7 +6,10 @@ of a step (from a second, profiled run that waits for each kernel: its total is 
 timed run's). A timing is `steps` steps on the device, from the first launch to the end of the
 last kernel; bringing the state back to the host (what a run does for each output) is timed
 apart, and the rate with one such copy per `steps` steps is given beside it: at 10^6 spheres the
-copy costs as much as a few hundred steps. Never part of the tests' timings.
+copy costs as much as a few hundred steps. `walls` "moving" adds loose rows whose lid keeps a
+normal stress and slides along x at a set velocity (MOVING_LID): the walls' own steps and the
+tree sum of the particles' forces on them, on top of the same scene. Never part of the tests'
+timings.
 """
 
 from __future__ import annotations
@@ -22,6 +25,10 @@ from ..simulation import advance
 from . import machine
 from .dem import canonical_case, on_device, settled_scene
 
+# the canonical scene's lid, stress-controlled and sliding (`walls` "moving")
+FIXED_LID = '[[walls]]\nface = "z+"'
+MOVING_LID = FIXED_LID + '\nmode = "stress"\nstress = 1000.0\nshear_axis = "x"\nshear_velocity = 0.01'
+
 
 def run_gpu_benchmark(
     sizes=(100_000, 1_000_000, 10_000_000),
@@ -30,13 +37,19 @@ def run_gpu_benchmark(
     states=("loose", "settled"),
     out_dir: Path = Path("bench-results"),
     log=print,
+    walls=("fixed",),
 ) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "steps": steps, "repeats": repeats, "rows": []}
+    rows = [(state, "fixed") for state in states if "fixed" in walls]
+    rows += [("loose", "moving")] if "moving" in walls else []
     for n in sizes:
-        for state in states:
+        for state, lid in rows:
             if state == "loose":
-                scene = build_scene(parse_case(on_device(canonical_case(n), "cuda")))
+                text = canonical_case(n)
+                if lid == "moving":
+                    text = text.replace(FIXED_LID, MOVING_LID)
+                scene = build_scene(parse_case(on_device(text, "cuda")))
             else:
                 scene = settled_scene(n, log, device="cuda")
             device = scene.step.compiled
@@ -50,6 +63,7 @@ def run_gpu_benchmark(
             row = {
                 "n": n,
                 "state": state,
+                "walls": lid,
                 "gpu": device.device_name,
                 "steps": steps,
                 "seconds": median,
@@ -65,7 +79,8 @@ def run_gpu_benchmark(
             results["rows"].append(row)
             shares = ", ".join(f"{name} {share:.0%}" for name, share in row["kernel_shares"].items())
             log(
-                f"N = {n:>8} {state:>7}  {row['particle_steps_per_second'] / 1e6:8.1f} M particle-steps/s "
+                f"N = {n:>8} {state:>7} {lid:>6} walls "
+                f"{row['particle_steps_per_second'] / 1e6:8.1f} M particle-steps/s "
                 f"(median of {repeats} x {steps} steps; "
                 f"best {row['best_particle_steps_per_second'] / 1e6:.1f} M; "
                 f"{row['device_bytes_per_particle']:.0f} B/particle on the GPU); state to the host in "

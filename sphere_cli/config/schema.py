@@ -69,10 +69,10 @@ class Simulation(Strict):
         "cpu",
         description=(
             'Where the steps run: "cpu" (every model), or "cuda", an NVIDIA GPU (needs the CUDA '
-            "extra, pip install 'sphere-cli[cuda]'), for particles with pair contacts, gravity, fixed "
-            "walls and periodic boundaries so far (a case with moving walls, a fluid, stages or the "
-            "energy budget is refused). The GPU agrees with the CPU to round-off; `sphere run "
-            "--device` overrides this key."
+            "extra, pip install 'sphere-cli[cuda]'), for particles with pair contacts, gravity, plane "
+            "walls (fixed, moving or stress-controlled) and periodic boundaries so far (a case with a "
+            "fluid, stages or the energy budget is refused). The GPU agrees with the CPU to round-off; "
+            "`sphere run --device` overrides this key."
         ),
     )
     rank_balance: Literal["particles", "time"] = Field(

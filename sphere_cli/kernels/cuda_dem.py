@@ -28,24 +28,37 @@ int64, cell_count (cells,) int32, cell_members (cells,K) int32; `worst` (1,) flo
 
 import math
 
-from numba import config, cuda
+from numba import config, cuda, njit
 
-from . import contact_probe, motion, neighbors
+from . import contact_probe, motion, neighbors, walls
 from .laws import D_N, D_T, HERTZ_MINDLIN, K_N, K_T, MU, MU_R, contact_response, reduced
 from .neighbors import minimum_image, wrap_cell
 
 
 def _on_arrays(function):
     """A CPU @njit function that takes arrays, for the kernels: Numba compiles it for the GPU
-    where a kernel calls it; the simulator runs the kernels as Python, on arrays an @njit
-    function cannot take, so there it is the Python function itself (the same operations)."""
-    return function.py_func if config.ENABLE_CUDASIM else function
+    where a kernel calls it, inlined (one the CPU does not inline is taken again from its Python
+    source with inline="always": numba-cuda would compile it as a device function of its own,
+    whose target it asks of a GPU, so it could not be compiled where there is none); the
+    simulator runs the kernels as Python, on arrays an @njit function cannot take, so there it
+    is the Python function itself (the same operations)."""
+    if config.ENABLE_CUDASIM:
+        return function.py_func
+    if function.targetoptions.get("inline") == "always":
+        return function
+    return njit(inline="always")(function.py_func)
 
 
 cell_number = _on_arrays(neighbors.cell_number)
 insert_ascending = _on_arrays(neighbors.insert_ascending)
 wall_normal = _on_arrays(contact_probe.wall_normal)
 unstable_reason = _on_arrays(motion.unstable_reason)
+wall_kick_drift = _on_arrays(walls.wall_kick_drift)
+chunk_difference = _on_arrays(walls.chunk_difference)
+tree_total = _on_arrays(walls.tree_total)
+finish_wall_totals = _on_arrays(walls.finish_wall_totals)
+wall_areas = _on_arrays(walls.wall_areas)
+wall_kick = _on_arrays(walls.wall_kick)
 
 
 @cuda.jit(device=True, inline=True)
@@ -345,12 +358,13 @@ def _cleared(hist, i, w):
 def wall_forces(
     pos, vel, angvel, vel_pred, angvel_pred, radius, mass, inertia, inv_mass, material, wall_axis,
     wall_sign, wall_coord, wall_vel, wall_vel_pred, wall_table, wall_hist, springs, law, rolling,
-    spring_dt, step_dt, force, torque,
+    spring_dt, step_dt, force, torque, record, pforce,
 ):  # fmt: skip
     """Add the forces of the plane walls on particle i, in wall order (kernels/walls.py
     wall_forces: the wall a body of infinite mass, radius and inertia, m* = m_i, R* = r_i,
     I* = I_i); its springs wall_hist[i] are its own, updated in place (springs: whether there are
-    any). A particle that does not move by forces touches no wall."""
+    any); the force of each wall marked in record into pforce[i] (zero where it does not touch).
+    A particle that does not move by forces touches no wall."""
     i = cuda.grid(1)
     if i >= pos.shape[0] or inv_mass[i] == 0.0:
         return
@@ -363,6 +377,10 @@ def wall_forces(
     for w in range(wall_axis.shape[0]):
         touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
         if not touching:
+            if record[w]:
+                pforce[i, w, 0] = 0.0
+                pforce[i, w, 1] = 0.0
+                pforce[i, w, 2] = 0.0
             # the spring of a contact that has ended is gone; one that is zero already is not
             # written again (the rows of wall_hist are 144 bytes apart: six walls' stores from
             # every thread made this kernel the step's slowest, bound by the L1)
@@ -400,6 +418,10 @@ def wall_forces(
             wall_hist[i, w, 0] = x0
             wall_hist[i, w, 1] = x1
             wall_hist[i, w, 2] = x2
+        if record[w]:
+            pforce[i, w, 0] = e0
+            pforce[i, w, 1] = e1
+            pforce[i, w, 2] = e2
         f0 += e0
         f1 += e1
         f2 += e2
@@ -416,6 +438,49 @@ def wall_forces(
     torque[i, 0] += t0
     torque[i, 1] += t1
     torque[i, 2] += t2
+
+
+@cuda.jit
+def wall_motion_drift(
+    wall_axis, wall_sign, mode, control, coord, vel, acc, vel_pred, shift, dt, attached, attached_wall, pvel
+):  # fmt: skip
+    """kernels/walls.py wall_kick_drift, on one thread: a few walls, and the glued particles in
+    order."""
+    if cuda.grid(1) == 0:
+        wall_kick_drift(
+            wall_axis, wall_sign, mode, control, coord, vel, acc, vel_pred, shift, dt, attached,
+            attached_wall, pvel,
+        )  # fmt: skip
+
+
+@cuda.jit
+def push_chunks(values, rows, record, out):
+    """One level of the tree sum of the particles' forces on the walls (kernels/walls.py
+    chunk_differences): thread (c, w, b) makes out[c, w, b] from its chunk's rows, in order."""
+    t = cuda.grid(1)
+    nw = record.shape[0]
+    c = t // (3 * nw)
+    w = (t // 3) % nw
+    b = t % 3
+    if c * walls.SUM_CHUNK < max(rows, 1) and record[w]:
+        out[c, w, b] = chunk_difference(values, rows, c, w, b)
+
+
+@cuda.jit
+def wall_motion_kick(
+    psum, level, positive, record, total, attached, attached_wall, pforce_total, mass, body_acc, fluid_force,
+    wall_force, wall_axis, wall_sign, coord, lower, upper, area, mode, control, vel, acc, time, dt,
+):  # fmt: skip
+    """The second half kick of the walls on one thread (physics/walls.py WallMotion.kick): the
+    tree sum's last level (in psum[level]), the forces on the walls (finish_wall_totals), their
+    areas, and the kick at `time`."""
+    if cuda.grid(1) == 0:
+        tree_total(psum, level, positive, record, total)
+        finish_wall_totals(
+            total, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
+        )
+        wall_areas(wall_axis, wall_sign, coord, lower, upper, area)
+        wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, time, dt)
 
 
 @cuda.jit

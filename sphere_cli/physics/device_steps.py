@@ -6,10 +6,12 @@ kept on the device across calls of simulation.advance and copied back only when 
 observables, checkpoints and stability checks), which then read the host arrays as on the CPU.
 
 It takes the place of physics/compiled_steps.py for the scenes it covers: particles, their pair
-contacts (both laws, friction, rolling, several materials), gravity, fixed plane walls and
-periodic boundaries. A case with anything else in its step (moving or stress-controlled walls, a
-fluid, stages, the energy budget) is refused
-with the modules named; so is a machine without a usable GPU. Results agree with the CPU to
+contacts (both laws, friction, rolling, several materials), gravity, plane walls (fixed, moving at
+a set velocity or keeping a stress, with spheres glued to them) and periodic boundaries. The
+walls' own steps run on one GPU thread each half step (a few walls); the particles' forces on
+them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
+A case with anything else in its step (a fluid, stages, the energy budget) is refused with the
+modules named; so is a machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
@@ -29,23 +31,25 @@ import numpy as np
 
 from ..errors import CaseError
 from ..kernels.neighbors import count_half_rows, fill_half_rows, row_starts
-from ..kernels.walls import FIXED
+from ..kernels.walls import chunk_count
 from ..state import State
 from .compiled_steps import CompiledSteps
 from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
 
 # threads per block: any size gives the same results (each thread sums its own particle)
 THREADS = 128
-# the modules the GPU step runs (fixed walls only; the Observer, "observables" or "" where it has
-# no state, only measures, from the host arrays)
-SUPPORTED = ("particles", "neighbors", "contact", "walls", "observables", "")
+# the modules the GPU step runs (the Observer, "observables" or "" where it has no state, only
+# measures, from the host arrays)
+SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
-    "wall_motion": "walls that move or keep a stress ([[walls]] velocity or stress)",
     "fluid": "a fluid ([fluid])",
     "stages": "stages ([[stages]])",
     "energy_budget": "the energy budget (output.observables)",
 }
+# the walls' arrays that moving walls change on the device, and those they only read
+MOVED = ("coord", "vel", "vel_pred", "acc", "shift", "force", "area")
+DRIVING = ("mode", "control", "fluid_force")
 # row and cell slots added on growth, beyond the longest seen
 ROW_HEADROOM = 4
 CELL_SLOTS = 8
@@ -106,6 +110,21 @@ def _gpu_name(cuda) -> str:
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
+def push_levels(launch, kernels, pforce, rows: int, record, psum) -> tuple[int, bool]:
+    """The tree sum of pforce's first `rows` rows on the device, level by level as the CPU's
+    particle_pushes makes it (kernels/walls.py), one thread per chunk and component; returns
+    where its last level lies in psum and whether that sum is positive (for tree_total)."""
+    nw = record.shape[0]
+    values, level, positive = pforce, 0, False
+    while True:
+        chunks = chunk_count(rows)
+        launch(kernels.push_chunks, chunks * nw * 3, values, rows, record, psum[level])
+        if chunks == 1:
+            return level, positive
+        rows, values = chunks, psum[level]
+        level, positive = 1 - level, not positive
+
+
 @dataclass
 class Rows:
     """A neighbour list on the device: full rows and each pair's slot in its partner's row."""
@@ -125,7 +144,8 @@ class DeviceSteps:
         self.search: NeighborSearch = scene.neighbors
         self.contact = scene.contact
         self.springs = self.search.springs
-        self.walls = scene.walls  # fixed plane walls, or None
+        self.walls = scene.walls  # plane walls, or None
+        self.moving = scene.wall_motion is not None  # some wall moves (WallMotion's steps)
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
@@ -137,9 +157,6 @@ class DeviceSteps:
     def of(cls, scene) -> DeviceSteps:
         """The GPU steps of a scene, or a CaseError saying what the GPU does not run yet."""
         extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
-        walls = scene.state.walls
-        if walls is not None and (walls.mode != FIXED).any() and NAMES["wall_motion"] not in extra:
-            extra.append(NAMES["wall_motion"])
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
         # any other module that acts between steps (the named ones are reported above)
@@ -147,7 +164,7 @@ class DeviceSteps:
         extra += [f"{m.name or type(m).__name__} after its steps" for m in between]
         if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
             raise CaseError(
-                f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, fixed '
+                f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, plane '
                 "walls and periodic boundaries; this case also has: "
                 f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
             )
@@ -229,7 +246,18 @@ class DeviceSteps:
                 wall_table=to(w.table),
                 wall_hist=to(w.hist if self.wall_springs else np.zeros((1, 1, 3))),
                 inertia=to(p.inertia),
+                record=to(w.record),
+                # each particle's force from the walls marked in record (written every step)
+                pforce=to(np.zeros((p.count if self.moving else 1, len(w.faces), 3))),
             )
+            if self.moving:
+                self.d.update(
+                    {f"wall_{name}": to(getattr(w, name)) for name in MOVED[3:] + DRIVING},
+                    attached=to(w.attached),
+                    attached_wall=to(w.attached_wall),
+                    psum=to(np.zeros((2, chunk_count(p.count), len(w.faces), 3))),
+                    push_total=to(np.zeros((len(w.faces), 3))),
+                )
         self.rows, self.hist = self._full_rows(nl, p.count)
         self.spare = self._allocate(p.count, self.rows.nbr.shape[1])
         self.hist_next = self._springs(p.count, self.rows.nbr.shape[1])
@@ -287,6 +315,9 @@ class DeviceSteps:
         if self.walls is not None and self.wall_springs:
             # a new array: the wall module derives its mask of set springs again (physics/walls.py)
             state.walls.hist = self.d["wall_hist"].copy_to_host()
+        if self.moving:
+            for name in MOVED:
+                self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
@@ -343,7 +374,13 @@ class DeviceSteps:
         dt = state.clock.dt
         zero = np.zeros(1)
         moved2 = 0.0
-        for _ in range(steps):
+        for taken in range(steps):
+            if self.moving:
+                self._launch(
+                    k.wall_motion_drift, 1, d["wall_axis"], d["wall_sign"], d["wall_mode"], d["wall_control"],
+                    d["wall_coord"], d["wall_vel"], d["wall_acc"], d["wall_vel_pred"], d["wall_shift"], dt,
+                    d["attached"], d["attached_wall"], d["vel"],
+                )  # fmt: skip
             d["worst"].copy_to_device(zero)
             self._launch(
                 k.kick_drift, n, d["pos"], d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"],
@@ -369,8 +406,10 @@ class DeviceSteps:
                     d["radius"], d["mass"], d["inertia"], d["inv_mass"], d["material"], d["wall_axis"],
                     d["wall_sign"], d["wall_coord"], d["wall_vel"], d["wall_vel_pred"], d["wall_table"],
                     d["wall_hist"], self.wall_springs, self.contact.law_code, self.contact.rolling, dt, dt,
-                    d["force"], d["torque"],
+                    d["force"], d["torque"], d["record"], d["pforce"],
                 )  # fmt: skip
+            if self.moving:
+                self._wall_kick(n, (state.clock.step + taken + 1) * dt, dt)
             self._launch(
                 k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"], dt
             )
@@ -378,6 +417,18 @@ class DeviceSteps:
         state.neighbors.moved2 = moved2
         self.on_device_at = state.clock.step + steps
         return steps, False
+
+    def _wall_kick(self, n: int, time: float, dt: float) -> None:
+        """The particles' forces on the walls summed in the CPU's tree, then the walls' second
+        half kick (physics/walls.py WallMotion.kick)."""
+        d = self.d
+        level, positive = push_levels(self._launch, self.k, d["pforce"], n, d["record"], d["psum"])
+        self._launch(
+            self.k.wall_motion_kick, 1, d["psum"], level, positive, d["record"], d["push_total"],
+            d["attached"], d["attached_wall"], d["force"], d["mass"], d["body_acc"], d["wall_fluid_force"],
+            d["wall_force"], d["wall_axis"], d["wall_sign"], d["wall_coord"], d["lower"], d["upper"],
+            d["wall_area"], d["wall_mode"], d["wall_control"], d["wall_vel"], d["wall_acc"], time, dt,
+        )  # fmt: skip
 
     def rebuild(self, state: State) -> None:
         """A new list from the positions, into the spare rows (grown until every row and cell

@@ -42,11 +42,11 @@ SIMULATED = bool(numba_config.ENABLE_CUDASIM)
 RTOL = 0.0 if SIMULATED else 1e-9
 
 
-def _placement(path, seed: int = 3) -> None:
+def _placement(path, seed: int = 3, lift: float = 0.0) -> None:
     rng = np.random.default_rng(seed)
     side = 4
     grid = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) / side
-    pos = (grid[:COUNT] + rng.uniform(-0.01, 0.01, (COUNT, 3))) * BOX
+    pos = (grid[:COUNT] + rng.uniform(-0.01, 0.01, (COUNT, 3))) * BOX + [0.0, 0.0, lift]
     radius = rng.uniform(0.00095, 0.00104, COUNT)
     # towards the centre, and at random: they keep colliding
     vel = 40.0 * (0.5 * BOX - pos) + rng.normal(0.0, 0.1, (COUNT, 3))
@@ -113,16 +113,39 @@ def _pairs(scene) -> dict:
 
 
 FLOOR_AND_LID = '\n[[walls]]\nface = "z-"\nmaterial = "b"\n[[walls]]\nface = "z+"\n'
+# a rough floor sliding along x at a set velocity, a lid keeping a stress with a sine on it and
+# driven along y by a shear stress: every mode of physics/walls.py, and spheres glued to a wall
+MOVING_WALLS = """
+[[walls]]
+face = "z-"
+material = "b"
+rough = {}
+mode = "velocity"
+velocity = 0.0
+shear_axis = "x"
+shear_velocity = 0.05
+[[walls]]
+face = "z+"
+mode = "stress"
+stress = 500.0
+stress_amplitude = 200.0
+frequency = 300.0
+shear_axis = "y"
+shear_stress = 50.0
+"""
 
 
-def _scenes(tmp_path, seed: int = 3, hertz: bool = True, walls: bool = False):
-    """The scene on the GPU and on the CPU; with walls, a floor and a lid instead of the periodic
-    z axis (the spheres pressed against both at first, then falling onto the floor)."""
+def _scenes(tmp_path, seed: int = 3, hertz: bool = True, walls: str = ""):
+    """The scene on the GPU and on the CPU; with walls (FLOOR_AND_LID or MOVING_WALLS), a floor
+    and a lid instead of the periodic z axis (the spheres pressed against both at first)."""
     path = tmp_path / "spheres.csv"
-    _placement(path, seed)
-    texts = [_case(path, device, hertz, FLOOR_AND_LID if walls else "") for device in ("cuda", "cpu")]
+    # the spheres glued to the rough floor lie on its plane: the others a radius higher
+    lift = 0.001 if "rough" in walls else 0.0
+    _placement(path, seed, lift)
+    texts = [_case(path, device, hertz, walls) for device in ("cuda", "cpu")]
     if walls:
         texts = [text.replace("[true, true, true]", "[true, true, false]") for text in texts]
+        texts = [text.replace(f"{BOX}]", f"{BOX + lift}]") for text in texts]
     return tuple(build_scene(parse_case(text)) for text in texts)
 
 
@@ -142,7 +165,9 @@ def _compare(gpu, cpu) -> None:
 
 
 @pytest.mark.parametrize(
-    "hertz, walls", [(True, False), (False, False), (True, True)], ids=["hertz-rolling", "linear", "walls"]
+    "hertz, walls",
+    [(True, ""), (False, ""), (True, FLOOR_AND_LID), (False, MOVING_WALLS)],
+    ids=["hertz-rolling", "linear", "walls", "moving-walls"],
 )
 def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
     gpu, cpu = _scenes(tmp_path, hertz=hertz, walls=walls)
@@ -159,9 +184,51 @@ def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
     assert gpu.state.neighbors.builds - builds >= 2
     assert min(contacts) >= 5, contacts
     if walls:  # wall springs too, each bitwise (the CPU's layout: (N,W,3))
-        assert np.count_nonzero(cpu.state.walls.hist.any(axis=2)) >= 3
+        # (the moving walls': the lid's; the rough floor's spheres touch the others instead)
+        assert np.count_nonzero(cpu.state.walls.hist.any(axis=2)) >= (3 if walls == FLOOR_AND_LID else 1)
         np.testing.assert_allclose(gpu.state.walls.hist, cpu.state.walls.hist, rtol=RTOL, atol=RTOL * 1e-3)
+    if walls == MOVING_WALLS:  # the walls moved on the device as on the CPU
+        a, b = gpu.state.walls, cpu.state.walls
+        assert b.attached.size > 0 and np.abs(b.shift).min(axis=1).max() == 0.0  # each a direction
+        assert np.abs(b.shift[0, 0]) > 1e-6 and np.abs(b.shift[1, 1:]).min() > 0.0
+        assert (np.abs(b.force[:, 2]) > 0.0).all()  # the glued spheres and the lid pushed
+        for name in ("coord", "vel", "acc", "shift", "force", "area"):
+            one, other = getattr(a, name), getattr(b, name)
+            np.testing.assert_allclose(one, other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
     assert gpu.state.clock.step == cpu.state.clock.step == 60
+
+
+def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree():
+    """The particles' forces on the walls, 5000 rows with most of them zero (three levels of
+    chunks), summed on the device level by level: bitwise the CPU's sum (kernels/walls.py
+    particle_pushes), also on a GPU, since a sum of differences has no multiply to fuse."""
+    from numba import cuda
+
+    from sphere_cli.kernels import cuda_dem
+    from sphere_cli.kernels.walls import chunk_count, particle_pushes, tree_total
+    from sphere_cli.physics.device_steps import push_levels
+
+    rng = np.random.default_rng(2)
+    n = 5000
+    pforce = rng.normal(0.0, 1.0, (n, 3, 3)) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
+    pforce[rng.random(n) < 0.8] = 0.0
+    record = np.array([1, 0, 1], dtype=np.uint8)
+    psum = np.zeros((2, chunk_count(n), 3, 3))
+    expected = np.zeros((3, 3))
+    particle_pushes(pforce, record, psum, expected)
+
+    def launch(kernel, size, *args):
+        threads = min(128, size)
+        kernel[-(-size // threads), threads](*args)
+
+    on_device = cuda.to_device(np.zeros_like(psum))
+    pushes, marked = cuda.to_device(pforce), cuda.to_device(record)
+    level, positive = push_levels(launch, cuda_dem, pushes, n, marked, on_device)
+    assert (level, positive) == (0, False)  # 5000 -> 79 -> 2 -> 1: three levels
+    total = np.zeros((3, 3))
+    tree_total(on_device.copy_to_host(), level, positive, record, total)
+    assert np.array_equal(total, expected) and np.abs(expected[0]).min() > 0.0
+    assert np.allclose(expected, pforce.sum(axis=0) * record[:, None], rtol=1e-12)
 
 
 def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
@@ -233,10 +300,9 @@ def _words_and_numbers(message: str) -> tuple[str, list[float]]:
 def test_what_the_gpu_does_not_run_is_refused_by_name(tmp_path):
     path = tmp_path / "spheres.csv"
     _placement(path)
-    walls = '\n[[walls]]\nface = "z-"\n[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = 0.01\n'
-    text = _case(path, "cuda", extra=walls).replace("[true, true, true]", "[true, true, false]")
-    with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: walls that move'):
-        build_scene(parse_case(text))
+    stages = "\n[[stages]]\nduration = 0.001\n[[stages]]\nduration = 0.001\nfriction = 0.0\n"
+    with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: stages \(\[\[stages\]\]\)'):
+        build_scene(parse_case(_case(path, "cuda", extra=stages)))
 
 
 def test_no_gpu_is_a_case_error_naming_the_key(tmp_path, monkeypatch):
@@ -352,14 +418,20 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
             "1",
             "--states",
             "loose",
+            "--walls",
+            "fixed,moving",
             "-o",
             str(tmp_path),
         ],
     )
     assert result.exit_code == 0, result.output
-    row = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"][0]
+    row, moving = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"]
     assert row["n"] == 40 and row["to_host_seconds"] > 0
     assert row["particle_steps_per_second"] > row["particle_steps_per_second_with_output"] > 0
     assert 200 < row["device_bytes_per_particle"] < 5000
     assert set(row["kernel_shares"]) == {"kick_drift", "pair_forces", "wall_forces", "kick"}
     assert abs(sum(row["kernel_shares"].values()) - 1.0) < 1e-9
+    # the lid keeping a stress: the walls' own kernels and the tree sum are timed too
+    assert (row["walls"], moving["walls"]) == ("fixed", "moving")
+    walls_own = {"wall_motion_drift", "push_chunks", "wall_motion_kick"}
+    assert set(moving["kernel_shares"]) == {*row["kernel_shares"], *walls_own}
