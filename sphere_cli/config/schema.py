@@ -70,8 +70,8 @@ class Simulation(Strict):
         description=(
             'Where the steps run: "cpu" (every model), or "cuda", an NVIDIA GPU (needs the CUDA '
             "extra, pip install 'sphere-cli[cuda]'), for particles with pair contacts, gravity, plane "
-            "walls (fixed, moving or stress-controlled) and periodic boundaries so far (a case with a "
-            "fluid, stages or the energy budget is refused). The GPU agrees with the CPU to round-off; "
+            "walls (fixed, moving or stress-controlled), stages and periodic boundaries so far (a case "
+            "with a fluid or the energy budget is refused). The GPU agrees with the CPU to round-off; "
             "`sphere run --device` overrides this key."
         ),
     )

@@ -10,8 +10,10 @@ contacts (both laws, friction, rolling, several materials), gravity, plane walls
 a set velocity or keeping a stress, with spheres glued to them) and periodic boundaries. The
 walls' own steps run on one GPU thread each half step (a few walls); the particles' forces on
 them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
-A case with anything else in its step (a fluid, stages, the energy budget) is refused with the
-modules named; so is a machine without a usable GPU. Results agree with the CPU to
+Stages run on the host, as on the CPU: the state comes back before each step where a stage may
+end (Stages.after_due) and goes up again when one has begun (its walls' modes, its friction, an
+approach). A case with anything else in its step (a fluid, the energy budget) is refused with
+the modules named; so is a machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
@@ -40,11 +42,10 @@ from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slo
 THREADS = 128
 # the modules the GPU step runs (the Observer, "observables" or "" where it has no state, only
 # measures, from the host arrays)
-SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "observables", "")
+SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
     "fluid": "a fluid ([fluid])",
-    "stages": "stages ([[stages]])",
     "energy_budget": "the energy budget (output.observables)",
 }
 # the walls' arrays that moving walls change on the device, and those they only read
@@ -146,6 +147,7 @@ class DeviceSteps:
         self.springs = self.search.springs
         self.walls = scene.walls  # plane walls, or None
         self.moving = scene.wall_motion is not None  # some wall moves (WallMotion's steps)
+        self.stages = scene.stages  # their after_step reads and changes the host's state, or None
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
@@ -159,8 +161,9 @@ class DeviceSteps:
         extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
-        # any other module that acts between steps (the named ones are reported above)
-        between = [m for m, _ in scene.step.after_step if m.name in SUPPORTED]
+        # any other module that acts between steps (the named ones are reported above; the
+        # stages act on the host's state, which comes back for them)
+        between = [m for m, _ in scene.step.after_step if m.name in SUPPORTED and m is not scene.stages]
         extra += [f"{m.name or type(m).__name__} after its steps" for m in between]
         if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
             raise CaseError(
@@ -368,7 +371,9 @@ class DeviceSteps:
 
     def _run(self, state: State, steps: int) -> tuple[int, bool]:
         k = self.k
-        if self.on_device_at != state.clock.step:
+        # again from the host where it is ahead, or where a stage has just begun there
+        stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
+        if self.on_device_at != state.clock.step or stage_began:
             self.upload(state)
         d, n = self.d, state.particles.count
         dt = state.clock.dt
@@ -415,7 +420,10 @@ class DeviceSteps:
             )
         self.host_stale = True
         state.neighbors.moved2 = moved2
-        self.on_device_at = state.clock.step + steps
+        self.on_device_at = end = state.clock.step + steps
+        if self.stages is not None and self.stages.after_due(end, state.clock):
+            self.download(state)  # the stage's test reads the host's state
+            self.host_stale = False
         return steps, False
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:
