@@ -28,7 +28,7 @@ int64, cell_count (cells,) int32, cell_members (cells,K) int32; `worst` (1,) flo
 
 import math
 
-from numba import config, cuda, njit
+from numba import config, cuda, float64, njit
 
 from . import contact_probe, motion, neighbors, walls
 from .laws import D_N, D_T, HERTZ_MINDLIN, K_N, K_T, MU, MU_R, contact_response, reduced
@@ -59,6 +59,8 @@ tree_total = _on_arrays(walls.tree_total)
 finish_wall_totals = _on_arrays(walls.finish_wall_totals)
 wall_areas = _on_arrays(walls.wall_areas)
 wall_kick = _on_arrays(walls.wall_kick)
+# a module global, so that Numba takes it as a constant (a shared array's size must be one)
+SUM_CHUNK = walls.SUM_CHUNK
 
 
 @cuda.jit(device=True, inline=True)
@@ -462,8 +464,34 @@ def push_chunks(values, rows, record, out):
     c = t // (3 * nw)
     w = (t // 3) % nw
     b = t % 3
-    if c * walls.SUM_CHUNK < max(rows, 1) and record[w]:
+    if c * SUM_CHUNK < max(rows, 1) and record[w]:
         out[c, w, b] = chunk_difference(values, rows, c, w, b)
+
+
+@cuda.jit
+def push_two_levels(values, rows, record, out):
+    """Two levels of that tree in one launch: block (g, w, b) of SUM_CHUNK threads makes the
+    sums of chunks g * SUM_CHUNK + t (one a thread, into shared memory), then its thread 0 sums
+    those in order into out[g, w, b] (chunk_differences twice, without the level between
+    going through global memory)."""
+    nw = record.shape[0]
+    g = cuda.blockIdx.x // (3 * nw)
+    w = (cuda.blockIdx.x // 3) % nw
+    b = cuda.blockIdx.x % 3
+    if not record[w]:  # the whole block: no thread waits at the barrier below
+        return
+    t = cuda.threadIdx.x
+    sums = cuda.shared.array(SUM_CHUNK, float64)
+    chunks = walls.chunk_count(rows)
+    c = g * SUM_CHUNK + t
+    if c < chunks:
+        sums[t] = chunk_difference(values, rows, c, w, b)
+    cuda.syncthreads()
+    if t == 0:
+        s = 0.0
+        for k in range(min(SUM_CHUNK, chunks - g * SUM_CHUNK)):
+            s -= sums[k]
+        out[g, w, b] = s
 
 
 @cuda.jit

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import CaseError
 from ..kernels.neighbors import count_half_rows, fill_half_rows, row_starts
-from ..kernels.walls import chunk_count
+from ..kernels.walls import SUM_CHUNK, chunk_count
 from ..state import State
 from .compiled_steps import CompiledSteps
 from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
@@ -112,18 +112,26 @@ def _gpu_name(cuda) -> str:
 
 
 def push_levels(launch, kernels, pforce, rows: int, record, psum) -> tuple[int, bool]:
-    """The tree sum of pforce's first `rows` rows on the device, level by level as the CPU's
-    particle_pushes makes it (kernels/walls.py), one thread per chunk and component; returns
-    where its last level lies in psum and whether that sum is positive (for tree_total)."""
+    """The tree sum of pforce's first `rows` rows on the device as the CPU's particle_pushes
+    makes it (kernels/walls.py): two levels a launch (push_two_levels, a block of SUM_CHUNK
+    threads per chunk of chunks), then the last one alone if one is left (push_chunks); returns
+    where the one sum left lies in psum and whether it is positive (for tree_total)."""
     nw = record.shape[0]
-    values, level, positive = pforce, 0, False
+    values, level, made = pforce, 0, 0  # made: levels summed so far (each flips the sign)
     while True:
         chunks = chunk_count(rows)
-        launch(kernels.push_chunks, chunks * nw * 3, values, rows, record, psum[level])
         if chunks == 1:
-            return level, positive
-        rows, values = chunks, psum[level]
-        level, positive = 1 - level, not positive
+            launch(kernels.push_chunks, nw * 3, values, rows, record, psum[level])
+            return level, (made + 1) % 2 == 0
+        above = chunk_count(chunks)
+        blocks = above * nw * 3  # of SUM_CHUNK threads
+        launch(
+            kernels.push_two_levels, blocks * SUM_CHUNK, values, rows, record, psum[level], block=SUM_CHUNK
+        )
+        made += 2
+        if above == 1:
+            return level, made % 2 == 0
+        rows, values, level = above, psum[level], 1 - level
 
 
 @dataclass
@@ -181,8 +189,10 @@ class DeviceSteps:
 
     # --- host <-> device ------------------------------------------------------------------
 
-    def _launch(self, kernel, size: int, *args) -> None:
-        threads = min(THREADS, max(size, 1))  # a small scene: no idle threads (the simulator's cost)
+    def _launch(self, kernel, size: int, *args, block: int | None = None) -> None:
+        """`kernel` on `size` threads, in blocks of `block` (a kernel that needs its size) or of
+        THREADS."""
+        threads = block or min(THREADS, max(size, 1))  # a small scene: no idle threads (the simulator's)
         launch = kernel[math.ceil(max(size, 1) / threads), threads]
         if self.timings is None:
             launch(*args)

@@ -59,6 +59,7 @@ SIGNATURES = {
     "wall_forces": (M, M, M, M, M, V, V, V, V, I1, L1, V, V, M, M, H, H, BOOL, INT, BOOL, F, F, M, M, B, H),
     "wall_motion_drift": (L1, V, L2, M, V, M, M, M, M, F, L1, L1, M),
     "push_chunks": (H, INT, B, H),
+    "push_two_levels": (H, INT, B, H),
     "wall_motion_kick": (
         H4,
         INT,

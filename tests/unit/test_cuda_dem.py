@@ -237,10 +237,16 @@ def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path):
         np.testing.assert_allclose(one, other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
 
 
-def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree():
-    """The particles' forces on the walls, 5000 rows with most of them zero (three levels of
-    chunks), summed on the device level by level: bitwise the CPU's sum (kernels/walls.py
-    particle_pushes), also on a GPU, since a sum of differences has no multiply to fuse."""
+@pytest.mark.parametrize(
+    "n, where",
+    [(5000, (1, False)), (1000, (0, True)), (40, (0, False))],
+    ids=["three-levels", "two-levels", "one-level"],
+)
+def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree(n, where):
+    """The particles' forces on the walls, most of them zero, summed on the device in its
+    launches (two levels of the tree at a time, then a last one alone: 5000 -> 79 -> 2 -> 1,
+    1000 -> 16 -> 1, 40 -> 1): bitwise the CPU's sum (kernels/walls.py particle_pushes), also on
+    a GPU, since a sum of differences has no multiply to fuse."""
     from numba import cuda
 
     from sphere_cli.kernels import cuda_dem
@@ -248,7 +254,6 @@ def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree():
     from sphere_cli.physics.device_steps import push_levels
 
     rng = np.random.default_rng(2)
-    n = 5000
     pforce = rng.normal(0.0, 1.0, (n, 3, 3)) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
     pforce[rng.random(n) < 0.8] = 0.0
     record = np.array([1, 0, 1], dtype=np.uint8)
@@ -256,14 +261,14 @@ def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree():
     expected = np.zeros((3, 3))
     particle_pushes(pforce, record, psum, expected)
 
-    def launch(kernel, size, *args):
-        threads = min(128, size)
+    def launch(kernel, size, *args, block=None):
+        threads = block or min(128, size)
         kernel[-(-size // threads), threads](*args)
 
     on_device = cuda.to_device(np.zeros_like(psum))
     pushes, marked = cuda.to_device(pforce), cuda.to_device(record)
     level, positive = push_levels(launch, cuda_dem, pushes, n, marked, on_device)
-    assert (level, positive) == (0, False)  # 5000 -> 79 -> 2 -> 1: three levels
+    assert (level, positive) == where  # where the CPU's levels leave the sum, and its sign
     total = np.zeros((3, 3))
     tree_total(on_device.copy_to_host(), level, positive, record, total)
     assert np.array_equal(total, expected) and np.abs(expected[0]).min() > 0.0
