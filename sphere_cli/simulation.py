@@ -59,8 +59,9 @@ class StepSchedule:
 def advance(scene, steps: int, sync: bool = True) -> bool:
     """Advance the scene by `steps` steps with no output (library use and tests), or until the
     last stage ends. Returns True if a stage ended on the last step taken. On a GPU
-    (physics/device_steps.py) the host's arrays hold the result once `sync` brings it back (the
-    run loop brings it back only when it reads them: `to_host`).
+    (physics/device_steps.py) the host's arrays hold the result once `sync` brings it back, and
+    changes made to them before the next call are then taken up (`hand_over`; the run loop
+    brings the state back only when it reads it: `to_host`).
 
     Where the scene's step allows it (physics/compiled_steps.py), whole runs of steps up to the
     next after_step hook are taken in one compiled call; the step that makes the neighbour list
@@ -108,14 +109,22 @@ def advance(scene, steps: int, sync: bool = True) -> bool:
         taken += 1
         after()
     if sync:
-        to_host(scene)
+        hand_over(scene)
     return scene.stages is not None and scene.stages.ended_at == clock.step
 
 
 def to_host(scene) -> None:
-    """The state into the host's arrays, where steps run elsewhere (a GPU)."""
+    """The state into the host's arrays, where steps run elsewhere (a GPU), for reading."""
     if scene.step.compiled is not None:
         scene.step.compiled.to_host(scene.state)
+
+
+def hand_over(scene) -> None:
+    """The state into the host's arrays for a caller who may change them before the next steps
+    (a script or notebook between calls of advance): steps that run elsewhere take them up
+    again from the host."""
+    if scene.step.compiled is not None:
+        scene.step.compiled.hand_over(scene.state)
 
 
 def check_stable(scene) -> None:

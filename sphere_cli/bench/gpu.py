@@ -53,7 +53,7 @@ def run_gpu_benchmark(
             else:
                 scene = settled_scene(n, log, device="cuda")
             device = scene.step.compiled
-            advance(scene, 5)  # compiles the kernels (cached after a first run), uploads
+            advance(scene, 5, sync=False)  # compiles the kernels (cached after a first run), uploads
             times, copies = _time_on_device(scene, steps, repeats)
             device.timings = {}
             advance(scene, steps)

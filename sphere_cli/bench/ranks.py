@@ -47,7 +47,7 @@ def member(n: int, steps: int, repeats: int) -> None:
         raise SystemExit(world.follow())
     with ranks.leading(world):
         scene = settled_scene(n, log=lambda *_: None)
-        advance(scene, 2)  # kernels loaded, the scene shared out
+        advance(scene, 2, sync=False)  # kernels loaded, the scene shared out
         times, gathers = [], []
         for _ in range(repeats):
             started = time.perf_counter()

@@ -104,6 +104,8 @@ class CompiledSteps:
     def to_host(state: State) -> None:
         """Nothing to bring back: the state is the host's arrays (physics/device_steps.py)."""
 
+    hand_over = to_host  # the caller's changes are the state's already
+
     @staticmethod
     def known_stable(state: State) -> bool:
         """False: the host checks its own arrays (simulation.check_stable)."""

@@ -361,6 +361,12 @@ class DeviceSteps:
             _on_gpu(lambda: self.download(state))
             self.host_stale = False
 
+    def hand_over(self, state: State) -> None:
+        """to_host, for a caller who may change the host's arrays before the next steps: those
+        then start from the host's arrays again (an upload), changed or not."""
+        self.to_host(state)
+        self.on_device_at = None
+
     def known_stable(self, state: State) -> bool:
         """True if the state on the device has no particle gone bad (checked there, without
         bringing the state back); False where the host must look (simulation.check_stable):

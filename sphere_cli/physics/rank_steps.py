@@ -336,6 +336,12 @@ class RankSteps:
         """True if the fluid takes its own step in the after_step of `step`."""
         return self.fluid is not None and self.fluid.after_due(step, clock)
 
+    def hand_over(self, state: State) -> None:
+        """to_host: on ranks the steps are called only by the run loop and the benchmark
+        (a script's run on ranks is refused, ranks.py), which do not change the scene between
+        calls."""
+        self.to_host(state)
+
     def to_host(self, state: State) -> None:
         """The owners' particles, rows and wall springs into the lead's scene."""
         if not self.host_stale:

@@ -297,6 +297,20 @@ def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
     assert device.rows.nbr.shape[1] >= width
 
 
+def test_changes_to_the_host_arrays_between_calls_reach_the_gpu(tmp_path):
+    """A script or notebook that changes the state between calls of advance (a sphere pushed,
+    the friction changed) sees the change in the GPU's steps, as on the CPU."""
+    from sphere_cli.kernels.laws import MU
+
+    gpu, cpu = _scenes(tmp_path, seed=7)
+    for scene in (gpu, cpu):
+        advance(scene, 20)
+        scene.state.particles.vel[7] += [0.3, -0.2, 0.1]
+        scene.contact.table[..., MU] = 0.1
+        advance(scene, 20)
+    _compare(gpu, cpu)
+
+
 def test_a_gpu_checkpoint_continues_on_the_cpu(tmp_path):
     """The host's list after a GPU call is a valid CPU list: continuing on the CPU from it gives
     the CPU's own result (the springs carried in the CPU's layout)."""
@@ -313,15 +327,14 @@ def test_the_gpu_checks_stability_in_place_and_reports_as_the_cpu(tmp_path):
     """The stability check runs on the device without bringing the state back; a particle gone
     bad brings it back and stops the run with the CPU's message."""
     from sphere_cli.errors import NumericalError
-    from sphere_cli.simulation import check_stable
+    from sphere_cli.simulation import check_stable, hand_over
 
     gpu, cpu = _scenes(tmp_path)
     advance(gpu, 3, sync=False)
     advance(cpu, 3)
     check_stable(gpu)
     assert gpu.step.compiled.host_stale  # checked on the device: nothing came back
-    gpu.step.compiled.to_host(gpu.state)
-    gpu.step.compiled.on_device_at = None  # the host is changed below: upload again
+    hand_over(gpu)  # the host is changed below: taken up by the next steps
     messages = []
     for scene in (gpu, cpu):
         scene.state.particles.vel[7] = [0.0, 300.0, 0.0]  # 3 mm a step: beyond half a radius
