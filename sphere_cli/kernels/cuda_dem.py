@@ -101,12 +101,15 @@ def kick_drift(
 
 
 @cuda.jit
-def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt):
-    """kernels/motion.py kick for particle i."""
+def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt, worst):
+    """kernels/motion.py kick for particle i; thread 0 zeroes worst[0] for the next step's
+    kick-drift (which the kick precedes on the stream: no copy from the host a step)."""
     i = cuda.grid(1)
     if i >= vel.shape[0]:
         return
     _half_kick(vel, angvel, force, torque, inv_mass, inv_inertia, 0.5 * dt, i)
+    if i == 0:
+        worst[0] = 0.0
 
 
 @cuda.jit

@@ -393,7 +393,7 @@ class DeviceSteps:
             self.upload(state)
         d, n = self.d, state.particles.count
         dt = state.clock.dt
-        zero = np.zeros(1)
+        d["worst"].copy_to_device(np.zeros(1))  # then zeroed by each step's kick on the device
         moved2 = 0.0
         for taken in range(steps):
             if self.moving:
@@ -402,7 +402,6 @@ class DeviceSteps:
                     d["wall_coord"], d["wall_vel"], d["wall_acc"], d["wall_vel_pred"], d["wall_shift"], dt,
                     d["attached"], d["attached_wall"], d["vel"],
                 )  # fmt: skip
-            d["worst"].copy_to_device(zero)
             self._launch(
                 k.kick_drift, n, d["pos"], d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"],
                 d["inv_inertia"], d["lower"], d["length"], d["periodic"], dt, d["vel_pred"],
@@ -432,8 +431,9 @@ class DeviceSteps:
             if self.moving:
                 self._wall_kick(n, (state.clock.step + taken + 1) * dt, dt)
             self._launch(
-                k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"], dt
-            )
+                k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"],
+                dt, d["worst"],
+            )  # fmt: skip
         self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = end = state.clock.step + steps

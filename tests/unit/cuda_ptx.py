@@ -21,7 +21,7 @@ F, INT, BOOL = t.float64, t.int64, t.boolean
 
 SIGNATURES = {
     "kick_drift": (M, M, M, M, M, V, V, V, V, B, F, M, M, M, V),
-    "kick": (M, M, M, M, V, V, F),
+    "kick": (M, M, M, M, V, V, F, V),
     "clear": (I1,),
     "bin_particles": (M, V, V, L1, L1, I1, I2, I1),
     "build_rows": (M, V, V, B, L1, L1, I1, I2, F, I2, I1, I1),

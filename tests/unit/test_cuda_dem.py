@@ -180,8 +180,10 @@ def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
         _compare(gpu, cpu)
         contacts.append(len(_pairs(cpu)))
     # the scene did what the test needs: the list rebuilt on the device, contacts with springs
-    # all along
+    # all along; rebuilt at the CPU's steps (results do not show a list rebuilt too often)
     assert gpu.state.neighbors.builds - builds >= 2
+    if SIMULATED:  # (on a GPU a displacement within round-off of the skin may part them)
+        assert gpu.state.neighbors.builds == cpu.state.neighbors.builds
     assert min(contacts) >= 5, contacts
     if walls:  # wall springs too, each bitwise (the CPU's layout: (N,W,3))
         # (the moving walls': the lid's; the rough floor's spheres touch the others instead)
