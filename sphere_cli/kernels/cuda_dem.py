@@ -27,38 +27,57 @@ int64, cell_count (cells,) int32, cell_members (cells,K) int32; `worst` (1,) flo
 """
 
 import math
+import types
 
 from numba import config, cuda, float64, njit
+from numba.core.dispatcher import Dispatcher
 
 from . import contact_probe, motion, neighbors, walls
 from .laws import D_N, D_T, HERTZ_MINDLIN, K_N, K_T, MU, MU_R, contact_response, reduced
 from .neighbors import minimum_image, wrap_cell
 
 
-def _on_arrays(function):
-    """A CPU @njit function that takes arrays, for the kernels: Numba compiles it for the GPU
-    where a kernel calls it, inlined (one the CPU does not inline is taken again from its Python
-    source with inline="always": numba-cuda would compile it as a device function of its own,
-    whose target it asks of a GPU, so it could not be compiled where there is none); the
-    simulator runs the kernels as Python, on arrays an @njit function cannot take, so there it
-    is the Python function itself (the same operations)."""
+def for_gpu(function):
+    """A CPU @njit function, for the kernels: Numba compiles it for the GPU where a kernel calls
+    it, inlined (one the CPU does not inline is taken again from its Python source with
+    inline="always": numba-cuda would compile it as a device function of its own, whose target
+    it asks of a GPU, so it could not be compiled where there is none). The simulator runs the
+    kernels as Python, on arrays an @njit function cannot take, so there it is the Python
+    function itself, calling the Python functions of the @njit functions it calls (the same
+    operations)."""
     if config.ENABLE_CUDASIM:
-        return function.py_func
+        return _python(function)
     if function.targetoptions.get("inline") == "always":
         return function
     return njit(inline="always")(function.py_func)
 
 
-cell_number = _on_arrays(neighbors.cell_number)
-insert_ascending = _on_arrays(neighbors.insert_ascending)
-wall_normal = _on_arrays(contact_probe.wall_normal)
-unstable_reason = _on_arrays(motion.unstable_reason)
-wall_kick_drift = _on_arrays(walls.wall_kick_drift)
-chunk_difference = _on_arrays(walls.chunk_difference)
-tree_total = _on_arrays(walls.tree_total)
-finish_wall_totals = _on_arrays(walls.finish_wall_totals)
-wall_areas = _on_arrays(walls.wall_areas)
-wall_kick = _on_arrays(walls.wall_kick)
+def _python(function):
+    """The Python function of an @njit function, with each @njit function it calls replaced by
+    its own Python function, and so on down."""
+    source = function.py_func
+    calls = {
+        name: _python(value)
+        for name in source.__code__.co_names
+        if isinstance(value := source.__globals__.get(name), Dispatcher)
+    }
+    if not calls:
+        return source
+    scope = {**source.__globals__, **calls}
+    code, name = source.__code__, source.__name__
+    return types.FunctionType(code, scope, name, source.__defaults__, source.__closure__)
+
+
+cell_number = for_gpu(neighbors.cell_number)
+insert_ascending = for_gpu(neighbors.insert_ascending)
+wall_normal = for_gpu(contact_probe.wall_normal)
+unstable_reason = for_gpu(motion.unstable_reason)
+wall_kick_drift = for_gpu(walls.wall_kick_drift)
+chunk_difference = for_gpu(walls.chunk_difference)
+tree_total = for_gpu(walls.tree_total)
+finish_wall_totals = for_gpu(walls.finish_wall_totals)
+wall_areas = for_gpu(walls.wall_areas)
+wall_kick = for_gpu(walls.wall_kick)
 # a module global, so that Numba takes it as a constant (a shared array's size must be one)
 SUM_CHUNK = walls.SUM_CHUNK
 

@@ -12,8 +12,11 @@ walls' own steps run on one GPU thread each half step (a few walls); the particl
 them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
 Stages run on the host, as on the CPU: the state comes back before each step where a stage may
 end (Stages.after_due) and goes up again when one has begun (its walls' modes, its friction, an
-approach). A case with anything else in its step (a fluid, the energy budget) is refused with
-the modules named; so is a machine without a usable GPU. Results agree with the CPU to
+approach). So does the 1D VANS fluid's column, solved on the host at its coupling steps from the
+particles brought back; its force on the particles runs on the device every step
+(kernels/fluid/cuda_profile_forces.py), reading the column's profiles sent up after each fluid
+step. A case with anything else in its step (a Navier-Stokes or Darcy fluid, the energy budget)
+is refused with the modules named; so is a machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
@@ -45,7 +48,7 @@ THREADS = 128
 SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
-    "fluid": "a fluid ([fluid])",
+    "fluid": "a Navier-Stokes or Darcy fluid ([fluid])",
     "energy_budget": "the energy budget (output.observables)",
 }
 # the walls' arrays that moving walls change on the device, and those they only read
@@ -111,6 +114,16 @@ def _gpu_name(cuda) -> str:
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
+def _vans1d(scene):
+    """The scene's fluid if it is the 1D VANS profile (the one the GPU couples to), else None
+    (a dry scene imports nothing of the fluids)."""
+    if scene.fluid is None:
+        return None
+    from .fluid.vans1d import Vans1d
+
+    return scene.fluid if isinstance(scene.fluid, Vans1d) else None
+
+
 def push_levels(launch, kernels, pforce, rows: int, record, psum) -> tuple[int, bool]:
     """The tree sum of pforce's first `rows` rows on the device as the CPU's particle_pushes
     makes it (kernels/walls.py): two levels a launch (push_two_levels, a block of SUM_CHUNK
@@ -156,6 +169,12 @@ class DeviceSteps:
         self.walls = scene.walls  # plane walls, or None
         self.moving = scene.wall_motion is not None  # some wall moves (WallMotion's steps)
         self.stages = scene.stages  # their after_step reads and changes the host's state, or None
+        self.fluid = _vans1d(scene)  # the 1D VANS fluid: its column on the host, or None
+        self.fluid_due = None  # the step at whose end the column takes its step on the host
+        if self.fluid is not None:
+            from ..kernels.fluid.cuda_profile_forces import profile_forces
+
+            self.fluid_kernel = profile_forces
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
@@ -166,7 +185,10 @@ class DeviceSteps:
     @classmethod
     def of(cls, scene) -> DeviceSteps:
         """The GPU steps of a scene, or a CaseError saying what the GPU does not run yet."""
-        extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
+        vans = _vans1d(scene)
+        extra = [
+            NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED and m is not vans
+        ]
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
         # any other module that acts between steps (the named ones are reported above; the
@@ -176,7 +198,7 @@ class DeviceSteps:
         if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
             raise CaseError(
                 f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, plane '
-                "walls and periodic boundaries; this case also has: "
+                "walls, stages, the 1D VANS fluid and periodic boundaries; this case also has: "
                 f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
             )
         if not scene.neighbors.dense:
@@ -271,10 +293,23 @@ class DeviceSteps:
                     psum=to(np.zeros((2, chunk_count(p.count), len(w.faces), 3))),
                     push_total=to(np.zeros((len(w.faces), 3))),
                 )
+        if self.fluid is not None:
+            self._fluid_arguments(state)
         self.rows, self.hist = self._full_rows(nl, p.count)
         self.spare = self._allocate(p.count, self.rows.nbr.shape[1])
         self.hist_next = self._springs(p.count, self.rows.nbr.shape[1])
         self.on_device_at = state.clock.step
+
+    def _fluid_arguments(self, state: State) -> None:
+        """The fluid's force kernel's arguments on the device (Vans1d.force_arguments): the
+        particles' own arrays, the column's profiles and per-particle arrays sent up again,
+        its numbers as they are now."""
+        p = state.particles
+        own = {id(getattr(p, name)): name for name in ("pos", "vel", "radius", "force")}
+        self.fluid_args = tuple(
+            self.d[own[id(a)]] if id(a) in own else self.cuda.to_device(a) if isinstance(a, np.ndarray) else a
+            for a in self.fluid.force_arguments(state)
+        )
 
     def _allocate(self, n: int, width: int) -> Rows:
         cuda = self.cuda
@@ -331,6 +366,10 @@ class DeviceSteps:
         if self.moving:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
+        if self.fluid is not None:  # the drag of the last step, which the stability check reads
+            f = state.fluid
+            for host, device in zip((f.drag_coef, f.drag_x), self.fluid_args[-2:], strict=True):
+                device.copy_to_host(host)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
@@ -371,7 +410,7 @@ class DeviceSteps:
         """True if the state on the device has no particle gone bad (checked there, without
         bringing the state back); False where the host must look (simulation.check_stable):
         something has gone bad, or the host's arrays are current anyway."""
-        if not self.host_stale:
+        if not self.host_stale or self.fluid is not None:  # (the fluid's own test is the host's)
             return False
         return _on_gpu(lambda: self._stable_on_device(state))
 
@@ -391,6 +430,8 @@ class DeviceSteps:
         stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
         if self.on_device_at != state.clock.step or stage_began:
             self.upload(state)
+        elif self.fluid_due == state.clock.step:  # the column's step on the host: its profiles
+            self._fluid_arguments(state)
         d, n = self.d, state.particles.count
         dt = state.clock.dt
         d["worst"].copy_to_device(np.zeros(1))  # then zeroed by each step's kick on the device
@@ -428,6 +469,8 @@ class DeviceSteps:
                     d["wall_hist"], self.wall_springs, self.contact.law_code, self.contact.rolling, dt, dt,
                     d["force"], d["torque"], d["record"], d["pforce"],
                 )  # fmt: skip
+            if self.fluid is not None:
+                self._launch(self.fluid_kernel, n, *self.fluid_args)
             if self.moving:
                 self._wall_kick(n, (state.clock.step + taken + 1) * dt, dt)
             self._launch(
@@ -437,8 +480,11 @@ class DeviceSteps:
         self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = end = state.clock.step + steps
-        if self.stages is not None and self.stages.after_due(end, state.clock):
-            self.download(state)  # the stage's test reads the host's state
+        stage = self.stages is not None and self.stages.after_due(end, state.clock)
+        if self.fluid is not None and self.fluid.after_due(end, state.clock):
+            self.fluid_due = end
+        if stage or self.fluid_due == end:
+            self.download(state)  # the stage's test and the fluid's step read the host's state
             self.host_stale = False
         return steps, False
 

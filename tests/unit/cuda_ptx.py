@@ -1,8 +1,8 @@
-"""Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py) for an H200 (compute capability
-9.0) with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot
-tell whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
-numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds
-in its code.
+"""Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py)
+for an H200 (compute capability 9.0) with NVIDIA's compiler, without a GPU: the simulator runs
+the kernels as Python and cannot tell whether they compile. Run by tests/unit/test_cuda_dem.py
+with NUMBA_ENABLE_CUDASIM=0 where numba-cuda is installed (the CUDA extra); prints each kernel's
+name and the fused multiply-adds in its code.
 
 The argument types are those physics/device_steps.py passes."""
 
@@ -10,6 +10,7 @@ from numba import cuda
 from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
+from sphere_cli.kernels.fluid import cuda_profile_forces
 
 V = t.float64[:]  # (N,) or (3,)
 M = t.float64[:, :]  # (N,3)
@@ -88,7 +89,13 @@ SIGNATURES = {
     ),  # fmt: skip
 }
 
+# the 1D VANS fluid's force (kernels/fluid/cuda_profile_forces.py)
+FLUID_SIGNATURES = {
+    "profile_forces": (M, M, V, B, V, V, V, V, BOOL, F, F, F, F, F, V, BOOL, F, BOOL, M, M, V, V),
+}
+
 if __name__ == "__main__":
-    for name, signature in SIGNATURES.items():
-        ptx, _ = cuda.compile_ptx(getattr(cuda_dem, name).py_func, signature, cc=(9, 0))
-        print(name, ptx.count("fma.rn.f64"))
+    for module, signatures in ((cuda_dem, SIGNATURES), (cuda_profile_forces, FLUID_SIGNATURES)):
+        for name, signature in signatures.items():
+            ptx, _ = cuda.compile_ptx(getattr(module, name).py_func, signature, cc=(9, 0))
+            print(name, ptx.count("fma.rn.f64"))

@@ -299,6 +299,42 @@ def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
     assert device.rows.nbr.shape[1] >= width
 
 
+# a 1D VANS water column over the floor, driven by a pressure gradient, solved every 10 steps,
+# with turbulent fluctuations drawn at each and lift: the particles in it feel drag, buoyancy
+# and lift from the profile on the device
+VANS = """
+[[walls]]
+face = "z-"
+material = "b"
+[fluid]
+model = "vans1d"
+surface = 0.0075
+cells = 15
+coupling = { steps = 10 }
+lift_coefficient = 0.2
+buoyancy = "full"
+flow = { kind = "solved", mixing_length = "prandtl", pressure_gradient = -2000.0, initial = "rest" }
+fluctuations = { bed_elevation = 0.001, seed = 3 }
+"""
+
+
+def test_the_vans_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path):
+    """The 1D VANS fluid with the particles on the GPU: its column is solved on the host at each
+    coupling step from the particles brought back, its force acts on the device every step, from
+    the profiles and fluctuations sent up after each fluid step."""
+    gpu, cpu = _scenes(tmp_path, walls=VANS)
+    assert type(gpu.step.compiled).__name__ == "DeviceSteps"
+    for steps in (15, 25, 20):  # runs that end inside and at the coupling intervals
+        advance(gpu, steps)
+        advance(cpu, steps)
+        _compare(gpu, cpu)
+    a, b = gpu.state.fluid, cpu.state.fluid
+    assert np.abs(b.column.u).max() > 0.0 and np.abs(b.drag_coef).max() > 0.0
+    for name in ("drag_coef", "drag_x"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=RTOL, err_msg=name)
+    np.testing.assert_allclose(a.column.u, b.column.u, rtol=RTOL, atol=RTOL * np.abs(b.column.u).max())
+
+
 def test_changes_to_the_host_arrays_between_calls_reach_the_gpu(tmp_path):
     """A script or notebook that changes the state between calls of advance (a sphere pushed,
     the friction changed) sees the change in the GPU's steps, as on the CPU."""
@@ -387,9 +423,12 @@ def test_every_kernel_compiles_for_a_gpu():
     done = subprocess.run([sys.executable, str(helper)], env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     compiled = {line.split()[0] for line in done.stdout.splitlines()}
+    from sphere_cli.kernels.fluid import cuda_profile_forces
+
     launched = {
         name
-        for name, value in vars(kernels).items()
+        for module in (kernels, cuda_profile_forces)
+        for name, value in vars(module).items()
         if not name.startswith("_") and hasattr(value, "py_func") and hasattr(value, "__getitem__")
     }
     assert launched and launched <= compiled, launched - compiled

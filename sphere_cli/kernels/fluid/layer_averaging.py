@@ -25,7 +25,7 @@ import math
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def slice_volume(z_p, r, a, b):
     """Volume of the sphere of centre height z_p and radius r between heights a < b [m^3]."""
     sa = min(max(a - z_p, -r), r)

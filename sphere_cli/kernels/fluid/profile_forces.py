@@ -81,7 +81,7 @@ def _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w):
     return (1.0 - w) * u[lo] + w * u[hi]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z):
     """u(z) with the boundary conditions (see _velocity)."""
     lo, hi, w = bracket(centres, z)
@@ -92,6 +92,52 @@ def fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z):
 def _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max):
     hindrance = (1.0 - min(max(solid_p, 0.0), solid_max)) ** (-exponent)
     return 0.5 * rho * math.pi * r * r * (0.44 * speed + 12.0 * nu / r) * hindrance
+
+
+@njit(cache=True, inline="always")
+def particle_profile_force(
+    i, pos, vel, radius, selected, faces, centres, u, solid, top_no_slip, lid_velocity, rho, nu, exponent,
+    solid_max, gravity, buoyancy_full, lift_coef, fluctuating, fluct, force, drag_coef, drag_x,
+):  # fmt: skip
+    """The fluid's force on particle i (module docstring), added to force[i]; its drag
+    coefficient and streamwise drag into drag_coef[i], drag_x[i]. One description for the
+    processor's loop (profile_forces) and the GPU's threads (kernels/fluid/cuda_profile_forces.py)."""
+    drag_coef[i] = 0.0
+    drag_x[i] = 0.0
+    if not selected[i]:
+        return
+    top = faces[centres.shape[0]]
+    z = pos[i, 2]
+    r = radius[i]
+    volume = 4.0 / 3.0 * math.pi * r * r * r
+    submerged = slice_volume(z, r, z - r, top)
+    if submerged <= 0.0:
+        return
+    frac = submerged / volume
+    lo, hi, w = bracket(centres, z)
+    ur = _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w) - vel[i, 0]
+    vr = -vel[i, 1]
+    wr = -vel[i, 2]
+    if fluctuating:
+        ur += fluct[i, 0]
+        vr += fluct[i, 1]
+        wr += fluct[i, 2]
+    speed = math.sqrt(ur * ur + vr * vr + wr * wr)
+    solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
+    k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)
+    drag_coef[i] = k
+    drag_x[i] = k * ur
+    force[i, 0] += k * ur
+    force[i, 1] += k * vr
+    force[i, 2] += k * wr
+    if buoyancy_full:
+        force[i, 0] -= rho * submerged * gravity[0]
+        force[i, 1] -= rho * submerged * gravity[1]
+    force[i, 2] -= rho * submerged * gravity[2]
+    if lift_coef > 0.0:
+        u_top = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z + r) - vel[i, 0]
+        u_bottom = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z - r) - vel[i, 0]
+        force[i, 2] += frac * 0.5 * rho * lift_coef * math.pi * r * r * (u_top * u_top - u_bottom * u_bottom)
 
 
 @njit(cache=True, parallel=True)
@@ -119,46 +165,12 @@ def profile_forces(
     drag_coef,
     drag_x,
 ):
-    n = centres.shape[0]
-    top = faces[n]
     for i in prange(pos.shape[0]):
-        drag_coef[i] = 0.0
-        drag_x[i] = 0.0
-        if not selected[i]:
-            continue
-        z = pos[i, 2]
-        r = radius[i]
-        volume = 4.0 / 3.0 * math.pi * r * r * r
-        submerged = slice_volume(z, r, z - r, top)
-        if submerged <= 0.0:
-            continue
-        frac = submerged / volume
-        lo, hi, w = bracket(centres, z)
-        ur = _velocity(faces, centres, u, top_no_slip, lid_velocity, z, lo, hi, w) - vel[i, 0]
-        vr = -vel[i, 1]
-        wr = -vel[i, 2]
-        if fluctuating:
-            ur += fluct[i, 0]
-            vr += fluct[i, 1]
-            wr += fluct[i, 2]
-        speed = math.sqrt(ur * ur + vr * vr + wr * wr)
-        solid_p = (1.0 - w) * solid[lo] + w * solid[hi]
-        k = frac * _drag_coefficient(rho, nu, r, speed, solid_p, exponent, solid_max)
-        drag_coef[i] = k
-        drag_x[i] = k * ur
-        force[i, 0] += k * ur
-        force[i, 1] += k * vr
-        force[i, 2] += k * wr
-        if buoyancy_full:
-            force[i, 0] -= rho * submerged * gravity[0]
-            force[i, 1] -= rho * submerged * gravity[1]
-        force[i, 2] -= rho * submerged * gravity[2]
-        if lift_coef > 0.0:
-            u_top = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z + r) - vel[i, 0]
-            u_bottom = fluid_velocity_at(faces, centres, u, top_no_slip, lid_velocity, z - r) - vel[i, 0]
-            force[i, 2] += (
-                frac * 0.5 * rho * lift_coef * math.pi * r * r * (u_top * u_top - u_bottom * u_bottom)
-            )
+        particle_profile_force(
+            i, pos, vel, radius, selected, faces, centres, u, solid, top_no_slip, lid_velocity, rho, nu,
+            exponent, solid_max, gravity, buoyancy_full, lift_coef, fluctuating, fluct, force, drag_coef,
+            drag_x,
+        )  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
