@@ -367,7 +367,7 @@ class DeviceSteps:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
         if self.fluid is not None:  # the drag of the last step, which the stability check reads
-            f = state.fluid
+            f = state.fluid  # (the last two of Vans1d.force_arguments)
             for host, device in zip((f.drag_coef, f.drag_x), self.fluid_args[-2:], strict=True):
                 device.copy_to_host(host)
         nbr = self.rows.nbr.copy_to_host()
@@ -409,8 +409,9 @@ class DeviceSteps:
     def known_stable(self, state: State) -> bool:
         """True if the state on the device has no particle gone bad (checked there, without
         bringing the state back); False where the host must look (simulation.check_stable):
-        something has gone bad, or the host's arrays are current anyway."""
-        if not self.host_stale or self.fluid is not None:  # (the fluid's own test is the host's)
+        something has gone bad, the host's arrays are current anyway, or a fluid has its own
+        test, which reads the host's arrays."""
+        if not self.host_stale or self.fluid is not None:
             return False
         return _on_gpu(lambda: self._stable_on_device(state))
 
