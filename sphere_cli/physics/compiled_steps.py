@@ -48,6 +48,37 @@ def _has_steps_kernel(hook) -> bool:
     return False
 
 
+def plain_step(scene) -> bool:
+    """True if the scene's hooks are exactly its modules' own (the particles' motion, walls that
+    move, the search, the pair and wall contacts, a fluid's force and kick, stages and a fluid's
+    step between steps), none replaced by a wrapper: the steps that the ranks
+    (physics/rank_steps.py) and a GPU (physics/device_steps.py) take in their own order."""
+    step = scene.step
+    moving = () if scene.wall_motion is None else (scene.wall_motion,)
+    fluid_kicks = scene.fluid is not None and "kick" in scene.fluid.takes_over
+    kicks = [(m, WallMotion) for m in moving]
+    kicks.append((scene.fluid, type(scene.fluid)) if fluid_kicks else (scene.motion, Motion))
+    forces = [(scene.contact, PairContactForces)]
+    if scene.walls is not None:
+        forces.append((scene.walls, PlaneWallForces))
+    if scene.fluid is not None:
+        forces.append((scene.fluid, type(scene.fluid)))
+    expected = {
+        "kick_drift": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
+        "prepare": [(scene.neighbors, NeighborSearch)],
+        "forces": forces,
+        "kick": kicks,
+    }
+    for hook, modules in expected.items():
+        hooks = getattr(step, hook)
+        if len(hooks) != len(modules):
+            return False
+        for bound, (module, cls) in zip(hooks, modules, strict=True):
+            if getattr(bound, "__self__", None) is not module or not is_hook_of(bound, cls, hook):
+                return False
+    return not step.finish_step and all(m is scene.stages or m is scene.fluid for m, _ in step.after_step)
+
+
 def step_arguments(state: State, contact: PairContactForces, walls: PlaneWallForces | None) -> tuple:
     """The argument tuples of the DEM step's kernels (kernels/steps.py): (kick_drift's, those of
     cross_chunk_pairs and chunk_pair_forces, wall_forces' or None without walls, kick's), valid

@@ -12,11 +12,12 @@ walls' own steps run on one GPU thread each half step (a few walls); the particl
 them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
 Stages run on the host, as on the CPU: the state comes back before each step where a stage may
 end (Stages.after_due) and goes up again when one has begun (its walls' modes, its friction, an
-approach). So does the 1D VANS fluid's column, solved on the host at its coupling steps from the
-particles brought back; its force on the particles runs on the device every step
-(kernels/fluid/cuda_profile_forces.py), reading the column's profiles sent up after each fluid
-step. A case with anything else in its step (a Navier-Stokes or Darcy fluid, the energy budget)
-is refused with the modules named; so is a machine without a usable GPU. Results agree with the CPU to
+approach). So does a fluid whose force on the particles runs on the GPU (FluidModule.on_gpu: the
+1D VANS profile, kernels/fluid/cuda_profile_forces.py; Darcy, kernels/fluid/cuda_darcy.py): its
+own step is the host's, at its coupling steps, from the particles brought back, and its fields
+go up again after each. A case with anything else in its step (a Navier-Stokes fluid, a Darcy
+fluid under a wall it pushes, the energy budget) is refused with the modules named; so is a
+machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
@@ -38,7 +39,7 @@ from ..errors import CaseError
 from ..kernels.neighbors import count_half_rows, fill_half_rows, row_starts
 from ..kernels.walls import SUM_CHUNK, chunk_count
 from ..state import State
-from .compiled_steps import CompiledSteps
+from .compiled_steps import plain_step
 from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
 
 # threads per block: any size gives the same results (each thread sums its own particle)
@@ -48,7 +49,7 @@ THREADS = 128
 SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
-    "fluid": "a Navier-Stokes or Darcy fluid ([fluid])",
+    "fluid": "a Navier-Stokes fluid, or a Darcy fluid under a wall it pushes ([fluid])",
     "energy_budget": "the energy budget (output.observables)",
 }
 # the walls' arrays that moving walls change on the device, and those they only read
@@ -114,14 +115,10 @@ def _gpu_name(cuda) -> str:
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
-def _vans1d(scene):
-    """The scene's fluid if it is the 1D VANS profile (the one the GPU couples to), else None
-    (a dry scene imports nothing of the fluids)."""
-    if scene.fluid is None:
-        return None
-    from .fluid.vans1d import Vans1d
-
-    return scene.fluid if isinstance(scene.fluid, Vans1d) else None
+def _fluid_on_gpu(scene):
+    """The scene's fluid if its force runs on the GPU (FluidModule.on_gpu), else None."""
+    fluid = scene.fluid
+    return fluid if fluid is not None and fluid.on_gpu else None
 
 
 def push_levels(launch, kernels, pforce, rows: int, record, psum) -> tuple[int, bool]:
@@ -169,12 +166,10 @@ class DeviceSteps:
         self.walls = scene.walls  # plane walls, or None
         self.moving = scene.wall_motion is not None  # some wall moves (WallMotion's steps)
         self.stages = scene.stages  # their after_step reads and changes the host's state, or None
-        self.fluid = _vans1d(scene)  # the 1D VANS fluid: its column on the host, or None
-        self.fluid_due = None  # the step at whose end the column takes its step on the host
+        self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
+        self.fluid_due = None  # the step at whose end the fluid takes its step on the host
         if self.fluid is not None:
-            from ..kernels.fluid.cuda_profile_forces import profile_forces
-
-            self.fluid_kernel = profile_forces
+            self.fluid_kernel, self.fluid_outputs = self.fluid.gpu_force()
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
@@ -185,9 +180,9 @@ class DeviceSteps:
     @classmethod
     def of(cls, scene) -> DeviceSteps:
         """The GPU steps of a scene, or a CaseError saying what the GPU does not run yet."""
-        vans = _vans1d(scene)
+        fluid = _fluid_on_gpu(scene)
         extra = [
-            NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED and m is not vans
+            NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED and m is not fluid
         ]
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
@@ -195,10 +190,10 @@ class DeviceSteps:
         # stages act on the host's state, which comes back for them)
         between = [m for m, _ in scene.step.after_step if m.name in SUPPORTED and m is not scene.stages]
         extra += [f"{m.name or type(m).__name__} after its steps" for m in between]
-        if extra or scene.neighbors is None or CompiledSteps.of(scene.step) is None:
+        if extra or scene.neighbors is None or not plain_step(scene):
             raise CaseError(
                 f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, plane '
-                "walls, stages, the 1D VANS fluid and periodic boundaries; this case also has: "
+                "walls, stages, the 1D VANS and Darcy fluids and periodic boundaries; this case also has: "
                 f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
             )
         if not scene.neighbors.dense:
@@ -301,9 +296,9 @@ class DeviceSteps:
         self.on_device_at = state.clock.step
 
     def _fluid_arguments(self, state: State) -> None:
-        """The fluid's force kernel's arguments on the device (Vans1d.force_arguments): the
-        particles' own arrays, the column's profiles and per-particle arrays sent up again,
-        its numbers as they are now."""
+        """The fluid's force kernel's arguments on the device (its force_arguments): the
+        particles' own arrays, the fluid's fields and per-particle arrays sent up again, its
+        numbers as they are now."""
         p = state.particles
         own = {id(getattr(p, name)): name for name in ("pos", "vel", "radius", "force")}
         self.fluid_args = tuple(
@@ -366,9 +361,9 @@ class DeviceSteps:
         if self.moving:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
-        if self.fluid is not None:  # the drag of the last step, which the stability check reads
-            f = state.fluid  # (the last two of Vans1d.force_arguments)
-            for host, device in zip((f.drag_coef, f.drag_x), self.fluid_args[-2:], strict=True):
+        if self.fluid is not None and self.fluid_outputs:  # what the fluid's force writes
+            written = self.fluid.force_arguments(state)[-self.fluid_outputs :]
+            for host, device in zip(written, self.fluid_args[-self.fluid_outputs :], strict=True):
                 device.copy_to_host(host)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
@@ -431,7 +426,7 @@ class DeviceSteps:
         stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
         if self.on_device_at != state.clock.step or stage_began:
             self.upload(state)
-        elif self.fluid_due == state.clock.step:  # the column's step on the host: its profiles
+        elif self.fluid_due == state.clock.step:  # the fluid's step on the host: its fields
             self._fluid_arguments(state)
         d, n = self.d, state.particles.count
         dt = state.clock.dt

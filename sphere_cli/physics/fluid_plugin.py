@@ -69,6 +69,16 @@ class FluidModule(Module):
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
 
+    # its force on the particles runs on a GPU (gpu_force), the rest of it on the host between
+    # steps (physics/device_steps.py); a model whose force cannot is refused there
+    on_gpu = False
+
+    def gpu_force(self) -> tuple | None:
+        """(the CUDA kernel of its force on the particles, taking force_arguments; how many of
+        those arguments' last arrays it writes besides the force, which the host reads after),
+        for a model that is on_gpu; imports the GPU's kernels, so only where a GPU is used."""
+        return None
+
     def particle_arrays(self, state) -> dict | None:
         """{name: (holder, attribute)} of the arrays it keeps per particle, which travel with the
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split

@@ -62,9 +62,8 @@ from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
 from ..state import Clock, NeighborList, Particles, State, Walls
-from .compiled_steps import is_hook_of, step_arguments
+from .compiled_steps import plain_step, step_arguments
 from .contact import PairContactForces
-from .motion import Motion
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
 from .walls import PlaneWallForces, WallMotion, push_scratch
 
@@ -148,35 +147,6 @@ class Part:
     receive: dict  # rank -> local indices of the ghosts it owns, ascending
 
 
-def _plain_step(scene) -> bool:
-    """True if the scene's hooks are exactly those the ranks run (RankSteps._steps), none
-    replaced by a wrapper."""
-    step = scene.step
-    moving = () if scene.wall_motion is None else (scene.wall_motion,)
-    fluid_kicks = scene.fluid is not None and "kick" in scene.fluid.takes_over
-    kicks = [(m, WallMotion) for m in moving]
-    kicks.append((scene.fluid, type(scene.fluid)) if fluid_kicks else (scene.motion, Motion))
-    forces = [(scene.contact, PairContactForces)]
-    if scene.walls is not None:
-        forces.append((scene.walls, PlaneWallForces))
-    if scene.fluid is not None:
-        forces.append((scene.fluid, type(scene.fluid)))
-    expected = {
-        "kick_drift": [(m, WallMotion if m is not scene.motion else Motion) for m in (*moving, scene.motion)],
-        "prepare": [(scene.neighbors, NeighborSearch)],
-        "forces": forces,
-        "kick": kicks,
-    }
-    for hook, modules in expected.items():
-        hooks = getattr(step, hook)
-        if len(hooks) != len(modules):
-            return False
-        for bound, (module, cls) in zip(hooks, modules, strict=True):
-            if getattr(bound, "__self__", None) is not module or not is_hook_of(bound, cls, hook):
-                return False
-    return not step.finish_step and all(m is scene.stages or m is scene.fluid for m, _ in step.after_step)
-
-
 def _refusal(scene) -> str | None:
     """What of the scene's step the ranks do not run, in words (None: they run all of it)."""
     extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
@@ -186,7 +156,7 @@ def _refusal(scene) -> str | None:
         extra.append(f"a {scene.fluid.model} fluid, which does not run split")
     if scene.case.simulation.device != "cpu":
         extra.append(f'simulation.device = "{scene.case.simulation.device}"')
-    if not extra and (scene.neighbors is None or not _plain_step(scene)):
+    if not extra and (scene.neighbors is None or not plain_step(scene)):
         extra.append("other step hooks")
     return ", ".join(extra) or None
 

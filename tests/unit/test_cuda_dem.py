@@ -318,21 +318,78 @@ fluctuations = { bed_elevation = 0.001, seed = 3 }
 """
 
 
-def test_the_vans_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path):
-    """The 1D VANS fluid with the particles on the GPU: its column is solved on the host at each
-    coupling step from the particles brought back, its force acts on the device every step, from
-    the profiles and fluctuations sent up after each fluid step."""
-    gpu, cpu = _scenes(tmp_path, walls=VANS)
+# Darcy pore pressure on a 2 x 2 x 3 grid, pulsed from below, solved every 5 steps
+DARCY = """
+[[walls]]
+face = "z-"
+material = "b"
+[fluid]
+model = "darcy"
+grid = { cells = [2, 2, 3] }
+coupling = { steps = 5 }
+bottom = { type = "pressure", pressure = 80.0, amplitude = 60.0, period = 0.0002 }
+top = { type = "pressure", pressure = 0.0 }
+"""
+
+
+def _vans_fields(scene) -> dict:
+    f = scene.state.fluid
+    return {"u": f.column.u, "drag_coef": f.drag_coef, "drag_x": f.drag_x}
+
+
+def _darcy_fields(scene) -> dict:
+    s = scene.fluid.pore.state
+    return {"pressure": s.pressure, "gradient": s.gradient, "porosity": s.porosity}
+
+
+@pytest.mark.parametrize(
+    "fluid, fields, runs",
+    [(VANS, _vans_fields, (15, 25, 20)), (DARCY, _darcy_fields, (12, 23, 25))],
+    ids=["vans1d", "darcy"],
+)
+def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
+    """A fluid with the particles on the GPU: its own step (the VANS column, the Darcy pore
+    pressure) solved on the host at each coupling step from the particles brought back, its force
+    (drag, buoyancy, lift and fluctuations; the seepage force and buoyancy) on the device every
+    step, from the fields sent up after each fluid step. The runs end inside and at the coupling
+    intervals."""
+    gpu, cpu = _scenes(tmp_path, walls=fluid)
     assert type(gpu.step.compiled).__name__ == "DeviceSteps"
-    for steps in (15, 25, 20):  # runs that end inside and at the coupling intervals
+    for steps in runs:
         advance(gpu, steps)
         advance(cpu, steps)
         _compare(gpu, cpu)
-    a, b = gpu.state.fluid, cpu.state.fluid
-    assert np.abs(b.column.u).max() > 0.0 and np.abs(b.drag_coef).max() > 0.0
-    for name in ("drag_coef", "drag_x"):
-        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=RTOL, err_msg=name)
-    np.testing.assert_allclose(a.column.u, b.column.u, rtol=RTOL, atol=RTOL * np.abs(b.column.u).max())
+    a, b = fields(gpu), fields(cpu)
+    for name, other in b.items():
+        assert np.abs(other).max() > 0.0, name  # the fluid did act
+        np.testing.assert_allclose(a[name], other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
+
+
+def test_a_darcy_fluid_pushing_a_wall_is_refused_on_the_gpu(tmp_path):
+    """Under an impermeable top wall the grid follows, the pore pressure pushes the wall every
+    step from the host: the GPU refuses the case, naming it."""
+    path = tmp_path / "spheres.csv"
+    _placement(path)
+    pushed = """
+    [[walls]]
+    face = "z-"
+    [[walls]]
+    face = "z+"
+    mode = "stress"
+    stress = 500.0
+    mass = 10.0
+    [fluid]
+    model = "darcy"
+    grid = { cells = [2, 2, 3], follow_top_wall = true }
+    top = { type = "no-flow" }
+    """
+    text = _case(path, "cuda", extra=textwrap.dedent(pushed)).replace(
+        "[true, true, true]", "[true, true, false]"
+    )
+    with pytest.raises(
+        CaseError, match=r"also has: a Navier-Stokes fluid, or a Darcy fluid under a wall it pushes"
+    ):
+        build_scene(parse_case(text))
 
 
 def test_changes_to_the_host_arrays_between_calls_reach_the_gpu(tmp_path):
@@ -423,11 +480,11 @@ def test_every_kernel_compiles_for_a_gpu():
     done = subprocess.run([sys.executable, str(helper)], env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     compiled = {line.split()[0] for line in done.stdout.splitlines()}
-    from sphere_cli.kernels.fluid import cuda_profile_forces
+    from sphere_cli.kernels.fluid import cuda_darcy, cuda_profile_forces
 
     launched = {
         name
-        for module in (kernels, cuda_profile_forces)
+        for module in (kernels, cuda_profile_forces, cuda_darcy)
         for name, value in vars(module).items()
         if not name.startswith("_") and hasattr(value, "py_func") and hasattr(value, "__getitem__")
     }

@@ -53,20 +53,31 @@ def _trilinear(f, i0, i1, j0, j1, k0, k1, wx, wy, wz):
     )
 
 
+@njit(cache=True, inline="always")
+def particle_pressure_force(
+    n, pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force
+):
+    """force[n] += -V grad p / (1 - phi) (whole = 1) or -V grad p (whole = 0), both trilinear in
+    the cell fields, and - rho_f V g: one description for the processor's loop
+    (add_pressure_forces) and the GPU's threads (kernels/fluid/cuda_darcy.py)."""
+    nx, ny, nz = grad.shape[0], grad.shape[1], grad.shape[2]
+    r = radius[n]
+    vol = 4.0 / 3.0 * math.pi * r * r * r
+    i0, i1, wx = _corner(pos[n, 0], origin[0], spacing[0], nx, periodic[0])
+    j0, j1, wy = _corner(pos[n, 1], origin[1], spacing[1], ny, periodic[1])
+    k0, k1, wz = _corner(pos[n, 2], origin[2], spacing[2], nz, 0)
+    share = vol
+    if whole:
+        share = vol / (1.0 - _trilinear(porosity, i0, i1, j0, j1, k0, k1, wx, wy, wz))
+    for a in range(3):
+        g = _trilinear(grad[:, :, :, a], i0, i1, j0, j1, k0, k1, wx, wy, wz)
+        force[n, a] += -share * g - rho_f * vol * gravity[a]
+
+
 @njit(cache=True, parallel=True)
 def add_pressure_forces(pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force):
-    """force += -V grad p / (1 - phi) (whole = 1) or -V grad p (whole = 0), both trilinear in the
-    cell fields, and - rho_f V g."""
-    nx, ny, nz = grad.shape[0], grad.shape[1], grad.shape[2]
+    """particle_pressure_force for every particle."""
     for n in prange(pos.shape[0]):
-        r = radius[n]
-        vol = 4.0 / 3.0 * math.pi * r * r * r
-        i0, i1, wx = _corner(pos[n, 0], origin[0], spacing[0], nx, periodic[0])
-        j0, j1, wy = _corner(pos[n, 1], origin[1], spacing[1], ny, periodic[1])
-        k0, k1, wz = _corner(pos[n, 2], origin[2], spacing[2], nz, 0)
-        share = vol
-        if whole:
-            share = vol / (1.0 - _trilinear(porosity, i0, i1, j0, j1, k0, k1, wx, wy, wz))
-        for a in range(3):
-            g = _trilinear(grad[:, :, :, a], i0, i1, j0, j1, k0, k1, wx, wy, wz)
-            force[n, a] += -share * g - rho_f * vol * gravity[a]
+        particle_pressure_force(
+            n, pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force
+        )

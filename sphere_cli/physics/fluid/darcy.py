@@ -318,11 +318,26 @@ class Darcy(FluidModule):
     def forces(self, state, spring_dt: float | None = None) -> None:
         if self.pushes_wall:
             self._push_wall(state)
+        add_pressure_forces(*self.force_arguments(state))
+
+    def force_arguments(self, state) -> tuple:
+        """The arguments of add_pressure_forces, valid until the next after_step (the grid may
+        move with the top wall there)."""
         p, grid, s = state.particles, self.pore.grid, self.pore.state
-        add_pressure_forces(
+        return (
             p.pos, p.radius, s.gradient, s.porosity_used, self.whole_seepage, grid.origin, grid.spacing,
             self.pore.periodic, self.pore.config.density, self.gravity, p.force,
         )  # fmt: skip
+
+    @property
+    def on_gpu(self) -> bool:
+        """A wall pushed by the pore pressure takes its push from the host every step."""
+        return not self.pushes_wall
+
+    def gpu_force(self) -> tuple:
+        from ...kernels.fluid.cuda_darcy import pressure_forces
+
+        return pressure_forces, 0
 
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the

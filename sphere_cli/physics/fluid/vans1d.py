@@ -330,6 +330,13 @@ class Vans1d(FluidModule):
     steps_kernel = staticmethod(vans1d_steps)
     serial_steps_kernel = staticmethod(vans1d_steps_serial)  # on one thread (kernels/serial.py)
 
+    on_gpu = True
+
+    def gpu_force(self) -> tuple:
+        from ...kernels.fluid.cuda_profile_forces import profile_forces as on_gpu
+
+        return on_gpu, 2  # drag_coef and drag_x, which the stability check reads
+
     def forces(self, state, spring_dt=None) -> None:
         kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces
         kernel(*self.force_arguments(state))

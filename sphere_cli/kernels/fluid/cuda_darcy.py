@@ -1,0 +1,21 @@
+"""The Darcy fluid's force on the particles on a CUDA GPU (physics/device_steps.py): one thread
+per particle, running the processor's own per-particle function (kernels/fluid/darcy.py
+particle_pressure_force); the pore pressure itself is solved on the processor between coupling
+steps. Arguments as add_pressure_forces's."""
+
+from numba import cuda
+
+from ..cuda_dem import for_gpu
+from . import darcy as on_processor
+
+particle_pressure_force = for_gpu(on_processor.particle_pressure_force)
+
+
+@cuda.jit
+def pressure_forces(pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force):
+    """kernels/fluid/darcy.py add_pressure_forces for particle n."""
+    n = cuda.grid(1)
+    if n < pos.shape[0]:
+        particle_pressure_force(
+            n, pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force
+        )
