@@ -337,6 +337,24 @@ def _vans_fields(scene) -> dict:
     return {"u": f.column.u, "drag_coef": f.drag_coef, "drag_x": f.drag_x}
 
 
+def _vans_and_lid_fields(scene) -> dict:
+    w = scene.state.walls
+    return {**_vans_fields(scene), "wall_coord": w.coord, "wall_shift": w.shift, "wall_force": w.force}
+
+
+# a lid keeping a stress and sliding over the VANS column: steps the CPU's compiled loop does not
+# take (moving walls with a fluid), the GPU does
+SLIDING_LID = """
+[[walls]]
+face = "z+"
+mode = "stress"
+stress = 500.0
+shear_axis = "x"
+shear_velocity = 0.05
+"""
+VANS_UNDER_A_LID = VANS.replace("[fluid]", SLIDING_LID + "[fluid]")
+
+
 def _darcy_fields(scene) -> dict:
     s = scene.fluid.pore.state
     return {"pressure": s.pressure, "gradient": s.gradient, "porosity": s.porosity}
@@ -344,8 +362,12 @@ def _darcy_fields(scene) -> dict:
 
 @pytest.mark.parametrize(
     "fluid, fields, runs",
-    [(VANS, _vans_fields, (15, 25, 20)), (DARCY, _darcy_fields, (12, 23, 25))],
-    ids=["vans1d", "darcy"],
+    [
+        (VANS, _vans_fields, (15, 25, 20)),
+        (VANS_UNDER_A_LID, _vans_and_lid_fields, (15, 25, 20)),
+        (DARCY, _darcy_fields, (12, 23, 25)),
+    ],
+    ids=["vans1d", "vans1d-moving-lid", "darcy"],
 )
 def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
     """A fluid with the particles on the GPU: its own step (the VANS column, the Darcy pore
