@@ -333,9 +333,9 @@ class Vans1d(FluidModule):
     on_gpu = True
 
     def gpu_force(self) -> tuple:
-        from ...kernels.fluid.cuda_profile_forces import profile_forces as on_gpu
+        from ...kernels.fluid import cuda_profile_forces
 
-        return on_gpu, 2  # drag_coef and drag_x, which the stability check reads
+        return cuda_profile_forces.profile_forces, 2  # drag_coef and drag_x, which the stability check reads
 
     def forces(self, state, spring_dt=None) -> None:
         kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces
