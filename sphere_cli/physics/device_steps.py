@@ -361,10 +361,7 @@ class DeviceSteps:
         if self.moving:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
-        if self.fluid is not None and self.fluid_outputs:  # what the fluid's force writes
-            written = self.fluid.force_arguments(state)[-self.fluid_outputs :]
-            for host, device in zip(written, self.fluid_args[-self.fluid_outputs :], strict=True):
-                device.copy_to_host(host)
+        self._fluid_outputs_to_host(state)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
@@ -395,6 +392,14 @@ class DeviceSteps:
             _on_gpu(lambda: self.download(state))
             self.host_stale = False
 
+    def _fluid_outputs_to_host(self, state: State) -> None:
+        """The per-particle arrays the fluid's force writes on the device (the VANS drag, which
+        its stability test reads) into the host's."""
+        if self.fluid is not None and self.fluid_outputs:
+            written = self.fluid.force_arguments(state)[-self.fluid_outputs :]
+            for host, device in zip(written, self.fluid_args[-self.fluid_outputs :], strict=True):
+                device.copy_to_host(host)
+
     def hand_over(self, state: State) -> None:
         """to_host, for a caller who may change the host's arrays before the next steps: those
         then start from the host's arrays again (an upload), changed or not."""
@@ -403,10 +408,11 @@ class DeviceSteps:
 
     def known_stable(self, state: State) -> bool:
         """True if the state on the device has no particle gone bad (checked there, without
-        bringing the state back); False where the host must look (simulation.check_stable):
-        something has gone bad, the host's arrays are current anyway, or a fluid has its own
-        test, which reads the host's arrays."""
-        if not self.host_stale or self.fluid is not None:
+        bringing the state back) and a fluid's own test passes (on its host fields, which its
+        step keeps current, and what its force wrote, brought back alone); False where the host
+        must look (simulation.check_stable): something has gone bad, or the host's arrays are
+        current anyway."""
+        if not self.host_stale:
             return False
         return _on_gpu(lambda: self._stable_on_device(state))
 
@@ -418,7 +424,12 @@ class DeviceSteps:
             k.find_unstable, n, d["pos"], d["vel"], d["angvel"], d["radius"], d["lower"], d["upper"],
             d["periodic"], state.clock.dt, first,
         )  # fmt: skip
-        return int(first.copy_to_host()[0]) == n
+        if int(first.copy_to_host()[0]) != n:
+            return False
+        if self.fluid is not None:
+            self._fluid_outputs_to_host(state)
+            return self.fluid.first_unstable(state) is None
+        return True
 
     def _run(self, state: State, steps: int) -> tuple[int, bool]:
         k = self.k

@@ -196,7 +196,9 @@ class FluidModule(Module):
 
     def first_unstable(self, state) -> str | None:
         """A message naming the cell (or level), the quantity and its value when the fluid state
-        has gone bad; None when it is fine."""
+        has gone bad; None when it is fine. On a GPU (physics/device_steps.py) it is asked with
+        the particles' arrays on the host stale but for those its force writes: it reads the
+        fluid's own fields and those."""
         return None
 
     def output_fields(self, state) -> dict[str, tuple[np.ndarray, str]]:

@@ -337,6 +337,28 @@ def _vans_fields(scene) -> dict:
     return {"u": f.column.u, "drag_coef": f.drag_coef, "drag_x": f.drag_x}
 
 
+def test_a_fluids_stability_is_checked_without_bringing_the_state_back(tmp_path):
+    """With the VANS fluid on the GPU, the stability check tests the particles on the device and
+    the fluid on its host fields with the drag brought back alone; a fluid gone bad stops the
+    run with the CPU's message."""
+    from sphere_cli.errors import NumericalError
+    from sphere_cli.simulation import check_stable
+
+    gpu, cpu = _scenes(tmp_path, walls=VANS)
+    advance(gpu, 12, sync=False)  # past the fluid step at 10
+    advance(cpu, 12)
+    check_stable(gpu)
+    assert gpu.step.compiled.host_stale  # checked there: the particles stayed on the device
+    np.testing.assert_allclose(gpu.state.fluid.drag_coef, cpu.state.fluid.drag_coef, rtol=RTOL)
+    messages = []
+    for scene in (gpu, cpu):
+        scene.state.fluid.column.u[3] = np.nan
+        with pytest.raises(NumericalError) as caught:
+            check_stable(scene)
+        messages.append(str(caught.value))
+    assert messages[0] == messages[1] and "vans1d fluid velocity is nan m/s in layer 3" in messages[0]
+
+
 def _vans_and_lid_fields(scene) -> dict:
     w = scene.state.walls
     return {**_vans_fields(scene), "wall_coord": w.coord, "wall_shift": w.shift, "wall_force": w.force}
