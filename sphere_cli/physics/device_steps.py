@@ -392,10 +392,22 @@ class DeviceSteps:
             _on_gpu(lambda: self.download(state))
             self.host_stale = False
 
+    def _particles_to_host(self, state: State) -> None:
+        """What a fluid's own step reads of the particles and the walls (positions, velocities,
+        spins; the walls' positions, which a grid may follow), without the list: the state on the
+        device goes on as it is, and a later to_host brings the rest."""
+        p = state.particles
+        for name in ("pos", "vel", "angvel"):
+            self.d[name].copy_to_host(getattr(p, name))
+        if self.moving:
+            for name in MOVED:
+                self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
+
     def _fluid_outputs_to_host(self, state: State) -> None:
         """The per-particle arrays the fluid's force writes on the device (the VANS drag, which
-        its stability test reads) into the host's."""
-        if self.fluid is not None and self.fluid_outputs:
+        its stability test reads) into the host's, unless the fluid's step on the host has made
+        them since (at the step the device is at)."""
+        if self.fluid is not None and self.fluid_outputs and self.fluid_due != self.on_device_at:
             written = self.fluid.force_arguments(state)[-self.fluid_outputs :]
             for host, device in zip(written, self.fluid_args[-self.fluid_outputs :], strict=True):
                 device.copy_to_host(host)
@@ -487,12 +499,13 @@ class DeviceSteps:
         self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = end = state.clock.step + steps
-        stage = self.stages is not None and self.stages.after_due(end, state.clock)
         if self.fluid is not None and self.fluid.after_due(end, state.clock):
             self.fluid_due = end
-        if stage or self.fluid_due == end:
-            self.download(state)  # the stage's test and the fluid's step read the host's state
+        if self.stages is not None and self.stages.after_due(end, state.clock):
+            self.download(state)  # the stage's test reads, and a stage that begins changes, it all
             self.host_stale = False
+        elif self.fluid_due == end:
+            self._particles_to_host(state)
         return steps, False
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:
