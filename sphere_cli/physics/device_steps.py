@@ -168,6 +168,7 @@ class DeviceSteps:
         self.stages = scene.stages  # their after_step reads and changes the host's state, or None
         self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
         self.fluid_due = None  # the step at whose end the fluid takes its step on the host
+        self.fluid_args = None  # its force kernel's arguments on the device (_fluid_arguments)
         if self.fluid is not None:
             self.fluid_kernel, self.fluid_outputs = self.fluid.gpu_force()
         self.rows = self.spare = None
@@ -297,14 +298,26 @@ class DeviceSteps:
 
     def _fluid_arguments(self, state: State) -> None:
         """The fluid's force kernel's arguments on the device (its force_arguments): the
-        particles' own arrays, the fluid's fields and per-particle arrays sent up again, its
-        numbers as they are now."""
+        particles' own arrays, the fluid's fields and per-particle arrays, its numbers as they
+        are now. Sent again after each fluid step, into the arrays already on the device (none
+        allocated then), but for those the force writes, whose host copies nothing reads there."""
         p = state.particles
         own = {id(getattr(p, name)): name for name in ("pos", "vel", "radius", "force")}
-        self.fluid_args = tuple(
-            self.d[own[id(a)]] if id(a) in own else self.cuda.to_device(a) if isinstance(a, np.ndarray) else a
-            for a in self.fluid.force_arguments(state)
-        )
+        host = self.fluid.force_arguments(state)
+        sent = self.fluid_args
+        args = []
+        for k, a in enumerate(host):
+            if id(a) in own:
+                args.append(self.d[own[id(a)]])
+            elif not isinstance(a, np.ndarray):
+                args.append(a)
+            elif sent is None or sent[k].shape != a.shape:
+                args.append(self.cuda.to_device(a))
+            else:
+                if k < len(host) - self.fluid_outputs:
+                    sent[k].copy_to_device(a)
+                args.append(sent[k])
+        self.fluid_args = tuple(args)
 
     def _allocate(self, n: int, width: int) -> Rows:
         cuda = self.cuda
@@ -358,9 +371,7 @@ class DeviceSteps:
         if self.walls is not None and self.wall_springs:
             # a new array: the wall module derives its mask of set springs again (physics/walls.py)
             state.walls.hist = self.d["wall_hist"].copy_to_host()
-        if self.moving:
-            for name in MOVED:
-                self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
+        self._moving_walls_to_host(state)
         self._fluid_outputs_to_host(state)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
@@ -399,6 +410,10 @@ class DeviceSteps:
         p = state.particles
         for name in ("pos", "vel", "angvel"):
             self.d[name].copy_to_host(getattr(p, name))
+        self._moving_walls_to_host(state)
+
+    def _moving_walls_to_host(self, state: State) -> None:
+        """The arrays of the walls that moving walls change on the device."""
         if self.moving:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
