@@ -132,39 +132,51 @@ def particle_drag(
     disturbance (N,3,MODES) [m/s] (or empty): the bands of each particle's self-induced velocity
     u' (physics/fluid/self_induced.py), which it does not feel: it sees the fluid velocity u -
     u', u' the sum over the bands."""
-    half = 0.5 * dt
     below = 0
+    for i in prange(vel.shape[0]):
+        below += drag_on_particle(
+            i, law, rho, mu, floor, pressure_force, cell_of, vel, radius, inv_mass, u, phi, grad_p, dt,
+            initial, cell_share, cell_diameter, cell_velocity, disturbance, force, f_other, coef, f_drag,
+        )  # fmt: skip
+    return below
+
+
+@njit(cache=True, inline="always")
+def drag_on_particle(
+    i, law, rho, mu, floor, pressure_force, cell_of, vel, radius, inv_mass, u, phi, grad_p, dt, initial,
+    cell_share, cell_diameter, cell_velocity, disturbance, force, f_other, coef, f_drag,
+):  # fmt: skip
+    """particle_drag for particle i (also the GPU's, kernels/fluid/cuda_drag.py): 1 if its cell
+    is below the porosity floor, else 0."""
+    half = 0.5 * dt
     averaged = cell_share.shape[0] > 0
     corrected = disturbance.shape[0] > 0
-    for i in prange(vel.shape[0]):
-        c = cell_of[i]
-        if phi[c] < floor:
-            below += 1
-        d = 2.0 * radius[i]
-        volume = math.pi / 6.0 * d * d * d
-        if averaged and cell_diameter[c] > 0.0 and cell_share[c] > 0.0:
-            w0 = u[c, 0] - cell_velocity[c, 0]
-            w1 = u[c, 1] - cell_velocity[c, 1]
-            w2 = u[c, 2] - cell_velocity[c, 2]
-            w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            k = volume * cell_share[c] * drag_rate(law, phi[c], cell_diameter[c], w, rho, mu, floor)
-        else:
-            w0 = _seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]
-            w1 = _seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]
-            w2 = _seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]
-            k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
-        coef[i] = k
-        g = phi1(k * inv_mass[i] * half)
-        for a in range(3):
-            fo = force[i, a]
-            if pressure_force:
-                fo -= volume * grad_p[c, a]
-            fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
-            f_other[i, a] = fo
-            if initial:
-                f_drag[i, a] = fd
-            force[i, a] = fo + fd
-    return below
+    c = cell_of[i]
+    d = 2.0 * radius[i]
+    volume = math.pi / 6.0 * d * d * d
+    if averaged and cell_diameter[c] > 0.0 and cell_share[c] > 0.0:
+        w0 = u[c, 0] - cell_velocity[c, 0]
+        w1 = u[c, 1] - cell_velocity[c, 1]
+        w2 = u[c, 2] - cell_velocity[c, 2]
+        w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        k = volume * cell_share[c] * drag_rate(law, phi[c], cell_diameter[c], w, rho, mu, floor)
+    else:
+        w0 = _seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]
+        w1 = _seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]
+        w2 = _seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]
+        k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
+    coef[i] = k
+    g = phi1(k * inv_mass[i] * half)
+    for a in range(3):
+        fo = force[i, a]
+        if pressure_force:
+            fo -= volume * grad_p[c, a]
+        fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        f_other[i, a] = fo
+        if initial:
+            f_drag[i, a] = fd
+        force[i, a] = fo + fd
+    return 1 if phi[c] < floor else 0
 
 
 @njit(cache=True, parallel=True)
@@ -188,43 +200,55 @@ def drag_kick(
     the particle's own loop gain G = K sum_j W s^2/mu (the share of its drag it would take back
     from its own wake) exceeds GAIN_CAP: c = GAIN_CAP/G keeps the corrected drag K/(1 - c G)
     bounded for particles nearly as wide as their cell."""
+    for i in prange(vel.shape[0]):
+        kick_with_drag(
+            i, vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag,
+            impulse, disturbance, cell_coef, cell_volume, weight, rate, band_decay, mu, nu,
+        )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def kick_with_drag(
+    i, vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse,
+    disturbance, cell_coef, cell_volume, weight, rate, band_decay, mu, nu,
+):  # fmt: skip
+    """drag_kick for particle i (also the GPU's, kernels/fluid/cuda_drag.py)."""
     half = 0.5 * dt
     corrected = disturbance.shape[0] > 0
-    for i in prange(vel.shape[0]):
-        c = cell_of[i]
-        k = coef[i]
-        im = inv_mass[i]
-        g = phi1(k * im * half)
-        screening = 0.0
-        screen_decay = 1.0
+    c = cell_of[i]
+    k = coef[i]
+    im = inv_mass[i]
+    g = phi1(k * im * half)
+    screening = 0.0
+    screen_decay = 1.0
+    if corrected:
+        screening = max(cell_coef[c] - k, 0.0) / (mu * cell_volume)
+        if screening > 0.0:
+            screen_decay = math.exp(-nu * screening * dt)
+    for a in range(3):
+        fo = f_other[i, a]
+        now = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        mean_drag = 0.5 * (f_drag[i, a] + now)  # over the step: this half kick's and the first's
+        impulse[i, a] += dt * mean_drag
+        vel[i, a] += half * (fo + now) * im
+        fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        f_drag[i, a] = fd
+        force[i, a] = fo + fd
+        angvel[i, a] += half * torque[i, a] * inv_inertia[i]
         if corrected:
-            screening = max(cell_coef[c] - k, 0.0) / (mu * cell_volume)
-            if screening > 0.0:
-                screen_decay = math.exp(-nu * screening * dt)
-        for a in range(3):
-            fo = f_other[i, a]
-            now = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
-            mean_drag = 0.5 * (f_drag[i, a] + now)  # over the step: this half kick's and the first's
-            impulse[i, a] += dt * mean_drag
-            vel[i, a] += half * (fo + now) * im
-            fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
-            f_drag[i, a] = fd
-            force[i, a] = fo + fd
-            angvel[i, a] += half * torque[i, a] * inv_inertia[i]
-            if corrected:
-                gain = 0.0
-                for j in range(disturbance.shape[2]):
-                    share = rate[a, j] / (rate[a, j] + screening)
-                    gain += weight[a, j] * share * share
-                gain *= k / mu
-                mobility = mean_drag / mu
-                if gain > GAIN_CAP:
-                    mobility *= GAIN_CAP / gain
-                for j in range(disturbance.shape[2]):
-                    share = rate[a, j] / (rate[a, j] + screening)
-                    target = -weight[a, j] * share * share * mobility
-                    decay = band_decay[a, j] * screen_decay
-                    disturbance[i, a, j] = target + (disturbance[i, a, j] - target) * decay
+            gain = 0.0
+            for j in range(disturbance.shape[2]):
+                share = rate[a, j] / (rate[a, j] + screening)
+                gain += weight[a, j] * share * share
+            gain *= k / mu
+            mobility = mean_drag / mu
+            if gain > GAIN_CAP:
+                mobility *= GAIN_CAP / gain
+            for j in range(disturbance.shape[2]):
+                share = rate[a, j] / (rate[a, j] + screening)
+                target = -weight[a, j] * share * share * mobility
+                decay = band_decay[a, j] * screen_decay
+                disturbance[i, a, j] = target + (disturbance[i, a, j] - target) * decay
 
 
 @njit(cache=True)

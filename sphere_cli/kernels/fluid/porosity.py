@@ -61,18 +61,24 @@ def bin_particles(pos, origin, spacing, shape, periodic, bin_of, wrapped):
     clamped to the grid, so a particle outside a bounded axis takes the nearest cell), and the
     centre brought into the box along the periodic axes (wrapped (N,3) [m])."""
     for p in prange(pos.shape[0]):
-        flat = 0
-        for a in range(3):
-            length = spacing[a] * shape[a]
-            x = _wrapped(pos[p, a], origin[a], length, periodic[a])
-            wrapped[p, a] = x
-            c = int(math.floor((x - origin[a]) / spacing[a]))
-            if c < 0:
-                c = 0
-            elif c >= shape[a]:
-                c = shape[a] - 1
-            flat = flat * shape[a] + c
-        bin_of[p] = flat
+        bin_particle(p, pos, origin, spacing, shape, periodic, bin_of, wrapped)
+
+
+@njit(cache=True, inline="always")
+def bin_particle(p, pos, origin, spacing, shape, periodic, bin_of, wrapped):
+    """bin_particles for particle p (also the GPU's, kernels/fluid/cuda_drag.py)."""
+    flat = 0
+    for a in range(3):
+        length = spacing[a] * shape[a]
+        x = _wrapped(pos[p, a], origin[a], length, periodic[a])
+        wrapped[p, a] = x
+        c = int(math.floor((x - origin[a]) / spacing[a]))
+        if c < 0:
+            c = 0
+        elif c >= shape[a]:
+            c = shape[a] - 1
+        flat = flat * shape[a] + c
+    bin_of[p] = flat
 
 
 @njit(cache=True, inline="always")
