@@ -12,11 +12,12 @@ walls' own steps run on one GPU thread each half step (a few walls); the particl
 them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
 Stages run on the host, as on the CPU: the state comes back before each step where a stage may
 end (Stages.after_due) and goes up again when one has begun (its walls' modes, its friction, an
-approach). So does a fluid whose force on the particles runs on the GPU (FluidModule.on_gpu: the
-1D VANS profile, kernels/fluid/cuda_profile_forces.py; Darcy, kernels/fluid/cuda_darcy.py): its
-own step is the host's, at its coupling steps, from the particles brought back, and its fields
-go up again after each. A case with anything else in its step (a Navier-Stokes fluid, a Darcy
-fluid under a wall it pushes, the energy budget) is refused with the modules named; so is a
+approach). So does a fluid whose action on the particles runs on the GPU (FluidModule.on_gpu,
+gpu_steps: the 1D VANS profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's,
+kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/cuda_drag.py):
+its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
+brought back, and its arrays go up again after each. A case with anything else in its step (a
+Darcy fluid under a wall it pushes, the energy budget) is refused with the modules named; so is a
 machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
@@ -49,7 +50,7 @@ THREADS = 128
 SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
-    "fluid": "a Navier-Stokes fluid, or a Darcy fluid under a wall it pushes ([fluid])",
+    "fluid": "a Darcy fluid under a wall it pushes ([fluid])",
     "energy_budget": "the energy budget (output.observables)",
 }
 # the walls' arrays that moving walls change on the device, and those they only read
@@ -115,6 +116,11 @@ def _gpu_name(cuda) -> str:
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
+def _key(a: np.ndarray) -> tuple:
+    """What tells a host array apart: its memory, shape and type (views of one array share it)."""
+    return a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str
+
+
 def _fluid_on_gpu(scene):
     """The scene's fluid if its force runs on the GPU (FluidModule.on_gpu), else None."""
     fluid = scene.fluid
@@ -168,9 +174,9 @@ class DeviceSteps:
         self.stages = scene.stages  # their after_step reads and changes the host's state, or None
         self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
         self.fluid_due = None  # the step at whose end the fluid takes its step on the host
-        self.fluid_args = None  # its force kernel's arguments on the device (_fluid_arguments)
-        if self.fluid is not None:
-            self.fluid_kernel, self.fluid_outputs = self.fluid.gpu_force()
+        self.fluid_steps = None  # its GpuSteps with the arguments on the device (_fluid_arguments)
+        self.fluid_written = ()  # (host array, device array) of those its kernels write
+        self.mirrors = {}  # the device's copy of each host array of the fluid's, by _key
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
         self.builds = 0
@@ -194,7 +200,8 @@ class DeviceSteps:
         if extra or scene.neighbors is None or not plain_step(scene):
             raise CaseError(
                 f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, plane '
-                "walls, stages, the 1D VANS and Darcy fluids and periodic boundaries; this case also has: "
+                "walls, stages, the 1D VANS, Darcy and Navier-Stokes fluids and periodic boundaries; this "
+                "case also has: "
                 f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
             )
         if not scene.neighbors.dense:
@@ -297,27 +304,34 @@ class DeviceSteps:
         self.on_device_at = state.clock.step
 
     def _fluid_arguments(self, state: State) -> None:
-        """The fluid's force kernel's arguments on the device (its force_arguments): the
-        particles' own arrays, the fluid's fields and per-particle arrays, its numbers as they
-        are now. Sent again after each fluid step, into the arrays already on the device (none
-        allocated then), but for those the force writes, whose host copies nothing reads there."""
-        p = state.particles
-        own = {id(getattr(p, name)): name for name in ("pos", "vel", "radius", "force")}
-        host = self.fluid.force_arguments(state)
-        sent = self.fluid_args
-        args = []
-        for k, a in enumerate(host):
-            if id(a) in own:
-                args.append(self.d[own[id(a)]])
-            elif not isinstance(a, np.ndarray):
-                args.append(a)
-            elif sent is None or sent[k].shape != a.shape:
-                args.append(self.cuda.to_device(a))
-            else:
-                if k < len(host) - self.fluid_outputs:
-                    sent[k].copy_to_device(a)
-                args.append(sent[k])
-        self.fluid_args = tuple(args)
+        """The fluid's kernels with their arguments on the device (its gpu_steps): the particles'
+        own arrays, one device copy of each of its host arrays (the views of one array share it),
+        its numbers as they are now. Sent again after each fluid step, into the arrays already
+        on the device (none allocated then)."""
+        own = {_key(a): name for name, a in vars(state.particles).items() if name in self.d}
+        host = self.fluid.gpu_steps(state)
+        mirrors = {}
+
+        def on_device(a):
+            if not isinstance(a, np.ndarray):
+                return a
+            key = _key(a)
+            if key in own:
+                return self.d[own[key]]
+            if key not in mirrors:
+                if key in self.mirrors:
+                    self.mirrors[key].copy_to_device(a)
+                    mirrors[key] = self.mirrors[key]
+                else:
+                    mirrors[key] = self.cuda.to_device(a)
+            return mirrors[key]
+
+        def launches(steps):
+            return [(kernel, size, tuple(on_device(a) for a in args)) for kernel, size, args in steps]
+
+        self.fluid_steps = type(host)(launches(host.forces), launches(host.kick))
+        self.fluid_written = tuple((a, on_device(a)) for a in host.written)
+        self.mirrors = mirrors
 
     def _allocate(self, n: int, width: int) -> Rows:
         cuda = self.cuda
@@ -419,13 +433,15 @@ class DeviceSteps:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
 
     def _fluid_outputs_to_host(self, state: State) -> None:
-        """The per-particle arrays the fluid's force writes on the device (the VANS drag, which
-        its stability test reads) into the host's, unless the fluid's step on the host has made
-        them since (at the step the device is at)."""
-        if self.fluid is not None and self.fluid_outputs and self.fluid_due != self.on_device_at:
-            written = self.fluid.force_arguments(state)[-self.fluid_outputs :]
-            for host, device in zip(written, self.fluid_args[-self.fluid_outputs :], strict=True):
-                device.copy_to_host(host)
+        """The arrays the fluid's kernels write on the device (the VANS drag, which its stability
+        test reads; the Navier-Stokes drag's per-particle arrays) into the host's, unless the
+        fluid's step on the host has made them since (at the step the device is at)."""
+        if self.fluid_due != self.on_device_at:
+            self._fluid_written_to_host()
+
+    def _fluid_written_to_host(self) -> None:
+        for host, device in self.fluid_written:
+            device.copy_to_host(host)
 
     def hand_over(self, state: State) -> None:
         """to_host, for a caller who may change the host's arrays before the next steps: those
@@ -454,6 +470,8 @@ class DeviceSteps:
         if int(first.copy_to_host()[0]) != n:
             return False
         if self.fluid is not None:
+            if self.fluid.stability_reads_particles:
+                self._particles_to_host(state)
             self._fluid_outputs_to_host(state)
             return self.fluid.first_unstable(state) is None
         return True
@@ -504,13 +522,20 @@ class DeviceSteps:
                     d["force"], d["torque"], d["record"], d["pforce"],
                 )  # fmt: skip
             if self.fluid is not None:
-                self._launch(self.fluid_kernel, n, *self.fluid_args)
+                for kernel, size, args in self.fluid_steps.forces:
+                    self._launch(kernel, size, *args)
             if self.moving:
                 self._wall_kick(n, (state.clock.step + taken + 1) * dt, dt)
-            self._launch(
-                k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"], d["inv_inertia"],
-                dt, d["worst"],
-            )  # fmt: skip
+            if self.fluid is not None and self.fluid_steps.kick:
+                *before, (kernel, size, args) = self.fluid_steps.kick
+                for launch in before:
+                    self._launch(launch[0], launch[1], *launch[2])
+                self._launch(kernel, size, *args, d["worst"])
+            else:
+                self._launch(
+                    k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"],
+                    d["inv_inertia"], dt, d["worst"],
+                )  # fmt: skip
         self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = end = state.clock.step + steps
@@ -521,6 +546,7 @@ class DeviceSteps:
             self.host_stale = False
         elif self.fluid_due == end:
             self._particles_to_host(state)
+            self._fluid_written_to_host()
         return steps, False
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:

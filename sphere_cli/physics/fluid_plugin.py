@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import importlib
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,6 +34,21 @@ MOVING_GRID_SPACING = "grid_spacing"
 
 # fluid steps a period of a modulated boundary pressure below which the run warns
 RESOLVED_PERIOD = 20
+
+
+@dataclass
+class GpuSteps:
+    """A fluid's kernels on a GPU (physics/device_steps.py), each (CUDA kernel, threads, arguments
+    as host arrays and numbers); the device holds one copy of each host array (the particles'
+    own arrays are the device's), sent up again after each of the fluid's own steps."""
+
+    forces: list[tuple]  # after the contacts and walls, adding its forces
+    # in place of the particles' second half kick (none: the device's own); the last is the
+    # kick, which also takes the device's largest displacement and zeroes it (cuda_dem.py kick)
+    kick: list[tuple] = field(default_factory=list)
+    # host arrays its kernels write that the host reads (its own step, its stability test,
+    # output): brought back before those
+    written: tuple = ()
 
 
 class FluidModule(Module):
@@ -69,14 +85,17 @@ class FluidModule(Module):
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
 
-    # its force on the particles runs on a GPU (gpu_force), the rest of it on the host between
-    # steps (physics/device_steps.py); a model whose force cannot is refused there
+    # its action on the particles runs on a GPU (gpu_steps), the rest of it on the host between
+    # coupling steps (physics/device_steps.py); a model whose action cannot is refused there
     on_gpu = False
+    # its stability test (first_unstable) reads the particles' positions and velocities, which a
+    # GPU then brings back for it
+    stability_reads_particles = False
 
-    def gpu_force(self) -> tuple | None:
-        """(the CUDA kernel of its force on the particles, taking force_arguments; how many of
-        those arguments' last arrays it writes besides the force, which the host reads after),
-        for a model that is on_gpu; imports the GPU's kernels, so only where a GPU is used."""
+    def gpu_steps(self, state) -> GpuSteps | None:
+        """What runs on a GPU each step, for a model that is on_gpu, with its arguments as they are
+        now (taken again after each of its own steps); imports the GPU's kernels, so only where a
+        GPU is used."""
         return None
 
     def particle_arrays(self, state) -> dict | None:

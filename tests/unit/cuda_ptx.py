@@ -1,8 +1,8 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
-kernels/fluid/cuda_darcy.py) for an H200 (compute capability 9.0) with NVIDIA's compiler, without
-a GPU: the simulator runs the kernels as Python and cannot tell whether they compile. Run by
-tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where numba-cuda is installed (the CUDA
-extra); prints each kernel's name and the fused multiply-adds in its code.
+kernels/fluid/cuda_darcy.py, kernels/fluid/cuda_drag.py) for an H200 (compute capability 9.0)
+with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
+whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
+numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds in its code.
 
 The argument types are those physics/device_steps.py passes."""
 
@@ -10,7 +10,7 @@ from numba import cuda
 from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
-from sphere_cli.kernels.fluid import cuda_darcy, cuda_profile_forces
+from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_profile_forces
 
 V = t.float64[:]  # (N,) or (3,)
 M = t.float64[:, :]  # (N,3)
@@ -94,12 +94,51 @@ VANS_SIGNATURES = {
     "profile_forces": (M, M, V, B, V, V, V, V, BOOL, F, F, F, F, F, V, BOOL, F, BOOL, M, M, V, V),
 }
 DARCY_SIGNATURES = {"pressure_forces": (M, V, H4, H, t.uint8, V, V, B, F, V, M)}
+# the Navier-Stokes drag (kernels/fluid/cuda_drag.py)
+DRAG_SIGNATURES = {
+    "drag_forces": (
+        M,
+        V,
+        V,
+        L1,
+        B,
+        M,
+        INT,
+        F,
+        F,
+        F,
+        BOOL,
+        L1,
+        M,
+        V,
+        V,
+        M,
+        V,
+        M,
+        F,
+        V,
+        V,
+        M,
+        H,
+        M,
+        M,
+        V,
+        M,
+        L1,
+    ),  # fmt: skip
+    "count_in_cells": (L1, I1),
+    "cell_starts": (I1, I1, I1),
+    "fill_cells": (L1, I1, I1),
+    "cell_coefficients": (I1, I1, V, I1, V),
+    "drag_kick": (M, M, M, V, V, L1, M, V, M, F, M, M, M, H, V, F, M, M, M, F, F, V),
+}
 
 if __name__ == "__main__":
     for module, signatures in (
         (cuda_dem, SIGNATURES),
         (cuda_profile_forces, VANS_SIGNATURES),
         (cuda_darcy, DARCY_SIGNATURES),
+        (cuda_drag, DRAG_SIGNATURES),
     ):
         for name, signature in signatures.items():
             ptx, _ = cuda.compile_ptx(getattr(module, name).py_func, signature, cc=(9, 0))

@@ -277,6 +277,49 @@ def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree(n, where):
     assert np.allclose(expected, pforce.sum(axis=0) * record[:, None], rtol=1e-12)
 
 
+def test_the_device_sums_each_cells_drag_coefficients_in_particle_order():
+    """The sums of the drag coefficients per fluid cell (the self-induced velocity's screening)
+    are bitwise the CPU's sums in particle order (kernels/fluid/drag.py cell_coefficients),
+    whatever order the atomic fill leaves in a cell: here each cell's particles are handed over
+    reversed, with coefficients over sixteen decades, so that a sum in that order differs."""
+    from numba import cuda
+
+    from sphere_cli.kernels.fluid import cuda_drag
+    from sphere_cli.kernels.fluid.drag import cell_coefficients
+
+    rng = np.random.default_rng(4)
+    n, cells = 300, 7
+    cell_of = rng.integers(0, cells, n)
+    coef = rng.uniform(1.0, 2.0, n) * 10.0 ** rng.integers(-8, 8, n)
+    expected = np.zeros(cells)
+    cell_coefficients(cell_of, coef, expected)
+    reversed_sums = [sum(coef[cell_of == c][::-1], 0.0) for c in range(cells)]
+    assert not np.array_equal(reversed_sums, expected)  # the order matters
+    count = cuda.to_device(np.zeros(cells, np.int32))
+    start, following = (
+        cuda.to_device(np.zeros(cells + 1, np.int32)),
+        cuda.to_device(np.zeros(cells, np.int32)),
+    )
+    cuda_drag.count_in_cells[3, 128](cell_of, count)
+    cuda_drag.cell_starts[1, 1](count, start, following)
+    bounds = start.copy_to_host()
+    order = np.argsort(cell_of, kind="stable").astype(np.int32)
+    for c in range(cells):
+        order[bounds[c] : bounds[c + 1]] = order[bounds[c] : bounds[c + 1]][::-1].copy()
+    found = np.zeros(cells)
+    cuda_drag.cell_coefficients[1, cells](start, order, coef, count, found)
+    assert np.array_equal(found, expected)
+    assert not count.copy_to_host().any()  # zeroed for the next step
+    # and through the device's own fill
+    cuda_drag.count_in_cells[3, 128](cell_of, count)
+    cuda_drag.cell_starts[1, 1](count, start, following)
+    filled = cuda.to_device(np.zeros(n, np.int32))
+    cuda_drag.fill_cells[3, 128](cell_of, following, filled)
+    found[:] = 0.0
+    cuda_drag.cell_coefficients[1, cells](start, filled, coef, count, found)
+    assert np.array_equal(found, expected)
+
+
 def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
     """Cells of one slot, and spare rows of one slot for the next build: the builds overflow,
     the device grows the arrays and builds again, and nothing is dropped (still the CPU's
@@ -332,31 +375,116 @@ top = { type = "pressure", pressure = 0.0 }
 """
 
 
+# a Navier-Stokes fluid over the floor on a 2 x 2 x 3 grid, open at the top, solved every 5 steps:
+# the drag of each particle (with its self-induced velocity subtracted, the default) and its
+# exact kick on the device
+NAVIER_STOKES = """
+[[walls]]
+face = "z-"
+material = "b"
+[fluid]
+model = "navier-stokes"
+density = 1000.0
+viscosity = 1.0e-3
+grid = { cells = [2, 2, 3] }
+coupling = { steps = 5 }
+bottom = { type = "no-flow" }
+top = { type = "pressure", pressure = 0.0 }
+"""
+# the cell-averaged Gidaspow drag, without the pressure-gradient force
+NAVIER_STOKES_CELL_DRAG = NAVIER_STOKES.replace(
+    "coupling =", 'drag = { law = "gidaspow", averaging = "cell", pressure_force = false }\ncoupling ='
+)
+
+
+def _navier_stokes_fields(scene) -> dict:
+    fs, drag = scene.fluid.fs, scene.fluid.drag
+    fields = {
+        "v": fs.v,
+        "p": fs.p,
+        "f_exchange": fs.f_exchange,
+        "impulse": drag.impulse,
+        "f_drag": drag.f_drag,
+    }
+    if drag.corrected:
+        fields["self_induced"] = drag.disturbance
+    return fields
+
+
 def _vans_fields(scene) -> dict:
     f = scene.state.fluid
     return {"u": f.column.u, "drag_coef": f.drag_coef, "drag_x": f.drag_x}
 
 
-def test_a_fluids_stability_is_checked_without_bringing_the_state_back(tmp_path):
-    """With the VANS fluid on the GPU, the stability check tests the particles on the device and
-    the fluid on its host fields with the drag brought back alone; a fluid gone bad stops the
-    run with the CPU's message."""
+def _spoil_the_column(scene) -> None:
+    scene.state.fluid.column.u[3] = np.nan
+
+
+def _spoil_the_grid(scene) -> None:
+    scene.fluid.fs.p[1, 0, 2] = np.nan
+
+
+@pytest.mark.parametrize(
+    "fluid, brought_back, spoil, message",
+    [
+        (
+            VANS,
+            lambda s: s.state.fluid.drag_coef,
+            _spoil_the_column,
+            "vans1d fluid velocity is nan m/s in layer 3",
+        ),
+        # its test of the cells crossed a fluid step reads the particles' velocities
+        (
+            NAVIER_STOKES,
+            lambda s: s.state.particles.vel,
+            _spoil_the_grid,
+            "has a non-finite pressure (nan Pa)",
+        ),
+    ],
+    ids=["vans1d", "navier-stokes"],
+)
+def test_a_fluids_stability_is_checked_without_bringing_the_state_back(
+    tmp_path, fluid, brought_back, spoil, message
+):
+    """With a fluid on the GPU, the stability check tests the particles on the device and the
+    fluid on its host fields with only what its test reads brought back (the VANS drag, the
+    particles' velocities); a fluid gone bad stops the run with the CPU's message."""
     from sphere_cli.errors import NumericalError
     from sphere_cli.simulation import check_stable
 
-    gpu, cpu = _scenes(tmp_path, walls=VANS)
-    advance(gpu, 12, sync=False)  # past the fluid step at 10
+    gpu, cpu = _scenes(tmp_path, walls=fluid)
+    advance(gpu, 12, sync=False)  # past the fluid step at 10, for whose step the host took some arrays
     advance(cpu, 12)
     check_stable(gpu)
-    assert gpu.step.compiled.host_stale  # checked there: the particles stayed on the device
-    np.testing.assert_allclose(gpu.state.fluid.drag_coef, cpu.state.fluid.drag_coef, rtol=RTOL)
+    assert gpu.step.compiled.host_stale  # checked there: the list stayed on the device
+    np.testing.assert_allclose(brought_back(gpu), brought_back(cpu), rtol=RTOL)
     messages = []
     for scene in (gpu, cpu):
-        scene.state.fluid.column.u[3] = np.nan
+        spoil(scene)
         with pytest.raises(NumericalError) as caught:
             check_stable(scene)
         messages.append(str(caught.value))
-    assert messages[0] == messages[1] and "vans1d fluid velocity is nan m/s in layer 3" in messages[0]
+    assert messages[0] == messages[1] and message in messages[0]
+
+
+def test_particles_under_the_porosity_floor_are_reported_from_the_gpu(tmp_path):
+    """A porosity under fluid.drag.porosity_floor (0.1) in every cell, set between calls (the
+    fluid's own step floors what it measures): the GPU counts the particles under it on the
+    device and warns once at the next fluid step, the CPU at the step itself; the drag uses the
+    floor on both."""
+    gpu, cpu = _scenes(tmp_path, walls=NAVIER_STOKES)
+    for scene in (gpu, cpu):
+        advance(scene, 7)
+        scene.fluid.fs.porosity[...] = 0.05
+    with pytest.warns(RuntimeWarning, match=r"step 7: porosity 0.05 .*\(40 particle\(s\) this step, not"):
+        advance(cpu, 5)
+    with pytest.warns(
+        RuntimeWarning,
+        match=r"step 10: porosity 0.05 in fluid cell \(\d, \d, \d\) is below fluid.drag.porosity_floor = 0.1;"
+        r" the drag uses the floor there \(120 particle-step\(s\) since the last fluid step, not repeated\)",
+    ):
+        advance(gpu, 5)
+    _compare(gpu, cpu)
 
 
 def _vans_and_lid_fields(scene) -> dict:
@@ -388,8 +516,10 @@ def _darcy_fields(scene) -> dict:
         (VANS, _vans_fields, (15, 25, 20)),
         (VANS_UNDER_A_LID, _vans_and_lid_fields, (15, 25, 20)),
         (DARCY, _darcy_fields, (12, 23, 25)),
+        (NAVIER_STOKES, _navier_stokes_fields, (12, 23, 6)),
+        (NAVIER_STOKES_CELL_DRAG, _navier_stokes_fields, (12, 23, 6)),
     ],
-    ids=["vans1d", "vans1d-moving-lid", "darcy"],
+    ids=["vans1d", "vans1d-moving-lid", "darcy", "navier-stokes", "navier-stokes-cell-drag"],
 )
 def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
     """A fluid with the particles on the GPU: its own step (the VANS column, the Darcy pore
@@ -430,9 +560,7 @@ def test_a_darcy_fluid_pushing_a_wall_is_refused_on_the_gpu(tmp_path):
     text = _case(path, "cuda", extra=textwrap.dedent(pushed)).replace(
         "[true, true, true]", "[true, true, false]"
     )
-    with pytest.raises(
-        CaseError, match=r"also has: a Navier-Stokes fluid, or a Darcy fluid under a wall it pushes"
-    ):
+    with pytest.raises(CaseError, match=r"also has: a Darcy fluid under a wall it pushes"):
         build_scene(parse_case(text))
 
 
@@ -524,11 +652,11 @@ def test_every_kernel_compiles_for_a_gpu():
     done = subprocess.run([sys.executable, str(helper)], env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     compiled = {line.split()[0] for line in done.stdout.splitlines()}
-    from sphere_cli.kernels.fluid import cuda_darcy, cuda_profile_forces
+    from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_profile_forces
 
     launched = {
         name
-        for module in (kernels, cuda_profile_forces, cuda_darcy)
+        for module in (kernels, cuda_profile_forces, cuda_darcy, cuda_drag)
         for name, value in vars(module).items()
         if not name.startswith("_") and hasattr(value, "py_func") and hasattr(value, "__getitem__")
     }

@@ -20,7 +20,7 @@ import numpy as np
 from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces
-from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
+from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .pore_pressure import PorePressure, fixed_pressure_cells
 from .porosity import Porosity
@@ -334,10 +334,10 @@ class Darcy(FluidModule):
         """A wall pushed by the pore pressure takes its push from the host every step."""
         return not self.pushes_wall
 
-    def gpu_force(self) -> tuple:
+    def gpu_steps(self, state) -> GpuSteps:
         from ...kernels.fluid.cuda_darcy import pressure_forces
 
-        return pressure_forces, 0
+        return GpuSteps([(pressure_forces, state.particles.count, self.force_arguments(state))])
 
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the

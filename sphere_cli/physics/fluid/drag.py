@@ -40,6 +40,7 @@ from ...kernels.fluid.drag import (
 from ...kernels.fluid.porosity import bin_particles
 from ...kernels.neighbors import counting_sort
 from ...state import State
+from ..fluid_plugin import GpuSteps
 from .self_induced import MODES, lattice_modes
 
 LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
@@ -105,6 +106,7 @@ class FluidParticleDrag:
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
+        self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
         # on MPI ranks: whole(*arrays), the arrays of every rank's own particles in one rank's
         # order (physics/rank_steps.py); None on one rank, which holds them all
         self.whole = None
@@ -144,17 +146,73 @@ class FluidParticleDrag:
             self.coef,
             self.f_drag,
         )
-        if below and not self.warned:
-            self.warned = True
-            cell = int(self.cell_of[np.flatnonzero(phi[self.cell_of] < self.floor)[0]])
-            warnings.warn(
-                f"step {state.clock.step}: porosity {phi[cell]:.3g} in fluid cell "
-                f"{np.unravel_index(cell, self.shape)} is below fluid.drag.porosity_floor = "
-                f"{self.floor}; the drag uses the floor there ({below} particle(s) this step, "
-                "not repeated)",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        if below:
+            self._warn_below(state, phi, f"{below} particle(s) this step")
+
+    def _warn_below(self, state: State, phi, how_many: str) -> None:
+        """Warn, once a run, that particles' cells are below the porosity floor."""
+        if self.warned:
+            return
+        self.warned = True
+        below = np.flatnonzero(phi[self.cell_of] < self.floor)  # none where they have moved on since
+        where = "the porosity of particles' fluid cells"
+        if below.size:
+            cell = int(self.cell_of[below[0]])
+            index = tuple(int(k) for k in np.unravel_index(cell, self.shape))
+            where = f"porosity {phi[cell]:.3g} in fluid cell {index}"
+        warnings.warn(
+            f"step {state.clock.step}: {where} is below fluid.drag.porosity_floor = "
+            f"{self.floor}; the drag uses the floor there ({how_many}, not repeated)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+    def report_below(self, state: State, fs) -> None:
+        """At a fluid step, before the porosity changes: warn of the particles a GPU found under
+        the porosity floor since the last one (gpu_steps)."""
+        if self.below is not None and self.below[0]:
+            since = f"{self.below[0]} particle-step(s) since the last fluid step"
+            self._warn_below(state, fs.porosity.reshape(-1), since)
+            self.below[0] = 0
+
+    def gpu_steps(self, state: State, fs) -> GpuSteps:
+        """`forces` and `kick` on a GPU (kernels/fluid/cuda_drag.py), with the arrays as they are
+        now; the grid's response bands follow its cells here, at the fluid's steps, which alone
+        change them. The particles under the porosity floor are counted on the device, and
+        reported at the next fluid step (report_below)."""
+        from ...kernels.fluid import cuda_drag as k
+
+        p, n, dt = state.particles, state.particles.count, state.clock.dt
+        cells = self.start.size - 1
+        if self.below is None:  # the device's counters and its sort of particles by cell
+            self.below = np.zeros(1, dtype=np.int64)
+            self.gpu_sort = tuple(np.zeros(size, np.int32) for size in (cells, cells + 1, cells, n))
+        u, grad_p = fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3)
+        forces = (
+            p.pos, self.origin, self.spacing, self.cells, self.periodic, self.wrapped, self.law, self.density,
+            self.viscosity, self.floor, self.pressure_force, self.cell_of, p.vel, p.radius, p.inv_mass, u,
+            fs.porosity.reshape(-1), grad_p, dt, self.cell_share, self.cell_diameter, self.cell_velocity,
+            self.disturbance, p.force, self.f_other, self.coef, self.f_drag, self.below,
+        )  # fmt: skip
+        kick = []
+        if self.corrected:
+            self._follow_grid(dt)
+            count, start, following, order = self.gpu_sort
+            kick = [
+                (k.count_in_cells, n, (self.cell_of, count)),
+                (k.cell_starts, 1, (count, start, following)),
+                (k.fill_cells, n, (self.cell_of, following, order)),
+                (k.cell_coefficients, cells, (start, order, self.coef, count, self.cell_coef)),
+            ]
+        kick_args = (
+            p.vel, p.angvel, p.torque, p.inv_mass, p.inv_inertia, self.cell_of, u, self.coef, self.f_other,
+            dt, p.force, self.f_drag, self.impulse, self.disturbance, self.cell_coef,
+            1.0 / self.inv_cell_volume, self.band_weight, self.band_rate, self.band_decay, self.viscosity,
+            self.viscosity / self.density,
+        )  # fmt: skip
+        kick.append((k.drag_kick, n, kick_args))
+        written = (self.cell_of, self.coef, self.f_other, self.f_drag, self.impulse, self.disturbance)
+        return GpuSteps([(k.drag_forces, n, forces)], kick, (*written, self.below))
 
     def kick(self, state: State, fs) -> None:
         """Second half kick of the particles with the drag of the last forces() call; then each

@@ -40,7 +40,7 @@ from ...kernels.fluid.navier_stokes import (
     top_outflow,
     viscous_stresses,
 )
-from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule
+from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .fixed_bed import FixedBed
@@ -581,6 +581,12 @@ class NavierStokes(FluidModule):
     def kick(self, state) -> None:
         self.drag.kick(state, self.fs)
 
+    on_gpu = True
+    stability_reads_particles = True  # the fastest particle's cells a fluid step
+
+    def gpu_steps(self, state) -> GpuSteps:
+        return self.drag.gpu_steps(state, self.fs)
+
     def particle_arrays(self, state) -> dict:
         """The drag's arrays per particle (its cell, coefficient, the other forces, the drag of
         the next half kick, the impulse not yet handed to the fluid, the self-induced velocity);
@@ -603,6 +609,7 @@ class NavierStokes(FluidModule):
         if self.top_wall is not None:
             self._follow_wall(state)
         if state.particles.count:  # without particles the porosity stays 1 and nothing is exchanged
+            self.drag.report_below(state, fs)
             # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
             np.copyto(fs.porosity_rate, fs.porosity)
             self._measure_porosity(state)

@@ -34,7 +34,7 @@ from ...kernels.fluid.vans1d import (
     shear_stress,
 )
 from ...kernels.serial import use_serial
-from ..fluid_plugin import FluidModule
+from ..fluid_plugin import FluidModule, GpuSteps
 from .layer_averaging import LayerProfiles, layer_faces
 
 
@@ -332,10 +332,12 @@ class Vans1d(FluidModule):
 
     on_gpu = True
 
-    def gpu_force(self) -> tuple:
-        from ...kernels.fluid import cuda_profile_forces
+    def gpu_steps(self, state) -> GpuSteps:
+        from ...kernels.fluid.cuda_profile_forces import profile_forces
 
-        return cuda_profile_forces.profile_forces, 2  # drag_coef and drag_x, which the stability check reads
+        f = state.fluid
+        forces = [(profile_forces, state.particles.count, self.force_arguments(state))]
+        return GpuSteps(forces, written=(f.drag_coef, f.drag_x))  # which the stability check reads
 
     def forces(self, state, spring_dt=None) -> None:
         kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces
