@@ -303,40 +303,46 @@ def exchange(
     pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt); solid
     the volume of the particles centred in each cell [m^3]. The impulses are reset to zero. With
     disturbance (N,3,MODES) not empty the particles feel u - u' (`particle_drag`)."""
+    for c in prange(f_i_coef.shape[0]):
+        exchange_cell(
+            c, start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged,
+            fluid_dt, inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
+        )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def exchange_cell(
+    c, start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged, fluid_dt,
+    inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
+):  # fmt: skip
+    """exchange for cell c (also the GPU's, kernels/fluid/cuda_drag.py)."""
     inv_dt = 1.0 / fluid_dt
     corrected = disturbance.shape[0] > 0
-    for c in prange(f_i_coef.shape[0]):
-        r0 = r1 = r2 = 0.0  # drag impulses received
-        e0 = e1 = e2 = 0.0  # drag expected over the next interval
-        sk = 0.0
-        sv = 0.0
-        for j in range(start[c], start[c + 1]):
-            i = order[j]
-            g = phi1(coef[i] * inv_mass[i] * fluid_dt)
-            k = g * coef[i]
-            sk += k
-            r0 += impulse[i, 0]
-            r1 += impulse[i, 1]
-            r2 += impulse[i, 2]
-            impulse[i, 0] = 0.0
-            impulse[i, 1] = 0.0
-            impulse[i, 2] = 0.0
-            e0 += k * (_seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]) + (g - 1.0) * f_other[i, 0]
-            e1 += k * (_seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]) + (g - 1.0) * f_other[i, 1]
-            e2 += k * (_seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]) + (g - 1.0) * f_other[i, 2]
-            d = 2.0 * radius[i]
-            sv += math.pi / 6.0 * d * d * d
-        _settle(
-            c, 0, r0, e0, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
-        )
-        _settle(
-            c, 1, r1, e1, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
-        )
-        _settle(
-            c, 2, r2, e2, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted
-        )
-        f_i_coef[c] = sk * inv_cell_volume
-        solid[c] = sv
+    r0 = r1 = r2 = 0.0  # drag impulses received
+    e0 = e1 = e2 = 0.0  # drag expected over the next interval
+    sk = 0.0
+    sv = 0.0
+    for j in range(start[c], start[c + 1]):
+        i = order[j]
+        g = phi1(coef[i] * inv_mass[i] * fluid_dt)
+        k = g * coef[i]
+        sk += k
+        r0 += impulse[i, 0]
+        r1 += impulse[i, 1]
+        r2 += impulse[i, 2]
+        impulse[i, 0] = 0.0
+        impulse[i, 1] = 0.0
+        impulse[i, 2] = 0.0
+        e0 += k * (_seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]) + (g - 1.0) * f_other[i, 0]
+        e1 += k * (_seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]) + (g - 1.0) * f_other[i, 1]
+        e2 += k * (_seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]) + (g - 1.0) * f_other[i, 2]
+        d = 2.0 * radius[i]
+        sv += math.pi / 6.0 * d * d * d
+    _settle(c, 0, r0, e0, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted)
+    _settle(c, 1, r1, e1, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted)
+    _settle(c, 2, r2, e2, sv, inv_dt, inv_cell_volume, grad_p, pressure_exchanged, f_i, f_exchange, predicted)
+    f_i_coef[c] = sk * inv_cell_volume
+    solid[c] = sv
 
 
 @njit(cache=True, inline="always")

@@ -136,53 +136,68 @@ def sample_cells(
     """phi = 1 - V_s / V_c per cell, clamped to [0, 1] (below 0 only where particles overlap);
     with want_means also the lens-volume-weighted mean particle velocity and diameter (0 where no
     particle reaches the sampling sphere). Returns the number of cells clamped."""
+    clamped = 0
+    for cell in prange(shape[0] * shape[1] * shape[2]):
+        clamped += sample_cell(
+            cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start,
+            order, want_means, porosity, mean_velocity, mean_diameter,
+        )  # fmt: skip
+    return clamped
+
+
+@njit(cache=True, inline="always")
+def sample_cell(
+    cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start, order,
+    want_means, porosity, mean_velocity, mean_diameter,
+):  # fmt: skip
+    """sample_cells for one cell (also the GPU's, kernels/fluid/cuda_porosity.py): 1 if its
+    porosity was clamped at 0, else 0."""
     nx, ny, nz = shape[0], shape[1], shape[2]
     big_r = sampling_radius
     sample_volume = 4.0 / 3.0 * math.pi * big_r * big_r * big_r
     lx, ly, lz = spacing[0] * nx, spacing[1] * ny, spacing[2] * nz
-    clamped = 0
-    for cell in prange(nx * ny * nz):
-        i = cell // (ny * nz)
-        j = (cell // nz) % ny
-        k = cell % nz
-        cx = origin[0] + (i + 0.5) * spacing[0]
-        cy = origin[1] + (j + 0.5) * spacing[1]
-        cz = origin[2] + (k + 0.5) * spacing[2]
-        sums = (0.0, 0.0, 0.0, 0.0, 0.0)
-        for ux in range(i - reach[0], i + reach[0] + 1):
-            gx, ix = _image(ux, nx)
-            if ix != 0 and not periodic[0]:
+    i = cell // (ny * nz)
+    j = (cell // nz) % ny
+    k = cell % nz
+    cx = origin[0] + (i + 0.5) * spacing[0]
+    cy = origin[1] + (j + 0.5) * spacing[1]
+    cz = origin[2] + (k + 0.5) * spacing[2]
+    sums = (0.0, 0.0, 0.0, 0.0, 0.0)
+    for ux in range(i - reach[0], i + reach[0] + 1):
+        gx, ix = _image(ux, nx)
+        if ix != 0 and not periodic[0]:
+            continue
+        for uy in range(j - reach[1], j + reach[1] + 1):
+            gy, iy = _image(uy, ny)
+            if iy != 0 and not periodic[1]:
                 continue
-            for uy in range(j - reach[1], j + reach[1] + 1):
-                gy, iy = _image(uy, ny)
-                if iy != 0 and not periodic[1]:
-                    continue
-                column = (gx * ny + gy) * nz
-                if periodic[2]:
-                    for uz in range(k - reach[2], k + reach[2] + 1):
-                        gz, iz = _image(uz, nz)
-                        g = column + gz
-                        sums = _add_particles(
-                            cell_start[g], cell_start[g + 1], order, wrapped, vel, radius,
-                            ix * lx, iy * ly, iz * lz, cx, cy, cz, big_r, want_means, sums,
-                        )  # fmt: skip
-                else:
-                    # the bins of a bounded z range are contiguous in the sorted order
-                    lo = max(k - reach[2], 0)
-                    hi = min(k + reach[2], nz - 1)
+            column = (gx * ny + gy) * nz
+            if periodic[2]:
+                for uz in range(k - reach[2], k + reach[2] + 1):
+                    gz, iz = _image(uz, nz)
+                    g = column + gz
                     sums = _add_particles(
-                        cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
-                        ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
+                        cell_start[g], cell_start[g + 1], order, wrapped, vel, radius,
+                        ix * lx, iy * ly, iz * lz, cx, cy, cz, big_r, want_means, sums,
                     )  # fmt: skip
-        phi = 1.0 - sums[0] / sample_volume
-        if phi < 0.0:
-            phi = 0.0
-            clamped += 1
-        porosity[i, j, k] = phi
-        if want_means:
-            w = 1.0 / sums[0] if sums[0] > 0.0 else 0.0
-            mean_velocity[i, j, k, 0] = sums[1] * w
-            mean_velocity[i, j, k, 1] = sums[2] * w
-            mean_velocity[i, j, k, 2] = sums[3] * w
-            mean_diameter[i, j, k] = sums[4] * w
+            else:
+                # the bins of a bounded z range are contiguous in the sorted order
+                lo = max(k - reach[2], 0)
+                hi = min(k + reach[2], nz - 1)
+                sums = _add_particles(
+                    cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
+                    ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
+                )  # fmt: skip
+    phi = 1.0 - sums[0] / sample_volume
+    clamped = 0
+    if phi < 0.0:
+        phi = 0.0
+        clamped = 1
+    porosity[i, j, k] = phi
+    if want_means:
+        w = 1.0 / sums[0] if sums[0] > 0.0 else 0.0
+        mean_velocity[i, j, k, 0] = sums[1] * w
+        mean_velocity[i, j, k, 1] = sums[2] * w
+        mean_velocity[i, j, k, 2] = sums[3] * w
+        mean_diameter[i, j, k] = sums[4] * w
     return clamped
