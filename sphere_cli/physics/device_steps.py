@@ -16,7 +16,9 @@ approach). So does a fluid whose action on the particles runs on the GPU (FluidM
 gpu_steps: the 1D VANS profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's,
 kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/cuda_drag.py):
 its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
-brought back, and its arrays go up again after each. A case with anything else in its step (a
+brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
+and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its
+arrays go up again after each. A case with anything else in its step (a
 Darcy fluid under a wall it pushes, the energy budget) is refused with the modules named; so is a
 machine without a usable GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
@@ -117,8 +119,15 @@ def _gpu_name(cuda) -> str:
 
 
 def _key(a: np.ndarray) -> tuple:
-    """What tells a host array apart: its memory, shape and type (views of one array share it)."""
-    return a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str
+    """What tells a host array apart: its memory and type (views of one contiguous array, such as
+    a grid's field and its flat form, share it)."""
+    return a.__array_interface__["data"][0], a.nbytes, a.dtype.str
+
+
+def _to_host(pairs: tuple) -> None:
+    """Each (host array, device array) copied back."""
+    for host, device in pairs:
+        device.copy_to_host(host)
 
 
 def _fluid_on_gpu(scene):
@@ -175,7 +184,9 @@ class DeviceSteps:
         self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
         self.fluid_due = None  # the step at whose end the fluid takes its step on the host
         self.fluid_steps = None  # its GpuSteps with the arguments on the device (_fluid_arguments)
-        self.fluid_written = ()  # (host array, device array) of those its kernels write
+        # (host array, device array) of those its kernels write, its stability test reads of
+        # those, and the kernels at the end of a step before its own step write
+        self.fluid_written = self.fluid_checked = self.fluid_coupled = ()
         self.mirrors = {}  # the device's copy of each host array of the fluid's, by _key
         self.rows = self.spare = None
         self.on_device_at = None  # the host step the device state is for (None: upload)
@@ -297,19 +308,21 @@ class DeviceSteps:
                     push_total=to(np.zeros((len(w.faces), 3))),
                 )
         if self.fluid is not None:
-            self._fluid_arguments(state)
+            self._fluid_arguments(state, everything=True)
         self.rows, self.hist = self._full_rows(nl, p.count)
         self.spare = self._allocate(p.count, self.rows.nbr.shape[1])
         self.hist_next = self._springs(p.count, self.rows.nbr.shape[1])
         self.on_device_at = state.clock.step
 
-    def _fluid_arguments(self, state: State) -> None:
+    def _fluid_arguments(self, state: State, everything: bool = False) -> None:
         """The fluid's kernels with their arguments on the device (its gpu_steps): the particles'
         own arrays, one device copy of each of its host arrays (the views of one array share it),
         its numbers as they are now. Sent again after each fluid step, into the arrays already
-        on the device (none allocated then)."""
+        on the device (none allocated then), but for those that are the device's alone
+        (GpuSteps.written with a coupling on the device) unless `everything` (an upload)."""
         own = {_key(a): name for name, a in vars(state.particles).items() if name in self.d}
         host = self.fluid.gpu_steps(state)
+        kept = set() if everything or not host.coupling else {_key(a) for a in host.written}
         mirrors = {}
 
         def on_device(a):
@@ -319,18 +332,26 @@ class DeviceSteps:
             if key in own:
                 return self.d[own[key]]
             if key not in mirrors:
-                if key in self.mirrors:
-                    self.mirrors[key].copy_to_device(a)
-                    mirrors[key] = self.mirrors[key]
-                else:
+                if key not in self.mirrors:
                     mirrors[key] = self.cuda.to_device(a)
-            return mirrors[key]
+                else:
+                    mirrors[key] = self.mirrors[key]
+                    if key not in kept:
+                        mirrors[key].copy_to_device(a.reshape(mirrors[key].shape))
+            device = mirrors[key]
+            return device if device.shape == a.shape else device.reshape(a.shape)
 
         def launches(steps):
             return [(kernel, size, tuple(on_device(a) for a in args)) for kernel, size, args in steps]
 
-        self.fluid_steps = type(host)(launches(host.forces), launches(host.kick))
-        self.fluid_written = tuple((a, on_device(a)) for a in host.written)
+        def pairs(arrays):
+            return tuple((a, on_device(a)) for a in arrays)
+
+        self.fluid_steps = type(host)(
+            launches(host.forces), launches(host.kick), coupling=launches(host.coupling)
+        )
+        self.fluid_written, self.fluid_checked = pairs(host.written), pairs(host.checked)
+        self.fluid_coupled = pairs(host.coupled)
         self.mirrors = mirrors
 
     def _allocate(self, n: int, width: int) -> Rows:
@@ -386,7 +407,8 @@ class DeviceSteps:
             # a new array: the wall module derives its mask of set springs again (physics/walls.py)
             state.walls.hist = self.d["wall_hist"].copy_to_host()
         self._moving_walls_to_host(state)
-        self._fluid_outputs_to_host(state)
+        if self.fluid is not None:
+            self._fluid_outputs_to_host(self.fluid_written)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
@@ -432,16 +454,12 @@ class DeviceSteps:
             for name in MOVED:
                 self.d[f"wall_{name}"].copy_to_host(getattr(state.walls, name))
 
-    def _fluid_outputs_to_host(self, state: State) -> None:
-        """The arrays the fluid's kernels write on the device (the VANS drag, which its stability
-        test reads; the Navier-Stokes drag's per-particle arrays) into the host's, unless the
-        fluid's step on the host has made them since (at the step the device is at)."""
-        if self.fluid_due != self.on_device_at:
-            self._fluid_written_to_host()
-
-    def _fluid_written_to_host(self) -> None:
-        for host, device in self.fluid_written:
-            device.copy_to_host(host)
+    def _fluid_outputs_to_host(self, pairs: tuple) -> None:
+        """Those of the arrays the fluid's kernels write on the device (GpuSteps.written, or of
+        those, checked) into the host's, unless the fluid's step on the host has made them since
+        (at the step the device is at, where they came back for it)."""
+        if self.fluid_steps.coupling or self.fluid_due != self.on_device_at:
+            _to_host(pairs)
 
     def hand_over(self, state: State) -> None:
         """to_host, for a caller who may change the host's arrays before the next steps: those
@@ -472,7 +490,7 @@ class DeviceSteps:
         if self.fluid is not None:
             if self.fluid.stability_reads_particles:
                 self._particles_to_host(state)
-            self._fluid_outputs_to_host(state)
+            self._fluid_outputs_to_host(self.fluid_checked)
             return self.fluid.first_unstable(state) is None
         return True
 
@@ -544,9 +562,14 @@ class DeviceSteps:
         if self.stages is not None and self.stages.after_due(end, state.clock):
             self.download(state)  # the stage's test reads, and a stage that begins changes, it all
             self.host_stale = False
+        elif self.fluid_due == end and self.fluid_steps.coupling:  # what the fluid's step reads, made here
+            for kernel, size, args in self.fluid_steps.coupling:
+                self._launch(kernel, size, *args)
+            _to_host(self.fluid_coupled)
+            self._moving_walls_to_host(state)
         elif self.fluid_due == end:
             self._particles_to_host(state)
-            self._fluid_written_to_host()
+            _to_host(self.fluid_written)
         return steps, False
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:

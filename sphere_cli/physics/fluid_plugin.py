@@ -46,9 +46,17 @@ class GpuSteps:
     # in place of the particles' second half kick (none: the device's own); the last is the
     # kick, which also takes the device's largest displacement and zeroes it (cuda_dem.py kick)
     kick: list[tuple] = field(default_factory=list)
-    # host arrays its kernels write that the host reads (its own step, its stability test,
-    # output): brought back before those
+    # host arrays its kernels write, brought back with the state (and, without `coupling`,
+    # before the fluid's own step, which may change them)
     written: tuple = ()
+    # host arrays its stability test (first_unstable) reads of those, brought back for it
+    checked: tuple = ()
+    # at the end of a step after which the fluid takes its own step: kernels doing on the device
+    # what that step needs of the particles, and the host arrays they write (brought back for
+    # it); none: the particles and `written` come back instead. With them, `written` is the
+    # device's alone: the fluid's step leaves it, and it is not sent up after that step.
+    coupling: list[tuple] = field(default_factory=list)
+    coupled: tuple = ()
 
 
 class FluidModule(Module):

@@ -1,5 +1,5 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
-kernels/fluid/cuda_darcy.py, kernels/fluid/cuda_drag.py) for an H200 (compute capability 9.0)
+kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py) for an H200 (compute capability 9.0)
 with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
 whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
 numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds in its code.
@@ -10,7 +10,7 @@ from numba import cuda
 from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
-from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_profile_forces
+from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_porosity, cuda_profile_forces
 
 V = t.float64[:]  # (N,) or (3,)
 M = t.float64[:, :]  # (N,3)
@@ -126,11 +126,18 @@ DRAG_SIGNATURES = {
         M,
         L1,
     ),  # fmt: skip
+    "cell_coefficients": (I1, I1, V, I1, V),
+    "exchange": (I1, I1, M, V, V, M, M, V, M, M, BOOL, F, F, H, M, V, M, M, V),
+    "drag_kick": (M, M, M, V, V, L1, M, V, M, F, M, M, M, H, V, F, M, M, M, F, F, V),
+}
+# the porosity and the sort of particles by fluid cell (kernels/fluid/cuda_porosity.py)
+POROSITY_SIGNATURES = {
+    "bin_particles": (M, V, V, L1, B, L1, M, I1, I1),
     "count_in_cells": (L1, I1),
     "cell_starts": (I1, I1, I1),
     "fill_cells": (L1, I1, I1),
-    "cell_coefficients": (I1, I1, V, I1, V),
-    "drag_kick": (M, M, M, V, V, L1, M, V, M, F, M, M, M, H, V, F, M, M, M, F, F, V),
+    "sort_cells": (I1, I1, I1),
+    "sample_cells": (M, M, V, V, V, L1, B, F, L1, I1, I1, BOOL, H, H4, H, I1),
 }
 
 if __name__ == "__main__":
@@ -139,6 +146,7 @@ if __name__ == "__main__":
         (cuda_profile_forces, VANS_SIGNATURES),
         (cuda_darcy, DARCY_SIGNATURES),
         (cuda_drag, DRAG_SIGNATURES),
+        (cuda_porosity, POROSITY_SIGNATURES),
     ):
         for name, signature in signatures.items():
             ptx, _ = cuda.compile_ptx(getattr(module, name).py_func, signature, cc=(9, 0))

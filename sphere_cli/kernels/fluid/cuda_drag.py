@@ -1,29 +1,25 @@
 """The Navier-Stokes fluid's drag on the particles on a CUDA GPU (physics/device_steps.py), one
-thread per particle running the processor's own per-particle functions (kernels/fluid/drag.py
-drag_on_particle and kick_with_drag, kernels/fluid/porosity.py bin_particle); the fluid's grid
-itself is solved on the processor between coupling steps.
+thread per particle or per fluid cell running the processor's own functions (kernels/fluid/
+drag.py drag_on_particle, kick_with_drag and exchange_cell, kernels/fluid/porosity.py
+bin_particle); the fluid's grid itself is solved on the processor between coupling steps.
 
-The self-induced velocity's correction needs the sum of the drag coefficients of each cell's
-particles, which the processor takes in particle order (drag.py cell_coefficients). Here the
-particles are sorted by cell (a count by atomics, a prefix sum, a fill whose order within a cell
-depends on the scheduling), then each cell's thread sorts its own particles by index and sums in
-that order: the processor's sum, bitwise, whatever the launch. The counts are integers: an atomic
-add is exact in any order.
+The sums over each cell's particles (the self-induced velocity's drag coefficients every step,
+the momentum exchange at each fluid step) gather from the particles sorted by cell
+(kernels/fluid/cuda_porosity.py), each cell's particles in index order: the processor's sums,
+bitwise, whatever the launch.
 
-Arrays as in drag.py; cell_count (C,) int32 (zero between steps: the sum zeroes it), cell_start
-(C+1,) int32, cell_next (C,) int32, cell_order (N,) int32, below (1,) int64: the particle-steps in
-cells under the porosity floor since the host last read it.
+Arrays as in drag.py; below (1,) int64: the particle-steps in cells under the porosity floor.
 """
 
 from numba import cuda
 
 from ..cuda_dem import for_gpu
 from . import drag as on_processor
-from . import porosity
+from .cuda_porosity import bin_particle, sort_cell
 
-bin_particle = for_gpu(porosity.bin_particle)
 drag_on_particle = for_gpu(on_processor.drag_on_particle)
 kick_with_drag = for_gpu(on_processor.kick_with_drag)
+exchange_cell = for_gpu(on_processor.exchange_cell)
 
 
 @cuda.jit
@@ -47,55 +43,31 @@ def drag_forces(
 
 
 @cuda.jit
-def count_in_cells(cell_of, cell_count):
-    """Each particle counted in its cell."""
-    i = cuda.grid(1)
-    if i < cell_of.shape[0]:
-        cuda.atomic.add(cell_count, cell_of[i], 1)
-
-
-@cuda.jit
-def cell_starts(cell_count, cell_start, cell_next):
-    """One thread: where each cell's particles begin in cell_order (a prefix sum of the counts)."""
-    if cuda.grid(1) != 0:
-        return
-    total = 0
-    for c in range(cell_count.shape[0]):
-        cell_start[c] = total
-        cell_next[c] = total
-        total += cell_count[c]
-    cell_start[cell_count.shape[0]] = total
-
-
-@cuda.jit
-def fill_cells(cell_of, cell_next, cell_order):
-    """Particle i into a free place of its cell's part of cell_order."""
-    i = cuda.grid(1)
-    if i < cell_of.shape[0]:
-        cell_order[cuda.atomic.add(cell_next, cell_of[i], 1)] = i
-
-
-@cuda.jit
 def cell_coefficients(cell_start, cell_order, coef, cell_count, cell_coef):
     """drag.py cell_coefficients for cell c: its particles sorted by index, their coefficients
-    summed in that order; its count zeroed for the next step."""
+    summed in that order."""
     c = cuda.grid(1)
     if c >= cell_coef.shape[0]:
         return
-    first = cell_start[c]
-    last = cell_start[c + 1]
-    for k in range(first + 1, last):  # insertion sort: a cell holds a few tens of particles
-        i = cell_order[k]
-        m = k
-        while m > first and cell_order[m - 1] > i:
-            cell_order[m] = cell_order[m - 1]
-            m -= 1
-        cell_order[m] = i
+    sort_cell(c, cell_start, cell_order, cell_count)
     total = 0.0
-    for k in range(first, last):
+    for k in range(cell_start[c], cell_start[c + 1]):
         total += coef[cell_order[k]]
     cell_coef[c] = total
-    cell_count[c] = 0
+
+
+@cuda.jit
+def exchange(
+    start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged, fluid_dt,
+    inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
+):  # fmt: skip
+    """drag.py exchange for cell c, its particles sorted (cuda_porosity.py sort_cells)."""
+    c = cuda.grid(1)
+    if c < f_i_coef.shape[0]:
+        exchange_cell(
+            c, start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged,
+            fluid_dt, inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
+        )  # fmt: skip
 
 
 @cuda.jit

@@ -107,6 +107,7 @@ class FluidParticleDrag:
         self.order = np.zeros(n, dtype=np.int64)
         self.warned = False
         self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
+        self.exchanged_on_device = False  # a GPU takes the momentum exchange (gpu_steps)
         # on MPI ranks: whole(*arrays), the arrays of every rank's own particles in one rank's
         # order (physics/rank_steps.py); None on one rank, which holds them all
         self.whole = None
@@ -175,18 +176,22 @@ class FluidParticleDrag:
             self._warn_below(state, fs.porosity.reshape(-1), since)
             self.below[0] = 0
 
-    def gpu_steps(self, state: State, fs) -> GpuSteps:
+    def gpu_steps(self, state: State, fs, fluid_dt: float | None = None) -> GpuSteps:
         """`forces` and `kick` on a GPU (kernels/fluid/cuda_drag.py), with the arrays as they are
         now; the grid's response bands follow its cells here, at the fluid's steps, which alone
         change them. The particles under the porosity floor are counted on the device, and
-        reported at the next fluid step (report_below)."""
+        reported at the next fluid step (report_below). With fluid_dt [s] (a grid that keeps its
+        cells), also the momentum exchange of fluid_forcing at the end of each step before a fluid
+        step, as `coupling`: the drag's arrays then stay on the device."""
         from ...kernels.fluid import cuda_drag as k
+        from ...kernels.fluid import cuda_porosity as sort
 
         p, n, dt = state.particles, state.particles.count, state.clock.dt
         cells = self.start.size - 1
         if self.below is None:  # the device's counters and its sort of particles by cell
             self.below = np.zeros(1, dtype=np.int64)
             self.gpu_sort = tuple(np.zeros(size, np.int32) for size in (cells, cells + 1, cells, n))
+        count, start, following, order = self.gpu_sort
         u, grad_p = fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3)
         forces = (
             p.pos, self.origin, self.spacing, self.cells, self.periodic, self.wrapped, self.law, self.density,
@@ -194,16 +199,15 @@ class FluidParticleDrag:
             fs.porosity.reshape(-1), grad_p, dt, self.cell_share, self.cell_diameter, self.cell_velocity,
             self.disturbance, p.force, self.f_other, self.coef, self.f_drag, self.below,
         )  # fmt: skip
+        by_cell = [
+            (sort.count_in_cells, n, (self.cell_of, count)),
+            (sort.cell_starts, 1, (count, start, following)),
+            (sort.fill_cells, n, (self.cell_of, following, order)),
+        ]
         kick = []
         if self.corrected:
             self._follow_grid(dt)
-            count, start, following, order = self.gpu_sort
-            kick = [
-                (k.count_in_cells, n, (self.cell_of, count)),
-                (k.cell_starts, 1, (count, start, following)),
-                (k.fill_cells, n, (self.cell_of, following, order)),
-                (k.cell_coefficients, cells, (start, order, self.coef, count, self.cell_coef)),
-            ]
+            kick = [*by_cell, (k.cell_coefficients, cells, (start, order, self.coef, count, self.cell_coef))]
         kick_args = (
             p.vel, p.angvel, p.torque, p.inv_mass, p.inv_inertia, self.cell_of, u, self.coef, self.f_other,
             dt, p.force, self.f_drag, self.impulse, self.disturbance, self.cell_coef,
@@ -211,8 +215,21 @@ class FluidParticleDrag:
             self.viscosity / self.density,
         )  # fmt: skip
         kick.append((k.drag_kick, n, kick_args))
-        written = (self.cell_of, self.coef, self.f_other, self.f_drag, self.impulse, self.disturbance)
-        return GpuSteps([(k.drag_forces, n, forces)], kick, (*written, self.below))
+        per_particle = (self.cell_of, self.coef, self.f_other, self.f_drag, self.impulse, self.disturbance)
+        steps = GpuSteps([(k.drag_forces, n, forces)], kick, (*per_particle, self.below))
+        self.exchanged_on_device = fluid_dt is not None
+        if self.exchanged_on_device:
+            exchange = (
+                start, order, self.impulse, self.coef, p.inv_mass, self.f_other, p.vel, p.radius, u, grad_p,
+                self.pressure_exchanged, fluid_dt, self.inv_cell_volume, self.disturbance,
+                fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3), self.predicted,
+                self.solid,
+            )  # fmt: skip
+            sorted_by_cell = (sort.sort_cells, cells, (start, order, count))
+            steps.coupling = [*by_cell, sorted_by_cell, (k.exchange, cells, exchange)]
+            steps.coupled = (fs.f_i, fs.k_drag, self.solid, self.below)  # which the fluid's step reads
+            steps.written += (self.predicted, self.cell_velocity, self.cell_diameter)
+        return steps
 
     def kick(self, state: State, fs) -> None:
         """Second half kick of the particles with the drag of the last forces() call; then each
@@ -272,7 +289,14 @@ class FluidParticleDrag:
         """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (also the time since the
         last call): the drag expected over the next interval at the fluid velocity now, settled
         against the impulses received since the last call (kernels/fluid/drag.py, "Momentum
-        exchange"); the impulses restart from zero."""
+        exchange"); the impulses restart from zero. A GPU that took the exchange on the device
+        (gpu_steps) has filled them already."""
+        if not self.exchanged_on_device:
+            self._exchange(state, fs, fluid_dt)
+        if self.averaged:
+            self._share(fs.porosity.reshape(-1))
+
+    def _exchange(self, state: State, fs, fluid_dt: float) -> None:
         p = state.particles
         counting_sort(self.cell_of, self.start.size - 1, self.start, self.order)
         exchange(
@@ -281,8 +305,6 @@ class FluidParticleDrag:
             self.inv_cell_volume, self.disturbance, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1),
             fs.f_exchange.reshape(-1, 3), self.predicted, self.solid,
         )  # fmt: skip
-        if self.averaged:
-            self._share(fs.porosity.reshape(-1))
 
     def measure_cell_means(self, state: State, porosity, phi) -> None:
         """The cell-averaged drag's means (the porosity estimate's lens-weighted mean diameter and

@@ -472,6 +472,8 @@ class NavierStokes(FluidModule):
             self._add_body_force(cfg.body_force)
         self.floor = float(cfg.drag.porosity_floor)
         self.warned = False
+        # on a GPU that measures the porosity (gpu_steps): its measurement and count of clamped cells
+        self.measured = self.measured_clamped = None
         self.bed = None  # a bed of imposed porosity ([fluid.bed], without particles)
         if cfg.bed is not None:  # a case without particles (config/consistency.py), so a fixed grid
             exchanged = self.drag.pressure_exchanged
@@ -585,7 +587,25 @@ class NavierStokes(FluidModule):
     stability_reads_particles = True  # the fastest particle's cells a fluid step
 
     def gpu_steps(self, state) -> GpuSteps:
-        return self.drag.gpu_steps(state, self.fs)
+        """The drag on the GPU; on a grid that keeps its cells (no top wall to follow), also the
+        porosity and the momentum exchange at the end of each step before a fluid step, so that
+        only the grid's fields travel (the moving grid's cells change in this module's step,
+        before the porosity: the particles come back for it instead)."""
+        if self.top_wall is not None:
+            return self.drag.gpu_steps(state, self.fs)
+        steps = self.drag.gpu_steps(state, self.fs, self.fluid_dt)
+        if self.measured is None:
+            self.measured = np.zeros_like(self.fs.porosity)
+        shape, drag = self.fs.porosity.shape, self.drag
+        means = (
+            (drag.cell_velocity.reshape(*shape, 3), drag.cell_diameter.reshape(shape))
+            if drag.averaged
+            else ()
+        )
+        measure, self.measured_clamped = self.porosity.gpu_measure(state.particles, self.measured, *means)
+        steps.coupling = [*measure, *steps.coupling]
+        steps.coupled += (self.measured, self.measured_clamped)
+        return steps
 
     def particle_arrays(self, state) -> dict:
         """The drag's arrays per particle (its cell, coefficient, the other forces, the drag of
@@ -651,7 +671,10 @@ class NavierStokes(FluidModule):
         """fs.porosity from the particles where they are now, floored at fluid.drag.porosity_floor:
         the fluid divides by phi, and the drag correlations take the same floor."""
         fs = self.fs
-        if self.drag.averaged:
+        if self.measured is not None:  # measured on a GPU at the end of this step (gpu_steps)
+            fs.porosity[...] = self.measured
+            self.porosity.report_clamped(int(self.measured_clamped[0]))
+        elif self.drag.averaged:
             self.drag.measure_cell_means(state, self.porosity, fs.porosity)
         else:
             self.porosity.measure(state.particles, fs.porosity)

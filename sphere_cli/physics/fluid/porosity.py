@@ -46,6 +46,7 @@ class Porosity:
         self._spare: dict[str, np.ndarray] = {}
         self.clamped_cells = 0
         self._warned = False
+        self.gpu_sort = None  # on a GPU: its counts, starts, next places, order and clamped count
 
     @property
     def sampling_radius(self) -> float:
@@ -60,6 +61,16 @@ class Porosity:
         pos, radius = particles.pos, particles.radius
         bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, self.cell_of, self.wrapped)
         counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
+        want, vbar, dbar = self._sampled(radius, mean_velocity, mean_diameter)
+        clamped = sample_cells(
+            self.wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
+            self.sampling_radius, self.reach, self.cell_start, self.order, want, porosity, vbar, dbar,
+        )  # fmt: skip
+        return self.report_clamped(int(clamped))
+
+    def _sampled(self, radius, mean_velocity, mean_diameter) -> tuple:
+        """The reach of the sampling spheres into the bins, now; (whether means are wanted, and the
+        arrays for them, given or scratch)."""
         # bins on either side of a cell that a particle touching its sampling sphere can lie in
         largest = float(radius.max()) if radius.size else 0.0
         np.floor(0.5 + (self.sampling_radius + largest) / self.spacing, out=self._reach)
@@ -70,11 +81,35 @@ class Porosity:
             vbar = self._scratch("velocity", tuple(self.grid.shape) + (3,)) if want else self._no_velocity
         if dbar is None:
             dbar = self._scratch("diameter", tuple(self.grid.shape)) if want else self._no_diameter
-        clamped = sample_cells(
-            self.wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
-            self.sampling_radius, self.reach, self.cell_start, self.order, want, porosity, vbar, dbar,
+        return want, vbar, dbar
+
+    def gpu_measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> tuple:
+        """`measure` on a GPU (kernels/fluid/cuda_porosity.py), for a grid that keeps its cells:
+        (the launches, the (1,) count of clamped cells they write, for report_clamped)."""
+        from ...kernels.fluid import cuda_porosity as k
+
+        p, n, cells = particles, particles.count, self.grid.cell_count
+        if self.gpu_sort is None:
+            self.gpu_sort = tuple(np.zeros(size, np.int32) for size in (cells, cells + 1, cells, n, 1))
+        count, start, following, order, clamped = self.gpu_sort
+        want, vbar, dbar = self._sampled(p.radius, mean_velocity, mean_diameter)
+        grid = (self.origin, self.spacing, self.shape, self.periodic)
+        sample = (
+            self.wrapped, p.vel, p.radius, *grid, self.sampling_radius, self.reach, start, order, want,
+            porosity, vbar, dbar, clamped,
         )  # fmt: skip
-        self.clamped_cells = int(clamped)
+        binned = (p.pos, *grid, self.cell_of, self.wrapped)
+        return [
+            (k.bin_particles, n, (*binned, count, clamped)),
+            (k.cell_starts, 1, (count, start, following)),
+            (k.fill_cells, n, (self.cell_of, following, order)),
+            (k.sort_cells, cells, (start, order, count)),
+            (k.sample_cells, cells, sample),
+        ], clamped
+
+    def report_clamped(self, clamped: int) -> int:
+        """Keep and (once) log the count of cells whose porosity was clamped at 0; returns it."""
+        self.clamped_cells = clamped
         if clamped and not self._warned:
             self._warned = True
             log.warning(

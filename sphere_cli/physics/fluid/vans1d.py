@@ -337,7 +337,8 @@ class Vans1d(FluidModule):
 
         f = state.fluid
         forces = [(profile_forces, state.particles.count, self.force_arguments(state))]
-        return GpuSteps(forces, written=(f.drag_coef, f.drag_x))  # which the stability check reads
+        drag = (f.drag_coef, f.drag_x)  # which its stability test reads
+        return GpuSteps(forces, written=drag, checked=drag)
 
     def forces(self, state, spring_dt=None) -> None:
         kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces

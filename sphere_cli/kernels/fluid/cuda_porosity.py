@@ -1,0 +1,101 @@
+"""The porosity of the fluid cells from the particles on a CUDA GPU (physics/device_steps.py), and
+the particles sorted by fluid cell, which it and the drag's sums per cell (kernels/fluid/
+cuda_drag.py) gather from: the processor's own functions (kernels/fluid/porosity.py bin_particle
+and sample_cell), one thread per particle or per cell.
+
+The sort gives the processor's stable counting sort (kernels/neighbors.py counting_sort): each
+cell's particles counted by atomics, a prefix sum on one thread, a fill whose order within a cell
+depends on the scheduling, then each cell's particles sorted by index. Counts are integers: an
+atomic add is exact in any order, so every sum over a cell's particles is the processor's,
+bitwise, whatever the launch.
+
+Arrays as in porosity.py; cell_count (C,) int32 (zero between sorts: sort_cells zeroes it),
+cell_start (C+1,) int32, cell_next (C,) int32, cell_order (N,) int32; clamped (1,) int32: the
+cells whose porosity was clamped at 0 by the last sample_cells.
+"""
+
+from numba import cuda
+
+from ..cuda_dem import for_gpu
+from . import porosity as on_processor
+
+bin_particle = for_gpu(on_processor.bin_particle)
+sample_cell = for_gpu(on_processor.sample_cell)
+
+
+@cuda.jit
+def bin_particles(pos, origin, spacing, shape, periodic, bin_of, wrapped, cell_count, clamped):
+    """porosity.py bin_particles for particle i, counted in its cell; thread 0 zeroes clamped[0]
+    for the sample_cells that follows."""
+    i = cuda.grid(1)
+    if i < pos.shape[0]:
+        bin_particle(i, pos, origin, spacing, shape, periodic, bin_of, wrapped)
+        cuda.atomic.add(cell_count, bin_of[i], 1)
+    if i == 0:
+        clamped[0] = 0
+
+
+@cuda.jit
+def count_in_cells(cell_of, cell_count):
+    """Each particle counted in its cell."""
+    i = cuda.grid(1)
+    if i < cell_of.shape[0]:
+        cuda.atomic.add(cell_count, cell_of[i], 1)
+
+
+@cuda.jit
+def cell_starts(cell_count, cell_start, cell_next):
+    """One thread: where each cell's particles begin in cell_order (a prefix sum of the counts)."""
+    if cuda.grid(1) != 0:
+        return
+    total = 0
+    for c in range(cell_count.shape[0]):
+        cell_start[c] = total
+        cell_next[c] = total
+        total += cell_count[c]
+    cell_start[cell_count.shape[0]] = total
+
+
+@cuda.jit
+def fill_cells(cell_of, cell_next, cell_order):
+    """Particle i into a free place of its cell's part of cell_order."""
+    i = cuda.grid(1)
+    if i < cell_of.shape[0]:
+        cell_order[cuda.atomic.add(cell_next, cell_of[i], 1)] = i
+
+
+@cuda.jit(device=True, inline=True)
+def sort_cell(c, cell_start, cell_order, cell_count):
+    """Cell c's particles in cell_order sorted by index (insertion: a cell holds a few tens); its
+    count zeroed for the next sort."""
+    first = cell_start[c]
+    last = cell_start[c + 1]
+    for k in range(first + 1, last):
+        i = cell_order[k]
+        m = k
+        while m > first and cell_order[m - 1] > i:
+            cell_order[m] = cell_order[m - 1]
+            m -= 1
+        cell_order[m] = i
+    cell_count[c] = 0
+
+
+@cuda.jit
+def sort_cells(cell_start, cell_order, cell_count):
+    c = cuda.grid(1)
+    if c < cell_count.shape[0]:
+        sort_cell(c, cell_start, cell_order, cell_count)
+
+
+@cuda.jit
+def sample_cells(
+    wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start, order,
+    want_means, porosity, mean_velocity, mean_diameter, clamped,
+):  # fmt: skip
+    """porosity.py sample_cells for cell c, the clamped cells counted in clamped[0]."""
+    c = cuda.grid(1)
+    if c < porosity.size and sample_cell(
+        c, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start, order,
+        want_means, porosity, mean_velocity, mean_diameter,
+    ):  # fmt: skip
+        cuda.atomic.add(clamped, 0, 1)
