@@ -318,11 +318,12 @@ class DeviceSteps:
         """The fluid's kernels with their arguments on the device (its gpu_steps): the particles'
         own arrays, one device copy of each of its host arrays (the views of one array share it),
         its numbers as they are now. Sent again after each fluid step, into the arrays already
-        on the device (none allocated then), but for those that are the device's alone
-        (GpuSteps.written with a coupling on the device) unless `everything` (an upload)."""
+        on the device (none allocated then), but for the kernels' scratch and those that are the
+        device's alone (GpuSteps.written with a coupling on the device) unless `everything` (an
+        upload)."""
         own = {_key(a): name for name, a in vars(state.particles).items() if name in self.d}
         host = self.fluid.gpu_steps(state)
-        kept = set() if everything or not host.coupling else {_key(a) for a in host.written}
+        kept = {_key(a) for a in (*host.scratch, *(() if everything or not host.coupling else host.written))}
         mirrors = {}
 
         def on_device(a):

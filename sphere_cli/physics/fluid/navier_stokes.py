@@ -605,6 +605,7 @@ class NavierStokes(FluidModule):
         measure, self.measured_clamped = self.porosity.gpu_measure(state.particles, self.measured, *means)
         steps.coupling = [*measure, *steps.coupling]
         steps.coupled += (self.measured, self.measured_clamped)
+        steps.scratch += (*self.porosity.gpu_sort[:4], self.porosity.cell_of, self.porosity.wrapped)
         return steps
 
     def particle_arrays(self, state) -> dict:
