@@ -307,6 +307,11 @@ def bench_gpu(
         "--walls",
         help="fixed and/or moving: moving adds loose rows whose lid keeps a stress and slides.",
     ),
+    fluids: str = typer.Option(
+        "none",
+        "--fluids",
+        help="none and/or navier-stokes: navier-stokes adds loose rows in water on a Navier-Stokes grid.",
+    ),
     output: Path = OUTPUT_OPTION,
 ) -> None:
     """The DEM step on a CUDA GPU (simulation.device = "cuda") on the canonical scene: particle-steps
@@ -319,7 +324,11 @@ def bench_gpu(
     lids = tuple(s.strip() for s in walls.split(",") if s.strip())
     if not lids or not set(lids) <= {"fixed", "moving"}:
         raise typer.BadParameter(f"--walls {walls!r}: expected fixed and/or moving")
-    _bench(lambda: run_gpu_benchmark(_numbers(sizes, "--sizes"), steps, repeats, chosen, output, walls=lids))
+    media = tuple(s.strip() for s in fluids.split(",") if s.strip())
+    if not media or not set(media) <= {"none", "navier-stokes"}:
+        raise typer.BadParameter(f"--fluids {fluids!r}: expected none and/or navier-stokes")
+    counts = _numbers(sizes, "--sizes")
+    _bench(lambda: run_gpu_benchmark(counts, steps, repeats, chosen, output, walls=lids, fluids=media))
 
 
 @bench_app.command("ranks")

@@ -8,13 +8,18 @@ last kernel; bringing the state back to the host (what a run does for each outpu
 apart, and the rate with one such copy per `steps` steps is given beside it: at 10^6 spheres the
 copy costs as much as a few hundred steps. `walls` "moving" adds loose rows whose lid keeps a
 normal stress and slides along x at a set velocity (MOVING_LID): the walls' own steps and the
-tree sum of the particles' forces on them, on top of the same scene. Never part of the tests'
-timings.
+tree sum of the particles' forces on them, on top of the same scene. `fluids` "navier-stokes"
+adds loose rows in water, periodic across (without the side walls), on a Navier-Stokes grid of
+cells about four diameters wide solved on the host every COUPLING_STEPS steps (NAVIER_STOKES):
+the drag and its kick every step, the porosity and the momentum exchange on the device and the
+grid's fields to and fro at each fluid step, the pressure solve on the host. Never part of the
+tests' timings.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import statistics
 import time
 from pathlib import Path
@@ -23,11 +28,21 @@ from ..config.load import parse_case
 from ..scene.builder import build_scene
 from ..simulation import advance
 from . import machine
-from .dem import canonical_case, on_device, settled_scene
+from .dem import SPACING, canonical_case, on_device, settled_scene
 
 # the canonical scene's lid, stress-controlled and sliding (`walls` "moving")
 FIXED_LID = '[[walls]]\nface = "z+"'
 MOVING_LID = FIXED_LID + '\nmode = "stress"\nstress = 1000.0\nshear_axis = "x"\nshear_velocity = 0.01'
+# the canonical scene in water (`fluids` "navier-stokes"): cells about four diameters wide
+COUPLING_STEPS = 10
+NAVIER_STOKES = """
+[fluid]
+model = "navier-stokes"
+density = 1000.0
+viscosity = 1.0e-3
+grid = {{ cells = [{across}, {across}, {up}] }}
+coupling = {{ steps = {steps} }}
+"""
 
 
 def run_gpu_benchmark(
@@ -38,17 +53,21 @@ def run_gpu_benchmark(
     out_dir: Path = Path("bench-results"),
     log=print,
     walls=("fixed",),
+    fluids=("none",),
 ) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "steps": steps, "repeats": repeats, "rows": []}
-    rows = [(state, "fixed") for state in states if "fixed" in walls]
-    rows += [("loose", "moving")] if "moving" in walls else []
+    rows = [(state, "fixed", "none") for state in states if "fixed" in walls and "none" in fluids]
+    rows += [("loose", "moving", "none")] if "moving" in walls else []
+    rows += [("loose", "fixed", "navier-stokes")] if "navier-stokes" in fluids else []
     for n in sizes:
-        for state, lid in rows:
+        for state, lid, fluid in rows:
             if state == "loose":
                 text = canonical_case(n)
                 if lid == "moving":
                     text = text.replace(FIXED_LID, MOVING_LID)
+                if fluid == "navier-stokes":
+                    text = _in_water(text, n)
                 scene = build_scene(parse_case(on_device(text, "cuda")))
             else:
                 scene = settled_scene(n, log, device="cuda")
@@ -64,6 +83,7 @@ def run_gpu_benchmark(
                 "n": n,
                 "state": state,
                 "walls": lid,
+                "fluid": fluid,
                 "gpu": device.device_name,
                 "steps": steps,
                 "seconds": median,
@@ -79,7 +99,7 @@ def run_gpu_benchmark(
             results["rows"].append(row)
             shares = ", ".join(f"{name} {share:.0%}" for name, share in row["kernel_shares"].items())
             log(
-                f"N = {n:>8} {state:>7} {lid:>6} walls "
+                f"N = {n:>8} {state:>7} {lid:>6} walls{'' if fluid == 'none' else ', ' + fluid} "
                 f"{row['particle_steps_per_second'] / 1e6:8.1f} M particle-steps/s "
                 f"(median of {repeats} x {steps} steps; "
                 f"best {row['best_particle_steps_per_second'] / 1e6:.1f} M; "
@@ -90,6 +110,17 @@ def run_gpu_benchmark(
     (out_dir / "bench-gpu.json").write_text(json.dumps(results, indent=2))
     log(f"results written to {out_dir / 'bench-gpu.json'}")
     return results
+
+
+def _in_water(text: str, n: int) -> str:
+    """The canonical scene of n spheres (its case text) in water: periodic across, as the
+    Navier-Stokes grid requires, without the side walls; cells about four diameters wide."""
+    for face in ("x-", "x+", "y-", "y+"):
+        text = text.replace(f'[[walls]]\nface = "{face}"\n', "")
+    text = text.replace("[particles]", "periodic = [true, true, false]\n[particles]")
+    side = math.ceil(n ** (1.0 / 3.0))  # lattice sites across (bench/dem.py canonical_case)
+    across = max(1, round(side * SPACING / 4.0))
+    return text + NAVIER_STOKES.format(across=across, up=2 * across, steps=COUPLING_STEPS)
 
 
 def _time_on_device(scene, steps: int, repeats: int) -> tuple[list[float], list[float]]:

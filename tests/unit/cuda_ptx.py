@@ -132,7 +132,7 @@ DRAG_SIGNATURES = {
 }
 # the porosity and the sort of particles by fluid cell (kernels/fluid/cuda_porosity.py)
 POROSITY_SIGNATURES = {
-    "bin_particles": (M, V, V, L1, B, L1, M, I1, I1),
+    "bin_in_fluid_cells": (M, V, V, L1, B, L1, M, I1, I1),
     "count_in_cells": (L1, I1),
     "cell_starts": (I1, I1, I1),
     "fill_cells": (L1, I1, I1),

@@ -751,8 +751,8 @@ def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):
 
 
 def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
-    """sphere bench gpu on a tiny loose bed (its figures mean nothing under the simulator; the
-    test is that a session with a GPU can run it at once)."""
+    """sphere bench gpu on a tiny loose bed, with a moving lid and in water (its figures mean
+    nothing under the simulator; the test is that a session with a GPU can run it at once)."""
     from typer.testing import CliRunner
 
     from sphere_cli.cli import app
@@ -772,12 +772,14 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
             "loose",
             "--walls",
             "fixed,moving",
+            "--fluids",
+            "none,navier-stokes",
             "-o",
             str(tmp_path),
         ],
     )
     assert result.exit_code == 0, result.output
-    row, moving = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"]
+    row, moving, in_water = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"]
     assert row["n"] == 40 and row["to_host_seconds"] > 0
     assert row["particle_steps_per_second"] > row["particle_steps_per_second_with_output"] > 0
     assert 200 < row["device_bytes_per_particle"] < 5000
@@ -787,3 +789,9 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
     assert (row["walls"], moving["walls"]) == ("fixed", "moving")
     walls_own = {"wall_motion_drift", "push_chunks", "wall_motion_kick"}
     assert set(moving["kernel_shares"]) == {*row["kernel_shares"], *walls_own}
+    # in water: the drag and its kick every step (the self-induced velocity's sums by cell), the
+    # porosity and the momentum exchange before the fluid step of the third step
+    assert (in_water["walls"], in_water["fluid"]) == ("fixed", "navier-stokes")
+    drag = {"drag_forces", "count_in_cells", "cell_starts", "fill_cells", "cell_coefficients", "drag_kick"}
+    coupling = {"bin_in_fluid_cells", "sort_cells", "sample_cells", "exchange"}
+    assert set(in_water["kernel_shares"]) == ({*row["kernel_shares"], *drag, *coupling} - {"kick"})

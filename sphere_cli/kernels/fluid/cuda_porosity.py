@@ -24,7 +24,7 @@ sample_cell = for_gpu(on_processor.sample_cell)
 
 
 @cuda.jit
-def bin_particles(pos, origin, spacing, shape, periodic, bin_of, wrapped, cell_count, clamped):
+def bin_in_fluid_cells(pos, origin, spacing, shape, periodic, bin_of, wrapped, cell_count, clamped):
     """porosity.py bin_particles for particle i, counted in its cell; thread 0 zeroes clamped[0]
     for the sample_cells that follows."""
     i = cuda.grid(1)

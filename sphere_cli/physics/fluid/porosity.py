@@ -100,7 +100,7 @@ class Porosity:
         )  # fmt: skip
         binned = (p.pos, *grid, self.cell_of, self.wrapped)
         return [
-            (k.bin_particles, n, (*binned, count, clamped)),
+            (k.bin_in_fluid_cells, n, (*binned, count, clamped)),
             (k.cell_starts, 1, (count, start, following)),
             (k.fill_cells, n, (self.cell_of, following, order)),
             (k.sort_cells, cells, (start, order, count)),
