@@ -561,6 +561,34 @@ def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
         np.testing.assert_allclose(a[name], other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
 
 
+CONFIGS = Path(__file__).parents[2] / "configs"
+
+
+def test_every_example_case_runs_on_the_gpu():
+    """Every case of configs/ is taken by the GPU (none refused for a module it does not run)."""
+    from sphere_cli.config.load import load_case
+
+    for path in sorted(CONFIGS.glob("*.toml")):
+        loaded = load_case(path)
+        loaded.case.simulation.device = "cuda"
+        assert type(build_scene(loaded).step.compiled).__name__ == "DeviceSteps", path.name
+
+
+@pytest.mark.parametrize("name", ["fluid-settling", "fluidized-bed"])
+def test_the_navier_stokes_examples_start_on_the_gpu_as_on_the_cpu(name):
+    """The Navier-Stokes examples as written (200 and 192 spheres; the second with fixed spheres
+    and the Gidaspow drag) over their first fluid steps: the GPU's particles are the CPU's."""
+    from sphere_cli.config.load import load_case
+
+    scenes = []
+    for device in ("cuda", "cpu"):
+        loaded = load_case(CONFIGS / f"{name}.toml")
+        loaded.case.simulation.device = device
+        scenes.append(build_scene(loaded))
+        advance(scenes[-1], 12)
+    _compare(*scenes)
+
+
 def test_a_darcy_fluid_pushing_a_wall_is_refused_on_the_gpu(tmp_path):
     """Under an impermeable top wall the grid follows, the pore pressure pushes the wall every
     step from the host: the GPU refuses the case, naming it."""
