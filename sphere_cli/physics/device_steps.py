@@ -18,9 +18,9 @@ kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/
 its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
 brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
 and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its
-arrays go up again after each. A case with anything else in its step (a
-Darcy fluid under a wall it pushes, the energy budget) is refused with the modules named; so is a
-machine without a usable GPU. Results agree with the CPU to
+arrays go up again after each. A case with anything else in its step (the energy budget) is
+refused with the modules named; so is a fluid without particles, and a machine without a usable
+GPU. Results agree with the CPU to
 round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
@@ -52,12 +52,11 @@ THREADS = 128
 SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
 # what a module the GPU does not run is, for the message that refuses it
 NAMES = {
-    "fluid": "a Darcy fluid under a wall it pushes ([fluid])",
     "energy_budget": "the energy budget (output.observables)",
 }
 # the walls' arrays that moving walls change on the device, and those they only read
-MOVED = ("coord", "vel", "vel_pred", "acc", "shift", "force", "area")
-DRIVING = ("mode", "control", "fluid_force")
+MOVED = ("coord", "vel", "vel_pred", "acc", "shift", "force", "area", "fluid_force")
+DRIVING = ("mode", "control")
 # row and cell slots added on growth, beyond the longest seen
 ROW_HEADROOM = 4
 CELL_SLOTS = 8
@@ -322,6 +321,9 @@ class DeviceSteps:
         device's alone (GpuSteps.written with a coupling on the device) unless `everything` (an
         upload)."""
         own = {_key(a): name for name, a in vars(state.particles).items() if name in self.d}
+        if self.walls is not None:  # the walls' arrays on the device (a Darcy fluid's push)
+            walls = vars(state.walls).items()
+            own.update({_key(a): f"wall_{name}" for name, a in walls if f"wall_{name}" in self.d})
         host = self.fluid.gpu_steps(state)
         kept = {_key(a) for a in (*host.scratch, *(() if everything or not host.coupling else host.written))}
         mirrors = {}

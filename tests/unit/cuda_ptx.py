@@ -93,7 +93,10 @@ SIGNATURES = {
 VANS_SIGNATURES = {
     "profile_forces": (M, M, V, B, V, V, V, V, BOOL, F, F, F, F, F, V, BOOL, F, BOOL, M, M, V, V),
 }
-DARCY_SIGNATURES = {"pressure_forces": (M, V, H4, H, t.uint8, V, V, B, F, V, M)}
+DARCY_SIGNATURES = {
+    "pressure_forces": (M, V, H4, H, t.uint8, V, V, B, F, V, M),
+    "push_wall": (V, INT, F, F, F, F, F, M),
+}
 # the Navier-Stokes drag (kernels/fluid/cuda_drag.py)
 DRAG_SIGNATURES = {
     "drag_forces": (

@@ -81,3 +81,15 @@ def add_pressure_forces(pos, radius, grad, porosity, whole, origin, spacing, per
         particle_pressure_force(
             n, pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force
         )
+
+
+@njit(cache=True)
+def push_wall(coord, top, bottom, height, pressure, stiffness, area, fluid_force):
+    """fluid_force[top, 2] = the pore pressure's push on the impermeable top wall `top` at
+    coord[top] [m] (physics/fluid/darcy.py Darcy._push_wall): (pressure - moved stiffness) area,
+    pressure [Pa] that of the top cells at the last fluid step, moved [m] the wall's rise since
+    then above the grid's bottom [m] and its height [m] then, stiffness [Pa/m] the undrained
+    response, area [m^2] the grid's top: the processor's and the GPU's (kernels/fluid/
+    cuda_darcy.py, one thread)."""
+    moved = (coord[top] - bottom) - height
+    fluid_force[top, 2] = (pressure - moved * stiffness) * area

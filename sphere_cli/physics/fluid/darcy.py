@@ -19,7 +19,7 @@ import numpy as np
 
 from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
-from ...kernels.fluid.darcy import add_pressure_forces
+from ...kernels.fluid.darcy import add_pressure_forces, push_wall
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .pore_pressure import PorePressure, fixed_pressure_cells
@@ -212,11 +212,16 @@ class Darcy(FluidModule):
         a force taken one step late would drive the wall unstable (negative damping ~ omega^2 dt
         against its own), while this one moves with the wall like a spring, stable below
         2/omega (the wall's dt limit, scene/builder.py)."""
-        grid, s = self.pore.grid, self.pore.state
-        moved = self._wall_height(state, grid) - grid.height
-        pressure = float(np.mean(s.pressure[:, :, -1])) - moved * self.wall_stiffness
+        push_wall(*self._push_arguments(state))
+
+    def _push_arguments(self, state) -> tuple:
+        """push_wall's arguments, valid until the next after_step (the grid's height and the top
+        cells' pressure change there)."""
+        grid, s, walls = self.pore.grid, self.pore.state, state.walls
         area = float(grid.spacing[0] * grid.spacing[1]) * grid.shape[0] * grid.shape[1]
-        state.walls.fluid_force[self.top_wall, 2] = pressure * area
+        pressure = float(np.mean(s.pressure[:, :, -1]))
+        top, bottom = self.top_wall, float(grid.origin[2])
+        return walls.coord, top, bottom, grid.height, pressure, self.wall_stiffness, area, walls.fluid_force
 
     def wall_stiffness_limit(self, state) -> dict[int, tuple[float, str]]:
         """Stiffness [N/m] the pore fluid adds to a wall it pushes, for the wall's dt limit: the
@@ -329,15 +334,16 @@ class Darcy(FluidModule):
             self.pore.periodic, self.pore.config.density, self.gravity, p.force,
         )  # fmt: skip
 
-    @property
-    def on_gpu(self) -> bool:
-        """A wall pushed by the pore pressure takes its push from the host every step."""
-        return not self.pushes_wall
+    on_gpu = True
 
     def gpu_steps(self, state) -> GpuSteps:
-        from ...kernels.fluid.cuda_darcy import pressure_forces
+        """The force on the particles, and on a wall it pushes (one thread), on a GPU."""
+        from ...kernels.fluid import cuda_darcy
 
-        return GpuSteps([(pressure_forces, state.particles.count, self.force_arguments(state))])
+        forces = [(cuda_darcy.pressure_forces, state.particles.count, self.force_arguments(state))]
+        if self.pushes_wall:
+            forces.insert(0, (cuda_darcy.push_wall, 1, self._push_arguments(state)))
+        return GpuSteps(forces)
 
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the
