@@ -241,7 +241,8 @@ class DeviceSteps:
         self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - started
 
     def device_bytes(self) -> int:
-        """The bytes this keeps on the device (sphere bench gpu's memory per particle)."""
+        """The bytes this keeps on the device, a fluid's arrays included (sphere bench gpu's memory
+        per particle)."""
         arrays = [
             *self.d.values(),
             self.cell_of,
@@ -249,6 +250,7 @@ class DeviceSteps:
             self.cell_members,
             self.hist,
             self.hist_next,
+            *self.mirrors.values(),
         ]
         for rows in (self.rows, self.spare):
             arrays += [rows.nbr, rows.count, rows.mate]
