@@ -564,16 +564,20 @@ class DeviceSteps:
         self.on_device_at = end = state.clock.step + steps
         if self.fluid is not None and self.fluid.after_due(end, state.clock):
             self.fluid_due = end
-        if self.stages is not None and self.stages.after_due(end, state.clock):
-            self.download(state)  # the stage's test reads, and a stage that begins changes, it all
-            self.host_stale = False
-        elif self.fluid_due == end and self.fluid_steps.coupling:  # what the fluid's step reads, made here
+        fluid_step = self.fluid_due == end
+        coupling = fluid_step and self.fluid_steps.coupling
+        if coupling:  # what the fluid's own step reads of the particles, made here
             for kernel, size, args in self.fluid_steps.coupling:
                 self._launch(kernel, size, *args)
             _to_host(self.fluid_coupled)
+        if self.stages is not None and self.stages.after_due(end, state.clock):
+            self.download(state)  # the stage's test reads, and a stage that begins changes, it all
+            self.host_stale = False
+        elif coupling:  # and the walls
             self._moving_walls_to_host(state)
-        elif self.fluid_due == end:
+        elif fluid_step:
             self._particles_to_host(state)
+        if fluid_step and not coupling:  # (download leaves them: the host's step makes them after)
             _to_host(self.fluid_written)
         return steps, False
 

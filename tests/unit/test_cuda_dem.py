@@ -222,10 +222,20 @@ shear_velocity = 0.05
 """
 
 
-def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path):
+@pytest.mark.parametrize(
+    "grid", ["", "fixed", "following"], ids=["dry", "navier-stokes", "navier-stokes-grid-following"]
+)
+def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path, grid):
     """Stages on the GPU: the state comes back for each test of a stage's end, and goes up again
-    when the next stage has set the walls' modes, the friction and moved the lid (approach)."""
-    gpu, cpu = _scenes(tmp_path, walls=FLOOR_AND_LID + STAGES)
+    when the next stage has set the walls' modes, the friction and moved the lid (approach). In
+    a Navier-Stokes fluid, whose steps (every 5 steps) fall on those tests: on a grid that keeps
+    its cells (the porosity and the exchange made on the device) and on one following the lid."""
+    fluid = ""
+    if grid:
+        fluid = NAVIER_STOKES[NAVIER_STOKES.index("[fluid]") :]
+        if grid == "following":
+            fluid = fluid.replace("cells = [2, 2, 3] }", "cells = [2, 2, 3], follow_top_wall = true }")
+    gpu, cpu = _scenes(tmp_path, walls=FLOOR_AND_LID + STAGES + fluid)
     assert type(gpu.step.compiled).__name__ == "DeviceSteps"
     for steps in (15, 25, 20):  # the first stage ends inside the second call
         ended = [advance(gpu, steps), advance(cpu, steps)]
