@@ -333,6 +333,8 @@ class DeviceSteps:
         def on_device(a):
             if not isinstance(a, np.ndarray):
                 return a
+            if not a.flags.c_contiguous:  # its key would not tell it from another view
+                raise ValueError(f"{type(self.fluid).__name__}.gpu_steps: an argument is not C-contiguous")
             key = _key(a)
             if key in own:
                 return self.d[own[key]]

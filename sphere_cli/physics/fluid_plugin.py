@@ -57,8 +57,8 @@ class GpuSteps:
     # device's alone: the fluid's step leaves it, and it is not sent up after that step.
     coupling: list[tuple] = field(default_factory=list)
     coupled: tuple = ()
-    # host arrays that are the kernels' scratch (written before they are read on the device):
-    # sent up only when first allocated there, never brought back
+    # host arrays the kernels write before they read them on the device (scratch, or results
+    # that come back in `coupled`): sent up only when first allocated there
     scratch: tuple = ()
 
 

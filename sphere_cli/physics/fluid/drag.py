@@ -216,10 +216,8 @@ class FluidParticleDrag:
         )  # fmt: skip
         kick.append((k.drag_kick, n, kick_args))
         per_particle = (self.cell_of, self.coef, self.f_other, self.f_drag, self.impulse, self.disturbance)
-        steps = GpuSteps(
-            [(k.drag_forces, n, forces)], kick, (*per_particle, self.below), scratch=self.gpu_sort
-        )
-        steps.scratch += (self.wrapped,)
+        steps = GpuSteps([(k.drag_forces, n, forces)], kick, (*per_particle, self.below))
+        steps.scratch = (*self.gpu_sort, self.wrapped, self.cell_coef)
         self.exchanged_on_device = fluid_dt is not None
         if self.exchanged_on_device:
             exchange = (

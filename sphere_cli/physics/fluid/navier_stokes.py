@@ -605,7 +605,12 @@ class NavierStokes(FluidModule):
         measure, self.measured_clamped = self.porosity.gpu_measure(state.particles, self.measured, *means)
         steps.coupling = [*measure, *steps.coupling]
         steps.coupled += (self.measured, self.measured_clamped)
-        steps.scratch += (*self.porosity.gpu_sort[:4], self.porosity.cell_of, self.porosity.wrapped)
+        steps.scratch += (
+            *self.porosity.gpu_sort,
+            self.porosity.cell_of,
+            self.porosity.wrapped,
+            self.measured,
+        )
         return steps
 
     def particle_arrays(self, state) -> dict:
