@@ -10,18 +10,19 @@ contacts (both laws, friction, rolling, several materials), gravity, plane walls
 a set velocity or keeping a stress, with spheres glued to them) and periodic boundaries. The
 walls' own steps run on one GPU thread each half step (a few walls); the particles' forces on
 them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
-Stages run on the host, as on the CPU: the state comes back before each step where a stage may
-end (Stages.after_due) and goes up again when one has begun (its walls' modes, its friction, an
-approach). So does a fluid whose action on the particles runs on the GPU (FluidModule.on_gpu,
-gpu_steps: the 1D VANS profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's,
+Stages run on the host, as on the CPU: what their test reads comes back before each step where
+a stage may end (Stages.after_due), the whole state where one does end (Stages.ends_at), and it
+goes up again when the next has begun (its walls' modes, its friction, an approach). So does a
+fluid whose action on the particles runs on the GPU (FluidModule.on_gpu, gpu_steps: the 1D VANS
+profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's and its push on a wall,
 kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/cuda_drag.py):
 its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
 brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
 and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its
 arrays go up again after each. A case with anything else in its step (the energy budget) is
 refused with the modules named; so is a fluid without particles, and a machine without a usable
-GPU. Results agree with the CPU to
-round-off: the GPU's compiler fuses a multiply and an add into one rounding (FMA) where the
+GPU. Results agree with the CPU to round-off: the GPU's compiler fuses a multiply and an add into
+one rounding (FMA) where the
 CPU rounds twice (docs/user-guide.md, "The GPU").
 
 The host's neighbour list is a half list with packed springs (kernels/neighbors.py); the device
@@ -406,14 +407,18 @@ class DeviceSteps:
     def download(self, state: State) -> None:
         """The particles' arrays and the list (as half rows with packed springs) back into the
         host's arrays."""
+        self._particles_to_host(state)
+        self._rest_to_host(state)
+
+    def _rest_to_host(self, state: State) -> None:
+        """All but what _particles_to_host brings back."""
         p, nl = state.particles, state.neighbors
-        for name in ("pos", "vel", "angvel", "force", "torque", "vel_pred", "angvel_pred"):
+        for name in ("force", "torque", "vel_pred", "angvel_pred"):
             self.d[name].copy_to_host(getattr(p, name))
         self.d["ref_pos"].copy_to_host(nl.ref_pos)
         if self.walls is not None and self.wall_springs:
             # a new array: the wall module derives its mask of set springs again (physics/walls.py)
             state.walls.hist = self.d["wall_hist"].copy_to_host()
-        self._moving_walls_to_host(state)
         if self.fluid is not None:
             self._fluid_outputs_to_host(self.fluid_written)
         nbr = self.rows.nbr.copy_to_host()
@@ -573,8 +578,10 @@ class DeviceSteps:
                 self._launch(kernel, size, *args)
             _to_host(self.fluid_coupled)
         if self.stages is not None and self.stages.after_due(end, state.clock):
-            self.download(state)  # the stage's test reads, and a stage that begins changes, it all
-            self.host_stale = False
+            self._particles_to_host(state)  # what the stage's test reads
+            if self.stages.ends_at(end, state):  # the next stage begins from, and changes, it all
+                self._rest_to_host(state)
+                self.host_stale = False
         elif coupling:  # and the walls
             self._moving_walls_to_host(state)
         elif fluid_step:

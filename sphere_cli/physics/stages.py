@@ -108,11 +108,19 @@ class Stages(Module):
 
     def after_step(self, state: State) -> None:
         """Test the current stage's end; `ended_at` is this step if a stage ended at it."""
-        over, tested = self._due(state.clock.step, state.clock)
-        elapsed = state.clock.step - self.start_step
-        if over or (tested and self._condition_met(state, self.stages[self.index].stop_when, elapsed)):
+        if self.ends_at(state.clock.step, state):
             self.begin(state, self.index + 1)
             self.ended_at = state.clock.step
+
+    def ends_at(self, step: int, state: State) -> bool:
+        """Whether the current stage ends at `step` (the clock's, once it has advanced there): its
+        duration is over, or its stop_when holds on the particles' velocities and spins and the
+        walls' positions and shifts in `state`, all that the test reads (a GPU brings back only
+        those for a test, and the whole state where the stage ends)."""
+        over, tested = self._due(step, state.clock)
+        if over or not tested:
+            return over
+        return self._condition_met(state, self.stages[self.index].stop_when, step - self.start_step)
 
     def after_due(self, step: int, clock) -> bool:
         """True if after_step at `step` may end the current stage (its duration ends there, or a
