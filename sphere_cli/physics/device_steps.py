@@ -22,8 +22,7 @@ and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its 
 arrays go up again after each. A case with anything else in its step (the energy budget) is
 refused with the modules named; so is a fluid without particles, and a machine without a usable
 GPU. Results agree with the CPU to round-off: the GPU's compiler fuses a multiply and an add into
-one rounding (FMA) where the
-CPU rounds twice (docs/user-guide.md, "The GPU").
+one rounding (FMA) where the CPU rounds twice (docs/user-guide.md, "The GPU").
 
 The host's neighbour list is a half list with packed springs (kernels/neighbors.py); the device
 holds full rows with the springs at the owner's slot (kernels/cuda_dem.py). The two are
