@@ -294,7 +294,8 @@ def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree(n, where):
     assert np.allclose(expected, pforce.sum(axis=0) * record[:, None], rtol=1e-12)
 
 
-def test_the_device_sorts_particles_by_fluid_cell_and_sums_in_particle_order():
+@pytest.mark.parametrize("cells", [7, 100], ids=["heap-sorted", "insertion-sorted"])
+def test_the_device_sorts_particles_by_fluid_cell_and_sums_in_particle_order(cells):
     """The particles sorted by fluid cell on the device (atomic counts and fill, then each cell
     sorted) are the CPU's stable counting sort (kernels/neighbors.py counting_sort), whatever
     order the fill leaves; so the sums of the drag coefficients per cell (the self-induced
@@ -308,7 +309,7 @@ def test_the_device_sorts_particles_by_fluid_cell_and_sums_in_particle_order():
     from sphere_cli.kernels.neighbors import counting_sort
 
     rng = np.random.default_rng(4)
-    n, cells = 300, 7
+    n = 300  # in 7 cells: more than INSERTION_MOST particles in each; in 100: a few
     cell_of = rng.integers(0, cells, n)
     coef = rng.uniform(1.0, 2.0, n) * 10.0 ** rng.integers(-8, 8, n)
     start_cpu, order_cpu = np.zeros(cells + 1, np.int64), np.zeros(n, np.int64)
@@ -317,6 +318,8 @@ def test_the_device_sorts_particles_by_fluid_cell_and_sums_in_particle_order():
     cell_coefficients(cell_of, coef, expected)
     reversed_sums = [sum(coef[cell_of == c][::-1], 0.0) for c in range(cells)]
     assert not np.array_equal(reversed_sums, expected)  # the order matters
+    fullest = np.bincount(cell_of, minlength=cells).max()
+    assert (fullest > cuda_porosity.INSERTION_MOST) == (cells == 7)
 
     count = cuda.to_device(np.zeros(cells, np.int32))
     start = cuda.to_device(np.zeros(cells + 1, np.int32))

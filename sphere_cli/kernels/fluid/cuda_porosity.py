@@ -5,7 +5,8 @@ and sample_cell), one thread per particle or per cell.
 
 The sort gives the processor's stable counting sort (kernels/neighbors.py counting_sort): each
 cell's particles counted by atomics, a prefix sum on one thread, a fill whose order within a cell
-depends on the scheduling, then each cell's particles sorted by index. Counts are integers: an
+depends on the scheduling, then each cell's particles sorted by index (by its own thread:
+insertion for a few tens, a heap sort beyond). Counts are integers: an
 atomic add is exact in any order, so every sum over a cell's particles is the processor's,
 bitwise, whatever the launch.
 
@@ -64,20 +65,52 @@ def fill_cells(cell_of, cell_next, cell_order):
         cell_order[cuda.atomic.add(cell_next, cell_of[i], 1)] = i
 
 
+# a cell with more particles than this is heap-sorted (k log k), fewer by insertion (k^2, fast
+# for the few tens of particles of a cell a few diameters wide)
+INSERTION_MOST = 32
+
+
 @cuda.jit(device=True, inline=True)
 def sort_cell(c, cell_start, cell_order, cell_count):
-    """Cell c's particles in cell_order sorted by index (insertion: a cell holds a few tens); its
-    count zeroed for the next sort."""
+    """Cell c's particles in cell_order sorted by index; its count zeroed for the next sort.
+    (Distinct indices have one ascending order: either sort gives it.)"""
     first = cell_start[c]
     last = cell_start[c + 1]
-    for k in range(first + 1, last):
-        i = cell_order[k]
-        m = k
-        while m > first and cell_order[m - 1] > i:
-            cell_order[m] = cell_order[m - 1]
-            m -= 1
-        cell_order[m] = i
+    if last - first <= INSERTION_MOST:
+        for k in range(first + 1, last):
+            i = cell_order[k]
+            m = k
+            while m > first and cell_order[m - 1] > i:
+                cell_order[m] = cell_order[m - 1]
+                m -= 1
+            cell_order[m] = i
+    else:
+        size = last - first
+        for top in range(size // 2 - 1, -1, -1):
+            _sift_down(cell_order, first, top, size)
+        for end in range(size - 1, 0, -1):
+            largest = cell_order[first]
+            cell_order[first] = cell_order[first + end]
+            cell_order[first + end] = largest
+            _sift_down(cell_order, first, 0, end)
     cell_count[c] = 0
+
+
+@cuda.jit(device=True, inline=True)
+def _sift_down(order, first, node, size):
+    """The heap order[first:first + size] (largest at its root) restored below `node`."""
+    while True:
+        child = 2 * node + 1
+        if child >= size:
+            return
+        if child + 1 < size and order[first + child + 1] > order[first + child]:
+            child += 1
+        if order[first + node] >= order[first + child]:
+            return
+        swap = order[first + node]
+        order[first + node] = order[first + child]
+        order[first + child] = swap
+        node = child
 
 
 @cuda.jit
