@@ -58,7 +58,7 @@ $(CUDA_STAMP): pyproject.toml Makefile
 	touch $@
 
 test-cuda: $(CUDA_STAMP)
-	NUMBA_ENABLE_CUDASIM=$${CUDASIM:-1} $(CUDA_VENV)/bin/python -m pytest -q -p no:randomly tests/unit/test_cuda_dem.py
+	NUMBA_ENABLE_CUDASIM=$${CUDASIM:-1} $(CUDA_VENV)/bin/python -m pytest -q -p no:randomly tests/unit/test_cuda_dem.py tests/unit/test_cuda_fluids.py
 
 bench: $(STAMP)
 	$(BIN)/sphere bench dem

@@ -200,6 +200,23 @@ def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
     assert gpu.state.clock.step == cpu.state.clock.step == 60
 
 
+# a Navier-Stokes fluid over the floor on a 2 x 2 x 3 grid, open at the top, solved every 5 steps:
+# the drag of each particle (with its self-induced velocity subtracted, the default) and its
+# exact kick on the device
+NAVIER_STOKES = """
+[[walls]]
+face = "z-"
+material = "b"
+[fluid]
+model = "navier-stokes"
+density = 1000.0
+viscosity = 1.0e-3
+grid = { cells = [2, 2, 3] }
+coupling = { steps = 5 }
+bottom = { type = "no-flow" }
+top = { type = "pressure", pressure = 0.0 }
+"""
+
 # a frictionless first stage that ends on its kinetic-energy test (tested every 10 steps from
 # step 20), then the lid approaching the spheres, keeping a stress and sliding, with friction
 STAGES = """
@@ -294,60 +311,6 @@ def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree(n, where):
     assert np.allclose(expected, pforce.sum(axis=0) * record[:, None], rtol=1e-12)
 
 
-@pytest.mark.parametrize("cells", [7, 100], ids=["heap-sorted", "insertion-sorted"])
-def test_the_device_sorts_particles_by_fluid_cell_and_sums_in_particle_order(cells):
-    """The particles sorted by fluid cell on the device (atomic counts and fill, then each cell
-    sorted) are the CPU's stable counting sort (kernels/neighbors.py counting_sort), whatever
-    order the fill leaves; so the sums of the drag coefficients per cell (the self-induced
-    velocity's screening) are bitwise the CPU's in particle order (kernels/fluid/drag.py
-    cell_coefficients): here with each cell's particles handed over reversed, and coefficients
-    over sixteen decades, so that a sum in that order differs."""
-    from numba import cuda
-
-    from sphere_cli.kernels.fluid import cuda_drag, cuda_porosity
-    from sphere_cli.kernels.fluid.drag import cell_coefficients
-    from sphere_cli.kernels.neighbors import counting_sort
-
-    rng = np.random.default_rng(4)
-    n = 300  # in 7 cells: more than INSERTION_MOST particles in each; in 100: a few
-    cell_of = rng.integers(0, cells, n)
-    coef = rng.uniform(1.0, 2.0, n) * 10.0 ** rng.integers(-8, 8, n)
-    start_cpu, order_cpu = np.zeros(cells + 1, np.int64), np.zeros(n, np.int64)
-    counting_sort(cell_of, cells, start_cpu, order_cpu)
-    expected = np.zeros(cells)
-    cell_coefficients(cell_of, coef, expected)
-    reversed_sums = [sum(coef[cell_of == c][::-1], 0.0) for c in range(cells)]
-    assert not np.array_equal(reversed_sums, expected)  # the order matters
-    fullest = np.bincount(cell_of, minlength=cells).max()
-    assert (fullest > cuda_porosity.INSERTION_MOST) == (cells == 7)
-
-    count = cuda.to_device(np.zeros(cells, np.int32))
-    start = cuda.to_device(np.zeros(cells + 1, np.int32))
-    following = cuda.to_device(np.zeros(cells, np.int32))
-    order = cuda.to_device(np.zeros(n, np.int32))
-
-    def sort_by_cell():
-        cuda_porosity.count_in_cells[3, 128](cell_of, count)
-        cuda_porosity.cell_starts[1, 1](count, start, following)
-        cuda_porosity.fill_cells[3, 128](cell_of, following, order)
-
-    sort_by_cell()
-    cuda_porosity.sort_cells[1, cells](start, order, count)
-    assert np.array_equal(start.copy_to_host(), start_cpu) and np.array_equal(order.copy_to_host(), order_cpu)
-    assert not count.copy_to_host().any()  # zeroed for the next sort
-    bounds = start.copy_to_host()
-    handed = order_cpu.astype(np.int32)
-    for c in range(cells):
-        handed[bounds[c] : bounds[c + 1]] = handed[bounds[c] : bounds[c + 1]][::-1].copy()
-    found = np.zeros(cells)
-    cuda_drag.cell_coefficients[1, cells](start, handed, coef, count, found)
-    assert np.array_equal(found, expected)
-    sort_by_cell()  # and as the kick sums them, from the device's own fill
-    found[:] = 0.0
-    cuda_drag.cell_coefficients[1, cells](start, order, coef, count, found)
-    assert np.array_equal(found, expected)
-
-
 def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
     """Cells of one slot, and spare rows of one slot for the next build: the builds overflow,
     the device grows the arrays and builds again, and nothing is dropped (still the CPU's
@@ -368,262 +331,6 @@ def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
     assert gpu.state.neighbors.builds > builds
     assert device.cell_members.shape[1] > 1
     assert device.rows.nbr.shape[1] >= width
-
-
-# a 1D VANS water column over the floor, driven by a pressure gradient, solved every 10 steps,
-# with turbulent fluctuations drawn at each and lift: the particles in it feel drag, buoyancy
-# and lift from the profile on the device
-VANS = """
-[[walls]]
-face = "z-"
-material = "b"
-[fluid]
-model = "vans1d"
-surface = 0.0075
-cells = 15
-coupling = { steps = 10 }
-lift_coefficient = 0.2
-buoyancy = "full"
-flow = { kind = "solved", mixing_length = "prandtl", pressure_gradient = -2000.0, initial = "rest" }
-fluctuations = { bed_elevation = 0.001, seed = 3 }
-"""
-
-
-# Darcy pore pressure on a 2 x 2 x 3 grid, pulsed from below, solved every 5 steps
-DARCY = """
-[[walls]]
-face = "z-"
-material = "b"
-[fluid]
-model = "darcy"
-grid = { cells = [2, 2, 3] }
-coupling = { steps = 5 }
-bottom = { type = "pressure", pressure = 80.0, amplitude = 60.0, period = 0.0002 }
-top = { type = "pressure", pressure = 0.0 }
-"""
-
-
-# a Navier-Stokes fluid over the floor on a 2 x 2 x 3 grid, open at the top, solved every 5 steps:
-# the drag of each particle (with its self-induced velocity subtracted, the default) and its
-# exact kick on the device
-NAVIER_STOKES = """
-[[walls]]
-face = "z-"
-material = "b"
-[fluid]
-model = "navier-stokes"
-density = 1000.0
-viscosity = 1.0e-3
-grid = { cells = [2, 2, 3] }
-coupling = { steps = 5 }
-bottom = { type = "no-flow" }
-top = { type = "pressure", pressure = 0.0 }
-"""
-# the cell-averaged Gidaspow drag, without the pressure-gradient force
-NAVIER_STOKES_CELL_DRAG = NAVIER_STOKES.replace(
-    "coupling =", 'drag = { law = "gidaspow", averaging = "cell", pressure_force = false }\ncoupling ='
-)
-
-# a lid coming down with the grid following it: the grid's cells change in the fluid's own step,
-# before the porosity, so the particles come back for the host to measure it
-NAVIER_STOKES_UNDER_A_LID = NAVIER_STOKES.replace(
-    "[fluid]", '[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = -0.5\n[fluid]'
-).replace("grid = { cells = [2, 2, 3] }", "grid = { cells = [2, 2, 3], follow_top_wall = true }")
-
-
-def _darcy_and_lid_fields(scene) -> dict:
-    w = scene.state.walls
-    return {**_darcy_fields(scene), "wall_coord": w.coord, "wall_fluid_force": w.fluid_force}
-
-
-def _navier_stokes_fields(scene) -> dict:
-    fs, drag = scene.fluid.fs, scene.fluid.drag
-    fields = {
-        "v": fs.v,
-        "p": fs.p,
-        "f_exchange": fs.f_exchange,
-        "impulse": drag.impulse,
-        "f_drag": drag.f_drag,
-    }
-    if drag.corrected:
-        fields["self_induced"] = drag.disturbance
-    return fields
-
-
-def _vans_fields(scene) -> dict:
-    f = scene.state.fluid
-    return {"u": f.column.u, "drag_coef": f.drag_coef, "drag_x": f.drag_x}
-
-
-def _spoil_the_column(scene) -> None:
-    scene.state.fluid.column.u[3] = np.nan
-
-
-def _spoil_the_grid(scene) -> None:
-    scene.fluid.fs.p[1, 0, 2] = np.nan
-
-
-@pytest.mark.parametrize(
-    "fluid, brought_back, spoil, message",
-    [
-        (
-            VANS,
-            lambda s: s.state.fluid.drag_coef,
-            _spoil_the_column,
-            "vans1d fluid velocity is nan m/s in layer 3",
-        ),
-        # its test of the cells crossed a fluid step reads the particles' velocities
-        (
-            NAVIER_STOKES,
-            lambda s: s.state.particles.vel,
-            _spoil_the_grid,
-            "has a non-finite pressure (nan Pa)",
-        ),
-    ],
-    ids=["vans1d", "navier-stokes"],
-)
-def test_a_fluids_stability_is_checked_without_bringing_the_state_back(
-    tmp_path, fluid, brought_back, spoil, message
-):
-    """With a fluid on the GPU, the stability check tests the particles on the device and the
-    fluid on its host fields with only what its test reads brought back (the VANS drag, the
-    particles' velocities); a fluid gone bad stops the run with the CPU's message."""
-    from sphere_cli.errors import NumericalError
-    from sphere_cli.simulation import check_stable
-
-    gpu, cpu = _scenes(tmp_path, walls=fluid)
-    advance(gpu, 12, sync=False)  # past the fluid step at 10, for whose step the host took some arrays
-    advance(cpu, 12)
-    check_stable(gpu)
-    assert gpu.step.compiled.host_stale  # checked there: the list stayed on the device
-    np.testing.assert_allclose(brought_back(gpu), brought_back(cpu), rtol=RTOL)
-    messages = []
-    for scene in (gpu, cpu):
-        spoil(scene)
-        with pytest.raises(NumericalError) as caught:
-            check_stable(scene)
-        messages.append(str(caught.value))
-    assert messages[0] == messages[1] and message in messages[0]
-
-
-def test_particles_under_the_porosity_floor_are_reported_from_the_gpu(tmp_path):
-    """A porosity under fluid.drag.porosity_floor (0.1) in every cell, set between calls (the
-    fluid's own step floors what it measures): the GPU counts the particles under it on the
-    device and warns once at the next fluid step, the CPU at the step itself; the drag uses the
-    floor on both."""
-    gpu, cpu = _scenes(tmp_path, walls=NAVIER_STOKES)
-    for scene in (gpu, cpu):
-        advance(scene, 7)
-        scene.fluid.fs.porosity[...] = 0.05
-    with pytest.warns(RuntimeWarning, match=r"step 7: porosity 0.05 .*\(40 particle\(s\) this step, not"):
-        advance(cpu, 5)
-    with pytest.warns(
-        RuntimeWarning,
-        match=r"step 10: porosity 0.05 in fluid cell \(\d, \d, \d\) is below fluid.drag.porosity_floor = 0.1;"
-        r" the drag uses the floor there \(120 particle-step\(s\) since the last fluid step, not repeated\)",
-    ):
-        advance(gpu, 5)
-    _compare(gpu, cpu)
-
-
-def _vans_and_lid_fields(scene) -> dict:
-    w = scene.state.walls
-    return {**_vans_fields(scene), "wall_coord": w.coord, "wall_shift": w.shift, "wall_force": w.force}
-
-
-# a lid keeping a stress and sliding over the VANS column: steps the CPU's compiled loop does not
-# take (moving walls with a fluid), the GPU does
-SLIDING_LID = """
-[[walls]]
-face = "z+"
-mode = "stress"
-stress = 500.0
-shear_axis = "x"
-shear_velocity = 0.05
-"""
-VANS_UNDER_A_LID = VANS.replace("[fluid]", SLIDING_LID + "[fluid]")
-
-
-# under an impermeable lid keeping a stress, which the grid follows: the pore pressure pushes the
-# lid every step (with the undrained response to its move since the last fluid step)
-DARCY_UNDER_A_LID = (
-    DARCY.replace("[fluid]", '[[walls]]\nface = "z+"\nmode = "stress"\nstress = 500.0\nmass = 10.0\n[fluid]')
-    .replace("grid = { cells = [2, 2, 3] }", "grid = { cells = [2, 2, 3], follow_top_wall = true }")
-    .replace('top = { type = "pressure", pressure = 0.0 }', 'top = { type = "no-flow" }')
-)
-
-
-def _darcy_fields(scene) -> dict:
-    s = scene.fluid.pore.state
-    return {"pressure": s.pressure, "gradient": s.gradient, "porosity": s.porosity}
-
-
-@pytest.mark.parametrize(
-    "fluid, fields, runs",
-    [
-        (VANS, _vans_fields, (15, 25, 20)),
-        (VANS_UNDER_A_LID, _vans_and_lid_fields, (15, 25, 20)),
-        (DARCY, _darcy_fields, (12, 23, 25)),
-        (DARCY_UNDER_A_LID, _darcy_and_lid_fields, (12, 23, 25)),
-        (NAVIER_STOKES, _navier_stokes_fields, (12, 23, 6)),
-        (NAVIER_STOKES_CELL_DRAG, _navier_stokes_fields, (12, 23, 6)),
-        (NAVIER_STOKES_UNDER_A_LID, _navier_stokes_fields, (12, 23, 6)),
-    ],
-    ids=[
-        "vans1d",
-        "vans1d-moving-lid",
-        "darcy",
-        "darcy-pushed-lid",
-        "navier-stokes",
-        "navier-stokes-cell-drag",
-        "navier-stokes-lid",
-    ],
-)
-def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
-    """A fluid with the particles on the GPU: its own step (the VANS column, the Darcy pore
-    pressure) solved on the host at each coupling step from the particles brought back, its force
-    (drag, buoyancy, lift and fluctuations; the seepage force and buoyancy) on the device every
-    step, from the fields sent up after each fluid step. The runs end inside and at the coupling
-    intervals."""
-    gpu, cpu = _scenes(tmp_path, walls=fluid)
-    assert type(gpu.step.compiled).__name__ == "DeviceSteps"
-    for steps in runs:
-        advance(gpu, steps)
-        advance(cpu, steps)
-        _compare(gpu, cpu)
-    a, b = fields(gpu), fields(cpu)
-    for name, other in b.items():
-        assert np.abs(other).max() > 0.0, name  # the fluid did act
-        np.testing.assert_allclose(a[name], other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
-
-
-CONFIGS = Path(__file__).parents[2] / "configs"
-
-
-def test_every_example_case_runs_on_the_gpu():
-    """Every case of configs/ is taken by the GPU (none refused for a module it does not run)."""
-    from sphere_cli.config.load import load_case
-
-    for path in sorted(CONFIGS.glob("*.toml")):
-        loaded = load_case(path)
-        loaded.case.simulation.device = "cuda"
-        assert type(build_scene(loaded).step.compiled).__name__ == "DeviceSteps", path.name
-
-
-def test_the_fluidized_bed_example_starts_on_the_gpu_as_on_the_cpu():
-    """configs/fluidized-bed.toml as written (192 spheres, 64 of them fixed as a distributor,
-    the Gidaspow drag, the fluid forced up through the bed) over its first fluid steps: the GPU's
-    particles are the CPU's. (The per-particle drag of fluid-settling.toml is that of the small
-    scenes above.)"""
-    from sphere_cli.config.load import load_case
-
-    scenes = []
-    for device in ("cuda", "cpu"):
-        loaded = load_case(CONFIGS / "fluidized-bed.toml")
-        loaded.case.simulation.device = device
-        scenes.append(build_scene(loaded))
-        advance(scenes[-1], 12)
-    _compare(*scenes)
 
 
 def test_changes_to_the_host_arrays_between_calls_reach_the_gpu(tmp_path):
