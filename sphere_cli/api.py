@@ -110,6 +110,12 @@ def _drive(
     gpu = getattr(scene.step.compiled, "device_name", None)
     if gpu is not None:
         log.info("steps on the GPU (simulation.device = cuda): %s", gpu)
+        if scene.fluid is not None:
+            log.info(
+                "fluid: its action on the particles on the GPU every step, its own step on the processor "
+                "every %d steps",
+                scene.fluid.coupling_steps,
+            )
     if hasattr(scene.step.compiled, "world"):
         log.info("steps %s", scene.step.compiled.describe())
     log.info("time step limit %.6g s: %s", scene.dt_limit, scene.dt_limit_reason)
