@@ -12,8 +12,8 @@ tree sum of the particles' forces on them, on top of the same scene. `fluids` "n
 adds loose rows in water, periodic across (without the side walls), on a Navier-Stokes grid of
 cells about four diameters wide solved on the host every COUPLING_STEPS steps (NAVIER_STOKES):
 the drag and its kick every step, the porosity and the momentum exchange on the device and the
-grid's fields to and fro at each fluid step, the pressure solve on the host. Never part of the
-tests' timings.
+grid's fields to and fro at each fluid step, the pressure solve on the host, whose time is shared
+out beside the kernels' as "fluid (host)". Never part of the tests' timings.
 """
 
 from __future__ import annotations
@@ -75,7 +75,10 @@ def run_gpu_benchmark(
             advance(scene, 5, sync=False)  # compiles the kernels (cached after a first run), uploads
             times, copies = _time_on_device(scene, steps, repeats)
             device.timings = {}
+            hooks = scene.step.after_step
+            scene.step.after_step = tuple(_timed(module, hook, device.timings) for module, hook in hooks)
             advance(scene, steps)
+            scene.step.after_step = hooks
             profiled, device.timings = device.timings, None
             total = sum(profiled.values())
             median, copy = statistics.median(times), statistics.median(copies)
@@ -110,6 +113,19 @@ def run_gpu_benchmark(
     (out_dir / "bench-gpu.json").write_text(json.dumps(results, indent=2))
     log(f"results written to {out_dir / 'bench-gpu.json'}")
     return results
+
+
+def _timed(module, hook, timings: dict) -> tuple:
+    """(module, its after_step hook timed into timings as "<module> (host)"): a fluid's own step
+    and the stages run on the host, between the device's runs of steps."""
+    name = f"{module.name} (host)"
+
+    def timed_hook(state) -> None:
+        started = time.perf_counter()
+        hook(state)
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - started
+
+    return module, timed_hook
 
 
 def _in_water(text: str, n: int) -> str:
