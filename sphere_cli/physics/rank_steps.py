@@ -2,10 +2,13 @@
 cells, ghosts one cell wide, particles moving between ranks only at neighbour-list builds, and
 results bitwise those of one rank, whatever the rank count.
 
-**Slabs.** The box is cut along the axis with the most search cells (physics/neighbors.py
-search_cells) into one slab of whole cells per rank, cut where the particles are shared evenly
-(or, with simulation.rank_balance = "time", the measured work) at each list build (a cut never
-changes a result). A rank owns the particles whose position at the last list build
+**Slabs.** The box is cut along one axis into one slab of whole search cells per rank
+(physics/neighbors.py search_cells), cut where the particles are shared evenly (or, with
+simulation.rank_balance = "time", the measured work) at each list build (a cut never changes a
+result). The axis is chosen again at each cut, of those with a cell for every rank: the one
+whose slabs leave the busiest rank the fewest particles, own and ghosts (a bed lying in a tall
+box is cut across its width, not through its few layers: finer shares, thinner ghost layers and
+each rank its part of the floor). A rank owns the particles whose position at the last list build
 lies in its slab, and holds as ghosts those within one cell of it: every pair listed at that
 build then lies within one rank's particles, own or ghost, until the next build.
 
@@ -114,11 +117,11 @@ class Template:
     attached: np.ndarray  # (K,) global indices of the spheres glued to walls
     attached_wall: np.ndarray  # (K,) their wall
     count: int  # the scene's particles, on every rank together
-    axis: int  # the cut axis
-    lower: float  # the box's lower corner along it [m]
-    cell: float  # search cells' width along it [m]
-    cells: int  # search cells along it
-    periodic: bool  # the cut axis is periodic
+    axes: tuple  # the axes a cut may follow: those with a search cell for every rank
+    lower: np.ndarray  # (3,) the box's lower corner [m]
+    cell: np.ndarray  # (3,) search cells' width along each axis [m]
+    cells: np.ndarray  # (3,) int64 search cells along each axis
+    periodic: np.ndarray  # (3,) bool, each axis periodic
     capacity: int  # the rows' width
     builds: int  # list builds so far
     builds_since_growth: int
@@ -172,6 +175,7 @@ class RankSteps:
         self.t = template
         self.part: Part | None = None
         self.pids: list[int] = []
+        self.axis = 0  # the axis of the last cut
         self.slabs = np.zeros(world.size + 1, dtype=np.int64)  # first cell of each rank's slab
         self.busy = 0.0  # seconds in this rank's forces since the last cut (rank_balance = "time")
         self.at_step = None  # the lead: the host step the ranks' particles are for (None: send)
@@ -196,12 +200,13 @@ class RankSteps:
                 "simulation.threads)."
             )
         search, state = scene.neighbors, scene.state
-        axis = int(np.argmax(search.ncell))  # the first of the axes with the most cells
-        if search.ncell[axis] < world.size:
+        axes = tuple(a for a in range(3) if search.ncell[a] >= world.size)
+        if not axes:
+            widest = int(np.argmax(search.ncell))
             raise UsageError(
-                f"started as {world.size} MPI ranks: the box is {int(search.ncell[axis])} search cells "
-                f"wide along its widest axis ({'xyz'[axis]}) and each rank needs a slab at least one cell "
-                f"wide; use at most {int(search.ncell[axis])} ranks"
+                f"started as {world.size} MPI ranks: the box is {int(search.ncell[widest])} search cells "
+                f"wide along its widest axis ({'xyz'[widest]}) and each rank needs a slab at least one cell "
+                f"wide; use at most {int(search.ncell[widest])} ranks"
             )
         template = Template(
             box=state.box,
@@ -217,11 +222,11 @@ class RankSteps:
             attached=np.zeros(0, dtype=np.int64),
             attached_wall=np.zeros(0, dtype=np.int64),
             count=state.particles.count,
-            axis=axis,
-            lower=float(state.box.lower[axis]),
-            cell=float(search.cell_size[axis]),
-            cells=int(search.ncell[axis]),
-            periodic=bool(state.box.periodic[axis]),
+            axes=axes,
+            lower=np.array(state.box.lower, dtype=np.float64),
+            cell=np.array(search.cell_size, dtype=np.float64),
+            cells=np.array(search.ncell, dtype=np.int64),
+            periodic=np.array(state.box.periodic, dtype=bool),
             capacity=state.neighbors.nbr.shape[1],
             builds=state.neighbors.builds,
             builds_since_growth=search.builds_since_growth,
@@ -247,11 +252,12 @@ class RankSteps:
         return steps
 
     def describe(self) -> str:
-        """For run.log: ranks, cut axis and processes."""
+        """For run.log: ranks, how the slabs are cut and processes."""
         by = "measured work" if self.t.balance == "time" else "particles held"
         return (
-            f"split across {self.world.size} MPI ranks, slabs of search cells along {'xyz'[self.t.axis]} "
-            f"cut by {by} (process ids by rank: {' '.join(map(str, self.pids))})"
+            f"split across {self.world.size} MPI ranks, slabs of search cells cut by {by} along the "
+            "axis where the busiest rank holds the fewest, chosen again at each list build (process ids "
+            f"by rank: {' '.join(map(str, self.pids))})"
         )
 
     # --- the lead's side (simulation.advance and check_stable call these) --------------------
@@ -558,9 +564,9 @@ class RankSteps:
         rank's part is made of what it receives (`moved2`: the displacement a build is for)."""
         world = self.world
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
-        cell = self._cells(mine["ref"]) if mine else np.zeros(0, dtype=np.int64)
-        self._cut(cell)
-        _, holders = self._owners(cell)
+        ref = mine["ref"] if mine else np.zeros((0, 3))
+        self._cut(ref)
+        _, holders = self._owners(self._cells(ref))
         outgoing = [_select(mine, np.flatnonzero((holders == r).any(axis=0))) for r in range(world.size)]
         kept, outgoing[world.rank] = outgoing[world.rank], {}  # what stays is not pickled
         arrived = world.comm.alltoall(outgoing)
@@ -570,11 +576,12 @@ class RankSteps:
         received = _select(received, order)
         self.part = self._make_part(received, moved2)
 
-    def _cells(self, ref: np.ndarray) -> np.ndarray:
-        """Each position's search cell along the cut axis (kernels/neighbors.py cell_number)."""
-        t = self.t
-        cell = np.floor((ref[:, t.axis] - t.lower) / t.cell).astype(np.int64)
-        return np.clip(cell, 0, t.cells - 1)
+    def _cells(self, ref: np.ndarray, axis: int | None = None) -> np.ndarray:
+        """Each position's search cell along the cut axis, or `axis` (kernels/neighbors.py
+        cell_number)."""
+        t, a = self.t, self.axis if axis is None else axis
+        cell = np.floor((ref[:, a] - t.lower[a]) / t.cell[a]).astype(np.int64)
+        return np.clip(cell, 0, t.cells[a] - 1)
 
     def _owners(self, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rank owning each cell (n,), and the ranks holding a particle in it (3, n): the
@@ -584,44 +591,34 @@ class RankSteps:
 
     def _owner_of_cell(self, cell: np.ndarray) -> np.ndarray:
         """The rank owning each cell; a cell past an open end: -1."""
-        t = self.t
-        if t.periodic:
-            cell = cell % t.cells
+        cells = self.t.cells[self.axis]
+        if self.t.periodic[self.axis]:
+            cell = cell % cells
         owner = np.searchsorted(self.slabs, cell, side="right") - 1
-        return np.where((cell < 0) | (cell >= t.cells), -1, owner)
+        return np.where((cell < 0) | (cell >= cells), -1, owner)
 
-    def _cut(self, cell: np.ndarray) -> None:
-        """Slab boundaries where each rank holds about as many particles, its ghosts counted
-        (counted over every rank), each slab at least one cell wide: cuts nearest the even
-        shares of the particles, then each moved by a cell where that lowers the larger of the
-        two slabs it bounds. With rank_balance = "time" each rank counts its particles (`cell`:
-        the cells of those it sends) by its force time per particle held since the last cut, so
-        that the shares are of measured work (the first cut, before any step, by particles)."""
-        t, size = self.t, self.world.size
+    def _cut(self, ref: np.ndarray) -> None:
+        """The cut axis and its slab boundaries, from the positions `ref` this rank sends (the
+        lead's whole scene at a share): on each axis that may be cut, the slabs of `_slabs` from
+        the particles of each cell counted over every rank; then the axis whose busiest rank
+        holds the fewest, own and ghosts (on a tie the axis of the last cut, else the first).
+        With rank_balance = "time" each rank counts its particles by its force time per particle
+        held since the last cut, so that the shares are of measured work (the first cut, before
+        any step, by particles)."""
+        t = self.t
         weight = 1.0
         if t.balance == "time" and self.part is not None and self.part.gid.size and self.busy > 0.0:
             weight = self.busy / self.part.gid.size
         self.busy = 0.0
-        counts = np.bincount(cell, minlength=t.cells) * weight
-        total = np.empty_like(counts)
-        self.world.comm.Allreduce(counts, total, op=self.world.mpi.SUM)
-        work = np.concatenate(([0], np.cumsum(total)))  # particles (or work) in cells [0, c)
-        targets = np.arange(1, size) * (work[-1] / size)
-        above = np.clip(np.searchsorted(work, targets), 1, t.cells - 1)
-        below_is_nearer = np.abs(work[above - 1] - targets) <= np.abs(work[above] - targets)
-        nearer = np.where(below_is_nearer, above - 1, above)
-        k = np.arange(1, size)
-        cuts = np.maximum.accumulate(np.maximum(nearer, k) - k) + k  # each slab a cell or more
-        cuts = np.minimum(cuts, t.cells - size + k)
-        slabs = np.concatenate(([0], cuts, [t.cells])).astype(np.int64)
-        for k in range(1, size):
-            best = _held(total, slabs, k, t.periodic)
-            for shift in (-1, 1):
-                trial = slabs.copy()
-                trial[k] += shift
-                if trial[k - 1] < trial[k] < trial[k + 1] and _held(total, trial, k, t.periodic) < best:
-                    slabs, best = trial, _held(total, trial, k, t.periodic)
-        self.slabs = slabs
+        counts = [np.bincount(self._cells(ref, a), minlength=t.cells[a]) * weight for a in t.axes]
+        total = np.empty(sum(c.size for c in counts))
+        self.world.comm.Allreduce(np.concatenate(counts), total, op=self.world.mpi.SUM)
+        best = None
+        for a, first in zip(t.axes, np.cumsum([0] + [c.size for c in counts])[:-1], strict=True):
+            slabs, largest = _slabs(total[first : first + t.cells[a]], self.world.size, t.periodic[a])
+            if best is None or largest < best[0] or (largest == best[0] and a == self.axis):
+                best = (largest, a, slabs)
+        _, self.axis, self.slabs = best
 
     def _make_part(self, rec: dict, moved2: float) -> Part:
         t, world = self.t, self.world
@@ -717,19 +714,45 @@ class RankSteps:
                 part.receive[rank] = receive
 
 
+def _slabs(total: np.ndarray, size: int, periodic: bool) -> tuple[np.ndarray, float]:
+    """Slab boundaries along one axis where each of `size` ranks holds about as many particles
+    (or work) of `total` (per cell), its ghosts counted, each slab at least one cell wide: cuts
+    nearest the even shares, then each moved by a cell where that lowers the larger of the two
+    slabs it bounds; and what the busiest rank then holds."""
+    cells = total.size
+    work = np.concatenate(([0], np.cumsum(total)))  # particles (or work) in cells [0, c)
+    targets = np.arange(1, size) * (work[-1] / size)
+    above = np.clip(np.searchsorted(work, targets), 1, cells - 1)
+    below_is_nearer = np.abs(work[above - 1] - targets) <= np.abs(work[above] - targets)
+    nearer = np.where(below_is_nearer, above - 1, above)
+    k = np.arange(1, size)
+    cuts = np.maximum.accumulate(np.maximum(nearer, k) - k) + k  # each slab a cell or more
+    cuts = np.minimum(cuts, cells - size + k)
+    slabs = np.concatenate(([0], cuts, [cells])).astype(np.int64)
+    for k in range(1, size):
+        best = _held(total, slabs, k, periodic)
+        for shift in (-1, 1):
+            trial = slabs.copy()
+            trial[k] += shift
+            if trial[k - 1] < trial[k] < trial[k + 1] and _held(total, trial, k, periodic) < best:
+                slabs, best = trial, _held(total, trial, k, periodic)
+    return slabs, max(_held_by(total, slabs, r, periodic) for r in range(size))
+
+
+def _held_by(counts: np.ndarray, slabs: np.ndarray, r: int, periodic: bool) -> float:
+    """The particles (or work) rank r holds, own and ghosts."""
+    cells = counts.size
+    first, end = slabs[r], slabs[r + 1]
+    ghosts = [first - 1, end]
+    if periodic:
+        ghosts = [c % cells for c in ghosts]
+    return float(counts[first:end].sum()) + sum(float(counts[c]) for c in ghosts if 0 <= c < cells)
+
+
 def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> float:
     """The larger of the particles (or work) held, own and ghosts, by the two slabs that cut k
     bounds."""
-    cells = counts.size
-
-    def held(r: int) -> float:
-        first, end = slabs[r], slabs[r + 1]
-        ghosts = [first - 1, end]
-        if periodic:
-            ghosts = [c % cells for c in ghosts]
-        return float(counts[first:end].sum()) + sum(float(counts[c]) for c in ghosts if 0 <= c < cells)
-
-    return max(held(k - 1), held(k))
+    return max(_held_by(counts, slabs, k - 1, periodic), _held_by(counts, slabs, k, periodic))
 
 
 def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray, fluid) -> dict:

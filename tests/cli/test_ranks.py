@@ -211,7 +211,8 @@ def sliding(tmp_path_factory) -> Path:
 
 def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
     """2 ranks to t = 0.02 s, then on 4 ranks and on 1 to the end: every frame and checkpoint is
-    one rank's, springs included (each bead has crossed the rank boundaries many times)."""
+    one rank's, springs included (each bead changes rank 4 to 18 times on 2 ranks, median 9: across
+    the cuts, and where the cut axis turns from z, while the beads fall, to x as they slide)."""
     root = sliding
     run_ok(sphere("run", "case.toml", "-o", "two", "-q", "--until", "0.02", ranks=2, cwd=root))
     log = (root / "two" / "run.log").read_text()
@@ -278,7 +279,7 @@ def test_bedload_with_turbulent_fluctuations_is_one_ranks_on_three(tmp_path):
 
 def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     """configs/fluid-settling.toml as a bed: 500 beads in a touching lattice settle in water onto
-    the floor, the cut axis z through the bed. The fluid steps at rank 0 on the whole bed every
+    the floor, the cuts through the bed (across its width). The fluid steps at rank 0 on the whole bed every
     10 steps; the drag and the implicit kick run on every rank. A ghost's drag needs its owner's
     other forces (its contacts beyond the ghosts) and each particle's self-induced velocity the
     drag coefficients of its whole fluid cell, summed over every rank in one rank's order. Run
