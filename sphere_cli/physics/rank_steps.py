@@ -19,6 +19,8 @@ each pair across a cut is computed on both sides with the same inputs and spring
 force misses its pairs beyond the ghosts: after the forces, each owner sends its ghosts' force
 and torque, so that every rank's kick, and next drift, of a ghost is its owner's, bit for bit.
 The largest displacement that decides a rebuild is the maximum over ranks (exact in any order).
+The stability check runs on every rank, on its particles and its view of a fluid; the lead
+gathers the scene to report the first failure only when some rank finds one.
 
 **At a build** the owners send each particle, with its half row of springs by global index and
 its wall springs, to the ranks that own or hold it next; each rank rebuilds its list from
@@ -338,10 +340,9 @@ class RankSteps:
         self.host_stale = False
 
     def known_stable(self, state: State) -> bool:
-        """True when no rank holds a particle gone bad (then the host checks itself, to report
-        the first as one rank does). With a fluid the host checks (its checks read the
-        particles with the fluid)."""
-        if not self.host_stale or self.fluid is not None:
+        """True when no rank holds a particle gone bad, nor sees its fluid gone bad (then the
+        host checks itself, to report the first as one rank does)."""
+        if not self.host_stale:
             return False
 
         def work():
@@ -527,12 +528,18 @@ class RankSteps:
         return tuple(out)
 
     def _stable(self) -> bool:
-        state = self.part.state
+        """Collective: no rank's particles, and no rank's view of the fluid (its own arrays
+        whole, the per-particle ones of the particles held: FluidModule.first_unstable), gone
+        bad."""
+        part = self.part
+        state = part.state
         p, box = state.particles, state.box
         i, _ = first_unstable(
             p.pos, p.vel, p.angvel, p.radius, box.lower, box.upper, box.periodic, state.clock.dt
         )
-        first = int(self.part.gid[i]) if i >= 0 else np.iinfo(np.int64).max
+        first = int(part.gid[i]) if i >= 0 else np.iinfo(np.int64).max
+        if part.fluid is not None and part.fluid.first_unstable(state) is not None:
+            first = -1
         return self.world.comm.allreduce(first, op=self.world.mpi.MIN) == np.iinfo(np.int64).max
 
     def _gather(self) -> list | None:

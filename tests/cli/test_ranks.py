@@ -435,6 +435,57 @@ def test_a_particle_gone_bad_on_a_rank_stops_every_rank_as_one_rank_stops(tmp_pa
     assert newest_valid_checkpoint(tmp_path / "two" / "checkpoints") is not None
 
 
+# 8 light beads (10 kg/m^3) at rest in a 4 m/s stream of water: the drag relaxes them in 4.8 us,
+# under dt = 15 us, so the fluid's check fails at the first step while no bead yet moves half its
+# radius in a step (the motion's check passes there, and fails a step later)
+UNSTABLE_DRAG = """\
+[simulation]
+duration = 0.003
+dt = 1.5e-5
+stability = "contact"
+blowup_check_every = 1
+
+[domain]
+upper = [0.006, 0.006, 0.01]
+periodic = [true, true, false]
+gravity = [0.5, 0.0, -9.8]
+
+[particles]
+count = 8
+density = 10.0
+radius = { distribution = "fixed", value = 0.001 }
+placement = { method = "lattice" }
+
+[contact]
+normal_stiffness = 10.0
+
+[[walls]]
+face = "z-"
+
+[fluid]
+model = "vans1d"
+viscosity = 1.0e-6
+surface = 0.008
+cells = 20
+flow = { kind = "profile", z = [0.0, 0.008], u = [4.0, 4.0] }
+"""
+
+
+def test_a_fluid_gone_bad_on_the_ranks_stops_the_run_as_on_one_rank(tmp_path):
+    """Each rank runs the fluid's own check on its particles between outputs (the state is not
+    gathered for it): the unstable drag is named at the same step as on one rank, not left to
+    the motion's check a step later."""
+    (tmp_path / "case.toml").write_text(UNSTABLE_DRAG)
+    one = sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path)
+    two = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
+    errors = []
+    for result in (one, two):
+        assert result.returncode == 70, result.stderr
+        assert "at step 1 " in result.stderr and "drag relaxation time" in result.stderr, result.stderr
+        errors.append([line for line in result.stderr.splitlines() if line.startswith("sphere: error:")])
+    assert errors[0] == errors[1]
+
+
 # A lead that sends a command no follower knows, or fails itself, inside a collective step; argv:
 # the run directory, and which rank fails
 FAILING_RANK = """
