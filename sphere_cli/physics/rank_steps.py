@@ -574,14 +574,17 @@ class RankSteps:
         ref = mine["ref"] if mine else np.zeros((0, 3))
         self._cut(ref)
         _, holders = self._owners(self._cells(ref))
-        outgoing = [_select(mine, np.flatnonzero((holders == r).any(axis=0))) for r in range(world.size)]
-        kept, outgoing[world.rank] = outgoing[world.rank], {}  # what stays is not pickled
+        held = [np.flatnonzero((holders == r).any(axis=0)) for r in range(world.size)]
+        # what stays is neither pickled nor copied before the one copy below
+        outgoing = [{} if r == world.rank else _select(mine, held[r]) for r in range(world.size)]
         arrived = world.comm.alltoall(outgoing)
-        arrived[world.rank] = kept
-        received = _merge(arrived)
-        order = np.argsort(received["gid"], kind="stable")
-        received = _select(received, order)
-        self.part = self._make_part(received, moved2)
+        # this rank's particles in ascending global index: what stays and what arrived, each
+        # array taken once from the pool of both
+        pool = _merge([mine, *arrived])
+        stays = mine["gid"].size if mine else 0
+        take = np.concatenate([held[world.rank], np.arange(stays, pool["gid"].size)])
+        take = take[np.argsort(pool["gid"][take], kind="stable")]
+        self.part = self._make_part(_select(pool, take), moved2)
 
     def _cells(self, ref: np.ndarray, axis: int | None = None) -> np.ndarray:
         """Each position's search cell along the cut axis, or `axis` (kernels/neighbors.py
@@ -790,6 +793,8 @@ def _merge(packs: list) -> dict:
     packs = [p for p in packs if p]
     if not packs:
         return {}
+    if len(packs) == 1:  # not copied: every caller reads it
+        return packs[0]
     return {name: np.concatenate([p[name] for p in packs]) for name in packs[0]}
 
 
