@@ -73,6 +73,11 @@ class FluidModule(Module):
     # the coupling when [fluid.coupling] gives neither steps nor interval: 1 step, or this [s]
     default_interval: float | None = None
     fluid_dt = math.nan  # the fluid step, coupling_steps x dt [s] (start_coupling)
+    # split across MPI ranks (physics/rank_steps.py), its own step runs on every rank
+    # (step_on_rank(state, whole, held)) instead of at the lead on the gathered scene; the step
+    # it last took there, which the lead's after_step then leaves out
+    steps_on_ranks = False
+    stepped_on_ranks: int | None = None
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate

@@ -43,7 +43,10 @@ writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes dr
 go to the ghosts with the force, and a sum over all particles inside its step (the
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
 own particles in global order (`_whole`). The fluid's step itself (porosity, pressure solve)
-runs at the lead alone: the grids are not cut.
+runs at the lead alone: the grids are not cut. The 1D VANS column (FluidModule.steps_on_ranks)
+steps on every rank instead, with nothing gathered: each rank's drag of its particles, the
+layer profiles summed over every rank's particles in global order (`_whole`), the column solved
+alike on every rank.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -290,7 +293,7 @@ class RankSteps:
             stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
             if self.at_step != state.clock.step or stage_began:
                 self._send_out(state)
-            elif self._fluid_steps_at(state.clock.step, state.clock):
+            elif self._fluid_steps_at(state.clock.step, state.clock) and not self.fluid.steps_on_ranks:
                 self.world.order("fluid", self.fluid, state.fluid)
                 self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
@@ -298,6 +301,8 @@ class RankSteps:
 
         self.world.together(work)
         self.at_step = state.clock.step + steps
+        if self._fluid_steps_at(self.at_step, state.clock) and self.fluid.steps_on_ranks:
+            self.fluid.stepped_on_ranks = self.at_step  # taken in _steps, on every rank
         self.host_stale = True
         if self._read_after(state.clock.step + steps, state.clock):
             self.to_host(state)
@@ -305,8 +310,8 @@ class RankSteps:
 
     def _read_after(self, step: int, clock) -> bool:
         """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
-        step, or a stage that may end there (tested only there)."""
-        return self._fluid_steps_at(step, clock) or (
+        step (unless the ranks take it), or a stage that may end there (tested only there)."""
+        return (self._fluid_steps_at(step, clock) and not self.fluid.steps_on_ranks) or (
             self.stages is not None and self.stages.after_due(step, clock)
         )
 
@@ -410,6 +415,9 @@ class RankSteps:
             elif state.particles.count:
                 kick_call[0](*kick_call[1])
             state.clock.step += 1
+        fluid = self.t.fluid
+        if fluid is not None and fluid.steps_on_ranks and fluid.after_due(state.clock.step, state.clock):
+            self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
 
     def _kernels(self) -> tuple:
         """The kick-drift, the contacts (pairs, then plane walls) and the kick of this rank's

@@ -121,6 +121,7 @@ class Vans1dState:
 class Vans1d(FluidModule):
     model = "vans1d"
     default_interval = 1.0e-3  # s between fluid updates when [fluid.coupling] gives neither
+    steps_on_ranks = True  # its own step runs on every MPI rank (step_on_rank), from sums over all
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
@@ -206,19 +207,28 @@ class Vans1d(FluidModule):
         self.fluct_draws = np.zeros(count, dtype=np.uint64)
         self.reynolds = np.zeros(cells + 1)  # [Pa] at the layer faces
 
-    def _fluctuate(self, state, elapsed: float) -> None:
-        """Draw the particles whose fluctuation has lived its time, from the current profile."""
+    def _fluctuate(self, state, elapsed: float, whole=None, held=None) -> None:
+        """Draw the particles whose fluctuation has lived its time, from the current profile. On
+        MPI ranks (`step_on_rank`) drawn for every particle, whose random streams are keyed by
+        the global index, and kept for those `held`."""
         f, spec, col = state.fluid, self.cfg.fluctuations, state.fluid.column
         # the turbulent part of the shear stress alone: the stress with nu = 0
         shear_stress(
             col.faces, col.centres, col.u, f.profiles.solid_fraction, col.damped, col.rho, 0.0,
             col.top_no_slip, col.lid_velocity, self.reynolds,
         )  # fmt: skip
+        drawn = (state.particles.pos, f.selected, self.fluct, self.fluct_lifetime, self.fluct_draws)
+        if whole is not None:
+            drawn = whole(*drawn)
+        pos, selected, fluct, lifetime, draws = drawn
         turbulent_fluctuations(
-            state.particles.pos, f.selected, col.faces, self.reynolds, col.rho, col.nu, col.kappa,
-            spec.bed_elevation, np.uint64(spec.seed), spec.correlated, elapsed, self.fluct,
-            self.fluct_lifetime, self.fluct_draws,
+            pos, selected, col.faces, self.reynolds, col.rho, col.nu, col.kappa, spec.bed_elevation,
+            np.uint64(spec.seed), spec.correlated, elapsed, fluct, lifetime, draws,
         )  # fmt: skip
+        if whole is not None:
+            self.fluct[...] = fluct[held]
+            self.fluct_lifetime[...] = lifetime[held]
+            self.fluct_draws[...] = draws[held]
 
     # ---------------------------------------------------------------- checks and schedule
 
@@ -358,7 +368,19 @@ class Vans1d(FluidModule):
         )  # fmt: skip
 
     def after_step(self, state) -> None:
-        self._average(state)
+        if self.stepped_on_ranks == state.clock.step:
+            return  # taken by every MPI rank (step_on_rank), the lead's fluid arrays with it
+        self._step(state)
+
+    def step_on_rank(self, state, whole, held) -> None:
+        """after_step on one MPI rank's part (physics/rank_steps.py): `held` the global indices of
+        its particles, whole(*arrays) the arrays of every rank's own particles in global order.
+        The drag of each particle held is its own; the profiles, sums over every particle in
+        one rank's order, and the column after them are the same on every rank, bit for bit."""
+        self._step(state, whole, held)
+
+    def _step(self, state, whole=None, held=None) -> None:
+        self._average(state, whole)
         if self.solved:
             f = state.fluid
             prof = f.profiles
@@ -367,13 +389,14 @@ class Vans1d(FluidModule):
                 self.fluid_steps,
             )  # fmt: skip
             if self.fluctuating:
-                self._fluctuate(state, self.fluid_dt)
+                self._fluctuate(state, self.fluid_dt, whole, held)
 
-    def _average(self, state) -> None:
+    def _average(self, state, whole=None) -> None:
         """Solid profiles of the current particles, the drag evaluated with the current fluid.
         Every particle is in them, as in YADE's HydroForceEngine: a fixed rough bed or particles
         of materials that do not feel the fluid hold its solid fraction and take its drag (at their
-        own velocity, zero when fixed), though only the selected mobile ones receive forces."""
+        own velocity, zero when fixed), though only the selected mobile ones receive forces. On
+        MPI ranks the profiles sum whole(*arrays), every rank's particles."""
         p, f = state.particles, state.fluid
         col, cfg = f.column, self.cfg
         drag_coefficients(
@@ -381,7 +404,10 @@ class Vans1d(FluidModule):
             col.top_no_slip, col.lid_velocity, col.rho, col.nu, cfg.drag_exponent, cfg.packed_solid_fraction,
             f.drag_coef, f.drag_x,
         )  # fmt: skip
-        f.profiles.average(p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x, col.faces, self.area)
+        summed = (p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x)
+        if whole is not None:
+            summed = whole(*summed)
+        f.profiles.average(*summed, col.faces, self.area)
         if self.imposed is not None:
             f.profiles.solid_fraction[:] = self.imposed
         col.update_mixing_length(f.profiles.solid_fraction)
