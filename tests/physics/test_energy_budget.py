@@ -120,3 +120,23 @@ def test_direct_shear_budget_closes():
     assert b["work_walls"] > 0.5 * work > 0.0  # the walls drive this run
     assert b["dissipated_friction"] > 0.2 * work and dissipated > 0.5 * work
     assert abs(b["energy_balance_residual"]) < 0.01 * work
+
+
+def test_the_terms_are_the_particles_shares_summed_in_order():
+    """Each particle's share is booked apart (what travels with it between MPI ranks) and the
+    terms are their sums in particle order; a checkpoint of the older kind (the totals alone)
+    carries its totals on."""
+    text = POUR.format(friction=0.5, rolling=0.05, restitution=0.5)
+    scene = run_in_memory(text, 0)
+    advance(scene, 300)
+    terms = ("work_gravity", "work_walls", "dissipated_damping", "dissipated_friction", "dissipated_rolling")
+    booked = scene.budget.booked
+    assert booked.shape == (48, 5) and booked[:, 0].all()
+    b = _budget(scene)
+    assert [b[name] for name in terms] == [sum(booked[:, t].tolist()) for t in range(5)]
+    older = run_in_memory(text, 0)
+    totals = booked.sum(axis=0)
+    reference = scene.budget.prognostic_state(scene.state)["reference"]
+    older.budget.restore(older.state, {"totals": totals, "reference": reference})
+    assert not older.budget.booked.any()
+    assert [_budget(older)[name] for name in terms] == list(totals)

@@ -43,6 +43,28 @@ def test_resume_is_bitwise_identical(config: Path, tmp_path: Path):
     assert a.keys() <= b.keys()
 
 
+def test_the_energy_budget_resumes_bitwise(tmp_path: Path):
+    """The budget's checkpoint holds each particle's share of its terms: a run resumed halfway
+    ends with the uninterrupted run's shares and observables, bit for bit."""
+    case = tmp_path / "case.toml"
+    text = textwrap.dedent(CASE.format(duration=1.0))
+    case.write_text(text + '[output.observables]\nquantities = ["energy_budget"]\nevery_steps = 60\n')
+    end = STEPS * step_dt(case)
+    api.run(case, tmp_path / "whole", until=end)
+    api.run(case, tmp_path / "split", until=0.5 * end)
+    api.resume(tmp_path / "split", until=end)
+    a, b = final_state(tmp_path / "whole"), final_state(tmp_path / "split")
+    assert_same_state(a, b)
+    assert a["energy_budget"]["booked"].any()
+    with (
+        h5py.File(tmp_path / "whole" / "trajectory.h5") as w,
+        h5py.File(tmp_path / "split" / "trajectory.h5") as s,
+    ):
+        for name in ("work_gravity", "dissipated_damping", "energy_balance_residual"):
+            series = f"observables/{name}/value"
+            assert np.array_equal(w[series][-1], s[series][-1]), name
+
+
 def test_vans1d_turbulent_fluctuations_resume_bitwise(tmp_path: Path):
     """configs/bedload.toml with [fluid.fluctuations]: the fluctuations, their lifetimes and
     each particle's count of draws are in the checkpoint, so a resume (here between two fluid

@@ -37,9 +37,10 @@ Arguments as in contact.py, walls.py and contact_probe.py; vel_half, angvel_half
 half-step velocities; vel, angvel (N,3) the full-step ones [m/s, rad/s]; hist, wall_hist the
 springs of the previous step [m]; inv_mass (N,) [1/kg]; wall_vel_half, wall_vel_pred, wall_vel
 (W,3) the walls' half-step, predicted and full-step velocities (as the particles') [m/s];
-scratch (N,2,3) [m]; parts (N,5) [J]
-per-particle contributions (gravity, walls, damping, friction, rolling); totals (5,) [J],
-accumulated in place by a serial sum in particle order (thread-count independent).
+scratch (N,2,3) [m]; booked (N,5) [J] each particle's share of the terms (gravity, walls,
+damping, friction, rolling: its own, its walls' and its row's pairs'), accumulated over the
+steps; `budget_totals` sums them in particle order, whatever the threads or MPI ranks that
+booked them (each particle's share is booked where it is owned, its row as one rank has it).
 """
 
 import math
@@ -146,10 +147,9 @@ def accumulate_budget(
     wall_hist,
     dt,
     scratch,
-    parts,
-    totals,
+    booked,
 ):
-    """Add one step's work and dissipation to totals (see the module docstring)."""
+    """Add one step's work and dissipation to each particle's share (see the module docstring)."""
     n = pos.shape[0]
     cap = nbr.shape[1]
     single = table.shape[0] == 1
@@ -289,11 +289,18 @@ def accumulate_budget(
                     n0, n1, n2, row[MU_R], ri, fn, inertia[i], dt,
                 )  # fmt: skip
                 roll -= (m0 * angvel[i, 0] + m1 * angvel[i, 1] + m2 * angvel[i, 2]) * dt
-        parts[i, GRAVITY] = gravity
-        parts[i, WALLS] = walls
-        parts[i, DAMPING] = damping
-        parts[i, FRICTION] = friction
-        parts[i, ROLLING] = roll
-    for i in range(n):
+        booked[i, GRAVITY] += gravity
+        booked[i, WALLS] += walls
+        booked[i, DAMPING] += damping
+        booked[i, FRICTION] += friction
+        booked[i, ROLLING] += roll
+
+
+@njit(cache=True)
+def budget_totals(booked, totals):
+    """totals (5,) [J]: the particles' shares summed in particle order."""
+    for t in range(TERMS):
+        totals[t] = 0.0
+    for i in range(booked.shape[0]):
         for t in range(TERMS):
-            totals[t] += parts[i, t]
+            totals[t] += booked[i, t]

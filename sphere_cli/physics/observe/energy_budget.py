@@ -21,6 +21,7 @@ from ...kernels.observe.energy_budget import (
     TERMS,
     WALLS,
     accumulate_budget,
+    budget_totals,
 )
 from ...state import State
 from ..module import Module
@@ -39,19 +40,25 @@ UNITS = {
 class EnergyBudget(Module):
     """Two hooks per step: `forces` (before the contacts, physics/module.py ORDER) keeps the
     springs of the previous step and the half-step velocities; `finish_step` (after the second
-    half kick) books the step at the full-step velocities (see kernels/observe/energy_budget.py)."""
+    half kick) books the step at the full-step velocities (see kernels/observe/energy_budget.py),
+    each particle's share apart (`booked`, which travels with it between MPI ranks), summed when
+    observed. `scene`: what it reads of one, its state, contact and walls (an MPI rank's part is
+    one to it, physics/rank_steps.py)."""
 
     name = "energy_budget"
 
-    def __init__(self, scene):
+    def __init__(self, scene, booked: np.ndarray | None = None):
         self.scene = scene
         state = scene.state
         n = state.particles.count
+        # each particle's share of the terms so far [J] (kernels/observe/energy_budget.py)
+        self.booked = np.zeros((n, TERMS)) if booked is None else booked
+        # the totals of a checkpoint written before the shares were kept per particle [J]
+        self.carried = np.zeros(TERMS)
         self.totals = np.zeros(TERMS)
         # kinetic + elastic energy when accounting began [J]
         self.reference = np.zeros(1)
         self.scratch = np.zeros((n, 2, 3))
-        self.parts = np.zeros((n, TERMS))
         self.vel_half = np.zeros((n, 3))
         self.angvel_half = np.zeros((n, 3))
         self.hist = np.zeros_like(state.neighbors.hist)
@@ -86,7 +93,8 @@ class EnergyBudget(Module):
 
     def start(self) -> None:
         """Begin accounting at the current state."""
-        self.totals[:] = 0.0
+        self.booked[...] = 0.0
+        self.carried[:] = 0.0
         self.reference[0] = self._stored_energy()
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
@@ -151,12 +159,12 @@ class EnergyBudget(Module):
             self.wall_hist,
             state.clock.dt,
             self.scratch,
-            self.parts,
-            self.totals,
+            self.booked,
         )
 
     def observables(self, state: State) -> dict[str, tuple[float, str]]:
-        t = self.totals
+        budget_totals(self.booked, self.totals)
+        t = self.totals + self.carried
         change = self._stored_energy() - float(self.reference[0])
         dissipated = t[DAMPING] + t[FRICTION] + t[ROLLING]
         values = {
@@ -171,10 +179,15 @@ class EnergyBudget(Module):
         return {name: (float(v), UNITS[name]) for name, v in values.items()}
 
     def prognostic_state(self, state: State) -> dict:
-        return {"totals": self.totals, "reference": self.reference}
+        return {"booked": self.booked, "carried": self.carried, "reference": self.reference}
 
     def restore(self, state: State, arrays: dict) -> None:
-        self.totals[:] = arrays["totals"]
+        if "booked" in arrays:
+            self.booked[...] = arrays["booked"]
+            self.carried[:] = arrays["carried"]
+        else:  # written before the shares were kept per particle: its totals carried on
+            self.booked[...] = 0.0
+            self.carried[:] = arrays["totals"]
         self.reference[:] = arrays["reference"]
 
 
