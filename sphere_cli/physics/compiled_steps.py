@@ -48,17 +48,21 @@ def _has_steps_kernel(hook) -> bool:
     return False
 
 
-def plain_step(scene) -> bool:
+def plain_step(scene, budget: bool = False) -> bool:
     """True if the scene's hooks are exactly its modules' own (the particles' motion, walls that
     move, the search, the pair and wall contacts, a fluid's force and kick, stages and a fluid's
-    step between steps), none replaced by a wrapper: the steps that the ranks
-    (physics/rank_steps.py) and a GPU (physics/device_steps.py) take in their own order."""
+    step between steps; with `budget`, the energy budget's too), none replaced by a wrapper: the
+    steps that the ranks (physics/rank_steps.py) and a GPU (physics/device_steps.py) take in
+    their own order."""
     step = scene.step
+    kept = scene.budget if budget else None
     moving = () if scene.wall_motion is None else (scene.wall_motion,)
     fluid_kicks = scene.fluid is not None and "kick" in scene.fluid.takes_over
     kicks = [(m, WallMotion) for m in moving]
     kicks.append((scene.fluid, type(scene.fluid)) if fluid_kicks else (scene.motion, Motion))
     forces = [(scene.contact, PairContactForces)]
+    if kept is not None:  # its forces hook first: it keeps the springs of the last step
+        forces.insert(0, (kept, type(kept)))
     if scene.walls is not None:
         forces.append((scene.walls, PlaneWallForces))
     if scene.fluid is not None:
@@ -76,7 +80,10 @@ def plain_step(scene) -> bool:
         for bound, (module, cls) in zip(hooks, modules, strict=True):
             if getattr(bound, "__self__", None) is not module or not is_hook_of(bound, cls, hook):
                 return False
-    return not step.finish_step and all(m is scene.stages or m is scene.fluid for m, _ in step.after_step)
+    finish = () if kept is None else (kept.finish_step,)
+    return tuple(step.finish_step) == finish and all(
+        m is scene.stages or m is scene.fluid for m, _ in step.after_step
+    )
 
 
 def step_arguments(state: State, contact: PairContactForces, walls: PlaneWallForces | None) -> tuple:

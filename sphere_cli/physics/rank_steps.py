@@ -50,14 +50,16 @@ alike on every rank.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
-(1D VANS, Darcy, Navier-Stokes). The energy budget, a fluid without particles and the GPU are
-refused with what they are named.
+(1D VANS, Darcy, Navier-Stokes), and the energy budget: each rank books its own particles'
+shares (EnergyBudget.booked, their rows as one rank has them), which travel with the particles.
+A fluid without particles and the GPU are refused with what they are named.
 """
 
 from __future__ import annotations
 
 import copy
 import time
+import types
 from dataclasses import dataclass
 
 import numba
@@ -73,6 +75,7 @@ from ..state import Clock, NeighborList, Particles, State, Walls
 from .compiled_steps import plain_step, step_arguments
 from .contact import PairContactForces
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
+from .observe.energy_budget import EnergyBudget
 from .walls import PlaneWallForces, WallMotion, push_scratch
 
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
@@ -89,9 +92,9 @@ SUPPORTED = (
     "fluid",
     "stages",
     "observables",
+    "energy_budget",
     "",
 )
-NAMES = {"energy_budget": "the energy budget (output.observables)"}
 # the walls' arrays every rank keeps, each the same on every rank (all but the per-particle
 # springs, forces and glued spheres)
 WALL_FIELDS = (
@@ -134,6 +137,7 @@ class Template:
     balance: str  # simulation.rank_balance: the slabs cut by particles held, or by measured work
     fluid: object = None  # the lead's fluid module (FluidModule with particle_arrays), or None
     fluid_state: object = None  # its state.fluid
+    budget: bool = False  # the energy budget is kept (each particle's share travels with it)
 
 
 @dataclass
@@ -149,6 +153,7 @@ class Part:
     walls: PlaneWallForces | None
     wall_motion: WallMotion | None
     fluid: object  # this rank's copy of the fluid module (its particles' arrays), or None
+    budget: EnergyBudget | None  # the energy budget of its particles' shares, or None
     glued: np.ndarray  # (k,) local indices of the glued spheres held here
     glued_order: np.ndarray  # (k,) their places in the lead's list of glued spheres
     send: dict  # rank -> local indices of own particles that are ghosts there, ascending
@@ -157,14 +162,14 @@ class Part:
 
 def _refusal(scene) -> str | None:
     """What of the scene's step the ranks do not run, in words (None: they run all of it)."""
-    extra = [NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED]
+    extra = [m.name for m in scene.modules if m.name not in SUPPORTED]
     if scene.state.particles.count == 0:
         extra.append("no particles (a fluid-only case)")
     if scene.fluid is not None and scene.fluid.particle_arrays(scene.state) is None:
         extra.append(f"a {scene.fluid.model} fluid, which does not run split")
     if scene.case.simulation.device != "cpu":
         extra.append(f'simulation.device = "{scene.case.simulation.device}"')
-    if not extra and (scene.neighbors is None or not plain_step(scene)):
+    if not extra and (scene.neighbors is None or not plain_step(scene, budget=True)):
         extra.append("other step hooks")
     return ", ".join(extra) or None
 
@@ -189,6 +194,7 @@ class RankSteps:
         self.contact = None  # the lead: its scene's PairContactForces (a stage sets its table)
         self.stages = None  # the lead: its scene's Stages
         self.fluid = None  # the lead: its scene's fluid module
+        self.budget = None  # the lead: its scene's EnergyBudget
 
     # --- set-up ----------------------------------------------------------------------------
 
@@ -237,12 +243,14 @@ class RankSteps:
             builds_since_growth=search.builds_since_growth,
             threads=scene.case.simulation.threads,
             balance=scene.case.simulation.rank_balance,
+            budget=scene.budget is not None,
         )
         steps = cls(world, template)
         steps.host_search = search
         steps.contact = scene.contact
         steps.stages = scene.stages
         steps.fluid = scene.fluid
+        steps.budget = scene.budget
         world.order("start", template)
         steps.pids = world.pids()
         return steps
@@ -282,7 +290,7 @@ class RankSteps:
         self.world.order("share", t)
         n = state.particles.count
         every = np.arange(n)
-        self._share([_pack(state, every, every, t.springs, state.neighbors.ref_pos, self.fluid)])
+        self._share([_pack(state, every, every, t.springs, state.neighbors.ref_pos, self.fluid, self.budget)])
         self.at_step = state.clock.step
 
     def run(self, state: State, steps: int) -> tuple[int, bool]:
@@ -333,7 +341,7 @@ class RankSteps:
         def work():
             self.world.order("gather")
             capacity = self.part.state.neighbors.nbr.shape[1]
-            _unpack_into_host(state, self._gather(), capacity, self.t.springs, self.fluid)
+            _unpack_into_host(state, self._gather(), capacity, self.t.springs, self.fluid, self.budget)
 
         self.world.together(work)
         if state.walls is not None:  # the walls, the same on every rank: the lead's own
@@ -397,6 +405,8 @@ class RankSteps:
                 state = part.state
                 drift_call, contacts_call, kick_call = self._kernels()
             started = time.perf_counter()
+            if part.budget is not None:  # before the contacts: it keeps the springs of the last step
+                part.budget.forces(state)
             if state.particles.count:
                 if part.wall_motion is None:
                     contacts_call[0](*contacts_call[1])
@@ -414,6 +424,8 @@ class RankSteps:
                 part.fluid.kick(state)
             elif state.particles.count:
                 kick_call[0](*kick_call[1])
+            if part.budget is not None:
+                part.budget.finish_step(state)
             state.clock.step += 1
         fluid = self.t.fluid
         if fluid is not None and fluid.steps_on_ranks and fluid.after_due(state.clock.step, state.clock):
@@ -554,7 +566,9 @@ class RankSteps:
         """The owned particles of every rank, at the lead (None elsewhere)."""
         part = self.part
         own = np.flatnonzero(part.owned)
-        packed = _pack(part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos, part.fluid)
+        packed = _pack(
+            part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos, part.fluid, part.budget
+        )
         return self.world.comm.gather(packed, root=0)
 
     def _rebuild(self) -> None:
@@ -563,7 +577,7 @@ class RankSteps:
         part = self.part
         own = np.flatnonzero(part.owned)
         state = part.state
-        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos, part.fluid)
+        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos, part.fluid, part.budget)
         self.t.capacity = state.neighbors.nbr.shape[1]
         self.t.builds = state.neighbors.builds
         self.t.builds_since_growth = part.search.builds_since_growth
@@ -695,15 +709,21 @@ class RankSteps:
         NeighborSearch._reverse(nl)
         contact = PairContactForces(t.tables)
         contact.table[...] = t.table  # the friction of the stage under way
+        plane_walls = None if walls is None else PlaneWallForces(contact)
+        budget = None
+        if t.budget:  # what it reads of a scene, the part's; each particle's share received
+            held = types.SimpleNamespace(state=state, contact=contact, walls=plane_walls)
+            budget = EnergyBudget(held, booked=np.ascontiguousarray(rec["budget"]))
         part = Part(
             gid=rec["gid"],
             owned=owned,
             state=state,
             search=search,
             contact=contact,
-            walls=None if walls is None else PlaneWallForces(contact),
+            walls=plane_walls,
             wall_motion=WallMotion() if t.moving else None,
             fluid=fluid,
+            budget=budget,
             glued=glued,
             glued_order=glued_order,
             send={},
@@ -773,9 +793,12 @@ def _held(counts: np.ndarray, slabs: np.ndarray, k: int, periodic: bool) -> floa
     return max(_held_by(counts, slabs, k - 1, periodic), _held_by(counts, slabs, k, periodic))
 
 
-def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray, fluid) -> dict:
+def _pack(
+    state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np.ndarray, fluid, budget
+) -> dict:
     """The particles `idx` of a state (global indices gid[idx]) with their half rows by global
-    index, their springs and the fluid's arrays of them: what a rank sends of them."""
+    index, their springs, the fluid's arrays of them and their shares of the energy budget:
+    what a rank sends of them."""
     p, nl, walls = state.particles, state.neighbors, state.walls
     rec = {name: getattr(p, name)[idx] for name in CARRIED}
     rec["gid"] = gid[idx].astype(np.int64)
@@ -793,6 +816,8 @@ def _pack(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool, ref: np
     if fluid is not None:
         for name, (holder, attribute) in fluid.particle_arrays(state).items():
             rec[FLUID + name] = getattr(holder, attribute)[idx]
+    if budget is not None:
+        rec["budget"] = budget.booked[idx]
     return rec
 
 
@@ -826,7 +851,7 @@ def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return np.arange(int(counts.sum())) - np.repeat(before, counts) + np.repeat(first[idx], counts)
 
 
-def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, fluid) -> None:
+def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, fluid, budget) -> None:
     """The gathered owners' particles into the lead's whole scene (its list in one rank's layout)."""
     rec = _merge(packs)
     gid = rec["gid"]
@@ -837,6 +862,8 @@ def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, f
     if fluid is not None:
         for name, (holder, attribute) in fluid.particle_arrays(state).items():
             getattr(holder, attribute)[gid] = rec[FLUID + name]
+    if budget is not None:
+        budget.booked[gid] = rec["budget"]
     n = p.count
     cap = capacity
     nbr = np.zeros((n, cap), dtype=np.int32)

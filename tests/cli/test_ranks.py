@@ -246,8 +246,12 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
     """configs/direct-shear.toml, its stages shortened: deposit (frictionless, a kinetic-energy
     stop), consolidate (the top wall approaches, then keeps 1 kPa) and shear (the rough top wall
     moves sideways): the moving walls' forces are summed over the ranks in one rank's order, and
-    the walls, the glued spheres and the friction set by each stage reach every rank."""
+    the walls, the glued spheres and the friction set by each stage reach every rank. With the
+    energy budget: each rank books its own particles' shares (their rows as one rank has them),
+    which travel with them, so its observables and checkpoints are one rank's too."""
     text = (REPO / "configs" / "direct-shear.toml").read_text()
+    assert text.count("\nquantities = [") == 1
+    text = text.replace("\nquantities = [", '\nquantities = ["energy_budget", ')
     for old, new in (("duration = 0.15", "duration = 0.012"), ("min_time = 0.06", "min_time = 0.006")):
         text = text.replace(old, new)
     text = text.replace("duration = 0.05", "duration = 0.008").replace("duration = 0.08", "duration = 0.008")
@@ -260,6 +264,9 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
     with h5py.File(tmp_path / "one" / "trajectory.h5", "r") as f:
         top = f["observables/wall_position/value"][:, 1]
         assert top[-1] < top[0] - 0.001  # the top wall came down onto the bed
+        # the budget is booked (the top wall has not reached the bed in this short run)
+        assert f["observables/dissipated_damping/value"][-1] > 0.0
+        assert f["observables/work_gravity/value"][-1] > 0.0
 
 
 def test_bedload_with_turbulent_fluctuations_is_one_ranks_on_three(tmp_path):
@@ -535,17 +542,9 @@ def test_a_rank_that_fails_alone_records_its_error_before_every_rank_ends(tmp_pa
 
 
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
-    """The energy budget is not split across ranks yet: refused with exit 2 by the lead, once,
-    naming it, with nothing written; a fluid without particles and more ranks than cells along
-    the cut axis too."""
-    observed = '[output.observables]\nquantities = ["energy_budget"]\n\n[output.frames]'
-    budget = SETTLING.replace("[output.frames]", observed)
-    (tmp_path / "budget.toml").write_text(budget)
-    result = sphere("run", "budget.toml", "-o", "out", ranks=2, cwd=tmp_path)
-    assert result.returncode == 2, result.stderr
-    assert result.stderr.count("sphere: error: started as 2 MPI ranks") == 1, result.stderr
-    assert "the energy budget" in result.stderr and "Traceback" not in result.stderr
-    assert not (tmp_path / "out").exists()
+    """A fluid without particles is not split across ranks: refused with exit 2 by the lead,
+    once, naming it, with nothing written; more ranks than cells along the box's widest axis
+    too."""
     alone = "[simulation]\nduration = 0.01\ndt = 0.001\n\n[domain]\nupper = [0.01, 0.01, 0.02]\n\n[fluid]\n"
     (tmp_path / "alone.toml").write_text(
         alone
@@ -554,6 +553,8 @@ def test_what_does_not_run_split_is_refused_by_name(tmp_path):
     )
     result = sphere("run", "alone.toml", "-o", "out", ranks=2, cwd=tmp_path)
     assert result.returncode == 2 and "no particles (a fluid-only case)" in result.stderr, result.stderr
+    assert result.stderr.count("sphere: error: started as 2 MPI ranks") == 1, result.stderr
+    assert "Traceback" not in result.stderr
     assert not (tmp_path / "out").exists()
     (tmp_path / "narrow.toml").write_text(
         SETTLING.replace("[0.016, 0.006, 0.012]", "[0.004, 0.004, 0.004]")
