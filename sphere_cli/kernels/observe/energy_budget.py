@@ -150,150 +150,181 @@ def accumulate_budget(
     booked,
 ):
     """Add one step's work and dissipation to each particle's share (see the module docstring)."""
-    n = pos.shape[0]
     cap = nbr.shape[1]
+    no_spring = np.zeros(3)  # the spring of every contact when none has friction (read only)
+    pair_springs = hist.shape[0] > 0
+    wall_springs = wall_hist.shape[0] > 0
+    for i in prange(pos.shape[0]):
+        particles = (
+            pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel, radius, mass, inertia,
+            inv_mass, inv_inertia, material,
+        )  # fmt: skip
+        wall_arrays = (
+            wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel, wall_table,
+            wall_hist, wall_springs,
+        )  # fmt: skip
+        book_particle(
+            i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, wall_arrays,
+            table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring,
+        )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def book_particle(
+    i, lowest, partners, count, row_springs, pair_springs, particles, wall_arrays, table, law, rolling,
+    body_acc, length, periodic, dt, scratch, booked, no_spring,
+):  # fmt: skip
+    """Particle i's share of one step: partners[:count] its listed partners (those below `lowest`
+    left out: the GPU's full rows), row_springs[k] the spring of partner k at the last step
+    (read when pair_springs); `particles` and `wall_arrays` the arrays of accumulate_budget (the
+    arguments of one call stay under the 30 that CPython passes one by one, which Numba's
+    inlining needs), wall_hist[i, w] a wall spring (read when wall_springs); no_spring a (3,)
+    zero."""
+    pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel = particles[:7]
+    radius, mass, inertia, inv_mass, inv_inertia, material = particles[7:]
+    wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel = wall_arrays[:6]
+    wall_table, wall_hist, wall_springs = wall_arrays[6:]
     single = table.shape[0] == 1
     wall_single = wall_table.shape[1] == 1
-    no_spring = np.zeros(3)  # the spring of every contact when none has friction (read only)
-    for i in prange(n):
-        ri = radius[i]
-        mi = mass[i]
-        ci = 0 if single else material[i]
-        driven = inv_mass[i] == 0.0  # moved by prescription, not by forces
-        gravity = 0.0
-        if not driven:
-            gravity = (
-                dt
-                * mi
-                * (body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2])
-            )
-        walls = 0.0
-        # force and torque of its contacts on a driven particle i (its work is the boundary's)
-        f0 = 0.0
-        f1 = 0.0
-        f2 = 0.0
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        damping = 0.0
-        friction = 0.0
-        roll = 0.0
-        for k in range(min(nbr_count[i], cap)):
-            j = nbr[i, k]
-            row = table[0, 0] if single else table[ci, material[j]]
-            touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
-            if not touching:
-                # a parting pair's spring is dropped (Hertz: k_t = 0 at touch; none without friction)
-                if law != HERTZ_MINDLIN and hist.shape[0] > 0:
-                    s = start[i] + k
-                    xi2 = hist[s, 0] ** 2 + hist[s, 1] ** 2 + hist[s, 2] ** 2
-                    friction += 0.5 * row[K_T] * xi2
-                continue
-            rj = radius[j]
-            v0, v1, v2 = pair_slip(vel_half, angvel_half, i, j, ri, rj, n0, n1, n2)
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            u0, u1, u2 = pair_slip(vel_pred, angvel_pred, i, j, ri, rj, n0, n1, n2)
-            un = u0 * n0 + u1 * n1 + u2 * n2
-            w0, w1, w2 = pair_slip(vel, angvel, i, j, ri, rj, n0, n1, n2)
-            wn = w0 * n0 + w1 * n1 + w2 * n2
-            root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
-            r_eff = ri * rj / (ri + rj)
-            travel, grow, end = contact_window(delta, vn, un, dt)
-            kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
-            fe = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, 0.0, travel, grow)[0]
-            fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, un, travel, grow)
-            spring = hist[start[i] + k] if hist.shape[0] > 0 else no_spring
-            g0, g1, g2, d_t, f_t = _tangential(
-                scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
-                row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+    ri = radius[i]
+    mi = mass[i]
+    ci = 0 if single else material[i]
+    driven = inv_mass[i] == 0.0  # moved by prescription, not by forces
+    gravity = 0.0
+    if not driven:
+        gravity = (
+            dt
+            * mi
+            * (body_acc[0] * vel_half[i, 0] + body_acc[1] * vel_half[i, 1] + body_acc[2] * vel_half[i, 2])
+        )
+    walls = 0.0
+    # force and torque of its contacts on a driven particle i (its work is the boundary's)
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    t0 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    damping = 0.0
+    friction = 0.0
+    roll = 0.0
+    for k in range(count):
+        j = partners[k]
+        if j < lowest:  # (a full row's partners below i: their own rows book them)
+            continue
+        row = table[0, 0] if single else table[ci, material[j]]
+        touching, n0, n1, n2, delta = pair_normal(pos, radius, i, j, length, periodic)
+        if not touching:
+            # a parting pair's spring is dropped (Hertz: k_t = 0 at touch; none without friction)
+            if law != HERTZ_MINDLIN and pair_springs:
+                xi2 = row_springs[k, 0] ** 2 + row_springs[k, 1] ** 2 + row_springs[k, 2] ** 2
+                friction += 0.5 * row[K_T] * xi2
+            continue
+        rj = radius[j]
+        v0, v1, v2 = pair_slip(vel_half, angvel_half, i, j, ri, rj, n0, n1, n2)
+        vn = v0 * n0 + v1 * n1 + v2 * n2
+        u0, u1, u2 = pair_slip(vel_pred, angvel_pred, i, j, ri, rj, n0, n1, n2)
+        un = u0 * n0 + u1 * n1 + u2 * n2
+        w0, w1, w2 = pair_slip(vel, angvel, i, j, ri, rj, n0, n1, n2)
+        wn = w0 * n0 + w1 * n1 + w2 * n2
+        root_m = math.sqrt(reduced(inv_mass[i], inv_mass[j]))
+        r_eff = ri * rj / (ri + rj)
+        travel, grow, end = contact_window(delta, vn, un, dt)
+        kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+        fe = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, 0.0, travel, grow)[0]
+        fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, r_eff, root_m, un, travel, grow)
+        spring = row_springs[k] if pair_springs else no_spring
+        g0, g1, g2, d_t, f_t = _tangential(
+            scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt, ct,
+            row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+        )  # fmt: skip
+        damping += -(fn - fe) * wn * dt + d_t
+        friction += f_t
+        # force on i (on j: its negative); torques r n x F_t of both, and the rolling pair
+        c0 = fn * n0 + g0
+        c1 = fn * n1 + g1
+        c2 = fn * n2 + g2
+        x0 = n1 * g2 - n2 * g1
+        x1 = n2 * g0 - n0 * g2
+        x2 = n0 * g1 - n1 * g0
+        m0 = 0.0
+        m1 = 0.0
+        m2 = 0.0
+        if rolling and row[MU_R] > 0.0:
+            m0, m1, m2 = rolling_torque(
+                angvel_half[i, 0] - angvel_half[j, 0],
+                angvel_half[i, 1] - angvel_half[j, 1],
+                angvel_half[i, 2] - angvel_half[j, 2],
+                n0, n1, n2, row[MU_R], r_eff, fn, reduced(inv_inertia[i], inv_inertia[j]), dt,
             )  # fmt: skip
-            damping += -(fn - fe) * wn * dt + d_t
-            friction += f_t
-            # force on i (on j: its negative); torques r n x F_t of both, and the rolling pair
-            c0 = fn * n0 + g0
-            c1 = fn * n1 + g1
-            c2 = fn * n2 + g2
-            x0 = n1 * g2 - n2 * g1
-            x1 = n2 * g0 - n0 * g2
-            x2 = n0 * g1 - n1 * g0
-            m0 = 0.0
-            m1 = 0.0
-            m2 = 0.0
-            if rolling and row[MU_R] > 0.0:
-                m0, m1, m2 = rolling_torque(
-                    angvel_half[i, 0] - angvel_half[j, 0],
-                    angvel_half[i, 1] - angvel_half[j, 1],
-                    angvel_half[i, 2] - angvel_half[j, 2],
-                    n0, n1, n2, row[MU_R], r_eff, fn, reduced(inv_inertia[i], inv_inertia[j]), dt,
-                )  # fmt: skip
-                r0 = angvel[i, 0] - angvel[j, 0]
-                r1 = angvel[i, 1] - angvel[j, 1]
-                r2 = angvel[i, 2] - angvel[j, 2]
-                roll -= (m0 * r0 + m1 * r1 + m2 * r2) * dt
-            # the work a driven particle does on the other: minus that of the contact on it
-            if driven:
-                f0 += c0
-                f1 += c1
-                f2 += c2
-                t0 += m0 - ri * x0
-                t1 += m1 - ri * x1
-                t2 += m2 - ri * x2
-            if inv_mass[j] == 0.0:
-                walls += (c0 * vel[j, 0] + c1 * vel[j, 1] + c2 * vel[j, 2]) * dt
-                walls -= ((-m0 - rj * x0) * angvel[j, 0] + (-m1 - rj * x1) * angvel[j, 1]) * dt
-                walls -= (-m2 - rj * x2) * angvel[j, 2] * dt
+            r0 = angvel[i, 0] - angvel[j, 0]
+            r1 = angvel[i, 1] - angvel[j, 1]
+            r2 = angvel[i, 2] - angvel[j, 2]
+            roll -= (m0 * r0 + m1 * r1 + m2 * r2) * dt
+        # the work a driven particle does on the other: minus that of the contact on it
         if driven:
-            walls -= (f0 * vel[i, 0] + f1 * vel[i, 1] + f2 * vel[i, 2]) * dt
-            walls -= (t0 * angvel[i, 0] + t1 * angvel[i, 1] + t2 * angvel[i, 2]) * dt
-        for w in range(wall_axis.shape[0]):
-            if driven:
-                break  # walls neither touch nor push driven particles
-            row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
-            touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
-            if not touching:
-                if law != HERTZ_MINDLIN and wall_hist.shape[0] > 0:
-                    xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
-                    friction += 0.5 * row[K_T] * xi2
-                continue
-            wv0 = wall_vel[w, 0]
-            wv1 = wall_vel[w, 1]
-            wv2 = wall_vel[w, 2]
-            h0 = wall_vel_half[w, 0]
-            h1 = wall_vel_half[w, 1]
-            h2 = wall_vel_half[w, 2]
-            v0, v1, v2 = wall_slip(vel_half, angvel_half, i, ri, n0, n1, n2, h0, h1, h2)
-            vn = v0 * n0 + v1 * n1 + v2 * n2
-            p0 = wall_vel_pred[w, 0]
-            p1 = wall_vel_pred[w, 1]
-            p2 = wall_vel_pred[w, 2]
-            u0, u1, u2 = wall_slip(vel_pred, angvel_pred, i, ri, n0, n1, n2, p0, p1, p2)
-            un = u0 * n0 + u1 * n1 + u2 * n2
-            w0, w1, w2 = wall_slip(vel, angvel, i, ri, n0, n1, n2, wv0, wv1, wv2)
-            wn = w0 * n0 + w1 * n1 + w2 * n2
-            root_m = math.sqrt(mi)
-            travel, grow, end = contact_window(delta, vn, un, dt)
-            kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
-            fe = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, 0.0, travel, grow)[0]
-            fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, un, travel, grow)
-            spring = wall_hist[i, w] if wall_hist.shape[0] > 0 else no_spring
-            g0, g1, g2, d_t, f_t = _tangential(
-                scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
-                ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+            f0 += c0
+            f1 += c1
+            f2 += c2
+            t0 += m0 - ri * x0
+            t1 += m1 - ri * x1
+            t2 += m2 - ri * x2
+        if inv_mass[j] == 0.0:
+            walls += (c0 * vel[j, 0] + c1 * vel[j, 1] + c2 * vel[j, 2]) * dt
+            walls -= ((-m0 - rj * x0) * angvel[j, 0] + (-m1 - rj * x1) * angvel[j, 1]) * dt
+            walls -= (-m2 - rj * x2) * angvel[j, 2] * dt
+    if driven:
+        walls -= (f0 * vel[i, 0] + f1 * vel[i, 1] + f2 * vel[i, 2]) * dt
+        walls -= (t0 * angvel[i, 0] + t1 * angvel[i, 1] + t2 * angvel[i, 2]) * dt
+    for w in range(wall_axis.shape[0]):
+        if driven:
+            break  # walls neither touch nor push driven particles
+        row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
+        touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
+        if not touching:
+            if law != HERTZ_MINDLIN and wall_springs:
+                xi2 = wall_hist[i, w, 0] ** 2 + wall_hist[i, w, 1] ** 2 + wall_hist[i, w, 2] ** 2
+                friction += 0.5 * row[K_T] * xi2
+            continue
+        wv0 = wall_vel[w, 0]
+        wv1 = wall_vel[w, 1]
+        wv2 = wall_vel[w, 2]
+        h0 = wall_vel_half[w, 0]
+        h1 = wall_vel_half[w, 1]
+        h2 = wall_vel_half[w, 2]
+        v0, v1, v2 = wall_slip(vel_half, angvel_half, i, ri, n0, n1, n2, h0, h1, h2)
+        vn = v0 * n0 + v1 * n1 + v2 * n2
+        p0 = wall_vel_pred[w, 0]
+        p1 = wall_vel_pred[w, 1]
+        p2 = wall_vel_pred[w, 2]
+        u0, u1, u2 = wall_slip(vel_pred, angvel_pred, i, ri, n0, n1, n2, p0, p1, p2)
+        un = u0 * n0 + u1 * n1 + u2 * n2
+        w0, w1, w2 = wall_slip(vel, angvel, i, ri, n0, n1, n2, wv0, wv1, wv2)
+        wn = w0 * n0 + w1 * n1 + w2 * n2
+        root_m = math.sqrt(mi)
+        travel, grow, end = contact_window(delta, vn, un, dt)
+        kn, kt, dn, dtan = row[K_N], row[K_T], row[D_N], row[D_T]
+        fe = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, 0.0, travel, grow)[0]
+        fn, kt, ct = normal_law(kn, kt, dn, dtan, law, delta, ri, root_m, un, travel, grow)
+        spring = wall_hist[i, w] if wall_springs else no_spring
+        g0, g1, g2, d_t, f_t = _tangential(
+            scratch, i, spring, v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, n0, n1, n2, kt,
+            ct, row[MU], fn, dt, grow, end, u0 - un * n0, u1 - un * n1, u2 - un * n2, w0, w1, w2,
+        )  # fmt: skip
+        walls += ((fn * n0 + g0) * wv0 + (fn * n1 + g1) * wv1 + (fn * n2 + g2) * wv2) * dt
+        damping += -(fn - fe) * wn * dt + d_t
+        friction += f_t
+        if rolling and row[MU_R] > 0.0:
+            m0, m1, m2 = rolling_torque(
+                angvel_half[i, 0], angvel_half[i, 1], angvel_half[i, 2],
+                n0, n1, n2, row[MU_R], ri, fn, inertia[i], dt,
             )  # fmt: skip
-            walls += ((fn * n0 + g0) * wv0 + (fn * n1 + g1) * wv1 + (fn * n2 + g2) * wv2) * dt
-            damping += -(fn - fe) * wn * dt + d_t
-            friction += f_t
-            if rolling and row[MU_R] > 0.0:
-                m0, m1, m2 = rolling_torque(
-                    angvel_half[i, 0], angvel_half[i, 1], angvel_half[i, 2],
-                    n0, n1, n2, row[MU_R], ri, fn, inertia[i], dt,
-                )  # fmt: skip
-                roll -= (m0 * angvel[i, 0] + m1 * angvel[i, 1] + m2 * angvel[i, 2]) * dt
-        booked[i, GRAVITY] += gravity
-        booked[i, WALLS] += walls
-        booked[i, DAMPING] += damping
-        booked[i, FRICTION] += friction
-        booked[i, ROLLING] += roll
+            roll -= (m0 * angvel[i, 0] + m1 * angvel[i, 1] + m2 * angvel[i, 2]) * dt
+    booked[i, GRAVITY] += gravity
+    booked[i, WALLS] += walls
+    booked[i, DAMPING] += damping
+    booked[i, FRICTION] += friction
+    booked[i, ROLLING] += roll
 
 
 @njit(cache=True)
