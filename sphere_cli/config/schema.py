@@ -70,9 +70,9 @@ class Simulation(Strict):
         description=(
             'Where the steps run: "cpu" (every model), or "cuda", an NVIDIA GPU (needs the CUDA '
             "extra, pip install 'sphere-cli[cuda]'), for particles with pair contacts, gravity, plane "
-            "walls (fixed, moving or stress-controlled), stages, periodic boundaries and the fluids' "
-            "action on the particles (the fluid's own step runs on the CPU at each coupling step) so "
-            "far (a case with a fluid without particles or the energy budget is refused). The GPU "
+            "walls (fixed, moving or stress-controlled), stages, periodic boundaries, the energy "
+            "budget and the fluids' action on the particles (the fluid's own step runs on the CPU at "
+            "each coupling step) so far (a case with a fluid without particles is refused). The GPU "
             "agrees with the CPU to round-off; "
             "`sphere run --device` overrides this key."
         ),

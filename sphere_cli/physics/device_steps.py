@@ -19,10 +19,13 @@ kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/
 its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
 brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
 and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its
-arrays go up again after each. A case with anything else in its step (the energy budget) is
-refused with the modules named; so is a fluid without particles, and a machine without a usable
-GPU. Results agree with the CPU to round-off: the GPU's compiler fuses a multiply and an add into
-one rounding (FMA) where the CPU rounds twice (docs/user-guide.md, "The GPU").
+arrays go up again after each. The energy budget books each particle's share of a step on the
+device (kernels/observe/cuda_energy_budget.py), its copies of the half-step velocities and of the
+last wall springs taken before the contacts, the last pair springs those of the spare spring
+buffer after the contacts. A case with anything else in its step is refused with the modules
+named; so is a fluid without particles, and a machine without a usable GPU. Results agree
+with the CPU to round-off: the GPU's compiler fuses a multiply and an add into one rounding
+(FMA) where the CPU rounds twice (docs/user-guide.md, "The GPU").
 
 The host's neighbour list is a half list with packed springs (kernels/neighbors.py); the device
 holds full rows with the springs at the owner's slot (kernels/cuda_dem.py). The two are
@@ -49,11 +52,9 @@ from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slo
 THREADS = 128
 # the modules the GPU step runs (the Observer, "observables" or "" where it has no state, only
 # measures, from the host arrays)
-SUPPORTED = ("particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "")
-# what a module the GPU does not run is, for the message that refuses it
-NAMES = {
-    "energy_budget": "the energy budget (output.observables)",
-}
+SUPPORTED = (
+    "particles", "neighbors", "contact", "walls", "wall_motion", "stages", "observables", "energy_budget", "",
+)  # fmt: skip
 # the walls' arrays that moving walls change on the device, and those they only read
 MOVED = ("coord", "vel", "vel_pred", "acc", "shift", "force", "area", "fluid_force")
 DRIVING = ("mode", "control")
@@ -180,6 +181,7 @@ class DeviceSteps:
         self.walls = scene.walls  # plane walls, or None
         self.moving = scene.wall_motion is not None  # some wall moves (WallMotion's steps)
         self.stages = scene.stages  # their after_step reads and changes the host's state, or None
+        self.budget = scene.budget  # the energy budget (its shares booked on the device), or None
         self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
         self.fluid_due = None  # the step at whose end the fluid takes its step on the host
         self.fluid_steps = None  # its GpuSteps with the arguments on the device (_fluid_arguments)
@@ -198,16 +200,14 @@ class DeviceSteps:
     def of(cls, scene) -> DeviceSteps:
         """The GPU steps of a scene, or a CaseError saying what the GPU does not run yet."""
         fluid = _fluid_on_gpu(scene)
-        extra = [
-            NAMES.get(m.name, m.name) for m in scene.modules if m.name not in SUPPORTED and m is not fluid
-        ]
+        extra = [m.name for m in scene.modules if m.name not in SUPPORTED and m is not fluid]
         if scene.state.particles.count == 0:
             extra.append("no particles (a fluid-only case)")
         # any other module that acts between steps (the named ones are reported above; the
         # stages act on the host's state, which comes back for them)
         between = [m for m, _ in scene.step.after_step if m.name in SUPPORTED and m is not scene.stages]
         extra += [f"{m.name or type(m).__name__} after its steps" for m in between]
-        if extra or scene.neighbors is None or not plain_step(scene):
+        if extra or scene.neighbors is None or not plain_step(scene, budget=True):
             raise CaseError(
                 f'simulation.device = "cuda" runs the particles, their pair contacts, gravity, plane '
                 "walls, stages, the 1D VANS, Darcy and Navier-Stokes fluids and periodic boundaries; this "
@@ -308,12 +308,44 @@ class DeviceSteps:
                     psum=to(np.zeros((2, chunk_count(p.count), len(w.faces), 3))),
                     push_total=to(np.zeros((len(w.faces), 3))),
                 )
+        if self.budget is not None:
+            self._budget_arrays(state)
         if self.fluid is not None:
             self._fluid_arguments(state, everything=True)
         self.rows, self.hist = self._full_rows(nl, p.count)
         self.spare = self._allocate(p.count, self.rows.nbr.shape[1])
         self.hist_next = self._springs(p.count, self.rows.nbr.shape[1])
         self.on_device_at = state.clock.step
+
+    def _budget_arrays(self, state: State) -> None:
+        """The energy budget's shares, and its copies of the step's half-step velocities and
+        last wall springs (taken before each step's contacts), on the device; empty walls
+        without walls (kernels/observe/cuda_energy_budget.py)."""
+        to, empty = self.cuda.to_device, self.cuda.device_array
+        n = state.particles.count
+        d = self.d
+        d.update(
+            booked=to(self.budget.booked),
+            vel_half=empty((n, 3)),
+            angvel_half=empty((n, 3)),
+            budget_scratch=empty((n, 2, 3)),
+            no_spring=to(np.zeros(3)),
+        )
+        if self.walls is not None:
+            d.update(wall_vel_half=empty(d["wall_vel"].shape), wall_hist_last=empty(d["wall_hist"].shape))
+            return
+        none = np.zeros((0, 3))
+        d.update(
+            inertia=to(state.particles.inertia),
+            wall_axis=to(np.zeros(0, dtype=np.int64)),
+            wall_sign=to(np.zeros(0)),
+            wall_coord=to(np.zeros(0)),
+            wall_vel=to(none),
+            wall_vel_pred=to(none),
+            wall_vel_half=to(none),
+            wall_table=to(np.zeros((0, 1, 6))),
+            wall_hist_last=to(np.zeros((n, 0, 3))),
+        )
 
     def _fluid_arguments(self, state: State, everything: bool = False) -> None:
         """The fluid's kernels with their arguments on the device (its gpu_steps): the particles'
@@ -420,6 +452,8 @@ class DeviceSteps:
             state.walls.hist = self.d["wall_hist"].copy_to_host()
         if self.fluid is not None:
             self._fluid_outputs_to_host(self.fluid_written)
+        if self.budget is not None:
+            self.d["booked"].copy_to_host(self.budget.booked)
         nbr = self.rows.nbr.copy_to_host()
         count = self.rows.count.copy_to_host()
         n = count.size
@@ -534,6 +568,11 @@ class DeviceSteps:
                 self.rebuild(state)
                 moved2 = 0.0  # as the host's rebuild leaves it
             rows = self.rows
+            if self.budget is not None:  # what it books the step from (EnergyBudget.forces)
+                for now in ("vel", "angvel", "wall_vel"):
+                    d[f"{now}_half"].copy_to_device(d[now])
+                if self.walls is not None and self.wall_springs:
+                    d["wall_hist_last"].copy_to_device(d["wall_hist"])
             self._launch(
                 k.pair_forces, n, d["pos"], d["vel"], d["angvel"], d["vel_pred"], d["angvel_pred"],
                 d["radius"], d["inv_mass"], d["inv_inertia"], d["material"], d["mass"], d["body_acc"],
@@ -565,6 +604,8 @@ class DeviceSteps:
                     k.kick, n, d["vel"], d["angvel"], d["force"], d["torque"], d["inv_mass"],
                     d["inv_inertia"], dt, d["worst"],
                 )  # fmt: skip
+            if self.budget is not None:  # the springs of the last step are hist_next's since the swap
+                self._book(n, dt)
         self.host_stale = True
         state.neighbors.moved2 = moved2
         self.on_device_at = end = state.clock.step + steps
@@ -588,6 +629,21 @@ class DeviceSteps:
         if fluid_step and not coupling:  # (download leaves them: the host's step makes them after)
             _to_host(self.fluid_written)
         return steps, False
+
+    def _book(self, n: int, dt: float) -> None:
+        """The energy budget's shares of the step (EnergyBudget.finish_step)."""
+        from ..kernels.observe.cuda_energy_budget import book
+
+        d, rows = self.d, self.rows
+        wall_springs = self.walls is not None and self.wall_springs
+        self._launch(
+            book, n, d["pos"], d["vel_half"], d["angvel_half"], d["vel_pred"], d["angvel_pred"], d["vel"],
+            d["angvel"], d["radius"], d["mass"], d["inertia"], d["inv_mass"], d["inv_inertia"], d["material"],
+            rows.nbr, rows.count, self.hist_next, self.springs, d["table"], self.contact.law_code,
+            self.contact.rolling, d["body_acc"], d["length"], d["periodic"], d["wall_axis"], d["wall_sign"],
+            d["wall_coord"], d["wall_vel_half"], d["wall_vel_pred"], d["wall_vel"], d["wall_table"],
+            d["wall_hist_last"], wall_springs, dt, d["budget_scratch"], d["booked"], d["no_spring"],
+        )  # fmt: skip
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:
         """The particles' forces on the walls summed in the CPU's tree, then the walls' second

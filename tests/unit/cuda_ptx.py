@@ -1,5 +1,6 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
-kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py) for an H200 (compute capability 9.0)
+kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, kernels/observe/cuda_energy_budget.py)
+for an H200 (compute capability 9.0)
 with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
 whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
 numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds in its code.
@@ -11,6 +12,7 @@ from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
 from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_porosity, cuda_profile_forces
+from sphere_cli.kernels.observe import cuda_energy_budget
 
 V = t.float64[:]  # (N,) or (3,)
 M = t.float64[:, :]  # (N,3)
@@ -142,6 +144,47 @@ POROSITY_SIGNATURES = {
     "sort_cells": (I1, I1, I1),
     "sample_cells": (M, M, V, V, V, L1, B, F, L1, I1, I1, BOOL, H, H4, H, I1),
 }
+# the energy budget (kernels/observe/cuda_energy_budget.py)
+BUDGET_SIGNATURES = {
+    "book": (
+        M,
+        M,
+        M,
+        M,
+        M,
+        M,
+        M,
+        V,
+        V,
+        V,
+        V,
+        V,
+        I1,
+        I2,
+        I1,
+        H,
+        BOOL,
+        H,
+        INT,
+        BOOL,
+        V,
+        V,
+        B,
+        L1,
+        V,
+        V,
+        M,
+        M,
+        M,
+        H,
+        H,
+        BOOL,
+        F,
+        H,
+        M,
+        V,
+    ),  # fmt: skip
+}
 
 if __name__ == "__main__":
     for module, signatures in (
@@ -150,6 +193,7 @@ if __name__ == "__main__":
         (cuda_darcy, DARCY_SIGNATURES),
         (cuda_drag, DRAG_SIGNATURES),
         (cuda_porosity, POROSITY_SIGNATURES),
+        (cuda_energy_budget, BUDGET_SIGNATURES),
     ):
         for name, signature in signatures.items():
             ptx, _ = cuda.compile_ptx(getattr(module, name).py_func, signature, cc=(9, 0))

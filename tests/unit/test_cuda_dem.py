@@ -16,6 +16,7 @@ physical change.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import subprocess
@@ -101,8 +102,11 @@ def _case(path, device: str, hertz: bool = True, extra: str = "") -> str:
 
 
 def _pairs(scene) -> dict:
-    """Each listed pair's spring, keyed by (i, j): the list's layout may differ, its pairs not."""
+    """Each listed pair's spring, keyed by (i, j): the list's layout may differ, its pairs not
+    (none without friction)."""
     nl = scene.state.neighbors
+    if not nl.hist.shape[0]:
+        return {}
     rows = spring_rows(nl)
     return {
         (i, int(nl.nbr[i, k])): rows[i, k]
@@ -135,14 +139,17 @@ shear_stress = 50.0
 """
 
 
-def _scenes(tmp_path, seed: int = 3, hertz: bool = True, walls: str = ""):
+def _scenes(tmp_path, seed: int = 3, hertz: bool = True, walls: str = "", friction: float = 0.4):
     """The scene on the GPU and on the CPU; with walls (FLOOR_AND_LID or MOVING_WALLS), a floor
     and a lid instead of the periodic z axis (the spheres pressed against both at first)."""
     path = tmp_path / "spheres.csv"
     # the spheres glued to the rough floor lie on its plane: the others a radius higher
     lift = 0.001 if "rough" in walls else 0.0
     _placement(path, seed, lift)
-    texts = [_case(path, device, hertz, walls) for device in ("cuda", "cpu")]
+    texts = [
+        _case(path, device, hertz, walls).replace("friction = 0.4", f"friction = {friction}")
+        for device in ("cuda", "cpu")
+    ]
     if walls:
         texts = [text.replace("[true, true, true]", "[true, true, false]") for text in texts]
         texts = [text.replace(f"{BOX}]", f"{BOX + lift}]") for text in texts]
@@ -390,12 +397,53 @@ def _words_and_numbers(message: str) -> tuple[str, list[float]]:
     return re.sub(number, "#", message), [float(x) for x in re.findall(number, message)]
 
 
-def test_what_the_gpu_does_not_run_is_refused_by_name(tmp_path):
-    path = tmp_path / "spheres.csv"
-    _placement(path)
-    budget = '\n[output.observables]\nquantities = ["energy_budget"]\n'
-    with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: the energy budget'):
-        build_scene(parse_case(_case(path, "cuda", extra=budget)))
+def test_what_the_gpu_does_not_run_is_refused_by_name():
+    """A fluid without particles (the GPU steps particles)."""
+    alone = textwrap.dedent(
+        """
+        [simulation]
+        duration = 0.01
+        dt = 0.001
+        device = "cuda"
+        [domain]
+        upper = [0.01, 0.01, 0.02]
+        [fluid]
+        model = "darcy"
+        grid = { cells = [1, 1, 8] }
+        permeability = { model = "constant", value = 1e-10 }
+        """
+    )
+    with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: no particles'):
+        build_scene(parse_case(alone))
+
+
+BUDGET = '\n[output.observables]\nquantities = ["energy_budget"]\n'
+
+
+@pytest.mark.parametrize(
+    "hertz, walls, friction",
+    [(True, "", 0.4), (False, MOVING_WALLS, 0.4), (False, FLOOR_AND_LID, 0.0)],
+    ids=["hertz-rolling", "moving-walls", "frictionless"],
+)
+def test_the_energy_budget_is_booked_on_the_gpu_as_on_the_cpu(tmp_path, hertz, walls, friction):
+    """Each particle's share of the budget, booked on the device from its full rows (the
+    partners below it left out), the springs and wall springs of the last step and the
+    half-step velocities kept before the contacts: the CPU's, and so its observables (without
+    friction, no springs at all)."""
+    gpu, cpu = _scenes(tmp_path, hertz=hertz, walls=walls + BUDGET, friction=friction)
+    assert type(gpu.step.compiled).__name__ == "DeviceSteps"
+    for steps in (1, 29):
+        advance(gpu, steps)
+        advance(cpu, steps)
+        _compare(gpu, cpu)
+        a, b = gpu.budget.booked, cpu.budget.booked
+        np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max())
+    terms = cpu.budget.booked.any(axis=0)  # every term that can be is booked
+    expected = [True, walls == MOVING_WALLS, True, friction > 0.0, hertz]
+    assert list(terms) == expected, terms
+    one, other = gpu.budget.observables(gpu.state), cpu.budget.observables(cpu.state)
+    for name, (value, _) in other.items():
+        assert math.isclose(one[name][0], value, rel_tol=RTOL, abs_tol=RTOL * 1e-12), name
 
 
 def test_no_gpu_is_a_case_error_naming_the_key(tmp_path, monkeypatch):
