@@ -301,7 +301,7 @@ class RankSteps:
             stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
             if self.at_step != state.clock.step or stage_began:
                 self._send_out(state)
-            elif self._fluid_steps_at(state.clock.step, state.clock) and not self.fluid.steps_on_ranks:
+            elif self._lead_steps_fluid_at(state.clock.step, state.clock):
                 self.world.order("fluid", self.fluid, state.fluid)
                 self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
@@ -318,14 +318,19 @@ class RankSteps:
 
     def _read_after(self, step: int, clock) -> bool:
         """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
-        step (unless the ranks take it), or a stage that may end there (tested only there)."""
-        return (self._fluid_steps_at(step, clock) and not self.fluid.steps_on_ranks) or (
+        step at the lead, or a stage that may end there (tested only there)."""
+        return self._lead_steps_fluid_at(step, clock) or (
             self.stages is not None and self.stages.after_due(step, clock)
         )
 
     def _fluid_steps_at(self, step: int, clock) -> bool:
         """True if the fluid takes its own step in the after_step of `step`."""
         return self.fluid is not None and self.fluid.after_due(step, clock)
+
+    def _lead_steps_fluid_at(self, step: int, clock) -> bool:
+        """True if the fluid takes its own step after `step` at the lead, on the scene gathered
+        there (not one that steps on every rank: FluidModule.steps_on_ranks)."""
+        return self._fluid_steps_at(step, clock) and not self.fluid.steps_on_ranks
 
     def hand_over(self, state: State) -> None:
         """to_host: on ranks the steps are called only by the run loop and the benchmark
