@@ -2,15 +2,18 @@
 cells, ghosts one cell wide, particles moving between ranks only at neighbour-list builds, and
 results bitwise those of one rank, whatever the rank count.
 
-**Slabs.** The box is cut along one axis into one slab of whole search cells per rank
-(physics/neighbors.py search_cells), cut where the particles are shared evenly (or, with
-simulation.rank_balance = "time", the measured work) at each list build (a cut never changes a
-result). The axis is chosen again at each cut, of those with a cell for every rank: the one
-whose slabs leave the busiest rank the fewest particles, own and ghosts (a bed lying in a tall
-box is cut across its width, not through its few layers: finer shares, thinner ghost layers and
-each rank its part of the floor). A rank owns the particles whose position at the last list build
-lies in its slab, and holds as ghosts those within one cell of it: every pair listed at that
-build then lies within one rank's particles, own or ghost, until the next build.
+**Slabs or pencils.** The box is cut along one axis into one slab of whole search cells per
+rank, or along two into pencils, p x q ranks (physics/neighbors.py search_cells), each axis cut
+where the particles are shared evenly (or, with simulation.rank_balance = "time", the measured
+work) at each list build (a cut never changes a result). The cut is chosen again each time: of
+the slabs along each axis with a cell for every rank and the pencils along each pair of axes
+and each p x q that fits them, the one whose busiest rank holds the fewest particles, own and
+ghosts (a bed lying in a tall box is cut across its width, not through its few layers: finer
+shares, thinner ghost layers and each rank its part of the floor; a square bed between walls
+on four ranks into 2 x 2 pencils). A rank owns the particles whose position at the last list
+build lies in its part, and holds as ghosts those within one cell of it, diagonals included:
+every pair listed at that build then lies within one rank's particles, own or ghost, until the
+next build.
 
 **Same bits.** A rank keeps its particles in ascending global index and runs the one-rank step
 on them (Motion, NeighborSearch, PairContactForces, PlaneWallForces), so each owned particle
@@ -58,6 +61,7 @@ A fluid without particles and the GPU are refused with what they are named.
 from __future__ import annotations
 
 import copy
+import itertools
 import time
 import types
 from dataclasses import dataclass
@@ -125,7 +129,7 @@ class Template:
     attached: np.ndarray  # (K,) global indices of the spheres glued to walls
     attached_wall: np.ndarray  # (K,) their wall
     count: int  # the scene's particles, on every rank together
-    axes: tuple  # the axes a cut may follow: those with a search cell for every rank
+    axes: tuple  # the axes a cut may follow: those at least two search cells wide
     lower: np.ndarray  # (3,) the box's lower corner [m]
     cell: np.ndarray  # (3,) search cells' width along each axis [m]
     cells: np.ndarray  # (3,) int64 search cells along each axis
@@ -185,8 +189,10 @@ class RankSteps:
         self.t = template
         self.part: Part | None = None
         self.pids: list[int] = []
-        self.axis = 0  # the axis of the last cut
-        self.slabs = np.zeros(world.size + 1, dtype=np.int64)  # first cell of each rank's slab
+        # the last cut: (axis, first cell of each part along it and the end) for one axis (slabs)
+        # or two (pencils, rank = index along the first x parts along the second + index along
+        # the second)
+        self.cut: tuple = ((0, np.array([0, 1], dtype=np.int64)),)
         self.busy = 0.0  # seconds in this rank's forces since the last cut (rank_balance = "time")
         self.at_step = None  # the lead: the host step the ranks' particles are for (None: send)
         self.host_stale = False  # the lead: steps taken since the last gather
@@ -211,13 +217,17 @@ class RankSteps:
                 "simulation.threads)."
             )
         search, state = scene.neighbors, scene.state
-        axes = tuple(a for a in range(3) if search.ncell[a] >= world.size)
-        if not axes:
+        axes = tuple(a for a in range(3) if search.ncell[a] >= 2)
+        slabs = any(search.ncell[a] >= world.size for a in axes)
+        if not slabs and not any(
+            _pencils(world.size, *search.ncell[list(ab)]) for ab in itertools.combinations(axes, 2)
+        ):
             widest = int(np.argmax(search.ncell))
             raise UsageError(
                 f"started as {world.size} MPI ranks: the box is {int(search.ncell[widest])} search cells "
                 f"wide along its widest axis ({'xyz'[widest]}) and each rank needs a slab at least one cell "
-                f"wide; use at most {int(search.ncell[widest])} ranks"
+                f"wide, or a pencil of p x q ranks a cell along each of two axes; use at most "
+                f"{int(search.ncell[widest])} ranks, or a product of two that fits the box"
             )
         template = Template(
             box=state.box,
@@ -268,9 +278,9 @@ class RankSteps:
         """For run.log: ranks, how the slabs are cut and processes."""
         by = "measured work" if self.t.balance == "time" else "particles held"
         return (
-            f"split across {self.world.size} MPI ranks, slabs of search cells cut by {by} along the "
-            "axis where the busiest rank holds the fewest, chosen again at each list build (process ids "
-            f"by rank: {' '.join(map(str, self.pids))})"
+            f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
+            "along the axes where the busiest rank holds the fewest, chosen again at each list build "
+            f"(process ids by rank: {' '.join(map(str, self.pids))})"
         )
 
     # --- the lead's side (simulation.advance and check_stable call these) --------------------
@@ -600,7 +610,7 @@ class RankSteps:
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
         ref = mine["ref"] if mine else np.zeros((0, 3))
         self._cut(ref)
-        _, holders = self._owners(self._cells(ref))
+        _, holders = self._owners(self._cut_cells(ref))
         held = [np.flatnonzero((holders == r).any(axis=0)) for r in range(world.size)]
         # what stays is neither pickled nor copied before the one copy below
         outgoing = [{} if r == world.rank else _select(mine, held[r]) for r in range(world.size)]
@@ -613,54 +623,89 @@ class RankSteps:
         take = take[np.argsort(pool["gid"][take], kind="stable")]
         self.part = self._make_part(_select(pool, take), moved2)
 
-    def _cells(self, ref: np.ndarray, axis: int | None = None) -> np.ndarray:
-        """Each position's search cell along the cut axis, or `axis` (kernels/neighbors.py
-        cell_number)."""
-        t, a = self.t, self.axis if axis is None else axis
-        cell = np.floor((ref[:, a] - t.lower[a]) / t.cell[a]).astype(np.int64)
-        return np.clip(cell, 0, t.cells[a] - 1)
+    def _cells(self, ref: np.ndarray, axis: int) -> np.ndarray:
+        """Each position's search cell along `axis` (kernels/neighbors.py cell_number)."""
+        t = self.t
+        cell = np.floor((ref[:, axis] - t.lower[axis]) / t.cell[axis]).astype(np.int64)
+        return np.clip(cell, 0, t.cells[axis] - 1)
 
-    def _owners(self, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The rank owning each cell (n,), and the ranks holding a particle in it (3, n): the
-        owners of that cell and of the cells on either side (-1 past an open end)."""
-        owner = self._owner_of_cell(cell)
-        return owner, np.stack((self._owner_of_cell(cell - 1), owner, self._owner_of_cell(cell + 1)))
+    def _cut_cells(self, ref: np.ndarray) -> np.ndarray:
+        """(k, n): each position's search cell along each of the k axes of the cut."""
+        return np.stack([self._cells(ref, axis) for axis, _ in self.cut])
 
-    def _owner_of_cell(self, cell: np.ndarray) -> np.ndarray:
-        """The rank owning each cell; a cell past an open end: -1."""
-        cells = self.t.cells[self.axis]
-        if self.t.periodic[self.axis]:
-            cell = cell % cells
-        owner = np.searchsorted(self.slabs, cell, side="right") - 1
-        return np.where((cell < 0) | (cell >= cells), -1, owner)
+    def _owners(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rank owning each cell (n,), and the ranks holding a particle in it (3^k, n): the
+        owners of that cell and of the cells next to it along the cut's k axes, diagonals
+        included (-1 past an open end)."""
+        shifts = itertools.product((-1, 0, 1), repeat=len(self.cut))
+        holders = np.stack([self._owner_of_cell(cells + np.array(s)[:, None]) for s in shifts])
+        return self._owner_of_cell(cells), holders
+
+    def _owner_of_cell(self, cells: np.ndarray) -> np.ndarray:
+        """The rank owning each cell of (k, n) along the cut's axes; a cell past an open end: -1."""
+        owner = np.zeros(cells.shape[1], dtype=np.int64)
+        outside = np.zeros(cells.shape[1], dtype=bool)
+        for (axis, bounds), cell in zip(self.cut, cells, strict=True):
+            count = self.t.cells[axis]
+            if self.t.periodic[axis]:
+                cell = cell % count
+            outside |= (cell < 0) | (cell >= count)
+            owner = owner * (bounds.size - 1) + np.searchsorted(bounds, cell, side="right") - 1
+        return np.where(outside, -1, owner)
 
     def _cut(self, ref: np.ndarray) -> None:
-        """The cut axis and its slab boundaries, from the positions `ref` this rank sends (the
-        lead's whole scene at a share): on each axis that may be cut, the slabs of `_slabs` from
-        the particles of each cell counted over every rank; then the axis whose busiest rank
-        holds the fewest, own and ghosts (on a tie the axis of the last cut, else the first).
-        With rank_balance = "time" each rank counts its particles by its force time per particle
-        held since the last cut, so that the shares are of measured work (the first cut, before
-        any step, by particles)."""
-        t = self.t
+        """The cut, from the positions `ref` this rank sends (the lead's whole scene at a share)
+        and the particles of each cell counted over every rank: slabs along each axis that may
+        be cut (`_slabs`), and pencils along each pair of them for each way of writing the rank
+        count as a product of two (the slabs of each axis cut from its own counts); then the cut
+        whose busiest rank holds the fewest particles, own and ghosts (on a tie the last cut's
+        axes and parts, else slabs before pencils, the lower axes first). With rank_balance =
+        "time" each rank counts its particles by its force time per particle held since the last
+        cut, so that the shares are of measured work (the first cut, before any step, by
+        particles)."""
+        t, size = self.t, self.world.size
         weight = 1.0
         if t.balance == "time" and self.part is not None and self.part.gid.size and self.busy > 0.0:
             weight = self.busy / self.part.gid.size
         self.busy = 0.0
-        counts = [np.bincount(self._cells(ref, a), minlength=t.cells[a]) * weight for a in t.axes]
+        cells = {a: self._cells(ref, a) for a in t.axes}
+        pairs = [
+            (a, b) for a, b in itertools.combinations(t.axes, 2) if _pencils(size, t.cells[a], t.cells[b])
+        ]
+        counts = [np.bincount(cells[a], minlength=t.cells[a]) * weight for a in t.axes]
+        counts += [
+            np.bincount(cells[a] * t.cells[b] + cells[b], minlength=t.cells[a] * t.cells[b]) * weight
+            for a, b in pairs
+        ]
         total = np.empty(sum(c.size for c in counts))
         self.world.comm.Allreduce(np.concatenate(counts), total, op=self.world.mpi.SUM)
+        ends = np.cumsum([c.size for c in counts])
+        along = {a: total[end - c.size : end] for a, c, end in zip(t.axes, counts, ends, strict=False)}
+        candidates = [(a, along[a], size) for a in t.axes if t.cells[a] >= size]
+        for (a, b), end in zip(pairs, ends[len(t.axes) :], strict=True):
+            grid = total[end - t.cells[a] * t.cells[b] : end].reshape(t.cells[a], t.cells[b])
+            candidates += [((a, b), grid, split) for split in _pencils(size, t.cells[a], t.cells[b])]
         best = None
-        for a, first in zip(t.axes, np.cumsum([0] + [c.size for c in counts])[:-1], strict=True):
-            slabs, largest = _slabs(total[first : first + t.cells[a]], self.world.size, t.periodic[a])
-            if best is None or largest < best[0] or (largest == best[0] and a == self.axis):
-                best = (largest, a, slabs)
-        _, self.axis, self.slabs = best
+        for axes, counted, parts in candidates:
+            if isinstance(axes, tuple):  # pencils: parts = (along a, along b)
+                a, b = axes
+                cut = tuple(
+                    (axis, _slabs(along[axis], p, t.periodic[axis])[0])
+                    for axis, p in zip(axes, parts, strict=True)
+                )
+                largest = max(_held_in_block(counted, cut, t.periodic[[a, b]], r) for r in range(size))
+            else:
+                bounds, largest = _slabs(counted, parts, t.periodic[axes])
+                cut = ((axes, bounds),)
+            same = [(axis, b.size) for axis, b in cut] == [(axis, b.size) for axis, b in self.cut]
+            if best is None or largest < best[0] or (largest == best[0] and same):
+                best = (largest, cut)
+        self.cut = best[1]
 
     def _make_part(self, rec: dict, moved2: float) -> Part:
         t, world = self.t, self.world
         n = rec["gid"].size
-        owned = self._owner_of_cell(self._cells(rec["ref"])) == world.rank
+        owned = self._owner_of_cell(self._cut_cells(rec["ref"])) == world.rank
         particles = Particles(**{name: rec[name] for name in CARRIED})
         # each row's partners by local index, those this rank does not hold left out (they lie
         # beyond the ghosts: out of reach of every particle here)
@@ -744,7 +789,7 @@ class RankSteps:
     def _exchange_lists(self, part: Part) -> None:
         """Which own particles each rank holds as ghosts, and which ghosts each rank owns, both
         in ascending global index (each side derives the other's list from the same cells)."""
-        owner, holders = self._owners(self._cells(part.state.neighbors.ref_pos))
+        owner, holders = self._owners(self._cut_cells(part.state.neighbors.ref_pos))
         part.send, part.receive = {}, {}
         for rank in range(self.world.size):
             if rank == self.world.rank:
@@ -780,6 +825,30 @@ def _slabs(total: np.ndarray, size: int, periodic: bool) -> tuple[np.ndarray, fl
             if trial[k - 1] < trial[k] < trial[k + 1] and _held(total, trial, k, periodic) < best:
                 slabs, best = trial, _held(total, trial, k, periodic)
     return slabs, max(_held_by(total, slabs, r, periodic) for r in range(size))
+
+
+def _pencils(size: int, cells_a: int, cells_b: int) -> list[tuple[int, int]]:
+    """The ways of cutting `size` ranks into pencils p_a x p_b, each at least 2, each axis with
+    a cell for each of its parts."""
+    return [
+        (p, size // p)
+        for p in range(2, size // 2 + 1)
+        if size % p == 0 and p <= cells_a and size // p <= cells_b
+    ]
+
+
+def _held_in_block(grid: np.ndarray, cut: tuple, periodic: np.ndarray, r: int) -> float:
+    """The particles (or work) of grid (cells along a, cells along b) that rank r of the
+    pencils `cut` holds: its block and the cells next to it, diagonals included (a cell once
+    however it wraps)."""
+    index = []
+    for (_, bounds), count, wraps, part in zip(
+        cut, grid.shape, periodic, divmod(r, cut[1][1].size - 1), strict=True
+    ):
+        near = np.arange(bounds[part] - 1, bounds[part + 1] + 1)
+        near = np.unique(near % count) if wraps else near[(near >= 0) & (near < count)]
+        index.append(near)
+    return float(grid[np.ix_(*index)].sum())
 
 
 def _held_by(counts: np.ndarray, slabs: np.ndarray, r: int, periodic: bool) -> float:

@@ -234,12 +234,16 @@ def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
     assert np.count_nonzero(springs["sphere/state/walls/hist"]) > 0
 
 
-def test_a_bed_settling_between_walls_is_one_ranks_on_three(tmp_path):
+def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
+    """On three ranks the box is cut into slabs; on four, walled on every side, into pencils of
+    2 x 2 (a rank's ghosts on two sides and a corner, particles moving between four ranks at each
+    list build): one rank's run either way."""
     (tmp_path / "case.toml").write_text(SETTLING)
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
-    run_ok(sphere("run", "case.toml", "-o", "three", "-q", ranks=3, cwd=tmp_path))
-    assert "cut by measured work" in (tmp_path / "three" / "run.log").read_text()
-    assert_runs_bitwise(tmp_path / "one", tmp_path / "three")
+    for ranks, name in ((3, "three"), (4, "four")):
+        run_ok(sphere("run", "case.toml", "-o", name, "-q", ranks=ranks, cwd=tmp_path))
+        assert "cut by measured work" in (tmp_path / name / "run.log").read_text()
+        assert_runs_bitwise(tmp_path / "one", tmp_path / name)
 
 
 def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_two(tmp_path):

@@ -1,6 +1,7 @@
-"""Where a scene split across MPI ranks cuts its slabs (physics/rank_steps.py RankSteps._cut),
-by particles held or, with simulation.rank_balance = "time", by each rank's measured force time
-per particle. Run in one process: a stand-in for the MPI world adds the other rank's counts."""
+"""Where a scene split across MPI ranks cuts its slabs or pencils (physics/rank_steps.py
+RankSteps._cut), by particles held or, with simulation.rank_balance = "time", by each rank's
+measured force time per particle. Run in one process: a stand-in for the MPI world adds the
+other ranks' counts."""
 
 from __future__ import annotations
 
@@ -12,22 +13,23 @@ from sphere_cli.physics.rank_steps import RankSteps
 
 
 class TwoRanks:
-    """Rank 0 of two, whose Allreduce(SUM) adds the other rank's contribution `other`."""
+    """Rank 0 of two (or `size`), whose Allreduce(SUM) adds the other ranks' contribution
+    `other`."""
 
-    size, rank = 2, 0
+    rank = 0
 
-    def __init__(self, other: np.ndarray):
-        self.comm, self.mpi, self.other = self, SimpleNamespace(SUM="sum"), other
+    def __init__(self, other: np.ndarray, size: int = 2):
+        self.comm, self.mpi, self.other, self.size = self, SimpleNamespace(SUM="sum"), other, size
 
     def Allreduce(self, send, receive, op):  # noqa: N802 (mpi4py's name)
         receive[...] = send + self.other
 
 
-def template(balance: str, cells=(10, 1, 1)) -> SimpleNamespace:
-    """What _cut reads of the template: unit cells from the origin, no axis periodic."""
+def template(balance: str, cells=(10, 1, 1), size: int = 2, periodic=(False,) * 3) -> SimpleNamespace:
+    """What _cut reads of the template: unit cells from the origin."""
     cells = np.array(cells)
     axes = tuple(a for a in range(3) if cells[a] >= 2)
-    periodic = np.zeros(3, dtype=bool)
+    periodic = np.array(periodic)
     return SimpleNamespace(
         axes=axes, lower=np.zeros(3), cell=np.ones(3), cells=cells, periodic=periodic, balance=balance
     )
@@ -41,7 +43,9 @@ def slabs(balance: str, other: np.ndarray) -> tuple[np.ndarray, float]:
     steps.busy = 0.6
     x = np.repeat(np.arange(5), 100) + 0.5
     steps._cut(np.stack((x, np.full(500, 0.5), np.full(500, 0.5)), axis=1))
-    return steps.slabs, steps.busy
+    ((axis, bounds),) = steps.cut
+    assert axis == 0
+    return bounds, steps.busy
 
 
 def test_slabs_share_the_particles_held():
@@ -68,11 +72,11 @@ def test_a_bed_in_a_tall_box_is_cut_across_its_width():
     x, z = np.meshgrid(np.arange(10) + 0.5, np.arange(4) + 0.5, indexing="ij")
     ref = np.repeat(np.stack((x.ravel(), np.full(40, 0.5), z.ravel()), axis=1), 25, axis=0)
     steps = RankSteps(TwoRanks(np.zeros(10 + 40)), template("particles", cells=(10, 1, 40)))
-    steps.axis = 2
+    steps.cut = ((2, np.array([0, 2, 40])),)
     steps._cut(ref)
-    assert steps.axis == 0
-    assert list(steps.slabs) == [0, 5, 10]
-    assert list(np.bincount(steps._owners(steps._cells(ref))[0])) == [500, 500]
+    ((axis, bounds),) = steps.cut
+    assert axis == 0 and list(bounds) == [0, 5, 10]
+    assert list(np.bincount(steps._owners(steps._cut_cells(ref))[0])) == [500, 500]
 
 
 def test_a_tie_keeps_the_axis_of_the_last_cut():
@@ -80,7 +84,51 @@ def test_a_tie_keeps_the_axis_of_the_last_cut():
     axis (y) stays."""
     grid = np.stack(np.meshgrid(*(np.arange(8) + 0.5,) * 3, indexing="ij"), axis=-1).reshape(-1, 3)
     steps = RankSteps(TwoRanks(np.zeros(24)), template("particles", cells=(8, 8, 8)))
-    steps.axis = 1
+    steps.cut = ((1, np.array([0, 3, 8])),)
     steps._cut(grid)
-    assert steps.axis == 1
-    assert list(steps.slabs) == [0, 4, 8]
+    ((axis, bounds),) = steps.cut
+    assert axis == 1 and list(bounds) == [0, 4, 8]
+
+
+def square_bed(periodic: bool) -> tuple[RankSteps, np.ndarray]:
+    """Rank 0 of four, cutting a bed of 8 x 8 cells in x and y, one deep, 10 particles in each
+    cell (all sent by rank 0)."""
+    x, y = np.meshgrid(np.arange(8) + 0.5, np.arange(8) + 0.5, indexing="ij")
+    ref = np.repeat(np.stack((x.ravel(), y.ravel(), np.full(64, 0.5)), axis=1), 10, axis=0)
+    period = (periodic, periodic, False)
+    steps = RankSteps(TwoRanks(np.zeros(8 + 8 + 64), size=4), template("particles", (8, 8, 1), 4, period))
+    steps._cut(ref)
+    return steps, ref
+
+
+def test_four_ranks_cut_a_square_bed_into_pencils_where_they_hold_fewer():
+    """Walled: four slabs of two columns hold up to four columns with their ghosts (320
+    particles); pencils of 4 x 4 cells, each at a corner, hold 5 x 5 cells (250). Each rank owns
+    a quarter; a particle at a block's corner is held by all four."""
+    steps, ref = square_bed(periodic=False)
+    assert [(axis, list(bounds)) for axis, bounds in steps.cut] == [(0, [0, 4, 8]), (1, [0, 4, 8])]
+    owner, holders = steps._owners(steps._cut_cells(ref))
+    assert list(np.bincount(owner)) == [160] * 4
+    assert holders.shape == (9, 640)
+    held = [int((holders == r).any(axis=0).sum()) for r in range(4)]
+    assert held == [250] * 4
+    corner = (np.abs(ref[:, 0] - 3.5) < 0.1) & (np.abs(ref[:, 1] - 3.5) < 0.1)
+    assert all(set(holders[:, i]) == {0, 1, 2, 3} for i in np.flatnonzero(corner))
+
+
+def test_periodic_axes_keep_slabs_where_pencils_hold_more():
+    """Periodic in x and y: a pencil's ghosts wrap around on every side (6 x 6 cells, 360
+    particles) while a slab holds four of the eight columns (320): slabs."""
+    steps, _ = square_bed(periodic=True)
+    assert len(steps.cut) == 1 and list(steps.cut[0][1]) == [0, 2, 4, 6, 8]
+
+
+def test_more_ranks_than_cells_along_any_axis_are_cut_into_pencils():
+    """Four ranks over a bed of 3 x 3 cells: no axis has a cell for each rank, pencils of 2 x 2
+    do (blocks of 2 or 1 cells along each axis)."""
+    x, y = np.meshgrid(np.arange(3) + 0.5, np.arange(3) + 0.5, indexing="ij")
+    ref = np.stack((x.ravel(), y.ravel(), np.full(9, 0.5)), axis=1)
+    steps = RankSteps(TwoRanks(np.zeros(3 + 3 + 9), size=4), template("particles", (3, 3, 1), 4))
+    steps._cut(ref)
+    assert [axis for axis, _ in steps.cut] == [0, 1]
+    assert sorted(set(steps._owners(steps._cut_cells(ref))[0])) == [0, 1, 2, 3]
