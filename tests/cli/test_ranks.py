@@ -235,15 +235,26 @@ def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
 
 
 def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
-    """On three ranks the box is cut into slabs; on four, walled on every side, into pencils of
-    2 x 2 (a rank's ghosts on two sides and a corner, particles moving between four ranks at each
-    list build): one rank's run either way."""
-    (tmp_path / "case.toml").write_text(SETTLING)
-    run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
-    for ranks, name in ((3, "three"), (4, "four")):
-        run_ok(sphere("run", "case.toml", "-o", name, "-q", ranks=ranks, cwd=tmp_path))
-        assert "cut by measured work" in (tmp_path / name / "run.log").read_text()
-        assert_runs_bitwise(tmp_path / "one", tmp_path / name)
+    """On three ranks the box is cut into slabs. On four, 300 of the spheres settling in a
+    square box between walls, into pencils of 2 x 2 at every list build: a rank's ghosts lie on
+    two sides and across a corner, where pairs touch diagonally, and particles move between four
+    ranks. One rank's run either way (the four-rank run fails without the diagonal ghosts)."""
+    square = SETTLING
+    for old, new in (
+        ("upper = [0.016, 0.006, 0.012]", "upper = [0.012, 0.012, 0.012]"),
+        ("region_upper = [0.016, 0.006, 0.009]", "region_upper = [0.012, 0.012, 0.009]"),
+        ("count = 200", "count = 300"),
+    ):
+        assert old in square
+        square = square.replace(old, new)
+    for ranks, case in ((3, SETTLING), (4, square)):
+        root = tmp_path / str(ranks)
+        root.mkdir()
+        (root / "case.toml").write_text(case)
+        run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=root))
+        run_ok(sphere("run", "case.toml", "-o", "split", "-q", ranks=ranks, cwd=root))
+        assert "cut by measured work" in (root / "split" / "run.log").read_text()
+        assert_runs_bitwise(root / "one", root / "split")
 
 
 def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_two(tmp_path):
