@@ -8,12 +8,12 @@ where the particles are shared evenly (or, with simulation.rank_balance = "time"
 work) at each list build (a cut never changes a result). The cut is chosen again each time: of
 the slabs along each axis with a cell for every rank and the pencils along each pair of axes
 and each p x q that fits them, the one whose busiest rank holds the fewest particles, own and
-ghosts (a bed lying in a tall box is cut across its width, not through its few layers: finer
-shares, thinner ghost layers and each rank its part of the floor; a square bed between walls
-on four ranks into 2 x 2 pencils). A rank owns the particles whose position at the last list
-build lies in its part, and holds as ghosts those within one cell of it, diagonals included:
-every pair listed at that build then lies within one rank's particles, own or ghost, until the
-next build.
+ghosts, the last one kept unless another holds 2 % fewer (a bed lying in a tall box is cut
+across its width, not through its few layers: finer shares, thinner ghost layers and each rank
+its part of the floor; a square bed between walls on four ranks into 2 x 2 pencils). A rank
+owns the particles whose position at the last list build lies in its part, and holds as ghosts
+those within one cell of it, diagonals included: every pair listed at that build then lies
+within one rank's particles, own or ghost, until the next build.
 
 **Same bits.** A rank keeps its particles in ascending global index and runs the one-rank step
 on them (Motion, NeighborSearch, PairContactForces, PlaneWallForces), so each owned particle
@@ -87,6 +87,9 @@ from .walls import PlaneWallForces, WallMotion, push_scratch
 CARRIED = (*Particles.PROGNOSTIC, "vel_pred", "angvel_pred")
 # the modules split across ranks (the stages, a fluid's own step and the Observer act on the
 # lead's whole scene)
+# a cut along other axes, or into other parts, replaces the last one only where its busiest rank
+# holds this fraction fewer particles: each change moves most particles between ranks
+SWITCH_GAIN = 0.02
 SUPPORTED = (
     "wall_motion",
     "particles",
@@ -658,8 +661,9 @@ class RankSteps:
         and the particles of each cell counted over every rank: slabs along each axis that may
         be cut (`_slabs`), and pencils along each pair of them for each way of writing the rank
         count as a product of two (the slabs of each axis cut from its own counts); then the cut
-        whose busiest rank holds the fewest particles, own and ghosts (on a tie the last cut's
-        axes and parts, else slabs before pencils, the lower axes first). With rank_balance =
+        whose busiest rank holds the fewest particles, own and ghosts (the last cut's axes and
+        parts unless another holds SWITCH_GAIN fewer; on a tie slabs before pencils, the lower
+        axes first). With rank_balance =
         "time" each rank counts its particles by its force time per particle held since the last
         cut, so that the shares are of measured work (the first cut, before any step, by
         particles)."""
@@ -698,8 +702,9 @@ class RankSteps:
                 bounds, largest = _slabs(counted, parts, t.periodic[axes])
                 cut = ((axes, bounds),)
             same = [(axis, b.size) for axis, b in cut] == [(axis, b.size) for axis, b in self.cut]
-            if best is None or largest < best[0] or (largest == best[0] and same):
-                best = (largest, cut)
+            score = largest if same else largest * (1.0 + SWITCH_GAIN)
+            if best is None or score < best[0]:
+                best = (score, cut)
         self.cut = best[1]
 
     def _make_part(self, rec: dict, moved2: float) -> Part:

@@ -211,8 +211,9 @@ def sliding(tmp_path_factory) -> Path:
 
 def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
     """2 ranks to t = 0.02 s, then on 4 ranks and on 1 to the end: every frame and checkpoint is
-    one rank's, springs included (each bead changes rank 4 to 18 times on 2 ranks, median 9: across
-    the cuts, and where the cut axis turns from z, while the beads fall, to x as they slide)."""
+    one rank's, springs included (each bead changes rank 2 to 10 times on 2 ranks, median 5: across
+    the cuts, and where the cut axis turns between z, while the beads fall and bounce, and x, as
+    they slide)."""
     root = sliding
     run_ok(sphere("run", "case.toml", "-o", "two", "-q", "--until", "0.02", ranks=2, cwd=root))
     log = (root / "two" / "run.log").read_text()

@@ -132,3 +132,19 @@ def test_more_ranks_than_cells_along_any_axis_are_cut_into_pencils():
     steps._cut(ref)
     assert [axis for axis, _ in steps.cut] == [0, 1]
     assert sorted(set(steps._owners(steps._cut_cells(ref))[0])) == [0, 1, 2, 3]
+
+
+def test_the_last_cut_stays_unless_another_holds_two_per_cent_fewer():
+    """Rows of 10 cells, 100 particles a cell but more in the two middle rows, on two ranks cut
+    along y before: slabs along x hold 6/10 of the bed, slabs along y 1 % more (8 more a middle
+    cell), then 5 % more (40 more). Only the second moves the cut to x: each change moves most
+    particles between ranks."""
+    for extra, axis in ((8, 1), (40, 0)):
+        counts = np.full((10, 10), 100)
+        counts[:, 4:6] += extra
+        x, y = np.nonzero(counts)
+        ref = np.repeat(np.stack((x + 0.5, y + 0.5, np.full(100, 0.5)), axis=1), counts.ravel(), axis=0)
+        steps = RankSteps(TwoRanks(np.zeros(10 + 10)), template("particles", (10, 10, 1)))
+        steps.cut = ((1, np.array([0, 5, 10])),)
+        steps._cut(ref)
+        assert steps.cut[0][0] == axis, extra
