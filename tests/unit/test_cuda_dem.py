@@ -442,8 +442,11 @@ def test_the_energy_budget_is_booked_on_the_gpu_as_on_the_cpu(tmp_path, hertz, w
     expected = [True, walls == MOVING_WALLS, True, friction > 0.0, hertz]
     assert list(terms) == expected, terms
     one, other = gpu.budget.observables(gpu.state), cpu.budget.observables(cpu.state)
+    # on a GPU the residual and the energy change are differences of terms that differ by the
+    # FMA round-off: compared against the largest term
+    scale = max(abs(value) for value, _ in other.values())
     for name, (value, _) in other.items():
-        assert math.isclose(one[name][0], value, rel_tol=RTOL, abs_tol=RTOL * 1e-12), name
+        assert math.isclose(one[name][0], value, rel_tol=RTOL, abs_tol=RTOL * scale), name
 
 
 def test_no_gpu_is_a_case_error_naming_the_key(tmp_path, monkeypatch):
