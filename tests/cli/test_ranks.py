@@ -23,6 +23,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from test_vans1d_bad_input import CASE as VANS_CASE
 
 from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint
 
@@ -458,40 +459,25 @@ def test_a_particle_gone_bad_on_a_rank_stops_every_rank_as_one_rank_stops(tmp_pa
     assert newest_valid_checkpoint(tmp_path / "two" / "checkpoints") is not None
 
 
-# 8 light beads (10 kg/m^3) at rest in a 4 m/s stream of water: the drag relaxes them in 4.8 us,
-# under dt = 15 us, so the fluid's check fails at the first step while no bead yet moves half its
-# radius in a step (the motion's check passes there, and fails a step later)
-UNSTABLE_DRAG = """\
-[simulation]
-duration = 0.003
-dt = 1.5e-5
-stability = "contact"
-blowup_check_every = 1
-
-[domain]
-upper = [0.006, 0.006, 0.01]
-periodic = [true, true, false]
-gravity = [0.5, 0.0, -9.8]
-
-[particles]
-count = 8
-density = 10.0
-radius = { distribution = "fixed", value = 0.001 }
-placement = { method = "lattice" }
-
-[contact]
-normal_stiffness = 10.0
-
-[[walls]]
-face = "z-"
-
-[fluid]
-model = "vans1d"
-viscosity = 1.0e-6
-surface = 0.008
-cells = 20
-flow = { kind = "profile", z = [0.0, 0.008], u = [4.0, 4.0] }
-"""
+# 8 light beads (10 kg/m^3) at rest in a 4 m/s stream of water (the VANS case of
+# test_vans1d_bad_input.py): the drag relaxes them in 4.8 us, under dt = 15 us, so the fluid's
+# check fails at the first step while no bead yet moves half its radius in a step (the motion's
+# check passes there, and fails a step later)
+UNSTABLE_DRAG = VANS_CASE
+for _old, _new in (
+    (
+        'duration = 0.0002\ndt = "auto"',
+        'duration = 0.003\ndt = 1.5e-5\nstability = "contact"\nblowup_check_every = 1',
+    ),
+    ("density = 2500.0", "density = 10.0"),
+    ("normal_stiffness = 1.0e4", "normal_stiffness = 10.0"),
+    (
+        'flow = { kind = "solved", mixing_length = "li-sawamoto" }',
+        'flow = { kind = "profile", z = [0.0, 0.008], u = [4.0, 4.0] }',
+    ),
+):
+    assert UNSTABLE_DRAG.count(_old) == 1, _old
+    UNSTABLE_DRAG = UNSTABLE_DRAG.replace(_old, _new)
 
 
 def test_a_fluid_gone_bad_on_the_ranks_stops_the_run_as_on_one_rank(tmp_path):
