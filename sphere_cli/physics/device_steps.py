@@ -321,6 +321,9 @@ class DeviceSteps:
         """The energy budget's shares, and its copies of the step's half-step velocities and
         last wall springs (taken before each step's contacts), on the device; empty walls
         without walls (kernels/observe/cuda_energy_budget.py)."""
+        from ..kernels.observe.cuda_energy_budget import book
+
+        self.book = book  # imported only where the budget runs on a GPU
         to, empty = self.cuda.to_device, self.cuda.device_array
         n = state.particles.count
         d = self.d
@@ -632,17 +635,16 @@ class DeviceSteps:
 
     def _book(self, n: int, dt: float) -> None:
         """The energy budget's shares of the step (EnergyBudget.finish_step)."""
-        from ..kernels.observe.cuda_energy_budget import book
-
         d, rows = self.d, self.rows
         wall_springs = self.walls is not None and self.wall_springs
         self._launch(
-            book, n, d["pos"], d["vel_half"], d["angvel_half"], d["vel_pred"], d["angvel_pred"], d["vel"],
-            d["angvel"], d["radius"], d["mass"], d["inertia"], d["inv_mass"], d["inv_inertia"], d["material"],
-            rows.nbr, rows.count, self.hist_next, self.springs, d["table"], self.contact.law_code,
-            self.contact.rolling, d["body_acc"], d["length"], d["periodic"], d["wall_axis"], d["wall_sign"],
-            d["wall_coord"], d["wall_vel_half"], d["wall_vel_pred"], d["wall_vel"], d["wall_table"],
-            d["wall_hist_last"], wall_springs, dt, d["budget_scratch"], d["booked"], d["no_spring"],
+            self.book, n, d["pos"], d["vel_half"], d["angvel_half"], d["vel_pred"], d["angvel_pred"],
+            d["vel"], d["angvel"], d["radius"], d["mass"], d["inertia"], d["inv_mass"], d["inv_inertia"],
+            d["material"], rows.nbr, rows.count, self.hist_next, self.springs, d["table"],
+            self.contact.law_code, self.contact.rolling, d["body_acc"], d["length"], d["periodic"],
+            d["wall_axis"], d["wall_sign"], d["wall_coord"], d["wall_vel_half"], d["wall_vel_pred"],
+            d["wall_vel"], d["wall_table"], d["wall_hist_last"], wall_springs, dt, d["budget_scratch"],
+            d["booked"], d["no_spring"],
         )  # fmt: skip
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:
