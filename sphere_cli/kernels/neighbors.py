@@ -326,3 +326,66 @@ def fill_half_rows(full_nbr, full_count, full_hist, springs, start, half_nbr, hi
                     for a in range(3):
                         hist[start[i] + m, a] = full_hist[i, k, a]
                 m += 1
+
+
+@njit(cache=True)
+def rows_by_global_index(idx, gid, nbr, nbr_count, start, hist, springs, row_start, partner, spring):
+    """The half rows of particles idx as a rank sends them (physics/rank_steps.py): row m (of
+    particle idx[m]) at row_start[m] .. row_start[m+1] of partner, each partner by its global
+    index gid[j], and (springs) its spring in the same place of spring."""
+    cap = nbr.shape[1]
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        first = row_start[m]
+        for k in range(min(nbr_count[i], cap)):
+            partner[first + k] = gid[nbr[i, k]]
+            if springs:
+                for a in range(3):
+                    spring[first + k, a] = hist[start[i] + k, a]
+
+
+@njit(cache=True)
+def local_partners(gid, row_start, partner, where, count):
+    """Each received partner's local index (-1 for one not held here) into where, and the
+    partners held of each row into count. A row's partners ascend from above its own particle,
+    as gid does: each is searched from the last one's place, in steps doubling until past it,
+    then by halves (a partner is mostly a few places on)."""
+    n = gid.shape[0]
+    for m in range(n):
+        held = 0
+        lo = m + 1
+        for s in range(row_start[m], row_start[m + 1]):
+            step = 1
+            hi = lo
+            while hi < n and gid[hi] < partner[s]:
+                lo = hi + 1
+                hi += step
+                step *= 2
+            hi = min(hi, n)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if gid[mid] < partner[s]:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            if lo < n and gid[lo] == partner[s]:
+                where[s] = lo
+                held += 1
+            else:
+                where[s] = -1
+        count[m] = held
+
+
+@njit(cache=True)
+def fill_rows(row_start, where, spring, springs, start, nbr, hist):
+    """The rows of a list from the received ones (local_partners' where): the partners held, in
+    their order, and (springs) their springs packed from start."""
+    for m in range(row_start.shape[0] - 1):
+        k = 0
+        for s in range(row_start[m], row_start[m + 1]):
+            if where[s] >= 0:
+                nbr[m, k] = where[s]
+                if springs:
+                    for a in range(3):
+                        hist[start[m] + k, a] = spring[s, a]
+                k += 1

@@ -71,7 +71,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..kernels.motion import first_unstable, kick, kick_drift, kick_drift_serial, kick_serial
-from ..kernels.neighbors import row_starts
+from ..kernels.neighbors import fill_rows, local_partners, row_starts, rows_by_global_index
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
@@ -714,19 +714,16 @@ class RankSteps:
         particles = Particles(**{name: rec[name] for name in CARRIED})
         # each row's partners by local index, those this rank does not hold left out (they lie
         # beyond the ghosts: out of reach of every particle here)
-        row = np.repeat(np.arange(n), rec["row_count"])
-        where = np.minimum(np.searchsorted(rec["gid"], rec["partner"]), max(n - 1, 0))
-        keep = rec["gid"][where] == rec["partner"] if n else np.zeros(0, dtype=bool)
-        row, where = row[keep], where[keep]
-        count = np.bincount(row, minlength=n).astype(np.int32)
-        slot = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+        row_start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(rec["row_count"], out=row_start[1:])
+        where = np.empty(row_start[-1], dtype=np.int64)
+        count = np.empty(n, dtype=np.int32)
+        local_partners(rec["gid"], row_start, rec["partner"], where, count)
         nbr = np.zeros((n, t.capacity), dtype=np.int32)
-        nbr[row, slot] = where
         start = np.zeros(n + 1, dtype=np.int64)
         row_starts(count, t.capacity, start)
         hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
-        if t.springs:  # the kept pairs, row after row, are the packed springs' order
-            hist[: start[-1]] = rec["spring"][keep]
+        fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist)
         nl = NeighborList(
             skin=t.skin,
             nbr=nbr,
@@ -882,14 +879,17 @@ def _pack(
     rec = {name: getattr(p, name)[idx] for name in CARRIED}
     rec["gid"] = gid[idx].astype(np.int64)
     rec["ref"] = ref[idx]
-    cap = nl.nbr.shape[1]
-    count = np.minimum(nl.nbr_count[idx], cap)
-    rec["row_count"] = count.astype(np.int64)
-    slots = np.arange(cap)[None, :] < count[:, None]
-    rec["partner"] = gid[nl.nbr[idx][slots]].astype(np.int64)
+    count = np.minimum(nl.nbr_count[idx], nl.nbr.shape[1]).astype(np.int64)
+    rec["row_count"] = count
+    row_start = np.zeros(idx.size + 1, dtype=np.int64)
+    np.cumsum(count, out=row_start[1:])
+    rec["partner"] = np.empty(row_start[-1], dtype=np.int64)
+    spring = np.empty((row_start[-1] if springs else 0, 3))
+    rows_by_global_index(
+        idx, gid, nl.nbr, nl.nbr_count, nl.start, nl.hist, springs, row_start, rec["partner"], spring
+    )
     if springs:
-        k = np.arange(cap)[None, :]
-        rec["spring"] = nl.hist[(nl.start[idx][:, None] + k)[slots]]
+        rec["spring"] = spring
         if walls is not None:
             rec["wall_hist"] = walls.hist[idx]
     if fluid is not None:

@@ -1,0 +1,58 @@
+"""The half rows a rank sends at a list build, by global index, and the list another rank makes
+of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
+physics/rank_steps.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sphere_cli.kernels.neighbors import fill_rows, local_partners, row_starts, rows_by_global_index
+
+
+def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held():
+    """Particles with global indices 10, 20, ..., 90; rows of 0 to 3 partners. Sent, then received
+    by a rank that holds all but global index 50: each row keeps its partners held, in order,
+    with their springs; a row's partners far along (the search's doubling steps) are found."""
+    gid = np.arange(10, 100, 10, dtype=np.int64)
+    rows = {0: [1, 2, 8], 1: [4], 2: [3, 4, 5], 5: [6, 8], 6: [7, 8]}
+    cap = 4
+    nbr = np.zeros((9, cap), dtype=np.int32)
+    nbr_count = np.zeros(9, dtype=np.int32)
+    for i, row in rows.items():
+        nbr[i, : len(row)] = row
+        nbr_count[i] = len(row)
+    start = np.zeros(10, dtype=np.int64)
+    row_starts(nbr_count, cap, start)
+    hist = np.arange(3 * start[-1], dtype=np.float64).reshape(-1, 3)
+
+    sent = np.array([0, 2, 5, 6], dtype=np.int64)
+    row_start = np.zeros(5, dtype=np.int64)
+    np.cumsum(nbr_count[sent], out=row_start[1:])
+    partner = np.empty(row_start[-1], dtype=np.int64)
+    spring = np.empty((row_start[-1], 3))
+    rows_by_global_index(sent, gid, nbr, nbr_count, start, hist, True, row_start, partner, spring)
+    assert list(partner) == [20, 30, 90, 40, 50, 60, 70, 90, 80, 90]
+    assert np.array_equal(spring, np.concatenate([hist[start[i] : start[i + 1]] for i in sent]))
+
+    # the receiver holds every particle but 50 (local index 4 is global 60); the rows it got are
+    # those of its particles 10, 30, 60 and 70, the others' rows empty
+    held = np.array([10, 20, 30, 40, 60, 70, 80, 90], dtype=np.int64)
+    counts = np.zeros(8, dtype=np.int64)
+    counts[[0, 2, 4, 5]] = nbr_count[sent]
+    received = np.zeros(9, dtype=np.int64)
+    np.cumsum(counts, out=received[1:])
+    where = np.empty(received[-1], dtype=np.int64)
+    kept = np.empty(8, dtype=np.int32)
+    local_partners(held, received, partner, where, kept)
+    assert list(where) == [1, 2, 7, 3, -1, 4, 5, 7, 6, 7]
+    assert list(kept) == [3, 0, 2, 0, 2, 2, 0, 0]
+
+    new_start = np.zeros(9, dtype=np.int64)
+    row_starts(kept, cap, new_start)
+    new_nbr = np.zeros((8, cap), dtype=np.int32)
+    new_hist = np.zeros((new_start[-1], 3))
+    fill_rows(received, where, spring, True, new_start, new_nbr, new_hist)
+    expected = [[1, 2, 7], [], [3, 4], [], [5, 7], [6, 7], [], []]
+    assert [list(new_nbr[i, : kept[i]]) for i in range(8)] == expected
+    # the pair (30, 50) is gone with its spring; every other spring is where its pair is
+    assert np.array_equal(new_hist, np.delete(spring, 4, axis=0))
