@@ -7,13 +7,14 @@ rank, or along two into pencils, p x q ranks (physics/neighbors.py search_cells)
 where the particles are shared evenly (or, with simulation.rank_balance = "time", the measured
 work) at each list build (a cut never changes a result). The cut is chosen again each time: of
 the slabs along each axis with a cell for every rank and the pencils along each pair of axes
-and each p x q that fits them, the one whose busiest rank holds the fewest particles, own and
-ghosts, the last one kept unless another holds 2 % fewer (a bed lying in a tall box is cut
-across its width, not through its few layers: finer shares, thinner ghost layers and each rank
-its part of the floor; a square bed between walls on four ranks into 2 x 2 pencils). A rank
-owns the particles whose position at the last list build lies in its part, and holds as ghosts
-those within one cell of it, diagonals included: every pair listed at that build then lies
-within one rank's particles, own or ghost, until the next build.
+and each p x q that fits them (a pair of more than PENCIL_GRID_CELLS cells only where no slabs
+fit: its counts are summed over the ranks at each cut), the one whose busiest rank holds the
+fewest particles, own and ghosts, the last one kept unless another holds 2 % fewer (a bed lying
+in a tall box is cut across its width, not through its few layers: finer shares, thinner ghost
+layers and each rank its part of the floor; a square bed between walls on four ranks into 2 x 2
+pencils). A rank owns the particles whose position at the last list build lies in its part,
+and holds as ghosts those within one cell of it, diagonals included: every pair listed at that
+build then lies within one rank's particles, own or ghost, until the next build.
 
 **Same bits.** A rank keeps its particles in ascending global index and runs the one-rank step
 on them (Motion, NeighborSearch, PairContactForces, PlaneWallForces), so each owned particle
@@ -85,11 +86,15 @@ from .walls import PlaneWallForces, WallMotion, push_scratch
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
 # too: the kick-drift of a build's step set them, and the forces read them)
 CARRIED = (*Particles.PROGNOSTIC, "vel_pred", "angvel_pred")
-# the modules split across ranks (the stages, a fluid's own step and the Observer act on the
-# lead's whole scene)
 # a cut along other axes, or into other parts, replaces the last one only where its busiest rank
 # holds this fraction fewer particles: each change moves most particles between ranks
 SWITCH_GAIN = 0.02
+# pencils along a pair of axes are weighed from the particles counted in each of their cells_a x
+# cells_b cells over every rank (an Allreduce at each cut): a pair with more cells is left out
+# where slabs fit (the sparse scene of `sphere bench dem`, 900^3 cells: 6.5 MB a pair)
+PENCIL_GRID_CELLS = 2**18
+# the modules split across ranks (the stages, a fluid's own step and the Observer act on the
+# lead's whole scene)
 SUPPORTED = (
     "wall_motion",
     "particles",
@@ -673,8 +678,12 @@ class RankSteps:
             weight = self.busy / self.part.gid.size
         self.busy = 0.0
         cells = {a: self._cells(ref, a) for a in t.axes}
+        slabs_fit = any(t.cells[a] >= size for a in t.axes)
         pairs = [
-            (a, b) for a, b in itertools.combinations(t.axes, 2) if _pencils(size, t.cells[a], t.cells[b])
+            (a, b)
+            for a, b in itertools.combinations(t.axes, 2)
+            if _pencils(size, t.cells[a], t.cells[b])
+            and (t.cells[a] * t.cells[b] <= PENCIL_GRID_CELLS or not slabs_fit)
         ]
         counts = [np.bincount(cells[a], minlength=t.cells[a]) * weight for a in t.axes]
         counts += [

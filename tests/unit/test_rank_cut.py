@@ -148,3 +148,28 @@ def test_the_last_cut_stays_unless_another_holds_two_per_cent_fewer():
         steps.cut = ((1, np.array([0, 5, 10])),)
         steps._cut(ref)
         assert steps.cut[0][0] == axis, extra
+
+
+class Counting(TwoRanks):
+    """TwoRanks that records the length of each Allreduce."""
+
+    def __init__(self, size: int):
+        super().__init__(0.0, size)
+        self.sent: list[int] = []
+
+    def Allreduce(self, send, receive, op):  # noqa: N802 (mpi4py's name)
+        self.sent.append(send.size)
+        super().Allreduce(send, receive, op)
+
+
+def test_a_huge_sparse_box_sums_its_pencil_counts_only_where_no_slabs_fit():
+    """1000 x 1000 cells: where slabs fit (2 ranks along x or y), the cut sums the counts of each
+    axis alone, not the million cells of the pair; with 2000 ranks no axis has a cell for each,
+    and the pencils' counts are summed."""
+    ref = np.array([[0.5, 0.5, 0.5], [999.5, 999.5, 0.5]])
+    for size, sent in ((4, 2000), (2000, 2000 + 1000 * 1000)):
+        world = Counting(size)
+        steps = RankSteps(world, template("particles", (1000, 1000, 1), size))
+        steps._cut(ref)
+        assert world.sent == [sent]
+        assert len(steps.cut) == (1 if size == 4 else 2)
