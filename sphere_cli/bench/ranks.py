@@ -4,7 +4,8 @@ alternate round by round (this machine's speed drifts by tens of per cent betwee
 each round's speed-up over one rank is reported with its spread.
 
 A timing is one call of advance as the run loop makes it between two outputs (the ranks'
-steps); the gather of the state at the lead that an output then needs is timed apart. Each rank
+steps), after one such call untimed; the gather of the state at the lead that an output then
+needs is timed apart. Each rank
 count runs in its own `mpiexec -n K python -m sphere_cli bench ranks-member` process group,
 which prints its timings as one JSON line.
 """
@@ -47,7 +48,9 @@ def member(n: int, steps: int, repeats: int) -> None:
         raise SystemExit(world.follow())
     with ranks.leading(world):
         scene = settled_scene(n, log=lambda *_: None)
-        advance(scene, 2, sync=False)  # kernels loaded, the scene shared out
+        # kernels loaded, the scene shared out, and (most likely) a list build of the parts: the
+        # first loads its kernels from Numba's cache on each rank, 0.1 s once a run
+        advance(scene, steps, sync=False)
         times, gathers = [], []
         for _ in range(repeats):
             started = time.perf_counter()
