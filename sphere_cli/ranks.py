@@ -13,6 +13,7 @@ mpi4py is imported only when the launcher started more than one rank.
 
 from __future__ import annotations
 
+import logging
 import os
 import pickle
 import signal
@@ -134,6 +135,9 @@ class World:
         # SIGTERM (scancel, a time limit) and Ctrl-C reach every rank: the lead checkpoints and
         # ends the run, so the followers outlive the signal, noting when it came
         signalled: list[float] = []
+        # the lead logs the run (run.log, the launcher's stderr); the fluid steps every rank
+        # takes alike (FluidModule.steps_on_ranks) would log their warnings once a rank there
+        logging.getLogger("sphere").addHandler(logging.NullHandler())
         for number in (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1):
             signal.signal(number, lambda *_: signalled.append(time.monotonic()))
         try:

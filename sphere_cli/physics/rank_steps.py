@@ -46,11 +46,13 @@ its per-particle arrays (`particle_arrays`) travelling with the particles; those
 writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's f_other)
 go to the ghosts with the force, and a sum over all particles inside its step (the
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
-own particles in global order (`_whole`). The fluid's step itself (porosity, pressure solve)
-runs at the lead alone: the grids are not cut. The 1D VANS column (FluidModule.steps_on_ranks)
-steps on every rank instead, with nothing gathered: each rank's drag of its particles, the
-layer profiles summed over every rank's particles in global order (`_whole`), the column solved
-alike on every rank.
+own particles in global order (`_whole`). The Navier-Stokes step itself (porosity, pressure
+solve) runs at the lead alone on the scene gathered there: the grids are not cut. The 1D VANS
+column and the Darcy pore pressure (FluidModule.steps_on_ranks) step on every rank instead, with
+nothing gathered: VANS from each rank's drag of its particles and the layer profiles summed over
+every rank's particles in global order, Darcy from the porosity of every rank's particles, taken
+in global order (`_whole`); either solved alike on every rank. A failure there is met by every
+rank at once and reported by the lead alone.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -452,7 +454,13 @@ class RankSteps:
             state.clock.step += 1
         fluid = self.t.fluid
         if fluid is not None and fluid.steps_on_ranks and fluid.after_due(state.clock.step, state.clock):
-            self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
+            try:
+                self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
+            except Exception:
+                if self.world.leads:
+                    raise
+                # every rank meets the same failure (the same step of the same arrays): the lead
+                # reports it, as one rank does, and ends the run; a follower waits for that
 
     def _kernels(self) -> tuple:
         """The kick-drift, the contacts (pairs, then plane walls) and the kick of this rank's

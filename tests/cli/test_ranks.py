@@ -23,6 +23,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from cli_test_support import edit
+from test_fluid_moving_grid_input import DARCY_FOLLOWING, DARCY_TOP_WALL
 from test_vans1d_bad_input import CASE as VANS_CASE
 
 from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint
@@ -362,12 +364,18 @@ def oedometer() -> str:
 
 
 def test_a_darcy_oedometer_with_the_pore_pressure_on_its_wall_is_one_ranks_on_two(tmp_path):
-    """The pore pressure steps at rank 0 on the whole bed, its field reaches every rank, and
-    each rank adds its push on the stress-controlled top wall (the wall's force observable
-    included)."""
-    (tmp_path / "case.toml").write_text(oedometer())
+    """Every rank steps the pore pressure from the porosity of the whole bed, and each adds its
+    push on the stress-controlled top wall (the wall's force observable included). The bed's
+    porosity, 0.397, is clamped at 0.39: the warning is logged once, by rank 0 (run.log and
+    the launcher's stderr), not once a rank."""
+    assert "porosity_max = 0.6" in oedometer()
+    (tmp_path / "case.toml").write_text(oedometer().replace("porosity_max = 0.6", "porosity_max = 0.39"))
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
-    run_ok(sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path))
+    split = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
+    run_ok(split)
+    warning = "Darcy: porosity clamped to [0.1, 0.39]"
+    assert (tmp_path / "two" / "run.log").read_text().count(warning) == 1
+    assert split.stderr.count(warning) == 1, split.stderr
     assert_runs_bitwise(tmp_path / "one", tmp_path / "two")
     with h5py.File(tmp_path / "one" / "trajectory.h5", "r") as f:
         pushed = f["observables/wall_force/value"][-1, 1, 2]
@@ -493,6 +501,18 @@ def test_a_fluid_gone_bad_on_the_ranks_stops_the_run_as_on_one_rank(tmp_path):
         assert "at step 1 " in result.stderr and "drag relaxation time" in result.stderr, result.stderr
         errors.append([line for line in result.stderr.splitlines() if line.startswith("sphere: error:")])
     assert errors[0] == errors[1]
+
+
+def test_a_fluid_step_failing_on_every_rank_is_reported_once(tmp_path):
+    """tests/cli/test_fluid_moving_grid_input.py's wall squeezing the Darcy cells below a
+    particle: every rank's pore-pressure step meets it at the same step; rank 0 reports it with
+    one rank's exit code, 70, and the others leave the report to it."""
+    (tmp_path / "case.toml").write_text(edit(DARCY_FOLLOWING, "[fluid]", DARCY_TOP_WALL))
+    result = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
+    assert result.returncode == 70, result.stderr
+    message = "the fluid cells (fluid.grid.follow_top_wall, 8 along z)"
+    assert result.stderr.count(message) == 1 and "rank 0, during the steps" in result.stderr, result.stderr
+    assert json.loads((tmp_path / "two" / "status.json").read_text())["state"] == "failed"
 
 
 # A lead that sends a command no follower knows, or fails itself, inside a collective step; argv:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import types
 
 import numpy as np
 
@@ -37,6 +38,9 @@ class Darcy(FluidModule):
     """The Darcy fluid of a scene (physics/fluid_plugin.py has the hooks and where they run)."""
 
     model = "darcy"
+    # split across MPI ranks, every rank takes the pore-pressure step from the porosity of every
+    # rank's particles (step_on_rank): nothing is gathered at the lead, nothing sent back
+    steps_on_ranks = True
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
@@ -265,7 +269,7 @@ class Darcy(FluidModule):
         if self.alone:  # open fluid, porosity 1, seen through the clamp as every open cell is
             s.porosity[...] = self.pore.config.porosity_max
         else:
-            self._measure(state)
+            self._measure(state.particles)
         self.porosity_previous[...] = s.porosity
         s.porosity_rate[...] = 0.0
         self.pore.update_permeability()
@@ -274,11 +278,29 @@ class Darcy(FluidModule):
             self.wall_stiffness = self._undrained_stiffness()
 
     def after_step(self, state) -> None:
+        if self.stepped_on_ranks == state.clock.step:
+            return  # taken by every MPI rank (step_on_rank), the lead's arrays with it
+        self._step(state, state.particles)
+
+    def step_on_rank(self, state, whole, held) -> None:
+        """after_step on one MPI rank's part (physics/rank_steps.py), whole(*arrays) the arrays
+        of every rank's own particles in global order: the porosity is measured from all of
+        them, as on one rank, and the pore pressure stepped alike on every rank, bit for bit."""
+        p = state.particles
+        pos, vel, radius = whole(p.pos, p.vel, p.radius)
+        self._step(state, types.SimpleNamespace(pos=pos, vel=vel, radius=radius))
+
+    def rank_copy(self, whole) -> Darcy:
+        """Itself: nothing is kept per particle, and every rank steps the whole fluid
+        (step_on_rank), which each rank's part then reads."""
+        return self
+
+    def _step(self, state, particles) -> None:
         clock = state.clock
         s = self.pore.state
         grid_speed = self._follow_wall(state) if self.top_wall is not None else 0.0
         if not self.alone:  # without particles the porosity stays as initialize() measured it
-            self._measure(state)
+            self._measure(particles)
             np.subtract(s.porosity, self.porosity_previous, out=s.porosity_rate)
             s.porosity_rate *= 1.0 / self.fluid_dt
             if grid_speed:
@@ -314,9 +336,9 @@ class Darcy(FluidModule):
                 clock.step,
             )  # fmt: skip
 
-    def _measure(self, state) -> None:
+    def _measure(self, particles) -> None:
         s = self.pore.state
-        self.porosity.measure(state.particles, s.porosity, mean_velocity=s.particle_velocity)
+        self.porosity.measure(particles, s.porosity, mean_velocity=s.particle_velocity)
 
     # -- particles -------------------------------------------------------------------------------
 
