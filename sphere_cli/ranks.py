@@ -96,7 +96,11 @@ class World:
         return self.comm.allgather(os.getpid())
 
     def abort(self, code: int = FAILED) -> None:
+        """End every rank with `code`. MPI_Abort asks the launcher to end them and may return
+        before this process is ended: it exits at once, or the exception being reported would
+        go on to the run loop's handlers and report itself a second time."""
         self.comm.Abort(code)
+        os._exit(code)
 
     def record_failures_in(self, run_path) -> None:
         """The lead's run directory, told to every rank: a rank that fails alone records its error
