@@ -73,10 +73,8 @@ class FluidModule(Module):
     # the coupling when [fluid.coupling] gives neither steps nor interval: 1 step, or this [s]
     default_interval: float | None = None
     fluid_dt = math.nan  # the fluid step, coupling_steps x dt [s] (start_coupling)
-    # split across MPI ranks (physics/rank_steps.py), its own step runs on every rank
-    # (step_on_rank(state, whole, held)) instead of at the lead on the gathered scene; the step
-    # it last took there, which the lead's after_step then leaves out
-    steps_on_ranks = False
+    # split across MPI ranks (physics/rank_steps.py), the last step after which every rank took
+    # its own step (step_on_rank), which the lead's after_step then leaves out
     stepped_on_ranks: int | None = None
 
     def __init__(self, loaded, state):
@@ -119,6 +117,14 @@ class FluidModule(Module):
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split
         across ranks."""
         return None
+
+    def step_on_rank(self, state, whole, held) -> None:
+        """after_step on one MPI rank's part (physics/rank_steps.py), for a model that runs split
+        (particle_arrays): `state` the part's (its particles those the rank holds, `held` their
+        global indices), whole(*arrays) the arrays of every rank's own particles in global
+        order (a collective). Every rank takes the same step from them, bit for bit one rank's,
+        so nothing is gathered at the lead nor sent back."""
+        raise NotImplementedError(f"the {self.model} fluid does not step on MPI ranks")
 
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the

@@ -38,21 +38,18 @@ resumes on any rank count. The steps run one at a time in Python with mpi4py's m
 exchange of ghost forces and one reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
-one rank's order over the ranks (`_wall_kick`). **Stages** and a **fluid's own step** run at
-the lead on its whole scene, gathered for the steps where they read it (a stage that may end,
-a fluid step); when a stage begins or the fluid has stepped, it is shared out again, the
-fluid's own arrays (profiles, grids) whole on every rank. Its force and kick run on every rank,
-its per-particle arrays (`particle_arrays`) travelling with the particles; those its force
-writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's f_other)
-go to the ghosts with the force, and a sum over all particles inside its step (the
+one rank's order over the ranks (`_wall_kick`). **Stages** run at the lead on its whole scene,
+gathered for the steps where a stage may end; when one begins, the scene is shared out again.
+A **fluid** keeps its own arrays (profiles, grids) whole on every rank. Its force and kick run
+on every rank, its per-particle arrays (`particle_arrays`) travelling with the particles; those
+its force writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's
+f_other) go to the ghosts with the force, and a sum over all particles inside its force (the
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
-own particles in global order (`_whole`). The Navier-Stokes step itself (porosity, pressure
-solve) runs at the lead alone on the scene gathered there: the grids are not cut. The 1D VANS
-column and the Darcy pore pressure (FluidModule.steps_on_ranks) step on every rank instead, with
-nothing gathered: VANS from each rank's drag of its particles and the layer profiles summed over
-every rank's particles in global order, Darcy from the porosity of every rank's particles, taken
-in global order (`_whole`); either solved alike on every rank. A failure there is met by every
-rank at once and reported by the lead alone.
+own particles in global order (`_whole`). Its own step (FluidModule.step_on_rank: the VANS
+column, the Darcy pore pressure, the Navier-Stokes grid) runs on every rank alike from every
+rank's own particles and their fluid arrays in global order (`_whole`), nothing gathered at
+the lead nor sent back: the grids are not cut, and each rank solves the whole fluid. A failure
+there is met by every rank at once and reported by the lead alone.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -316,41 +313,21 @@ class RankSteps:
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         def work():
             # again from the lead's scene when it is not the ranks' (a stage that began has set
-            # walls, friction and perhaps moved glued spheres); after the fluid's step, its own
-            # arrays and its particles' (the particles themselves unchanged)
+            # walls, friction and perhaps moved glued spheres)
             stage_began = self.stages is not None and self.stages.ended_at == state.clock.step
             if self.at_step != state.clock.step or stage_began:
                 self._send_out(state)
-            elif self._lead_steps_fluid_at(state.clock.step, state.clock):
-                self.world.order("fluid", self.fluid, state.fluid)
-                self._take_fluid(self.fluid, state.fluid)
             self.world.order("steps", steps)
             self._steps(steps)
 
         self.world.together(work)
         self.at_step = state.clock.step + steps
-        if self._fluid_steps_at(self.at_step, state.clock) and self.fluid.steps_on_ranks:
+        if self.fluid is not None and self.fluid.after_due(self.at_step, state.clock):
             self.fluid.stepped_on_ranks = self.at_step  # taken in _steps, on every rank
         self.host_stale = True
-        if self._read_after(state.clock.step + steps, state.clock):
-            self.to_host(state)
+        if self.stages is not None and self.stages.after_due(self.at_step, state.clock):
+            self.to_host(state)  # a stage's test reads the lead's scene (and only there)
         return steps, False
-
-    def _read_after(self, step: int, clock) -> bool:
-        """True if an after_step hook at `step` reads or changes the lead's scene: the fluid's
-        step at the lead, or a stage that may end there (tested only there)."""
-        return self._lead_steps_fluid_at(step, clock) or (
-            self.stages is not None and self.stages.after_due(step, clock)
-        )
-
-    def _fluid_steps_at(self, step: int, clock) -> bool:
-        """True if the fluid takes its own step in the after_step of `step`."""
-        return self.fluid is not None and self.fluid.after_due(step, clock)
-
-    def _lead_steps_fluid_at(self, step: int, clock) -> bool:
-        """True if the fluid takes its own step after `step` at the lead, on the scene gathered
-        there (not one that steps on every rank: FluidModule.steps_on_ranks)."""
-        return self._fluid_steps_at(step, clock) and not self.fluid.steps_on_ranks
 
     def hand_over(self, state: State) -> None:
         """to_host: on ranks the steps are called only by the run loop and the benchmark
@@ -399,8 +376,6 @@ class RankSteps:
             self._gather()
         elif command == "stable":
             self._stable()
-        elif command == "fluid":
-            self._take_fluid(*args)
         elif command == "share":
             self.t = args[0]
             self._share([])
@@ -453,7 +428,7 @@ class RankSteps:
                 part.budget.finish_step(state)
             state.clock.step += 1
         fluid = self.t.fluid
-        if fluid is not None and fluid.steps_on_ranks and fluid.after_due(state.clock.step, state.clock):
+        if fluid is not None and fluid.after_due(state.clock.step, state.clock):
             try:
                 self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
             except Exception:
@@ -480,13 +455,6 @@ class RankSteps:
             (contacts_serial if serial else contacts, (cross, pairs, walls)),
             (kick_serial if serial else kick, kicks),
         )
-
-    def _take_fluid(self, module, fluid_state) -> None:
-        """The lead's fluid after its step: its own arrays whole, its particles' arrays those of
-        this rank's particles (and the fluid of the parts its next list builds make)."""
-        part = self.part
-        self.t.fluid, self.t.fluid_state = module, fluid_state
-        part.fluid = self._fluid_for(part.state, lambda _, whole: whole[part.gid])
 
     def _fluid_for(self, state: State, pick):
         """The lead's fluid (the template's) for a rank's particles: its own arrays shared,

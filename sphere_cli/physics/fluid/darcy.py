@@ -38,9 +38,6 @@ class Darcy(FluidModule):
     """The Darcy fluid of a scene (physics/fluid_plugin.py has the hooks and where they run)."""
 
     model = "darcy"
-    # split across MPI ranks, every rank takes the pore-pressure step from the porosity of every
-    # rank's particles (step_on_rank): nothing is gathered at the lead, nothing sent back
-    steps_on_ranks = True
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
+import types
 import warnings
 from dataclasses import dataclass
 
@@ -627,9 +628,33 @@ class NavierStokes(FluidModule):
         twin = copy.copy(self)
         twin.drag = copy.copy(self.drag)
         twin.drag.whole = whole
+        twin.source = self  # the rank's whole fluid, which takes the fluid's steps (step_on_rank)
         return twin
 
+    def step_on_rank(self, state, whole, held) -> None:
+        """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin (`held`:
+        the global indices of its particles): the module it was copied from (the lead's scene's
+        own at rank 0) takes the step from every rank's own particles and their drag arrays,
+        whole(*arrays) in global order, as one rank does, bit for bit on every rank; the twin's
+        drag arrays then take its particles' rows of what the step left."""
+        source, p = self.source, state.particles
+        names = [name for _, name in self.particle_arrays(state).values()]
+        pos, vel, radius, inv_mass, *arrays = whole(
+            p.pos, p.vel, p.radius, p.inv_mass, *(getattr(self.drag, name) for name in names)
+        )
+        for name, array in zip(names, arrays, strict=True):
+            setattr(source.drag, name, array)
+        every = types.SimpleNamespace(pos=pos, vel=vel, radius=radius, inv_mass=inv_mass, count=pos.shape[0])
+        source._step(types.SimpleNamespace(particles=every, clock=state.clock, walls=state.walls))
+        for name in names:
+            getattr(self.drag, name)[...] = getattr(source.drag, name)[held]
+
     def after_step(self, state) -> None:
+        if self.stepped_on_ranks == state.clock.step:
+            return  # taken by every MPI rank (step_on_rank), the lead's arrays with it
+        self._step(state)
+
+    def _step(self, state) -> None:
         clock = state.clock
         fs = self.fs
         if self.top_wall is not None:

@@ -121,7 +121,6 @@ class Vans1dState:
 class Vans1d(FluidModule):
     model = "vans1d"
     default_interval = 1.0e-3  # s between fluid updates when [fluid.coupling] gives neither
-    steps_on_ranks = True  # its own step runs on every MPI rank (step_on_rank), from sums over all
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
