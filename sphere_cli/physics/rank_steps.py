@@ -169,6 +169,8 @@ class Part:
     glued_order: np.ndarray  # (k,) their places in the lead's list of glued spheres
     send: dict  # rank -> local indices of own particles that are ghosts there, ascending
     receive: dict  # rank -> local indices of the ghosts it owns, ascending
+    # its own particles, every rank's count of them and their global order (RankSteps._everyone)
+    everyone: tuple | None = None
 
 
 def _refusal(scene) -> str | None:
@@ -529,22 +531,32 @@ class RankSteps:
     def _whole(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         """Collective: the arrays (n, ...) of this rank's particles, of every rank's own
         particles, in global index order (the order one rank sums them in). They travel as
-        columns of doubles beside the global index (integers below 2^53 are exact there)."""
-        part, comm = self.part, self.world.comm
-        own = np.flatnonzero(part.owned)
-        columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
+        columns of doubles (integers below 2^53 are exact there), in one Allgatherv."""
+        own, counts, order = self._everyone()
+        columns = [a[own].reshape(own.size, -1) for a in arrays]
+        widths = [c.shape[1] for c in columns]
         mine = np.concatenate(columns, axis=1, dtype=np.float64)
-        counts = np.array(comm.allgather(mine.size), dtype=np.int64)
-        every = np.empty(int(counts.sum()))
-        comm.Allgatherv(mine.ravel(), [every, counts])
-        every = every.reshape(-1, mine.shape[1])
-        every = every[np.argsort(every[:, 0], kind="stable")]
-        out, first = [], 1
-        for a in arrays:
-            width = columns[len(out) + 1].shape[1]
+        every = np.empty((int(counts.sum()), sum(widths)))
+        self.world.comm.Allgatherv(mine.ravel(), [every, counts * sum(widths)])
+        every = every[order]
+        out, first = [], 0
+        for a, width in zip(arrays, widths, strict=True):
             out.append(every[:, first : first + width].astype(a.dtype).reshape(-1, *a.shape[1:]))
             first += width
         return tuple(out)
+
+    def _everyone(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Collective: this rank's own particles (local indices), every rank's count of them and
+        the order that sorts them all, rank after rank, by global index; found once a list build
+        (the owners change only there)."""
+        part = self.part
+        if part.everyone is None:
+            own = np.flatnonzero(part.owned)
+            counts = np.array(self.world.comm.allgather(own.size), dtype=np.int64)
+            gids = np.empty(int(counts.sum()), dtype=np.int64)
+            self.world.comm.Allgatherv(part.gid[own], [gids, counts])
+            part.everyone = (own, counts, np.argsort(gids, kind="stable"))
+        return part.everyone
 
     def _stable(self) -> bool:
         """Collective: no rank's particles, and no rank's view of the fluid (its own arrays
