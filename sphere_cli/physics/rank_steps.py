@@ -92,8 +92,11 @@ SWITCH_GAIN = 0.02
 # cells_b cells over every rank (an Allreduce at each cut): a pair with more cells is left out
 # where slabs fit (the sparse scene of `sphere bench dem`, 900^3 cells: 6.5 MB a pair)
 PENCIL_GRID_CELLS = 2**18
-# the modules split across ranks (the stages, a fluid's own step and the Observer act on the
-# lead's whole scene)
+# seconds a follower whose fluid step failed waits before it reports the failure itself: every
+# rank takes the same step from the same arrays and meets the same failure, which the lead
+# reports as one rank does, ending every rank; what fails on one rank alone is its own
+FAILURE_GRACE = 30.0
+# the modules split across ranks (the stages and the Observer act on the lead's whole scene)
 SUPPORTED = (
     "wall_motion",
     "particles",
@@ -434,10 +437,9 @@ class RankSteps:
             try:
                 self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
             except Exception:
-                if self.world.leads:
-                    raise
-                # every rank meets the same failure (the same step of the same arrays): the lead
-                # reports it, as one rank does, and ends the run; a follower waits for that
+                if not self.world.leads:  # the lead reports it, as one rank does, and ends them
+                    time.sleep(FAILURE_GRACE)
+                raise
 
     def _kernels(self) -> tuple:
         """The kick-drift, the contacts (pairs, then plane walls) and the kick of this rank's
