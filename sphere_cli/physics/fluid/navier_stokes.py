@@ -638,16 +638,17 @@ class NavierStokes(FluidModule):
         whole(*arrays) in global order, as one rank does, bit for bit on every rank; the twin's
         drag arrays then take its particles' rows of what the step left."""
         source, p = self.source, state.particles
-        names = [name for _, name in self.particle_arrays(state).values()]
+        mine = list(self.particle_arrays(state).values())
+        theirs = list(source.particle_arrays(state).values())
         pos, vel, radius, inv_mass, *arrays = whole(
-            p.pos, p.vel, p.radius, p.inv_mass, *(getattr(self.drag, name) for name in names)
+            p.pos, p.vel, p.radius, p.inv_mass, *(getattr(holder, name) for holder, name in mine)
         )
-        for name, array in zip(names, arrays, strict=True):
-            setattr(source.drag, name, array)
+        for (holder, name), array in zip(theirs, arrays, strict=True):
+            setattr(holder, name, array)
         every = types.SimpleNamespace(pos=pos, vel=vel, radius=radius, inv_mass=inv_mass, count=pos.shape[0])
         source._step(types.SimpleNamespace(particles=every, clock=state.clock, walls=state.walls))
-        for name in names:
-            getattr(self.drag, name)[...] = getattr(source.drag, name)[held]
+        for (holder, name), (whole_holder, _) in zip(mine, theirs, strict=True):
+            getattr(holder, name)[...] = getattr(whole_holder, name)[held]
 
     def after_step(self, state) -> None:
         if self.stepped_on_ranks == state.clock.step:
