@@ -5,9 +5,8 @@ each round's speed-up over one rank is reported with its spread.
 
 A timing is one call of advance as the run loop makes it between two outputs (the ranks'
 steps), after one such call untimed; the gather of the state at the lead that an output then
-needs is timed apart. Each rank
-count runs in its own `mpiexec -n K python -m sphere_cli bench ranks-member` process group,
-which prints its timings as one JSON line.
+needs is timed apart. Each rank count runs in its own `mpiexec -n K python -m sphere_cli bench
+ranks-member` process group, which prints its timings as one JSON line.
 """
 
 from __future__ import annotations
