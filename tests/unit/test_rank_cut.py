@@ -163,7 +163,7 @@ class Counting(TwoRanks):
 
 
 def test_a_huge_sparse_box_sums_its_pencil_counts_only_where_no_slabs_fit():
-    """1000 x 1000 cells: where slabs fit (2 ranks along x or y), the cut sums the counts of each
+    """1000 x 1000 cells: where slabs fit (4 ranks along x or y), the cut sums the counts of each
     axis alone, not the million cells of the pair; with 2000 ranks no axis has a cell for each,
     and the pencils' counts are summed."""
     ref = np.array([[0.5, 0.5, 0.5], [999.5, 999.5, 0.5]])
