@@ -323,6 +323,7 @@ class RunDirectory:
             status = json.loads(self.status_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             status = {}
+        status.pop("activity", None)  # the start's ("building the scene"), over with the run
         try:
             self.logger().log(logging.ERROR if state == "failed" else logging.WARNING, "%s", message)
             self.write_status({**status, "state": state, "error": message})

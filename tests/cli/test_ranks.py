@@ -513,7 +513,8 @@ def test_a_fluid_step_failing_on_every_rank_is_reported_once(tmp_path):
     assert result.returncode == 70, result.stderr
     message = "the fluid cells (fluid.grid.follow_top_wall, 8 along z)"
     assert result.stderr.count(message) == 1 and "rank 0, during the steps" in result.stderr, result.stderr
-    assert json.loads((tmp_path / "two" / "status.json").read_text())["state"] == "failed"
+    status = json.loads((tmp_path / "two" / "status.json").read_text())
+    assert status["state"] == "failed" and "activity" not in status, status  # not still "building"
 
 
 # A lead that sends a command no follower knows, or fails itself, inside a collective step; argv:
