@@ -64,6 +64,7 @@ import copy
 import itertools
 import time
 import types
+import warnings
 from dataclasses import dataclass
 
 import numba
@@ -435,7 +436,10 @@ class RankSteps:
         fluid = self.t.fluid
         if fluid is not None and fluid.after_due(state.clock.step, state.clock):
             try:
-                self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
+                with warnings.catch_warnings():
+                    if not self.world.leads:  # the same step's at the lead warns of the same
+                        warnings.simplefilter("ignore")
+                    self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
             except Exception:
                 if not self.world.leads:  # the lead reports it, as one rank does, and ends them
                     time.sleep(FAILURE_GRACE)
