@@ -23,7 +23,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from .errors import UsageError
+from .errors import SphereError, UsageError
 from .runtime import MPI_SIZE_VARIABLES, usable_cores
 
 # the exit code of a rank that failed on its own (aborts every rank), and of a stop on request
@@ -109,25 +109,34 @@ class World:
         if self.leads:
             self.order("record_in", self.run_path)
 
-    def _fail(self, message: str, code: int) -> None:
+    def _fail(
+        self, message: str, code: int, recorded: str | None = None, progress: dict | None = None
+    ) -> None:
         """Report an error that no other rank can hear (they wait in a message), then abort every
-        rank with `code`."""
+        rank with `code`: `message` on stderr, `recorded` (the message unless given) in run.log
+        and status.json, with `progress` (step, time) where known."""
         print(message, file=sys.stderr, flush=True)
         if self.run_path is not None:
             from .io.rundir import RunDirectory
 
-            RunDirectory(self.run_path).record_abort(message, "interrupted" if code == STOPPED else "failed")
+            state = "interrupted" if code == STOPPED else "failed"
+            RunDirectory(self.run_path).record_abort(recorded or message, state, progress)
         self.abort(code)
 
-    def together(self, work):
+    def together(self, work, progress=None):
         """The lead's part of a collective step: should it fail midway, the followers wait in
         a message that will never come, so every rank is aborted with the error's exit code
-        (75 for a second Ctrl-C); the newest checkpoint is intact."""
+        (75 for a second Ctrl-C); the newest checkpoint is intact. An error of the case or the
+        physics (a SphereError, met by every rank alike) is reported as one rank reports it,
+        with the step and time progress() gives; anything else names the rank and its type."""
         try:
             return work()
         except BaseException as exc:
             code = STOPPED if isinstance(exc, KeyboardInterrupt) else getattr(exc, "exit_code", FAILED)
-            self._fail(f"sphere: error: rank 0, during the steps: {type(exc).__name__}: {exc}", code)
+            if isinstance(exc, SphereError):
+                self._fail(f"sphere: error: {exc}", code, str(exc), progress() if progress else None)
+            else:
+                self._fail(f"sphere: error: rank 0, during the steps: {type(exc).__name__}: {exc}", code)
             raise
 
     def follow(self) -> int:

@@ -326,7 +326,7 @@ class RankSteps:
             self.world.order("steps", steps)
             self._steps(steps)
 
-        self.world.together(work)
+        self.world.together(work, self._progress)
         self.at_step = state.clock.step + steps
         if self.fluid is not None and self.fluid.after_due(self.at_step, state.clock):
             self.fluid.stepped_on_ranks = self.at_step  # taken in _steps, on every rank
@@ -334,6 +334,11 @@ class RankSteps:
         if self.stages is not None and self.stages.after_due(self.at_step, state.clock):
             self.to_host(state)  # a stage's test reads the lead's scene (and only there)
         return steps, False
+
+    def _progress(self) -> dict:
+        """The step and time the ranks have reached (status.json of a run that fails there)."""
+        clock = self.part.state.clock
+        return {"step": clock.step, "time": clock.time}
 
     def hand_over(self, state: State) -> None:
         """to_host: on ranks the steps are called only by the run loop and the benchmark
