@@ -336,7 +336,10 @@ class RankSteps:
         return steps, False
 
     def _progress(self) -> dict:
-        """The step and time the ranks have reached (status.json of a run that fails there)."""
+        """The step and time the ranks have reached (status.json of a run that fails there;
+        none before the scene is first shared out)."""
+        if self.part is None:
+            return {}
         clock = self.part.state.clock
         return {"step": clock.step, "time": clock.time}
 
