@@ -149,7 +149,7 @@ class World:
         # ends the run, so the followers outlive the signal, noting when it came
         signalled: list[float] = []
         # the lead logs the run (run.log, the launcher's stderr); the fluid steps every rank
-        # takes alike (FluidModule.step_on_rank) would log their warnings once a rank there
+        # takes alike (a fluid's step_on_rank) would log their warnings once a rank there
         logging.getLogger("sphere").addHandler(logging.NullHandler())
         for number in (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1):
             signal.signal(number, lambda *_: signalled.append(time.monotonic()))

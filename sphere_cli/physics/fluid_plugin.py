@@ -115,16 +115,12 @@ class FluidModule(Module):
     def particle_arrays(self, state) -> dict | None:
         """{name: (holder, attribute)} of the arrays it keeps per particle, which travel with the
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split
-        across ranks."""
+        across ranks. A model that runs split also defines step_on_rank(state, whole, held),
+        after_step on one rank's part: `state` the part's (its particles those the rank holds,
+        `held` their global indices), whole(*arrays) the arrays of every rank's own particles in
+        global order (a collective); every rank takes the same step from them, bit for bit one
+        rank's, so nothing is gathered at the lead nor sent back."""
         return None
-
-    def step_on_rank(self, state, whole, held) -> None:
-        """after_step on one MPI rank's part (physics/rank_steps.py), for a model that runs split
-        (particle_arrays): `state` the part's (its particles those the rank holds, `held` their
-        global indices), whole(*arrays) the arrays of every rank's own particles in global
-        order (a collective). Every rank takes the same step from them, bit for bit one rank's,
-        so nothing is gathered at the lead nor sent back."""
-        raise NotImplementedError(f"the {self.model} fluid does not step on MPI ranks")
 
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the

@@ -45,7 +45,7 @@ on every rank, its per-particle arrays (`particle_arrays`) travelling with the p
 its force writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's
 f_other) go to the ghosts with the force, and a sum over all particles inside its force (the
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
-own particles in global order (`_whole`). Its own step (FluidModule.step_on_rank: the VANS
+own particles in global order (`_whole`). Its own step (its `step_on_rank`: the VANS
 column, the Darcy pore pressure, the Navier-Stokes grid) runs on every rank alike from every
 rank's own particles and their fluid arrays in global order (`_whole`), nothing gathered at
 the lead nor sent back: the grids are not cut, and each rank solves the whole fluid. A failure
@@ -182,7 +182,10 @@ def _refusal(scene) -> str | None:
     extra = [m.name for m in scene.modules if m.name not in SUPPORTED]
     if scene.state.particles.count == 0:
         extra.append("no particles (a fluid-only case)")
-    if scene.fluid is not None and scene.fluid.particle_arrays(scene.state) is None:
+    fluid = scene.fluid
+    if fluid is not None and (
+        fluid.particle_arrays(scene.state) is None or not hasattr(fluid, "step_on_rank")
+    ):
         extra.append(f"a {scene.fluid.model} fluid, which does not run split")
     if scene.case.simulation.device != "cpu":
         extra.append(f'simulation.device = "{scene.case.simulation.device}"')
