@@ -56,6 +56,8 @@ class World:
         self.size = self.comm.Get_size()
         # ranks on this node (they share its cores)
         self.node_size = self.comm.Split_type(mpi.COMM_TYPE_SHARED).Get_size()
+        # the fluid grid's own messages (its solves' halos and sums), apart from the steps'
+        self.grid_comm = self.comm.Dup()
         self.steps = None  # the rank steps of the scene (physics/rank_steps.py), once started
         self.run_path: str | None = None  # where a failing rank records its error (record_failures_in)
 

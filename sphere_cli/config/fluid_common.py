@@ -14,12 +14,26 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, PrivateAttr, model_validator
 
 from .base import Count, Real, Strict
+
+# the solvers' rank_split_cells (Darcy's and Navier-Stokes's [fluid.solver])
+RankSplitCells = Annotated[
+    Count,
+    Field(
+        ge=1,
+        description=(
+            "Split across MPI ranks (mpiexec), each grid level of the solve whose cells give every rank at "
+            "least this many is cut into slabs of x planes, one a rank, exchanging the planes beside "
+            "them; the others are solved whole on every rank (their messages would cost more than the "
+            "work they share). Results are the same bit for bit either way [-]."
+        ),
+    ),
+]
 
 
 class CouplingConfig(Strict):

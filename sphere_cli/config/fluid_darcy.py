@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .base import Count, Real, Strict, Vec3, _default_tag
-from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary
+from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary, RankSplitCells
 from .fluid_grid import FluidGridConfig
 
 DarcyBoundary = Annotated[PressureBoundary | NoFlowBoundary, Field(discriminator="type")]
@@ -75,6 +75,7 @@ class DarcySolver(Strict):
     max_iterations: Count = Field(
         10000, ge=1, description="Iterations after which a solve that has not converged is an error [-]."
     )
+    rank_split_cells: RankSplitCells = 4096
 
 
 class DarcyFluid(Strict):

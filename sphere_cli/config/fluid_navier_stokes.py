@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 from .base import Count, Flag, Real, Strict, _default_tag
 from .drag import DragConfig
 from .expression import ExpressionText
-from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary
+from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary, RankSplitCells
 from .fluid_grid import FluidGridConfig
 
 
@@ -96,6 +96,7 @@ class PressureSolverConfig(Strict):
         ge=1,
         description="A solve that has not converged after this many iterations stops the run (exit 70) [-].",
     )
+    rank_split_cells: RankSplitCells = 4096
 
 
 Components = tuple[ExpressionText, ExpressionText, ExpressionText]

@@ -122,6 +122,12 @@ class FluidModule(Module):
         rank's, so nothing is gathered at the lead nor sent back."""
         return None
 
+    def split_grid(self, comm) -> None:
+        """Split the fluid's own solves across the MPI ranks of comm, the grid's communicator
+        (ranks.py World.grid_comm), before each of its steps on ranks (step_on_rank), on every
+        rank: a model whose step solves on its grid (Darcy, Navier-Stokes) splits its
+        PoissonSolver; the others need nothing."""
+
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the
         particle and the fluid's own arrays (the other forces on it): a ghost's owner sends

@@ -450,6 +450,7 @@ class RankSteps:
                 with warnings.catch_warnings():
                     if not self.world.leads:  # the same step's at the lead warns of the same
                         warnings.simplefilter("ignore")
+                    self.part.fluid.split_grid(self.world.grid_comm)
                     self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
             except Exception:
                 if not self.world.leads:  # the lead reports it, as one rank does, and ends them

@@ -311,8 +311,10 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     contacts beyond the ghosts) and each particle's self-induced velocity the drag coefficients
     of its whole fluid cell, summed over every rank in one rank's order. Run on 2 ranks to t = 2
     ms, then resumed on 4 with the slabs cut by measured work: one rank's run-then-resume, bit
-    for bit. The bed's cells are below a porosity floor of 0.5 (a touching cubic lattice leaves
-    0.48): the fluid step's warning of it is written once a run, by rank 0, not once a rank."""
+    for bit, with the pressure solve split across the ranks (rank_split_cells = 1: the grid's 5
+    planes in 2, then 4 slabs). The bed's cells are below a porosity floor of 0.5 (a touching
+    cubic lattice leaves 0.48): the fluid step's warning of it is written once a run, by rank 0,
+    not once a rank."""
     text = (REPO / "configs" / "fluid-settling.toml").read_text()
     for old, new in (
         ("count = 200", "count = 500"),
@@ -327,7 +329,10 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
         ("duration = 0.1", "duration = 0.004"),
         ("every_time = 0.01", "every_time = 0.001"),
         ("every_time = 0.05\nkeep = 2", "every_time = 0.002\nkeep = 10"),
-        ("[output.frames]", "[fluid.drag]\nporosity_floor = 0.5\n\n[output.frames]"),
+        (
+            "[output.frames]",
+            "[fluid.drag]\nporosity_floor = 0.5\n\n[fluid.solver]\nrank_split_cells = 1\n\n[output.frames]",
+        ),
     ):
         assert old in text, old
         text = text.replace(old, new)
@@ -373,9 +378,11 @@ def test_a_darcy_oedometer_with_the_pore_pressure_on_its_wall_is_one_ranks_on_tw
     """Every rank steps the pore pressure from the porosity of the whole bed, and each adds its
     push on the stress-controlled top wall (the wall's force observable included). The bed's
     porosity, 0.397, is clamped at 0.39: the warning is logged once, by rank 0 (run.log and
-    the launcher's stderr), not once a rank."""
+    the launcher's stderr), not once a rank. The pore pressure's solve is split (the grid's 2
+    planes, one a rank)."""
     assert "porosity_max = 0.6" in oedometer()
-    (tmp_path / "case.toml").write_text(oedometer().replace("porosity_max = 0.6", "porosity_max = 0.39"))
+    text = oedometer().replace("porosity_max = 0.6", "porosity_max = 0.39")
+    (tmp_path / "case.toml").write_text(text + "[fluid.solver]\nrank_split_cells = 1\n")
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
     split = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
     run_ok(split)

@@ -192,6 +192,8 @@ def test_operator_is_symmetric(periodic, bottom, top):
             solver.ih2,
             out,
             solver.part_b,
+            0,
+            shape[0],
         )
         matrix[:, m] = out.ravel()
         unit.flat[m] = 0.0

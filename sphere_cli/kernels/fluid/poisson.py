@@ -18,7 +18,10 @@ Arguments (grid nx, ny, nz):
   an axis lies between cells k-1 and k, faces 0 and n are the boundary faces. On a periodic
   axis faces 0 and n are the same face and face 0 is used;
   ih2 (3,): 1/h^2 per axis [1/m^2]; periodic_x, periodic_y, dirichlet_bottom, dirichlet_top:
-  0/1; partial (nx*ny,): one partial sum per grid column (i, j).
+  0/1; partial (nx*ny,): one partial sum per grid column (i, j), at index i*ny + j;
+  lo, hi: the kernel works on the columns i in [lo, hi) only (of the coarse grid for restrict),
+  reading the planes lo - 1 and hi (wrapped where periodic) as they are: the slab of one MPI
+  rank, whose neighbours' planes physics/fluid/poisson.py brings in (0, nx on one rank).
 
 Deterministic: every prange writes only its own cells and its own column's partial sum; the
 partial sums are added in column order by `ordered_sum`, so results do not depend on the
@@ -131,10 +134,11 @@ def prepare_system(
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial):
+def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial, lo, hi):
     """out = A x; partial = column sums of x * out."""
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         nb = _column(nx, ny, i, j, periodic_x, periodic_y)
@@ -147,10 +151,11 @@ def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partia
 
 
 @njit(cache=True, parallel=True)
-def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial):
+def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial, lo, hi):
     """r = rhs - A x; partial = column sums of r^2."""
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         nb = _column(nx, ny, i, j, periodic_x, periodic_y)
@@ -173,9 +178,10 @@ def ordered_sum(partial):
 
 
 @njit(cache=True, parallel=True)
-def column_sums(x, partial):
+def column_sums(x, partial, lo, hi):
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         acc = 0.0
@@ -185,9 +191,10 @@ def column_sums(x, partial):
 
 
 @njit(cache=True, parallel=True)
-def column_squares(x, partial):
+def column_squares(x, partial, lo, hi):
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         acc = 0.0
@@ -197,10 +204,11 @@ def column_squares(x, partial):
 
 
 @njit(cache=True, parallel=True)
-def shift(x, amount):
+def shift(x, amount, lo, hi):
     """x -= amount (removes the mean of a field in the singular case)."""
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         for k in range(nz):
@@ -208,10 +216,11 @@ def shift(x, amount):
 
 
 @njit(cache=True, parallel=True)
-def precondition(r, inv_diag, z, partial_rz, partial_z):
+def precondition(r, inv_diag, z, partial_rz, partial_z, lo, hi):
     """Jacobi preconditioner z = D^-1 r; partial_rz = column sums of r z, partial_z of z."""
     nx, ny, nz = r.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         rz = 0.0
@@ -226,10 +235,11 @@ def precondition(r, inv_diag, z, partial_rz, partial_z):
 
 
 @njit(cache=True, parallel=True)
-def cg_step(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z):
+def cg_step(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z, lo, hi):
     """x += alpha p; r -= alpha q; z = D^-1 r; column sums of r^2, r z and z."""
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         rr = 0.0
@@ -250,11 +260,12 @@ def cg_step(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z):
 
 
 @njit(cache=True, parallel=True)
-def new_direction(p, z, beta, z_mean):
+def new_direction(p, z, beta, z_mean, lo, hi):
     """p = (z - z_mean) + beta p (z_mean = 0 unless the system is singular: the direction then
     stays orthogonal to the constant null vector)."""
     nx, ny, nz = p.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         for k in range(nz):
@@ -375,12 +386,12 @@ def coarsen_coefficients(c, ax, ay, az, fx, fy, fz, cc, axc, ayc, azc):
 
 
 @njit(cache=True, parallel=True)
-def restrict(fine, fx, fy, fz, coarse):
+def restrict(fine, fx, fy, fz, coarse, lo, hi):
     """coarse = mean of the children in fine."""
     mx, my, mz = coarse.shape
-    for col in prange(mx * my):
-        ci = col // my
-        cj = col % my
+    for c in prange((hi - lo) * my):
+        ci = lo + c // my
+        cj = c % my
         for ck in range(mz):
             s = 0.0
             for i in range(ci * fx, ci * fx + fx):
@@ -391,10 +402,11 @@ def restrict(fine, fx, fy, fz, coarse):
 
 
 @njit(cache=True, parallel=True)
-def prolong_add(coarse, fx, fy, fz, fine):
+def prolong_add(coarse, fx, fy, fz, fine, lo, hi):
     """fine += the coarse value of each cell's parent."""
     nx, ny, nz = fine.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         for k in range(nz):
@@ -402,10 +414,11 @@ def prolong_add(coarse, fx, fy, fz, fine):
 
 
 @njit(cache=True, parallel=True)
-def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out):
+def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out, lo, hi):
     """One damped Jacobi sweep out = x + omega D^-1 (rhs - A x) (symmetric smoother)."""
     nx, ny, nz = x.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         nb = _column(nx, ny, i, j, periodic_x, periodic_y)
@@ -416,10 +429,11 @@ def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih
 
 
 @njit(cache=True, parallel=True)
-def column_dots(r, z, partial_rz, partial_z):
+def column_dots(r, z, partial_rz, partial_z, lo, hi):
     """partial_rz = column sums of r z, partial_z of z."""
     nx, ny, nz = r.shape
-    for col in prange(nx * ny):
+    for c in prange((hi - lo) * ny):
+        col = lo * ny + c
         i = col // ny
         j = col % ny
         rz = 0.0

@@ -287,6 +287,9 @@ class Darcy(FluidModule):
         pos, vel, radius = whole(p.pos, p.vel, p.radius)
         self._step(state, types.SimpleNamespace(pos=pos, vel=vel, radius=radius))
 
+    def split_grid(self, comm) -> None:
+        self.pore.solver.split(comm)
+
     def rank_copy(self, whole) -> Darcy:
         """Itself: nothing is kept per particle, and every rank steps the whole fluid
         (step_on_rank), which each rank's part then reads."""

@@ -148,8 +148,9 @@ class NavierStokesSolver:
         kinds = ["dirichlet" if k == 1 else "no-flux" for k in self.p_kind]
         solver = config.solver
         self.poisson = PoissonSolver(
-            grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations
-        )
+            grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations,
+            split_cells=solver.rank_split_cells,
+        )  # fmt: skip
         self.p_bound = np.zeros(2)  # boundary pressures at the new time [Pa]
         self.p_old = np.zeros(2)  # and at the old time [Pa]
         self.eps_bound = np.zeros(2)  # and of eps = p_new - beta p_old [Pa]
@@ -630,6 +631,9 @@ class NavierStokes(FluidModule):
         twin.drag.whole = whole
         twin.source = self  # the rank's whole fluid, which takes the fluid's steps (step_on_rank)
         return twin
+
+    def split_grid(self, comm) -> None:
+        self.solver.poisson.split(comm)  # the twins' and their source's
 
     def step_on_rank(self, state, whole, held) -> None:
         """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin (`held`:

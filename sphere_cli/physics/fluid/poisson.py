@@ -20,6 +20,14 @@ singular (x is defined up to a constant): the mean of b is removed (a compatible
 the amount is reported) and the zero-mean solution is returned.
 
 The solver object holds all its scratch arrays: a solve allocates nothing.
+
+Across MPI ranks (`PoissonSolver.split`, a fluid stepped on every rank of a split run) the
+conjugate gradient and the multigrid levels whose planes allow it work on slabs of x planes, one
+per rank (`Slabs`): each rank updates its own columns, brings in the planes beside its slab
+before a stencil reads them, and every sum gathers the column partial sums of all ranks before
+adding them in column order, so the iterates, the iteration count and the solution are one
+rank's, bit for bit. The right-hand side, the coefficients and the coarse levels the slabs do not
+fit are computed whole on every rank; the solution is gathered whole on every rank at the end.
 """
 
 from __future__ import annotations
@@ -63,6 +71,9 @@ COARSEST_LIMIT = 4096
 BOUNDARIES = ("dirichlet", "no-flux")
 TINY = np.finfo(np.float64).tiny
 RESCALE_EXPONENT = 100  # a right-hand side norm outside 2^-100 .. 2^100 is rescaled
+# split across ranks: a slab may hold this many times an even share of the planes, so that more
+# multigrid levels are split alike (a level solved whole costs every rank an eighth of the last)
+SLAB_IMBALANCE = 1.25
 
 
 @dataclass(frozen=True)
@@ -71,6 +82,70 @@ class PoissonResult:
     residual: float  # ||b - A x|| / max(||b||, tiny) of the returned x [-]
     converged: bool
     mean_removed: float = 0.0  # singular case: the mean of b taken out (0 for a compatible b)
+
+
+class Slabs:
+    """The x planes [lo, hi) of one grid level that this MPI rank works on (bounds: the first
+    plane of every rank and the end), or the whole level on one rank (comm None): where the
+    planes beside the slab come from, and the gathers that make a sum or a field whole."""
+
+    def __init__(self, shape, comm=None, bounds=None, periodic_x=False):
+        nx, ny, nz = shape
+        self.shape = shape
+        self.comm = comm
+        if comm is None:
+            bounds = np.array([0, nx], dtype=np.int64)
+        rank = 0 if comm is None else comm.Get_rank()
+        self.lo, self.hi = int(bounds[rank]), int(bounds[rank + 1])
+        self.columns = (np.diff(bounds) * ny, bounds[:-1] * ny)
+        self.cells = (np.diff(bounds) * ny * nz, bounds[:-1] * ny * nz)
+        # (plane to receive, its owner, tag) and (plane to send, to whom, tag) beside the slab;
+        # tag 0: a slab's first plane, which is its left neighbour's right halo, 1: its last
+        self.receive, self.send = [], []
+        if comm is None or self.lo == self.hi:
+            return
+
+        def owner(plane):
+            return int(np.searchsorted(bounds, plane, side="right")) - 1
+
+        left = self.lo - 1 if self.lo > 0 else (nx - 1 if periodic_x else None)
+        right = self.hi if self.hi < nx else (0 if periodic_x else None)
+        for plane, mine, tag in ((right, self.hi - 1, 0), (left, self.lo, 1)):
+            if plane is not None and owner(plane) != rank:
+                self.receive.append((plane, owner(plane), tag))
+                self.send.append((mine, owner(plane), 1 - tag))
+
+    def __reduce__(self):
+        return Slabs, (self.shape,)  # a copy sent to another process is whole until split there
+
+    @property
+    def split(self) -> bool:
+        return self.comm is not None
+
+    def halo(self, field: np.ndarray) -> None:
+        """The planes beside the slab from the ranks that own them."""
+        if not self.receive:
+            return
+        requests = [self.comm.Irecv(field[plane], source=src, tag=tag) for plane, src, tag in self.receive]
+        requests += [self.comm.Isend(field[plane], dest=dst, tag=tag) for plane, dst, tag in self.send]
+        self.mpi.Request.Waitall(requests)
+
+    def sum(self, partial: np.ndarray) -> float:
+        """The sum of every rank's column partial sums, in column order (ordered_sum)."""
+        if self.comm is not None:
+            self.comm.Allgatherv(self.mpi.IN_PLACE, [partial, *self.columns, self.mpi.DOUBLE])
+        return ordered_sum(partial)
+
+    def gather(self, field: np.ndarray) -> None:
+        """Every rank's planes of a cell field, into the field on every rank."""
+        if self.comm is not None:
+            self.comm.Allgatherv(self.mpi.IN_PLACE, [field, *self.cells, self.mpi.DOUBLE])
+
+    @property
+    def mpi(self):
+        from mpi4py import MPI
+
+        return MPI
 
 
 class _Level:
@@ -91,6 +166,7 @@ class _Level:
             np.zeros((nx, ny, nz + 1)),
         )
         self.partial = np.zeros(nx * ny)
+        self.slabs = Slabs(shape)
 
 
 class Multigrid:
@@ -117,6 +193,7 @@ class Multigrid:
         fine = grid.shape
         self.fine_x, self.fine_tmp, self.fine_r = (np.zeros(fine) for _ in range(3))
         self.fine_partial = np.zeros(fine[0] * fine[1])
+        self.fine_slabs = Slabs(fine)
 
     def update_spacing(self) -> None:
         """Take the grid's current spacing (a grid following the top wall changes it)."""
@@ -146,16 +223,20 @@ class Multigrid:
         """z = M^-1 r; fine = (diag, inv_diag, ax, ay, az, ih2) of the fine operator."""
         self._cycle(-1, r, z, fine)
 
-    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps):
+    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs):
         px, py = self.flags[0], self.flags[1]
+        lo, hi = slabs.lo, slabs.hi
         for _ in range(sweeps // 2):
-            jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp)
-            jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, x)
+            slabs.halo(x)
+            jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, lo, hi)
+            slabs.halo(tmp)
+            jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, x, lo, hi)
 
     def _cycle(self, index, rhs, x, fine):
         if index < 0:
             diag, inv_diag, ax, ay, az, ih2 = fine
             tmp, res, partial = self.fine_tmp, self.fine_r, self.fine_partial
+            slabs = self.fine_slabs
         else:
             level = self.levels[index]
             diag, inv_diag, ax, ay, az, ih2 = (
@@ -167,18 +248,24 @@ class Multigrid:
                 level.ih2,
             )
             tmp, res, partial = level.tmp, level.r, level.partial
+            slabs = level.slabs
         x[...] = 0.0
         if index == len(self.levels) - 1:
-            self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS)
+            self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs)
             return
-        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS)
+        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs)
         px, py = self.flags[0], self.flags[1]
-        residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial)
+        slabs.halo(x)
+        residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial, slabs.lo, slabs.hi)
         coarse = self.levels[index + 1]
-        restrict(res, *coarse.factors, coarse.b)
+        if coarse.slabs.split or not slabs.split:
+            restrict(res, *coarse.factors, coarse.b, coarse.slabs.lo, coarse.slabs.hi)
+        else:  # the first level solved whole on every rank
+            slabs.gather(res)
+            restrict(res, *coarse.factors, coarse.b, 0, coarse.shape[0])
         self._cycle(index + 1, coarse.b, coarse.x, fine)
-        prolong_add(coarse.x, *coarse.factors, x)
-        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS)
+        prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
+        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs)
 
 
 class PoissonSolver:
@@ -194,6 +281,7 @@ class PoissonSolver:
         tolerance: float = 1e-8,
         max_iterations: int = 100_000,
         preconditioner: str = "multigrid",
+        split_cells: int = 4096,
     ):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -210,6 +298,7 @@ class PoissonSolver:
         self.method = method
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
+        self.split_cells = int(split_cells)  # the least cells a rank of a level split across ranks
         self.periodic_x = np.uint8(bool(grid.periodic[0]))
         self.periodic_y = np.uint8(bool(grid.periodic[1]))
         self.dirichlet_bottom = np.uint8(bottom == "dirichlet")
@@ -226,6 +315,41 @@ class PoissonSolver:
             flags = (self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top)
             multigrid = Multigrid(grid, flags)
             self.multigrid = multigrid if multigrid.usable else None
+        self.slabs = Slabs(shape)
+
+    def split(self, comm) -> None:
+        """From now on solve on slabs of x planes, one per rank of the MPI communicator comm (one
+        of the solves' own: their messages carry no other tag), every rank calling solve() with
+        the same arguments at the same time (a collective); a second call with the same comm
+        changes nothing. The slabs' planes are multiples of the largest power of two that leaves
+        every rank one at least and the busiest at most SLAB_IMBALANCE times an even share, so
+        that the multigrid levels coarsened along x down to it are split alike. A level that
+        would give a rank fewer than split_cells cells, the coarsest and the coarser ones are
+        solved whole on every rank; so are the Jacobi method, a grid too small and one rank."""
+        size = comm.Get_size()
+        small = self.grid.cell_count < self.split_cells * size
+        if self.method != "pcg" or size == 1 or small or self.slabs.comm is comm:
+            return
+        nx = self.grid.shape[0]
+        levels = self.multigrid.levels if self.multigrid is not None else []
+        factor = [1]  # the fine planes per plane of each coarse level
+        for level in levels:
+            factor.append(factor[-1] * level.factors[0])
+        even = -(-nx // size)
+        block = max(
+            (f for f in factor if nx // f >= size and f * -(-(nx // f) // size) <= SLAB_IMBALANCE * even),
+            default=1,
+        )
+        bounds = block * (np.arange(size + 1, dtype=np.int64) * (nx // block) // size)
+        periodic = bool(self.periodic_x)
+        self.slabs = Slabs(self.grid.shape, comm, bounds, periodic)
+        if self.multigrid is not None:
+            self.multigrid.fine_slabs = self.slabs
+            for level, f in zip(levels, factor[1:], strict=True):
+                small = int(np.prod(level.shape)) < self.split_cells * size
+                # the coarsest's 40 sweeps would cost more in messages than the work they share
+                whole = f > block or small or level is levels[-1]
+                level.slabs = Slabs(level.shape) if whole else Slabs(level.shape, comm, bounds // f, periodic)
 
     def update_spacing(self) -> None:
         """Take the grid's current spacing: call after grid.set_height (a grid that follows the
@@ -269,10 +393,12 @@ class PoissonSolver:
         )  # fmt: skip
         singular = not (self.dirichlet_bottom or self.dirichlet_top) and not c.any()
         mean_removed = 0.0
-        if singular:
-            mean_removed = self._mean(self.rhs)
-            shift(self.rhs, mean_removed)
-            column_squares(self.rhs, self.part_a)
+        nx = self.grid.shape[0]
+        if singular:  # the right-hand side stays whole on every rank
+            column_sums(self.rhs, self.part_c, 0, nx)
+            mean_removed = ordered_sum(self.part_c) / self.rhs.size
+            shift(self.rhs, mean_removed, 0, nx)
+            column_squares(self.rhs, self.part_a, 0, nx)
         rhs_norm = math.sqrt(ordered_sum(self.part_a))
         if rhs_norm == 0.0 and not self.rhs.any():
             x[:] = 0.0
@@ -285,7 +411,7 @@ class PoissonSolver:
             exponent = math.frexp(float(np.abs(self.rhs).max()))[1]
             np.ldexp(self.rhs, -exponent, out=self.rhs)
             np.ldexp(x, -exponent, out=x)
-            column_squares(self.rhs, self.part_a)
+            column_squares(self.rhs, self.part_a, 0, nx)
             rhs_norm = math.sqrt(ordered_sum(self.part_a))
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
@@ -293,7 +419,8 @@ class PoissonSolver:
         else:
             iterations, res = self._jacobi(x, ax, ay, az, scale)
         if singular:
-            shift(x, self._mean(x))
+            shift(x, self._mean(x), self.slabs.lo, self.slabs.hi)
+        self.slabs.gather(x)
         if rescale:
             np.ldexp(x, exponent, out=x)
         return PoissonResult(iterations, res, res <= self.tolerance, mean_removed)
@@ -306,17 +433,21 @@ class PoissonSolver:
             b, c, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
             float(bottom_value), float(top_value), self.ih2, self.rhs, self.diag, self.inv_diag, self.part_a,
         )  # fmt: skip
-        self._true_residual(x, ax, ay, az)
+        residual(
+            self.rhs, x, self.diag, ax, ay, az, self.periodic_x, self.periodic_y, self.ih2,
+            self.r, self.part_a, 0, self.grid.shape[0],
+        )  # fmt: skip
         np.divide(self.r, c, out=self.r)
         x += self.r
 
     # -- helpers -----------------------------------------------------------------------------
 
     def _mean(self, field: np.ndarray) -> float:
-        column_sums(field, self.part_c)
-        return ordered_sum(self.part_c) / field.size
+        column_sums(field, self.part_c, self.slabs.lo, self.slabs.hi)
+        return self.slabs.sum(self.part_c) / field.size
 
     def _true_residual(self, x, ax, ay, az) -> float:
+        self.slabs.halo(x)
         residual(
             self.rhs,
             x,
@@ -329,11 +460,15 @@ class PoissonSolver:
             self.ih2,
             self.r,
             self.part_a,
+            self.slabs.lo,
+            self.slabs.hi,
         )
-        return math.sqrt(ordered_sum(self.part_a))
+        return math.sqrt(self.slabs.sum(self.part_a))
 
     def _pcg(self, x, c, ax, ay, az, singular, scale):
         n = x.size
+        slabs = self.slabs
+        lo, hi = slabs.lo, slabs.hi
         iterations = 0
         res = self._true_residual(x, ax, ay, az) * scale
         fine = (self.diag, self.inv_diag, ax, ay, az, self.ih2)
@@ -341,12 +476,13 @@ class PoissonSolver:
             self.multigrid.setup(c, ax, ay, az)
         # restarted from the true residual if the recursively updated one drifted from it
         while res > self.tolerance and iterations < self.max_iterations:
-            precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c)
+            precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c, lo, hi)
             self._multigrid(fine)
-            rz = ordered_sum(self.part_b)
-            z_mean = ordered_sum(self.part_c) / n if singular else 0.0
-            new_direction(self.p, self.z, 0.0, z_mean)
+            rz = slabs.sum(self.part_b)
+            z_mean = slabs.sum(self.part_c) / n if singular else 0.0
+            new_direction(self.p, self.z, 0.0, z_mean, lo, hi)
             while iterations < self.max_iterations:
+                slabs.halo(self.p)
                 apply_operator(
                     self.p,
                     self.diag,
@@ -358,8 +494,10 @@ class PoissonSolver:
                     self.ih2,
                     self.q,
                     self.part_a,
+                    lo,
+                    hi,
                 )
-                pq = ordered_sum(self.part_a)
+                pq = slabs.sum(self.part_a)
                 if not pq > 0.0:
                     return iterations, self._true_residual(x, ax, ay, az) * scale
                 alpha = rz / pq
@@ -374,14 +512,16 @@ class PoissonSolver:
                     self.part_a,
                     self.part_b,
                     self.part_c,
+                    lo,
+                    hi,
                 )
                 iterations += 1
-                if math.sqrt(ordered_sum(self.part_a)) * scale <= self.tolerance:
+                if math.sqrt(slabs.sum(self.part_a)) * scale <= self.tolerance:
                     break
                 self._multigrid(fine)
-                rz_new = ordered_sum(self.part_b)
-                z_mean = ordered_sum(self.part_c) / n if singular else 0.0
-                new_direction(self.p, self.z, rz_new / rz, z_mean)
+                rz_new = slabs.sum(self.part_b)
+                z_mean = slabs.sum(self.part_c) / n if singular else 0.0
+                new_direction(self.p, self.z, rz_new / rz, z_mean, lo, hi)
                 rz = rz_new
             res = self._true_residual(x, ax, ay, az) * scale
         return iterations, res
@@ -390,7 +530,7 @@ class PoissonSolver:
         """Replace the diagonal preconditioner's z (and its partial sums) by the V-cycle's."""
         if self.multigrid is not None:
             self.multigrid.apply(self.r, self.z, fine)
-            column_dots(self.r, self.z, self.part_b, self.part_c)
+            column_dots(self.r, self.z, self.part_b, self.part_c, self.slabs.lo, self.slabs.hi)
 
     def _jacobi(self, x, ax, ay, az, scale):
         src, dst = x, self.r

@@ -116,6 +116,7 @@ class PorePressure:
             method=solver.method,
             tolerance=solver.tolerance,
             max_iterations=solver.max_iterations,
+            split_cells=solver.rank_split_cells,
         )
         self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
         self.ih = 1.0 / np.asarray(grid.spacing, dtype=np.float64)
