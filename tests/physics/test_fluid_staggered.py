@@ -349,5 +349,5 @@ def test_an_inflow_brings_the_boundary_s_tangential_velocity(no_slip, carried):
     fs = solver.allocate()
     solver.set_velocity(fs, (drift, 0.0, inflow))
     edge_porosity(fs.porosity, fs.edges)
-    advective_fluxes(fs.v_face, fs.porosity, fs.edges, solver.bc_sign, fs.flux)
+    advective_fluxes(fs.v_face, fs.porosity, fs.edges, solver.bc_sign, fs.flux, 0, fs.porosity.shape[0])
     np.testing.assert_allclose(fs.flux[:, :, 0, 0, 2], inflow * carried * drift, rtol=1e-14)

@@ -81,7 +81,9 @@ Pa/m^2]; spacing (3,) [m]; bc_sign (2,3) float64; p_kind (2,) int64, 1 = prescri
 0 = no flow, 2 = prescribed velocity; p_bound (2,) [Pa] boundary pressure (bottom, top); inflow
 (2,) [m/s] superficial velocity along +z of a prescribed-velocity face; rho [kg/m^3]; mu [Pa s];
 beta [-]; pressure_in_solid 1 for formulation A, 0 for B; dt [s] the fluid step; stretch [1/s]
-the moving grid's s.
+the moving grid's s; lo, hi: the x planes lo .. hi - 1 that advective_fluxes, viscous_stresses
+and predict compute (lo may be -1 and hi nx + 1: x is periodic), one MPI rank's slab and, for
+the first two, the planes beside it that predict reads (0, nx on one rank).
 """
 
 import math
@@ -250,14 +252,14 @@ def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear):
+def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear, lo, hi):
     """The viscous stresses / viscosity where the momentum balances of the faces need them, each
     computed once: normal[i,j,k+1,c] = phi (d_c v_c) at the centre of cell (i,j,k) (k = -1 .. nz,
     the z ghosts included), between its faces of component c; shear[i,j,k,m] = phi_edge (d_a v_c
     + d_c v_a) at the edge of `edge_porosity` along m, c and a the other two axes."""
     nx, ny, nz = phi.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+    for t in prange(hi - lo):
+        i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(-1, nz + 1):
                 for c in range(3):
@@ -315,7 +317,7 @@ def _limited_face_value(upwind_upwind, upwind, downwind):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def advective_fluxes(v_face, phi, edges, bc_sign, flux):
+def advective_fluxes(v_face, phi, edges, bc_sign, flux, lo, hi):
     """flux[i,j,k,c,a] = phi u v_c through the side of the control volume of face (i,j,k) of
     component c half a cell towards -a (module docstring): the transport phi u there (phi of the
     cell centre for a = c, of the edge otherwise; u the mean of the two faces of component a
@@ -323,8 +325,8 @@ def advective_fluxes(v_face, phi, edges, bc_sign, flux):
     side is the -a side of one face and the +a side of the one before it: computed once here, so
     that `predict` takes the divergence. Layers k = 0 .. nz + 1 (the +z side of the top faces)."""
     nx, ny, nz = phi.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+    for t in prange(hi - lo):
+        i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(nz + 2):
                 for c in range(3):
@@ -399,6 +401,8 @@ def predict(
     inflow,
     v_star,
     mobility,
+    lo,
+    hi,
 ):
     """Predicted face velocities v* (step 1 of the module docstring) and the pressure
     equation's face coefficients, mobility = phi_f D_f (A) or D_f (B), D_f = 1/(1 + dt k_f/(rho
@@ -411,8 +415,8 @@ def predict(
     balance for v_new divides every explicit increment, the pressure's included, by 1 + dt k_f/
     (rho phi_f): v* = v + D_f dt [...], v_new = v* - dt/rho (mobility/phi_f) grad eps."""
     nx, ny, nz = phi.shape
-    for ii in prange(nx):
-        i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
+    for t in prange(hi - lo):
+        i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
             for k in range(nz + 1):
                 for c in range(3):

@@ -264,13 +264,24 @@ class NavierStokesSolver:
         # (V_new - V_old) / (V_new dt) of every cell of a grid following the top wall
         stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
         edge_porosity(fs.porosity, fs.edges)
-        advective_fluxes(fs.v_face, fs.porosity, fs.edges, self.bc_sign, fs.flux)
-        viscous_stresses(fs.v_face, fs.porosity, fs.edges, self.spacing, self.bc_sign, fs.normal, fs.shear)
+        # split across MPI ranks with the pressure solve (its slabs of x planes), the prediction
+        # takes the rank's planes, from the stresses and fluxes of those and the two beside
+        slabs = self.poisson.slabs
+        lo, hi = slabs.lo, slabs.hi
+        wide = (lo, hi)
+        if slabs.split and lo < hi:
+            wide = (lo - 1, hi + 1) if hi - lo + 2 <= fs.porosity.shape[0] else (0, fs.porosity.shape[0])
+        advective_fluxes(fs.v_face, fs.porosity, fs.edges, self.bc_sign, fs.flux, *wide)
+        viscous_stresses(
+            fs.v_face, fs.porosity, fs.edges, self.spacing, self.bc_sign, fs.normal, fs.shear, *wide
+        )  # fmt: skip
         predict(
             fs.v_face, fs.p, fs.porosity, fs.normal, fs.shear, fs.flux, fs.porosity_rate, fs.f_i, fs.k_drag,
             fs.acceleration, self.spacing, self.bc_sign, self.p_kind, old, rho, self.mu, beta, solid, dt,
-            self.inflow, fs.v_star, fs.mobility,
+            self.inflow, fs.v_star, fs.mobility, lo, hi,
         )  # fmt: skip
+        slabs.gather(fs.v_star)
+        slabs.gather(fs.mobility)
         if stretch != 0.0:
             add_grid_motion(
                 fs.v_face,

@@ -97,8 +97,8 @@ class Slabs:
             bounds = np.array([0, nx], dtype=np.int64)
         rank = 0 if comm is None else comm.Get_rank()
         self.lo, self.hi = int(bounds[rank]), int(bounds[rank + 1])
+        self.bounds = bounds
         self.columns = (np.diff(bounds) * ny, bounds[:-1] * ny)
-        self.cells = (np.diff(bounds) * ny * nz, bounds[:-1] * ny * nz)
         # (plane to receive, its owner, tag) and (plane to send, to whom, tag) beside the slab;
         # tag 0: a slab's first plane, which is its left neighbour's right halo, 1: its last
         self.receive, self.send = [], []
@@ -137,9 +137,12 @@ class Slabs:
         return ordered_sum(partial)
 
     def gather(self, field: np.ndarray) -> None:
-        """Every rank's planes of a cell field, into the field on every rank."""
+        """Every rank's planes of a field (C-ordered, x first: cells or faces), into the field on
+        every rank."""
         if self.comm is not None:
-            self.comm.Allgatherv(self.mpi.IN_PLACE, [field, *self.cells, self.mpi.DOUBLE])
+            plane = field[0].size
+            counts = (np.diff(self.bounds) * plane, self.bounds[:-1] * plane)
+            self.comm.Allgatherv(self.mpi.IN_PLACE, [field, *counts, self.mpi.DOUBLE])
 
     @property
     def mpi(self):
