@@ -24,6 +24,7 @@ Arguments (N particles, grid nx, ny, nz):
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 
@@ -132,12 +133,16 @@ def sample_cells(
     porosity,
     mean_velocity,
     mean_diameter,
+    first,
+    last,
 ):
-    """phi = 1 - V_s / V_c per cell, clamped to [0, 1] (below 0 only where particles overlap);
+    """phi = 1 - V_s / V_c per cell of the flat cells first .. last - 1 (one MPI rank's slab of
+    x planes; all of them on one rank), clamped to [0, 1] (below 0 only where particles overlap);
     with want_means also the lens-volume-weighted mean particle velocity and diameter (0 where no
-    particle reaches the sampling sphere). Returns the number of cells clamped."""
+    particle reaches the sampling sphere). Returns the number of those cells clamped."""
     clamped = 0
-    for cell in prange(shape[0] * shape[1] * shape[2]):
+    for c in prange(last - first):
+        cell = first + np.int64(c)  # the prange index is unsigned
         clamped += sample_cell(
             cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start,
             order, want_means, porosity, mean_velocity, mean_diameter,

@@ -289,6 +289,7 @@ class Darcy(FluidModule):
 
     def split_grid(self, comm) -> None:
         self.pore.solver.split(comm)
+        self.porosity.slabs = self.pore.solver.slabs
 
     def rank_copy(self, whole) -> Darcy:
         """Itself: nothing is kept per particle, and every rank steps the whole fluid

@@ -136,6 +136,10 @@ class Slabs:
             self.comm.Allgatherv(self.mpi.IN_PLACE, [partial, *self.columns, self.mpi.DOUBLE])
         return ordered_sum(partial)
 
+    def total(self, count: int) -> int:
+        """The sum of every rank's count."""
+        return count if self.comm is None else int(self.comm.allreduce(count))
+
     def gather(self, field: np.ndarray) -> None:
         """Every rank's planes of a field (C-ordered, x first: cells or faces), into the field on
         every rank."""

@@ -24,6 +24,7 @@ import numpy as np
 from ...kernels.fluid.porosity import bin_particles, sample_cells
 from ...kernels.neighbors import counting_sort
 from .grid import FluidGrid
+from .poisson import Slabs
 
 log = logging.getLogger("sphere.fluid.porosity")
 
@@ -47,6 +48,9 @@ class Porosity:
         self.clamped_cells = 0
         self._warned = False
         self.gpu_sort = None  # on a GPU: its counts, starts, next places, order and clamped count
+        # split across MPI ranks: the slabs of x planes whose cells this rank samples (the fluid's
+        # pressure solve's, set by its split_grid), the rest gathered from the other ranks
+        self.slabs = Slabs(grid.shape)
 
     @property
     def sampling_radius(self) -> float:
@@ -62,10 +66,17 @@ class Porosity:
         bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, self.cell_of, self.wrapped)
         counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
         want, vbar, dbar = self._sampled(radius, mean_velocity, mean_diameter)
+        plane = int(self.shape[1] * self.shape[2])
+        slabs = self.slabs
         clamped = sample_cells(
             self.wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
             self.sampling_radius, self.reach, self.cell_start, self.order, want, porosity, vbar, dbar,
+            slabs.lo * plane, slabs.hi * plane,
         )  # fmt: skip
+        if slabs.split:
+            for field in (porosity, vbar, dbar) if want else (porosity,):
+                slabs.gather(field)
+            clamped = slabs.total(int(clamped))
         return self.report_clamped(int(clamped))
 
     def _sampled(self, radius, mean_velocity, mean_diameter) -> tuple:
