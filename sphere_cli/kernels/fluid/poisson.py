@@ -428,6 +428,16 @@ def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih
             out[i, j, k] = x[i, j, k] + omega * inv_diag[i, j, k] * s
 
 
+@njit(cache=True)
+def jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, tmp, pairs):
+    """`pairs` times jacobi_smooth of the whole grid from x into tmp and back into x, in one call:
+    the coarsest level's 40 sweeps spent 5 us each returning to the interpreter."""
+    nx = x.shape[0]
+    for _ in range(pairs):
+        jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, tmp, 0, nx)
+        jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, x, 0, nx)
+
+
 @njit(cache=True, parallel=True)
 def column_dots(r, z, partial_rz, partial_z, lo, hi):
     """partial_rz = column sums of r z, partial_z of z."""

@@ -45,6 +45,7 @@ from ...kernels.fluid.poisson import (
     column_squares,
     column_sums,
     jacobi_smooth,
+    jacobi_smooth_pairs,
     jacobi_sweep,
     new_direction,
     ordered_sum,
@@ -233,6 +234,10 @@ class Multigrid:
     def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs):
         px, py = self.flags[0], self.flags[1]
         lo, hi = slabs.lo, slabs.hi
+        if not slabs.split:
+            pairs = sweeps // 2
+            jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs)
+            return
         for _ in range(sweeps // 2):
             slabs.halo(x)
             jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, lo, hi)
