@@ -330,7 +330,7 @@ def physics_hash(resolved: dict) -> str:
     for key in NON_PHYSICS_KEYS:
         node = physics
         for part in key[:-1]:
-            node = node.get(part, {})
+            node = node.get(part) or {}  # (a table absent, or None: a case without a fluid)
         node.pop(key[-1], None)
     blob = json.dumps(physics, sort_keys=True, separators=(",", ":")).encode()
     return hashlib.sha256(blob).hexdigest()

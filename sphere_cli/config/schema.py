@@ -847,5 +847,6 @@ NON_PHYSICS_KEYS = (
     ("simulation", "neighbor_skin"),
     ("simulation", "device"),
     ("simulation", "rank_balance"),
+    ("fluid", "solver", "rank_split_cells"),
     ("output",),
 )

@@ -312,9 +312,9 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     of its whole fluid cell, summed over every rank in one rank's order. Run on 2 ranks to t = 2
     ms, then resumed on 4 with the slabs cut by measured work: one rank's run-then-resume, bit
     for bit, with the pressure solve split across the ranks (rank_split_cells = 1: the grid's 5
-    planes in 2, then 4 slabs). The bed's cells are below a porosity floor of 0.5 (a touching
-    cubic lattice leaves 0.48): the fluid step's warning of it is written once a run, by rank 0,
-    not once a rank."""
+    planes in 2 slabs; on resume 50, which a resume accepts changed: 4 slabs). The bed's cells
+    are below a porosity floor of 0.5 (a touching cubic lattice leaves 0.48): the fluid step's
+    warning of it is written once a run, by rank 0, not once a rank."""
     text = (REPO / "configs" / "fluid-settling.toml").read_text()
     for old, new in (
         ("count = 200", "count = 500"),
@@ -341,7 +341,9 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     run_ok(sphere("resume", "one", "-q", cwd=tmp_path))
     split = [sphere("run", "case.toml", "-o", "split", "-q", "--until", "0.002", ranks=2, cwd=tmp_path)]
     edited = tmp_path / "split" / "case.toml"  # a resume may change how the slabs are cut
-    edited.write_text(edited.read_text().replace("[simulation]", '[simulation]\nrank_balance = "time"'))
+    text = edited.read_text().replace("[simulation]", '[simulation]\nrank_balance = "time"')
+    assert "rank_split_cells = 1\n" in text
+    edited.write_text(text.replace("rank_split_cells = 1\n", "rank_split_cells = 50\n"))
     split.append(sphere("resume", "split", "-q", ranks=4, cwd=tmp_path))
     for result in split:
         run_ok(result)
