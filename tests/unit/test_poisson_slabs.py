@@ -13,6 +13,7 @@ guess, and more ranks than planes.
 from __future__ import annotations
 
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -175,3 +176,31 @@ def test_the_slabs_split_the_multigrid_levels_the_planes_allow():
     default = PoissonSolver(grid, "dirichlet", "no-flux")
     default.split(Fake(1, 4))
     assert not default.slabs.split
+
+
+def test_a_split_solver_sent_to_another_process_arrives_whole():
+    """The lead's fluid module is pickled to the other ranks when the scene is shared out again
+    (a stage that begins): its solver's slabs must not travel (a communicator does not), and the
+    copy solves whole, as one rank does, until that rank splits it."""
+    namespace: dict = {}
+    exec(SYSTEMS, namespace)
+    (solver, arguments), *_ = namespace["systems"]()
+
+    class Comm:
+        def Get_size(self):
+            return 2
+
+        def Get_rank(self):
+            return 1
+
+    expected = arguments[0].copy()
+    solver.solve(expected, *arguments[1:])
+    solver.split(Comm())
+    assert solver.slabs.split and solver.multigrid.levels[0].slabs.split
+    copy = pickle.loads(pickle.dumps(solver))
+    slabs = [copy.slabs, copy.multigrid.fine_slabs] + [level.slabs for level in copy.multigrid.levels]
+    assert not any(s.split for s in slabs)
+    assert all((s.lo, s.hi) == (0, s.shape[0]) for s in slabs)
+    x = arguments[0].copy()
+    copy.solve(x, *arguments[1:])
+    assert np.array_equal(x, expected)
