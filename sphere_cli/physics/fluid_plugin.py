@@ -123,10 +123,11 @@ class FluidModule(Module):
         return None
 
     def split_grid(self, comm) -> None:
-        """Split the fluid's own solves across the MPI ranks of comm, the grid's communicator
-        (ranks.py World.grid_comm), before each of its steps on ranks (step_on_rank), on every
-        rank: a model whose step solves on its grid (Darcy, Navier-Stokes) splits its
-        PoissonSolver; the others need nothing."""
+        """Split the fluid's own grid work across the MPI ranks of comm, the grid's
+        communicator (ranks.py World.grid_comm), before each of its steps on ranks
+        (step_on_rank), on every rank: a model whose step solves on its grid (Darcy,
+        Navier-Stokes) splits its PoissonSolver, and its porosity sampling (and the
+        Navier-Stokes prediction) takes the solver's slabs; the others need nothing."""
 
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the

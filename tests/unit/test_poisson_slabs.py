@@ -91,6 +91,21 @@ if world.rank == 0:
 """
 )
 
+
+class Fake:
+    """The few calls of a communicator that PoissonSolver.split makes, for rank `rank` of `size`
+    (it sends nothing until a solve)."""
+
+    def __init__(self, rank, size):
+        self.rank, self.size = rank, size
+
+    def Get_size(self):
+        return self.size
+
+    def Get_rank(self):
+        return self.rank
+
+
 pytestmark = pytest.mark.skipif(
     not MPIEXEC.is_file() or shutil.which("mpiexec", path=str(MPIEXEC.parent)) is None,
     reason="no mpiexec beside this Python (the test extra installs the mpich wheel on Linux)",
@@ -133,18 +148,6 @@ def test_the_slabs_split_the_multigrid_levels_the_planes_allow():
     exec(SYSTEMS, namespace)
     solvers = [solver for solver, _ in namespace["systems"]()]
 
-    class Fake:
-        """The few calls of a communicator that split makes, for rank `rank` of `size`."""
-
-        def __init__(self, rank, size):
-            self.rank, self.size = rank, size
-
-        def Get_size(self):
-            return self.size
-
-        def Get_rank(self):
-            return self.rank
-
     periodic16, _, _, odd, _, narrow = solvers
     assert (periodic16.slabs.lo, periodic16.slabs.hi) == (0, 16) and not periodic16.slabs.split
     periodic16.split(Fake(1, 2))
@@ -186,16 +189,9 @@ def test_a_split_solver_sent_to_another_process_arrives_whole():
     exec(SYSTEMS, namespace)
     (solver, arguments), *_ = namespace["systems"]()
 
-    class Comm:
-        def Get_size(self):
-            return 2
-
-        def Get_rank(self):
-            return 1
-
     expected = arguments[0].copy()
     solver.solve(expected, *arguments[1:])
-    solver.split(Comm())
+    solver.split(Fake(1, 2))
     assert solver.slabs.split and solver.multigrid.levels[0].slabs.split
     copy = pickle.loads(pickle.dumps(solver))
     slabs = [copy.slabs, copy.multigrid.fine_slabs] + [level.slabs for level in copy.multigrid.levels]

@@ -265,7 +265,7 @@ class NavierStokesSolver:
         stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
         edge_porosity(fs.porosity, fs.edges)
         # split across MPI ranks with the pressure solve (its slabs of x planes), the prediction
-        # takes the rank's planes, from the stresses and fluxes of those and the two beside
+        # takes the rank's planes, from the stresses and fluxes of those and the plane either side
         slabs = self.poisson.slabs
         lo, hi = slabs.lo, slabs.hi
         wide = (lo, hi)
