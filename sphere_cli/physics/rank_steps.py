@@ -47,9 +47,11 @@ f_other) go to the ghosts with the force, and a sum over all particles inside it
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
 own particles in global order (`_whole`). Its own step (its `step_on_rank`: the VANS
 column, the Darcy pore pressure, the Navier-Stokes grid) runs on every rank alike from every
-rank's own particles and their fluid arrays in global order (`_whole`), nothing gathered at
-the lead nor sent back: the grids are not cut, and each rank solves the whole fluid. A failure
-there is met by every rank at once and reported by the lead alone.
+rank's own particles and their fluid arrays in global order (`_whole`; the Darcy porosity
+from those its cells reach, `_near`), nothing gathered at the lead nor sent back: the grids
+are cut only for the pressure solve, the porosity and the Navier-Stokes prediction
+(physics/fluid/poisson.py Slabs), and each rank computes the rest of the fluid whole. A
+failure there is met by every rank at once and reported by the lead alone.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -194,6 +196,22 @@ def _refusal(scene) -> str | None:
     return ", ".join(extra) or None
 
 
+class EveryRank:
+    """The `whole` a fluid's rank_copy and step_on_rank are given (collectives): called with
+    arrays of this rank's particles, the arrays of every rank's own particles in global order
+    (RankSteps._whole); near(needed, *arrays) only those that needed(pos) (n, ranks) marks for
+    this rank, in global order (RankSteps._near)."""
+
+    def __init__(self, steps: RankSteps):
+        self.steps = steps
+
+    def __call__(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        return self.steps._whole(*arrays)
+
+    def near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        return self.steps._near(needed, *arrays)
+
+
 class RankSteps:
     """scene.step.compiled on every rank of a split run (the lead's holds the whole scene)."""
 
@@ -217,6 +235,7 @@ class RankSteps:
         self.stages = None  # the lead: its scene's Stages
         self.fluid = None  # the lead: its scene's fluid module
         self.budget = None  # the lead: its scene's EnergyBudget
+        self.every = EveryRank(self)  # what a fluid's step on the rank sums over
 
     # --- set-up ----------------------------------------------------------------------------
 
@@ -451,7 +470,7 @@ class RankSteps:
                     if not self.world.leads:  # the same step's at the lead warns of the same
                         warnings.simplefilter("ignore")
                     self.part.fluid.split_grid(self.world.grid_comm)
-                    self.part.fluid.step_on_rank(state, self._whole, self.part.gid)
+                    self.part.fluid.step_on_rank(state, self.every, self.part.gid)
             except Exception:
                 if not self.world.leads:  # the lead reports it, as one rank does, and ends them
                     time.sleep(FAILURE_GRACE)
@@ -480,7 +499,7 @@ class RankSteps:
         """The lead's fluid (the template's) for a rank's particles: its own arrays shared,
         state.fluid a copy, each of its particle_arrays pick(name, the lead's array)."""
         state.fluid = copy.copy(self.t.fluid_state)
-        fluid = self.t.fluid.rank_copy(self._whole)
+        fluid = self.t.fluid.rank_copy(self.every)
         for name, (holder, attribute) in fluid.particle_arrays(state).items():
             setattr(holder, attribute, np.ascontiguousarray(pick(name, getattr(holder, attribute))))
         return fluid
@@ -560,6 +579,31 @@ class RankSteps:
         out, first = [], 0
         for a, width in zip(arrays, widths, strict=True):
             out.append(every[:, first : first + width].astype(a.dtype).reshape(-1, *a.shape[1:]))
+            first += width
+        return tuple(out)
+
+    def _near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Collective: the arrays (n, ...) of this rank's particles, of those of every rank's own
+        particles that needed(pos) ((n, ranks) bool of the owner's particles) marks for this rank,
+        in global index order: each owner sends each rank what it needs (one Alltoallv, the global
+        index travelling as a column of doubles, exact below 2^53), and each rank sorts what
+        arrives by it."""
+        own, _, _ = self._everyone()
+        part, comm, size = self.part, self.world.comm, self.world.size
+        marks = needed(part.state.particles.pos[own])
+        columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
+        widths = [c.shape[1] for c in columns]
+        mine = np.concatenate(columns, axis=1, dtype=np.float64)
+        sending = np.concatenate([mine[marks[:, rank]] for rank in range(size)])
+        send_counts = np.count_nonzero(marks, axis=0).astype(np.int64)
+        receive_counts = np.empty(size, dtype=np.int64)
+        comm.Alltoall(send_counts, receive_counts)
+        arrived = np.empty((int(receive_counts.sum()), sum(widths)))
+        comm.Alltoallv([sending, send_counts * sum(widths)], [arrived, receive_counts * sum(widths)])
+        arrived = arrived[np.argsort(arrived[:, 0], kind="stable")]
+        out, first = [], widths[0]
+        for a, width in zip(arrays, widths[1:], strict=True):
+            out.append(arrived[:, first : first + width].astype(a.dtype).reshape(-1, *a.shape[1:]))
             first += width
         return tuple(out)
 

@@ -19,6 +19,7 @@ import pytest
 
 from sphere_cli.kernels.fluid.porosity import lens_volume
 from sphere_cli.physics.fluid.grid import FluidGrid
+from sphere_cli.physics.fluid.poisson import Slabs
 from sphere_cli.physics.fluid.porosity import Porosity, particle_cells
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -269,3 +270,25 @@ def test_kernels_without_jit_agree():
     exec(code.replace("print(repr(phi.ravel().tolist() + vbar.ravel().tolist()))\n", ""), namespace)
     jitted = np.concatenate([namespace["phi"].ravel(), namespace["vbar"].ravel()])
     assert np.abs(pure - jitted).max() <= 1e-12
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_a_rank_is_sent_the_particles_its_slab_of_cells_can_reach(periodic):
+    """Porosity.needed_by, the window of a split run (physics/rank_steps.py _near): 8 x planes
+    of 1 mm cut 0-3 | 3-5 | 5-8 among 3 ranks; sampling spheres of 0.5 mm and particles of at
+    most 0.5 mm reach one plane either side, so rank 1 needs the particles binned in planes 2-5;
+    ranks 0 and 2 reach around the periodic x axis, not across a bounded one."""
+    grid = FluidGrid(np.zeros(3), np.full(3, 0.001), (8, 2, 2), np.array([periodic, True, False]))
+    porosity = Porosity(grid, 8)
+
+    class Comm:
+        def Get_rank(self):
+            return 0
+
+    porosity.slabs = Slabs(grid.shape, Comm(), np.array([0, 3, 5, 8]), periodic)
+    pos = np.column_stack([(np.arange(8) + 0.5) * 0.001, np.full(8, 0.0005), np.full(8, 0.0005)])
+    marks = porosity.needed_by(pos, 0.0005)
+    reached = [set(np.flatnonzero(marks[:, rank])) for rank in range(3)]
+    assert reached[1] == {2, 3, 4, 5}
+    assert reached[0] == ({0, 1, 2, 3, 7} if periodic else {0, 1, 2, 3})
+    assert reached[2] == ({4, 5, 6, 7, 0} if periodic else {4, 5, 6, 7})

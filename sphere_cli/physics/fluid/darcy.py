@@ -282,14 +282,23 @@ class Darcy(FluidModule):
     def step_on_rank(self, state, whole, held) -> None:
         """after_step on one MPI rank's part (physics/rank_steps.py), whole(*arrays) the arrays
         of every rank's own particles in global order: the porosity is measured from all of
-        them, as on one rank, and the pore pressure stepped alike on every rank, bit for bit."""
+        them, as on one rank, and the pore pressure stepped alike on every rank, bit for bit.
+        Where the porosity is sampled on slabs (split_grid), a rank takes only the particles its
+        cells can reach (whole.near), in the same order, so each cell's sum is one rank's."""
         p = state.particles
-        pos, vel, radius = whole(p.pos, p.vel, p.radius)
+        if self.porosity.slabs.split:
+            pos, vel, radius = whole.near(self._reached_by, p.pos, p.vel, p.radius)
+        else:
+            pos, vel, radius = whole(p.pos, p.vel, p.radius)
         self._step(state, types.SimpleNamespace(pos=pos, vel=vel, radius=radius))
 
     def split_grid(self, comm) -> None:
         self.pore.solver.split(comm)
         self.porosity.slabs = self.pore.solver.slabs
+
+    def _reached_by(self, pos: np.ndarray) -> np.ndarray:
+        """Which ranks' porosity cells can reach each of the particles at pos (whole.near)."""
+        return self.porosity.needed_by(pos, 0.5 * self.diameter)
 
     def rank_copy(self, whole) -> Darcy:
         """Itself: nothing is kept per particle, and every rank steps the whole fluid
@@ -339,7 +348,9 @@ class Darcy(FluidModule):
 
     def _measure(self, particles) -> None:
         s = self.pore.state
-        self.porosity.measure(particles, s.porosity, mean_velocity=s.particle_velocity)
+        # the largest radius of all the particles (a rank may be given only some: step_on_rank)
+        largest = 0.5 * self.diameter
+        self.porosity.measure(particles, s.porosity, mean_velocity=s.particle_velocity, largest=largest)
 
     # -- particles -------------------------------------------------------------------------------
 

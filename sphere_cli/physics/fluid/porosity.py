@@ -57,20 +57,23 @@ class Porosity:
         """[m], of the grid's current cells (a grid following the top wall changes them)."""
         return self.grid.sampling_radius
 
-    def measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> int:
+    def measure(self, particles, porosity, mean_velocity=None, mean_diameter=None, largest=None) -> int:
         """Fill porosity (nx, ny, nz) [-] from particles.pos/.radius; with mean_velocity
         (nx, ny, nz, 3) [m/s] and/or mean_diameter (nx, ny, nz) [m] also the lens-volume-weighted
         means over the particles reaching each sampling sphere (0 where none does). Returns the
         number of cells whose porosity was clamped at 0."""
         pos, radius = particles.pos, particles.radius
-        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, self.cell_of, self.wrapped)
-        counting_sort(self.cell_of, self.cell_start.size - 1, self.cell_start, self.order)
-        want, vbar, dbar = self._sampled(radius, mean_velocity, mean_diameter)
+        # (a rank of a split run may pass fewer particles than the scene's: those its cells reach)
+        n = pos.shape[0]
+        cell_of, wrapped, order = self.cell_of[:n], self.wrapped[:n], self.order[:n]
+        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, cell_of, wrapped)
+        counting_sort(cell_of, self.cell_start.size - 1, self.cell_start, order)
+        want, vbar, dbar = self._sampled(radius, mean_velocity, mean_diameter, largest)
         plane = int(self.shape[1] * self.shape[2])
         slabs = self.slabs
         clamped = sample_cells(
-            self.wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
-            self.sampling_radius, self.reach, self.cell_start, self.order, want, porosity, vbar, dbar,
+            wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
+            self.sampling_radius, self.reach, self.cell_start, order, want, porosity, vbar, dbar,
             slabs.lo * plane, slabs.hi * plane,
         )  # fmt: skip
         if slabs.split:
@@ -79,11 +82,13 @@ class Porosity:
             clamped = slabs.total(int(clamped))
         return self.report_clamped(int(clamped))
 
-    def _sampled(self, radius, mean_velocity, mean_diameter) -> tuple:
-        """The reach of the sampling spheres into the bins, now; (whether means are wanted, and the
+    def _sampled(self, radius, mean_velocity, mean_diameter, largest=None) -> tuple:
+        """The reach of the sampling spheres into the bins, now (largest: the largest radius of
+        all the particles, given where only some are passed); (whether means are wanted, and the
         arrays for them, given or scratch)."""
         # bins on either side of a cell that a particle touching its sampling sphere can lie in
-        largest = float(radius.max()) if radius.size else 0.0
+        if largest is None:
+            largest = float(radius.max()) if radius.size else 0.0
         np.floor(0.5 + (self.sampling_radius + largest) / self.spacing, out=self._reach)
         self.reach[:] = self._reach
         want = mean_velocity is not None or mean_diameter is not None
@@ -117,6 +122,31 @@ class Porosity:
             (k.sort_cells, cells, (start, order, count)),
             (k.sample_cells, cells, sample),
         ], clamped
+
+    def needed_by(self, pos: np.ndarray, largest: float) -> np.ndarray:
+        """(n, ranks) bool: which ranks of a split run sample cells that can reach each of these
+        particles (pos (n, 3) [m]): those whose slab of x planes, widened by the reach of the
+        largest sampling sphere the grid can have (half its smaller x or y edge: the z edge of
+        a grid following the top wall changes), holds the particle's bin. Whole bins are taken,
+        so a rank gets every particle of each bin its cells visit."""
+        bins = np.empty(pos.shape[0], dtype=np.int64)
+        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, bins, np.empty_like(pos))
+        nx = int(self.shape[0])
+        x = bins // int(self.shape[1] * self.shape[2])
+        reach = int(np.floor(0.5 + (0.5 * min(self.spacing[0], self.spacing[1]) + largest) / self.spacing[0]))
+        bounds = self.slabs.bounds
+        marks = np.zeros((pos.shape[0], bounds.size - 1), dtype=bool)
+        for rank, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+            first, last = lo - reach, hi - 1 + reach  # the planes its cells visit, unwrapped
+            if lo == hi:
+                continue
+            if not self.periodic[0]:
+                marks[:, rank] = (x >= first) & (x <= last)
+            elif last - first + 1 >= nx:
+                marks[:, rank] = True
+            else:
+                marks[:, rank] = (x - first) % nx <= last - first
+        return marks
 
     def report_clamped(self, clamped: int) -> int:
         """Keep and (once) log the count of cells whose porosity was clamped at 0; returns it."""
