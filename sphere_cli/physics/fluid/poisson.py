@@ -231,15 +231,18 @@ class Multigrid:
         """z = M^-1 r; fine = (diag, inv_diag, ax, ay, az, ih2) of the fine operator."""
         self._cycle(-1, r, z, fine)
 
-    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs):
+    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs, zero=False):
+        """`sweeps` damped Jacobi sweeps of x (zero: x is 0 everywhere, its planes beside the
+        slab too, so the first sweep needs no messages)."""
         px, py = self.flags[0], self.flags[1]
         lo, hi = slabs.lo, slabs.hi
         if not slabs.split:
             pairs = sweeps // 2
             jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs)
             return
-        for _ in range(sweeps // 2):
-            slabs.halo(x)
+        for sweep in range(sweeps // 2):
+            if sweep or not zero:
+                slabs.halo(x)
             jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, lo, hi)
             slabs.halo(tmp)
             jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, x, lo, hi)
@@ -263,9 +266,9 @@ class Multigrid:
             slabs = level.slabs
         x[...] = 0.0
         if index == len(self.levels) - 1:
-            self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs)
+            self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs, zero=True)
             return
-        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs)
+        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, zero=True)
         px, py = self.flags[0], self.flags[1]
         slabs.halo(x)
         residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial, slabs.lo, slabs.hi)
