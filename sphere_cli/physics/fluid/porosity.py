@@ -6,7 +6,9 @@ cell-centred sampling sphere of radius half the smallest cell edge).
     porosity.measure(particles, phi)                 # each fluid step: fills phi (nx, ny, nz)
     porosity.measure(particles, phi, vbar, dbar)     # also the means (nx, ny, nz, 3) and (nx, ny, nz)
     porosity.cell_of                                 # (N,) flat cell of each particle centre, as
-                                                     # of the last measure ((i*ny + j)*nz + k)
+                                                     # of the last measure ((i*ny + j)*nz + k);
+                                                     # given n < N particles (a Darcy rank's
+                                                     # window), only the first n entries, theirs
 
 phi is clamped to [0, 1]: below 0 only where overlapping particles put more solid in a sampling
 sphere than it holds; the first clamp is logged as a warning, and measure() returns the number
@@ -137,9 +139,9 @@ class Porosity:
         bounds = self.slabs.bounds
         marks = np.zeros((pos.shape[0], bounds.size - 1), dtype=bool)
         for rank, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
-            first, last = lo - reach, hi - 1 + reach  # the planes its cells visit, unwrapped
             if lo == hi:
                 continue
+            first, last = lo - reach, hi - 1 + reach  # the planes its cells visit, unwrapped
             if not self.periodic[0]:
                 marks[:, rank] = (x >= first) & (x <= last)
             elif last - first + 1 >= nx:
