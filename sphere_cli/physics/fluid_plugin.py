@@ -118,7 +118,7 @@ class FluidModule(Module):
         across ranks. A model that runs split also defines step_on_rank(state, whole, held),
         after_step on one rank's part: `state` the part's (its particles those the rank holds,
         `held` their global indices), whole(*arrays) the arrays of every rank's own particles in
-        global order (a collective; whole.near(needed, *arrays) only those needed(pos) marks for
+        global order (a collective; whole.near(needed, *arrays) only those needed(own) marks for
         this rank: physics/rank_steps.py EveryRank); every rank takes the same step from them,
         bit for bit one rank's, so nothing is gathered at the lead nor sent back."""
         return None

@@ -43,15 +43,16 @@ gathered for the steps where a stage may end; when one begins, the scene is shar
 A **fluid** keeps its own arrays (profiles, grids) whole on every rank. Its force and kick run
 on every rank, its per-particle arrays (`particle_arrays`) travelling with the particles; those
 its force writes from the other forces on a particle (`ghost_arrays`: the Navier-Stokes drag's
-f_other) go to the ghosts with the force, and a sum over all particles inside its force (the
-Navier-Stokes self-induced velocity's drag coefficients per cell) is taken over every rank's
-own particles in global order (`_whole`). Its own step (its `step_on_rank`: the VANS
-column, the Darcy pore pressure, the Navier-Stokes grid) runs on every rank alike from every
-rank's own particles and their fluid arrays in global order (`_whole`; the Darcy porosity
-from those its cells reach, `_near`), nothing gathered at the lead nor sent back: the grids
-are cut only for the pressure solve, the porosity and the Navier-Stokes prediction
-(physics/fluid/poisson.py Slabs), and each rank computes the rest of the fluid whole. A
-failure there is met by every rank at once and reported by the lead alone.
+f_other) go to the ghosts with the force, and a sum over particles inside its kick (the
+Navier-Stokes self-induced velocity's drag coefficients per cell) is taken, for the cells
+this rank's particles can visit, over every rank's own particles in them in global order
+(`_near`). Its own step (its `step_on_rank`: the VANS column, the Darcy pore pressure, the
+Navier-Stokes grid) runs on every rank alike from every rank's own particles and their fluid
+arrays in global order (`_whole`; on a split grid only those its slab's cells reach,
+`_near`), nothing gathered at the lead nor sent back: the grids are cut only for the pressure
+solve, the porosity, the Navier-Stokes momentum exchange and prediction (physics/fluid/
+poisson.py Slabs), and each rank computes the rest of the fluid whole. A failure there is met
+by every rank at once and reported by the lead alone.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -199,8 +200,9 @@ def _refusal(scene) -> str | None:
 class EveryRank:
     """The `whole` a fluid's rank_copy and step_on_rank are given (collectives): called with
     arrays of this rank's particles, the arrays of every rank's own particles in global order
-    (RankSteps._whole); near(needed, *arrays) only those that needed(pos) (n, ranks) marks for
-    this rank, in global order (RankSteps._near)."""
+    (RankSteps._whole); near(needed, *arrays) only those of them that needed(own) ((ranks, n)
+    bool of own, the local indices of this rank's own particles) marks for this rank, in global
+    order (RankSteps._near); every_mask(mask) every rank's mask."""
 
     def __init__(self, steps: RankSteps):
         self.steps = steps
@@ -210,6 +212,13 @@ class EveryRank:
 
     def near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         return self.steps._near(needed, *arrays)
+
+    def every_mask(self, mask: np.ndarray) -> np.ndarray:
+        """(ranks, m) bool: every rank's mask (m,) bool (one Allgather of its bits)."""
+        packed = np.packbits(mask)
+        every = np.empty((self.steps.world.size, packed.size), dtype=np.uint8)
+        self.steps.world.comm.Allgather(packed, every)
+        return np.unpackbits(every, axis=1, count=mask.size).astype(bool)
 
 
 class RankSteps:
@@ -584,18 +593,18 @@ class RankSteps:
 
     def _near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         """Collective: the arrays (n, ...) of this rank's particles, of those of every rank's own
-        particles that needed(pos) ((n, ranks) bool of the owner's particles) marks for this rank,
-        in global index order: each owner sends each rank what it needs (one Alltoallv, the global
-        index travelling as a column of doubles, exact below 2^53), and each rank sorts what
-        arrives by it."""
+        particles that needed(own) ((ranks, n) bool of the owner's own particles, own their local
+        indices) marks for this rank, in global index order: each owner sends each rank what it
+        needs (one Alltoallv, the global index travelling as a column of doubles, exact below
+        2^53), and each rank sorts what arrives by it."""
         own, _, _ = self._everyone()
         part, comm, size = self.part, self.world.comm, self.world.size
-        marks = needed(part.state.particles.pos[own])
+        marks = needed(own)
         columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
         widths = [c.shape[1] for c in columns]
         mine = np.concatenate(columns, axis=1, dtype=np.float64)
-        sending = np.concatenate([mine[marks[:, rank]] for rank in range(size)])
-        send_counts = np.count_nonzero(marks, axis=0).astype(np.int64)
+        sending = np.concatenate([mine[marks[rank]] for rank in range(size)])
+        send_counts = np.count_nonzero(marks, axis=1).astype(np.int64)
         receive_counts = np.empty(size, dtype=np.int64)
         comm.Alltoall(send_counts, receive_counts)
         arrived = np.empty((int(receive_counts.sum()), sum(widths)))

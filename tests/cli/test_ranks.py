@@ -444,12 +444,42 @@ keep = 2
 """
 
 
-def test_a_darcy_bed_sampled_on_slabs_is_one_ranks_on_two_and_three(tmp_path):
-    """Its porosity (and mean particle velocity) is sampled on slabs of 4 and 4, then 2, 3 and 3
-    x planes, each rank from only the particles its cells reach (RankSteps._near: a window of
-    its planes and one either side, wrapped), sorted back into global order: bit for bit one
-    rank's. It fails if the window leaves out the plane on either side of a slab."""
-    (tmp_path / "case.toml").write_text(DARCY_SLABS)
+# the same beads in water under a Navier-Stokes grid of the same cells, with the drag of each
+# particle (its self-induced velocity subtracted) or the cell-averaged drag
+NAVIER_STOKES_SLABS = (
+    DARCY_SLABS[: DARCY_SLABS.index("[fluid]")]
+    + """\
+[fluid]
+model = "navier-stokes"
+density = 1000.0
+viscosity = 1.0e-3
+grid = { cells = [8, 2, 6] }
+bottom = { type = "no-flow" }
+top = { type = "pressure", pressure = 0.0 }
+
+[fluid.solver]
+rank_split_cells = 1
+
+[fluid.coupling]
+steps = 5
+"""
+    + DARCY_SLABS[DARCY_SLABS.index("[output.frames]") - 1 :]
+)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [DARCY_SLABS, NAVIER_STOKES_SLABS, NAVIER_STOKES_SLABS + '\n[fluid.drag]\naveraging = "cell"\n'],
+    ids=["darcy", "navier-stokes", "navier-stokes-cell-averaged"],
+)
+def test_a_fluid_bed_on_slabs_is_one_ranks_on_two_and_three(case, tmp_path):
+    """Its porosity (and mean particle velocity) is sampled, and the Navier-Stokes momentum
+    exchange settled, on slabs of 4 and 4, then 2, 3 and 3 x planes, each rank from only the
+    particles its cells reach (RankSteps._near: a window of its planes and one either side,
+    wrapped), sorted back into global order, and the cells' fields gathered: bit for bit one
+    rank's. It fails if the window leaves out the plane on either side of a slab, or a rank's
+    cells are not gathered."""
+    (tmp_path / "case.toml").write_text(case)
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
     for ranks in (2, 3):
         run_ok(sphere("run", "case.toml", "-o", f"split{ranks}", "-q", ranks=ranks, cwd=tmp_path))

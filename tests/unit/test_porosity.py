@@ -288,7 +288,7 @@ def test_a_rank_is_sent_the_particles_its_slab_of_cells_can_reach(periodic):
     porosity.slabs = Slabs(grid.shape, Comm(), np.array([0, 3, 5, 8]), periodic)
     pos = np.column_stack([(np.arange(8) + 0.5) * 0.001, np.full(8, 0.0005), np.full(8, 0.0005)])
     marks = porosity.needed_by(pos, 0.0005)
-    reached = [set(np.flatnonzero(marks[:, rank])) for rank in range(3)]
+    reached = [set(np.flatnonzero(marks[rank])) for rank in range(3)]
     assert reached[1] == {2, 3, 4, 5}
     assert reached[0] == ({0, 1, 2, 3, 7} if periodic else {0, 1, 2, 3})
     assert reached[2] == ({4, 5, 6, 7, 0} if periodic else {4, 5, 6, 7})

@@ -275,6 +275,8 @@ def _seen(u, c, disturbance, i, a, corrected):
 
 @njit(cache=True, parallel=True)
 def exchange(
+    first,
+    last,
     start,
     order,
     impulse,
@@ -295,15 +297,17 @@ def exchange(
     predicted,
     solid,
 ):
-    """Per cell, in particle order (module docstring, "Momentum exchange"): `predicted` = the drag
-    its particles will receive over the next fluid interval at the fluid velocity u now, sum
+    """Per cell c of [first, last) (flat indices: every cell, or a rank's slab of x planes), in
+    particle order (module docstring, "Momentum exchange"): `predicted` = the drag its particles
+    will receive over the next fluid interval at the fluid velocity u now, sum
     (phi1 K (u - v) + (phi1 - 1) F_o) / cell volume; f_i = that, plus the drag impulses received
     over the last interval / (fluid_dt cell volume) less what the last fluid step took for them
     (its implicit part f_exchange - f_i and the old `predicted`), plus -V grad(p) / cell volume if
     pressure_exchanged; f_i_coef = sum phi1 K / cell volume, phi1 = phi1(lambda fluid_dt); solid
-    the volume of the particles centred in each cell [m^3]. The impulses are reset to zero. With
-    disturbance (N,3,MODES) not empty the particles feel u - u' (`particle_drag`)."""
-    for c in prange(f_i_coef.shape[0]):
+    the volume of the particles centred in each cell [m^3]. The impulses of those cells'
+    particles are reset to zero. With disturbance (N,3,MODES) not empty the particles feel
+    u - u' (`particle_drag`)."""
+    for c in prange(first, last):
         exchange_cell(
             c, start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged,
             fluid_dt, inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,

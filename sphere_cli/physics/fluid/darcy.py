@@ -287,7 +287,7 @@ class Darcy(FluidModule):
         cells can reach (whole.near), in the same order, so each cell's sum is one rank's."""
         p = state.particles
         if self.porosity.slabs.split:
-            pos, vel, radius = whole.near(self._reached_by, p.pos, p.vel, p.radius)
+            pos, vel, radius = whole.near(lambda own: self._reached_by(p.pos[own]), p.pos, p.vel, p.radius)
         else:
             pos, vel, radius = whole(p.pos, p.vel, p.radius)
         self._step(state, types.SimpleNamespace(pos=pos, vel=vel, radius=radius))

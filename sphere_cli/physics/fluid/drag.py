@@ -21,6 +21,7 @@ B (pressure in the fluid only: -grad p - f_i) exchanges drag and pressure-gradie
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 
@@ -41,6 +42,7 @@ from ...kernels.fluid.porosity import bin_particles
 from ...kernels.neighbors import counting_sort
 from ...state import State
 from ..fluid_plugin import GpuSteps
+from .poisson import Slabs
 from .self_induced import MODES, lattice_modes
 
 LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
@@ -105,12 +107,17 @@ class FluidParticleDrag:
         self.decay_dt = 0.0
         self.start = np.zeros(cells + 1, dtype=np.int64)
         self.order = np.zeros(n, dtype=np.int64)
+        self.every_cell = Slabs(self.shape)  # the cells one rank settles (fluid_forcing)
         self.warned = False
         self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
         self.exchanged_on_device = False  # a GPU takes the momentum exchange (gpu_steps)
         # on MPI ranks: whole(*arrays), the arrays of every rank's own particles in one rank's
-        # order (physics/rank_steps.py); None on one rank, which holds them all
+        # order (physics/rank_steps.py EveryRank); None on one rank, which holds them all
         self.whole = None
+        # on MPI ranks: (ranks, C) bool, the cells each rank's particles can visit until the
+        # next list build, and the (list builds, spacing) they are for (_cell_coefficients)
+        self.visited = None
+        self.visited_for = None
 
     @property
     def inv_cell_volume(self) -> float:
@@ -238,8 +245,7 @@ class FluidParticleDrag:
         p = state.particles
         if self.corrected:
             self._follow_grid(state.clock.dt)
-            every = (self.cell_of, self.coef) if self.whole is None else self.whole(self.cell_of, self.coef)
-            cell_coefficients(*every, self.cell_coef)
+            self._cell_coefficients(state)
         drag_kick(
             p.vel,
             p.angvel,
@@ -264,6 +270,41 @@ class FluidParticleDrag:
             self.viscosity / self.density,
         )
 
+    def _cell_coefficients(self, state: State) -> None:
+        """cell_coef, the sum of the drag coefficients of each cell's particles in particle
+        order. On an MPI rank (self.whole), of the cells its particles can visit until the next
+        list build (the others are left unread), from the particles every rank's owners have in
+        them, in global order (whole.near): as one rank sums them."""
+        if self.whole is None:
+            cell_coefficients(self.cell_of, self.coef, self.cell_coef)
+            return
+        visited_for = (state.neighbors.builds, *self.spacing)  # (a grid following a wall: its cells)
+        if self.visited_for != visited_for:
+            self.visited = self.whole.every_mask(self._cells_visited(state))
+            self.visited_for = visited_for
+        cell_of, coef = self.whole.near(self._visited_by, self.cell_of, self.coef)
+        cell_coefficients(cell_of, coef, self.cell_coef)
+
+    def _cells_visited(self, state: State) -> np.ndarray:
+        """(C,) bool, the cells this rank's particles can be in until the next list build: each
+        moves at most half the skin from where it was at the last (NeighborSearch's threshold),
+        so the cells of the points of a lattice over the box of that half width around it, at
+        most a cell apart along each axis."""
+        reach = 0.5 * state.neighbors.skin
+        ref = state.neighbors.ref_pos
+        visited = np.zeros(self.start.size - 1, dtype=bool)
+        bins, shifted = np.empty(ref.shape[0], dtype=np.int64), np.empty_like(ref)
+        points = [np.linspace(-reach, reach, int(np.ceil(2.0 * reach / h)) + 1) for h in self.spacing]
+        for offset in itertools.product(*points):
+            bin_particles(ref + offset, self.origin, self.spacing, self.cells, self.periodic, bins, shifted)
+            visited[bins] = True
+        return visited
+
+    def _visited_by(self, own: np.ndarray) -> np.ndarray:
+        """(ranks, n) bool: which ranks' particles can visit the cells of the particles own
+        (local indices) are in (binned by this step's forces)."""
+        return self.visited[:, self.cell_of[own]]
+
     def _follow_grid(self, dt: float) -> None:
         """The grid's response bands for its cells now and their decay over dt [s]. The cells
         change when the grid follows the top wall: the bands are those of the spacing rounded to
@@ -286,36 +327,48 @@ class FluidParticleDrag:
             np.exp(self.band_rate * (-self.viscosity / self.density * dt), out=self.band_decay)
             self.decay_dt = dt
 
-    def fluid_forcing(self, state: State, fs, fluid_dt: float) -> None:
+    def fluid_forcing(self, state: State, fs, fluid_dt: float, slabs: Slabs | None = None) -> None:
         """Fill fs.f_i and fs.k_drag for a fluid step of fluid_dt [s] (also the time since the
         last call): the drag expected over the next interval at the fluid velocity now, settled
         against the impulses received since the last call (kernels/fluid/drag.py, "Momentum
         exchange"); the impulses restart from zero. A GPU that took the exchange on the device
-        (gpu_steps) has filled them already."""
+        (gpu_steps) has filled them already. On MPI ranks (slabs split: physics/fluid/poisson.py)
+        each rank settles the cells of its slab from the particles in them, and the cells'
+        arrays are gathered."""
         if not self.exchanged_on_device:
-            self._exchange(state, fs, fluid_dt)
+            self._exchange(state, fs, fluid_dt, slabs if slabs is not None else self.every_cell)
         if self.averaged:
             self._share(fs.porosity.reshape(-1))
 
-    def _exchange(self, state: State, fs, fluid_dt: float) -> None:
+    def _exchange(self, state: State, fs, fluid_dt: float, slabs: Slabs) -> None:
         p = state.particles
-        counting_sort(self.cell_of, self.start.size - 1, self.start, self.order)
+        n = p.count  # (a rank of a split run passes those in its slab's cells and others)
+        cell_of, order = self.cell_of[:n], self.order[:n]
+        counting_sort(cell_of, self.start.size - 1, self.start, order)
+        plane = self.shape[1] * self.shape[2]
         exchange(
-            self.start, self.order, self.impulse, self.coef, p.inv_mass, self.f_other, p.vel, p.radius,
-            fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3), self.pressure_exchanged, fluid_dt,
-            self.inv_cell_volume, self.disturbance, fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1),
-            fs.f_exchange.reshape(-1, 3), self.predicted, self.solid,
+            slabs.lo * plane, slabs.hi * plane, self.start, order, self.impulse, self.coef, p.inv_mass,
+            self.f_other, p.vel, p.radius, fs.v.reshape(-1, 3), fs.grad_p.reshape(-1, 3),
+            self.pressure_exchanged, fluid_dt, self.inv_cell_volume, self.disturbance,
+            fs.f_i.reshape(-1, 3), fs.k_drag.reshape(-1), fs.f_exchange.reshape(-1, 3), self.predicted,
+            self.solid,
         )  # fmt: skip
+        if slabs.split:
+            for field in (fs.f_i, fs.k_drag, self.predicted.reshape(self.shape[0], -1)):
+                slabs.gather(field)
+            slabs.gather(self.solid.reshape(self.shape[0], -1))
 
-    def measure_cell_means(self, state: State, porosity, phi) -> None:
+    def measure_cell_means(self, state: State, porosity, phi, largest: float | None = None) -> None:
         """The cell-averaged drag's means (the porosity estimate's lens-weighted mean diameter and
         velocity of each cell) with phi, the porosity of each cell; at a fluid step, before
-        fluid_forcing (which then takes the particles' volume per cell and the shares)."""
+        fluid_forcing (which then takes the particles' volume per cell and the shares). largest:
+        the scene's largest radius [m] (Porosity.measure)."""
         porosity.measure(
             state.particles,
             phi,
             self.cell_velocity.reshape(*self.shape, 3),
             self.cell_diameter.reshape(self.shape),
+            largest,
         )
 
     def start_cell_means(self, state: State, phi) -> None:

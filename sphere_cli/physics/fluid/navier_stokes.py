@@ -648,23 +648,37 @@ class NavierStokes(FluidModule):
         self.porosity.slabs = self.solver.poisson.slabs
 
     def step_on_rank(self, state, whole, held) -> None:
-        """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin (`held`:
-        the global indices of its particles): the module it was copied from (the lead's scene's
-        own at rank 0) takes the step from every rank's own particles and their drag arrays,
-        whole(*arrays) in global order, as one rank does, bit for bit on every rank; the twin's
-        drag arrays then take its particles' rows of what the step left."""
+        """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin: the
+        module it was copied from (the lead's scene's own at rank 0), whose fields are kept whole
+        on every rank, takes the step from the particles and drag arrays the step reads, of
+        every rank's own particles in global order (whole(*arrays)), as one rank does, bit for
+        bit on every rank. Where the grid is split into slabs (split_grid), only those the
+        rank's cells can reach (whole.near): each rank measures the porosity and settles the
+        momentum exchange of its slab's cells, which are gathered. The step hands every
+        particle's drag impulse to the fluid: the twin's restart from zero."""
         source, p = self.source, state.particles
-        mine = list(self.particle_arrays(state).values())
-        theirs = list(source.particle_arrays(state).values())
-        pos, vel, radius, inv_mass, *arrays = whole(
-            p.pos, p.vel, p.radius, p.inv_mass, *(getattr(holder, name) for holder, name in mine)
-        )
-        for (holder, name), array in zip(theirs, arrays, strict=True):
-            setattr(holder, name, array)
+        drag = source.drag
+        read = ("cell_of", "coef", "f_other", "impulse") + (("disturbance",) if drag.corrected else ())
+        arrays = (p.pos, p.vel, p.radius, p.inv_mass, *(getattr(self.drag, name) for name in read))
+        if self.porosity.slabs.split:
+            pos, vel, radius, inv_mass, *taken = whole.near(lambda own: self._reached_by(p.pos[own]), *arrays)
+        else:
+            pos, vel, radius, inv_mass, *taken = whole(*arrays)
+        kept = {name: getattr(drag, name) for name in read}  # the lead's scene's own, at rank 0
+        for name, array in zip(read, taken, strict=True):
+            setattr(drag, name, array)
         every = types.SimpleNamespace(pos=pos, vel=vel, radius=radius, inv_mass=inv_mass, count=pos.shape[0])
-        source._step(types.SimpleNamespace(particles=every, clock=state.clock, walls=state.walls))
-        for (holder, name), (whole_holder, _) in zip(mine, theirs, strict=True):
-            getattr(holder, name)[...] = getattr(whole_holder, name)[held]
+        try:
+            source._step(types.SimpleNamespace(particles=every, clock=state.clock, walls=state.walls))
+        finally:
+            for name, array in kept.items():
+                setattr(drag, name, array)
+        self.drag.impulse[...] = 0.0
+
+    def _reached_by(self, pos: np.ndarray) -> np.ndarray:
+        """Which ranks' cells can reach each of the particles at pos (whole.near): their porosity
+        sampling spheres, and the momentum exchange of the cell the particle is in."""
+        return self.porosity.needed_by(pos, 0.5 * self.diameter)
 
     def after_step(self, state) -> None:
         if self.stepped_on_ranks == state.clock.step:
@@ -683,7 +697,7 @@ class NavierStokes(FluidModule):
             self._measure_porosity(state)
             np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
             fs.porosity_rate *= 1.0 / self.fluid_dt
-            self.drag.fluid_forcing(state, fs, self.fluid_dt)
+            self.drag.fluid_forcing(state, fs, self.fluid_dt, self.porosity.slabs)
         elif self.bed is not None:
             self.bed.forcing(fs)
         self.solver.step(fs, (clock.step - self.coupling_steps) * clock.dt, self.fluid_dt)
@@ -723,9 +737,9 @@ class NavierStokes(FluidModule):
             fs.porosity[...] = self.measured
             self.porosity.report_clamped(int(self.measured_clamped[0]))
         elif self.drag.averaged:
-            self.drag.measure_cell_means(state, self.porosity, fs.porosity)
+            self.drag.measure_cell_means(state, self.porosity, fs.porosity, 0.5 * self.diameter)
         else:
-            self.porosity.measure(state.particles, fs.porosity)
+            self.porosity.measure(state.particles, fs.porosity, largest=0.5 * self.diameter)
         if fs.porosity.min() >= self.floor:
             return
         if not self.warned:

@@ -126,7 +126,7 @@ class Porosity:
         ], clamped
 
     def needed_by(self, pos: np.ndarray, largest: float) -> np.ndarray:
-        """(n, ranks) bool: which ranks of a split run sample cells that can reach each of these
+        """(ranks, n) bool: which ranks of a split run sample cells that can reach each of these
         particles (pos (n, 3) [m]): those whose slab of x planes, widened by the reach of the
         largest sampling sphere the grid can have (half its smaller x or y edge: the z edge of
         a grid following the top wall changes), holds the particle's bin. Whole bins are taken,
@@ -137,17 +137,17 @@ class Porosity:
         x = bins // int(self.shape[1] * self.shape[2])
         reach = int(np.floor(0.5 + (0.5 * min(self.spacing[0], self.spacing[1]) + largest) / self.spacing[0]))
         bounds = self.slabs.bounds
-        marks = np.zeros((pos.shape[0], bounds.size - 1), dtype=bool)
+        marks = np.zeros((bounds.size - 1, pos.shape[0]), dtype=bool)
         for rank, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
             if lo == hi:
                 continue
             first, last = lo - reach, hi - 1 + reach  # the planes its cells visit, unwrapped
             if not self.periodic[0]:
-                marks[:, rank] = (x >= first) & (x <= last)
+                marks[rank] = (x >= first) & (x <= last)
             elif last - first + 1 >= nx:
-                marks[:, rank] = True
+                marks[rank] = True
             else:
-                marks[:, rank] = (x - first) % nx <= last - first
+                marks[rank] = (x - first) % nx <= last - first
         return marks
 
     def report_clamped(self, clamped: int) -> int:
