@@ -389,3 +389,27 @@ def fill_rows(row_start, where, spring, springs, start, nbr, hist):
                     for a in range(3):
                         hist[start[m] + k, a] = spring[s, a]
                 k += 1
+
+
+@njit(cache=True)
+def drop_ghost_pairs(owned, nbr, nbr_count, start, hist, springs):
+    """Leave out of a rank's rows (physics/rank_steps.py) the pairs of two particles it does not
+    own, ghosts both: they add only to ghosts' forces, which the owners send. The other pairs
+    keep their order and (springs) their springs; the rows are packed again from the first."""
+    cap = nbr.shape[1]
+    first = 0
+    for i in range(nbr.shape[0]):
+        was = start[i]
+        kept = 0
+        for k in range(min(nbr_count[i], cap)):
+            j = nbr[i, k]
+            if owned[i] or owned[j]:
+                nbr[i, kept] = j
+                if springs:  # moved towards the front only: first + kept <= was + k
+                    for a in range(3):
+                        hist[first + kept, a] = hist[was + k, a]
+                kept += 1
+        start[i] = first
+        nbr_count[i] = kept
+        first += kept
+    start[nbr.shape[0]] = first

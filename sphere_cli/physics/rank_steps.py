@@ -22,6 +22,8 @@ sums m g, its pairs (j, i) and its own row in the order one rank does (kernels/c
 each pair across a cut is computed on both sides with the same inputs and spring. A ghost's
 force misses its pairs beyond the ghosts: after the forces, each owner sends its ghosts' force
 and torque, so that every rank's kick, and next drift, of a ghost is its owner's, bit for bit.
+The pairs of two ghosts are therefore left out of a rank's list (kernels/neighbors.py
+drop_ghost_pairs): they would add only to forces that the owners' replace.
 The largest displacement that decides a rebuild is the maximum over ranks (exact in any order).
 The stability check runs on every rank, on its particles and its view of a fluid; the lead
 gathers the scene to report the first failure only when some rank finds one.
@@ -75,7 +77,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..kernels.motion import first_unstable, kick, kick_drift, kick_drift_serial, kick_serial
-from ..kernels.neighbors import fill_rows, local_partners, row_starts, rows_by_global_index
+from ..kernels.neighbors import drop_ghost_pairs, fill_rows, local_partners, row_starts, rows_by_global_index
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
@@ -667,7 +669,11 @@ class RankSteps:
         if state.walls is not None:  # moving walls have moved since the last share
             self.t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
         self._share([packed], state.neighbors.moved2)
-        self.part.search.rebuild(self.part.state)
+        part = self.part
+        part.search.rebuild(part.state)
+        nl = part.state.neighbors
+        drop_ghost_pairs(part.owned, nl.nbr, nl.nbr_count, nl.start, nl.hist, self.t.springs)
+        NeighborSearch._reverse(nl)
 
     def _share(self, packs: list, moved2: float = 0.0) -> None:
         """Collective: the particles in `packs` (this rank's own, or the whole scene at the
@@ -781,7 +787,7 @@ class RankSteps:
         owned = self._owner_of_cell(self._cut_cells(rec["ref"])) == world.rank
         particles = Particles(**{name: rec[name] for name in CARRIED})
         # each row's partners by local index, those this rank does not hold left out (they lie
-        # beyond the ghosts: out of reach of every particle here)
+        # beyond the ghosts: out of reach of every particle here), and the pairs of two ghosts
         row_start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(rec["row_count"], out=row_start[1:])
         where = np.empty(row_start[-1], dtype=np.int64)
@@ -792,6 +798,7 @@ class RankSteps:
         row_starts(count, t.capacity, start)
         hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
         fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist)
+        drop_ghost_pairs(owned, nbr, count, start, hist, t.springs)
         nl = NeighborList(
             skin=t.skin,
             nbr=nbr,

@@ -1,12 +1,18 @@
 """The half rows a rank sends at a list build, by global index, and the list another rank makes
 of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
-physics/rank_steps.py)."""
+physics/rank_steps.py), and the pairs of two ghosts left out of it (drop_ghost_pairs)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from sphere_cli.kernels.neighbors import fill_rows, local_partners, row_starts, rows_by_global_index
+from sphere_cli.kernels.neighbors import (
+    drop_ghost_pairs,
+    fill_rows,
+    local_partners,
+    row_starts,
+    rows_by_global_index,
+)
 
 
 def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held():
@@ -56,3 +62,30 @@ def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held
     assert [list(new_nbr[i, : kept[i]]) for i in range(8)] == expected
     # the pair (30, 50) is gone with its spring; every other spring is where its pair is
     assert np.array_equal(new_hist, np.delete(spring, 4, axis=0))
+
+
+def test_the_pairs_of_two_ghosts_are_left_out_and_the_rest_keep_their_order_and_springs():
+    """Six particles, 2 and 4 not owned (ghosts); rows with spare room (capacity 4). The pair
+    (2, 4) goes; a ghost's pair with an owned particle stays, as does every pair of an owned
+    one; the rows are packed from the first slot, each spring with its pair."""
+    owned = np.array([True, True, False, True, False, True])
+    rows = {0: [1, 2, 4], 1: [2, 3], 2: [3, 4, 5], 3: [4], 4: [5]}
+    cap = 4
+    nbr = np.zeros((6, cap), dtype=np.int32)
+    nbr_count = np.zeros(6, dtype=np.int32)
+    for i, row in rows.items():
+        nbr[i, : len(row)] = row
+        nbr_count[i] = len(row)
+    start = np.zeros(7, dtype=np.int64)
+    row_starts(nbr_count, cap, start)
+    pairs = [(i, j) for i, row in rows.items() for j in row]
+    hist = np.array([[i, j, 10 * i + j] for i, j in pairs], dtype=np.float64)
+
+    drop_ghost_pairs(owned, nbr, nbr_count, start, hist, True)
+    kept = [(i, j) for i, j in pairs if owned[i] or owned[j]]
+    assert (2, 4) not in kept and len(kept) == len(pairs) - 1
+    assert [list(nbr[i, : nbr_count[i]]) for i in range(6)] == [[1, 2, 4], [2, 3], [3, 5], [4], [5], []]
+    assert list(start) == [0, 3, 5, 7, 8, 9, 9]
+    assert np.array_equal(
+        hist[: start[-1]], np.array([[i, j, 10 * i + j] for i, j in kept], dtype=np.float64)
+    )
