@@ -15,20 +15,25 @@ from sphere_cli.kernels.neighbors import (
 )
 
 
+def half_rows(rows: dict, n: int, cap: int) -> tuple:
+    """A list of n particles with these rows ({i: partners}), rows cap wide, packed."""
+    nbr = np.zeros((n, cap), dtype=np.int32)
+    nbr_count = np.zeros(n, dtype=np.int32)
+    for i, row in rows.items():
+        nbr[i, : len(row)] = row
+        nbr_count[i] = len(row)
+    start = np.zeros(n + 1, dtype=np.int64)
+    row_starts(nbr_count, cap, start)
+    return nbr, nbr_count, start
+
+
 def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held():
     """Particles with global indices 10, 20, ..., 90; rows of 0 to 3 partners. Sent, then received
     by a rank that holds all but global index 50: each row keeps its partners held, in order,
     with their springs; a row's partners far along (the search's doubling steps) are found."""
     gid = np.arange(10, 100, 10, dtype=np.int64)
-    rows = {0: [1, 2, 8], 1: [4], 2: [3, 4, 5], 5: [6, 8], 6: [7, 8]}
     cap = 4
-    nbr = np.zeros((9, cap), dtype=np.int32)
-    nbr_count = np.zeros(9, dtype=np.int32)
-    for i, row in rows.items():
-        nbr[i, : len(row)] = row
-        nbr_count[i] = len(row)
-    start = np.zeros(10, dtype=np.int64)
-    row_starts(nbr_count, cap, start)
+    nbr, nbr_count, start = half_rows({0: [1, 2, 8], 1: [4], 2: [3, 4, 5], 5: [6, 8], 6: [7, 8]}, 9, cap)
     hist = np.arange(3 * start[-1], dtype=np.float64).reshape(-1, 3)
 
     sent = np.array([0, 2, 5, 6], dtype=np.int64)
@@ -70,14 +75,7 @@ def test_the_pairs_of_two_ghosts_are_left_out_and_the_rest_keep_their_order_and_
     one; the rows are packed from the first slot, each spring with its pair."""
     owned = np.array([True, True, False, True, False, True])
     rows = {0: [1, 2, 4], 1: [2, 3], 2: [3, 4, 5], 3: [4], 4: [5]}
-    cap = 4
-    nbr = np.zeros((6, cap), dtype=np.int32)
-    nbr_count = np.zeros(6, dtype=np.int32)
-    for i, row in rows.items():
-        nbr[i, : len(row)] = row
-        nbr_count[i] = len(row)
-    start = np.zeros(7, dtype=np.int64)
-    row_starts(nbr_count, cap, start)
+    nbr, nbr_count, start = half_rows(rows, 6, 4)
     pairs = [(i, j) for i, row in rows.items() for j in row]
     hist = np.array([[i, j, 10 * i + j] for i, j in pairs], dtype=np.float64)
 
