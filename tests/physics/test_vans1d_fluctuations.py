@@ -28,8 +28,8 @@ def draw(pos, correlated=True, seed=7, elapsed=0.0, state=None, reynolds=None):
         state if state is not None else (np.zeros((n, 3)), np.zeros(n), np.zeros(n, np.uint64))
     )
     turbulent_fluctuations(
-        pos, np.ones(n, np.uint8), FACES, np.full(51, STRESS) if reynolds is None else reynolds, RHO, NU,
-        KAPPA, BED, np.uint64(seed), correlated, elapsed, fluct, lifetime, draws,
+        pos, np.arange(n), np.ones(n, np.uint8), FACES, np.full(51, STRESS) if reynolds is None else reynolds,
+        RHO, NU, KAPPA, BED, np.uint64(seed), correlated, elapsed, fluct, lifetime, draws,
     )  # fmt: skip
     return fluct, lifetime, draws
 

@@ -15,9 +15,11 @@ a hash (splitmix64) of (seed, particle, n, k), so the sequence of each particle 
 nothing else: results do not depend on the thread count, and a resume that restores the
 counters continues the same sequence.
 
-Arguments: pos (N,3) [m]; selected (N,) uint8; faces (n+1,) [m]; reynolds (n+1,) [Pa] at the
-faces; rho [kg/m^3]; nu [m^2/s]; kappa [-]; bed [m]; seed uint64; correlated (bool); elapsed [s]
-since the last call; fluct (N,3) [m/s], lifetime (N,) [s] and draws (N,) uint64, updated.
+Arguments: pos (N,3) [m]; key (N,) int64, the number of each particle's sequence (its index
+in the scene: on an MPI rank, the global index of each particle it holds); selected (N,) uint8;
+faces (n+1,) [m]; reynolds (n+1,) [Pa] at the faces; rho [kg/m^3]; nu [m^2/s]; kappa [-];
+bed [m]; seed uint64; correlated (bool); elapsed [s] since the last call; fluct (N,3) [m/s],
+lifetime (N,) [s] and draws (N,) uint64, updated.
 """
 
 import math
@@ -62,7 +64,21 @@ def _normal_pair(seed, particle, draw, k):
 
 @njit(cache=True, parallel=True)
 def turbulent_fluctuations(
-    pos, selected, faces, reynolds, rho, nu, kappa, bed, seed, correlated, elapsed, fluct, lifetime, draws
+    pos,
+    key,
+    selected,
+    faces,
+    reynolds,
+    rho,
+    nu,
+    kappa,
+    bed,
+    seed,
+    correlated,
+    elapsed,
+    fluct,
+    lifetime,
+    draws,
 ):
     top = faces[faces.shape[0] - 1]
     for i in prange(pos.shape[0]):
@@ -83,8 +99,8 @@ def turbulent_fluctuations(
             lifetime[i] = 0.0
             continue
         u_star = math.sqrt(stress / rho)
-        r1, r2 = _normal_pair(seed, np.uint64(i), draws[i], np.uint64(0))
-        r4, _ = _normal_pair(seed, np.uint64(i), draws[i], np.uint64(2))
+        r1, r2 = _normal_pair(seed, np.uint64(key[i]), draws[i], np.uint64(0))
+        r4, _ = _normal_pair(seed, np.uint64(key[i]), draws[i], np.uint64(2))
         draws[i] += np.uint64(1)
         r3 = r4 - r1 if correlated else r4
         fluct[i, 0] = r3 * u_star

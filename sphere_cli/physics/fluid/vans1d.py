@@ -205,29 +205,23 @@ class Vans1d(FluidModule):
         self.fluct_lifetime = np.zeros(count)  # [s] left; <= 0: draw at the next coupling
         self.fluct_draws = np.zeros(count, dtype=np.uint64)
         self.reynolds = np.zeros(cells + 1)  # [Pa] at the layer faces
+        self.stream_key = np.arange(count, dtype=np.int64)  # each particle's sequence: its index
 
-    def _fluctuate(self, state, elapsed: float, whole=None, held=None) -> None:
+    def _fluctuate(self, state, elapsed: float, held=None) -> None:
         """Draw the particles whose fluctuation has lived its time, from the current profile. On
-        MPI ranks (`step_on_rank`) drawn for every particle, whose random streams are keyed by
-        the global index, and kept for those `held`."""
+        MPI ranks (`step_on_rank`) the particles `held`, each from the random stream of its
+        global index, as one rank draws it."""
         f, spec, col = state.fluid, self.cfg.fluctuations, state.fluid.column
         # the turbulent part of the shear stress alone: the stress with nu = 0
         shear_stress(
             col.faces, col.centres, col.u, f.profiles.solid_fraction, col.damped, col.rho, 0.0,
             col.top_no_slip, col.lid_velocity, self.reynolds,
         )  # fmt: skip
-        drawn = (state.particles.pos, f.selected, self.fluct, self.fluct_lifetime, self.fluct_draws)
-        if whole is not None:
-            drawn = whole(*drawn)
-        pos, selected, fluct, lifetime, draws = drawn
         turbulent_fluctuations(
-            pos, selected, col.faces, self.reynolds, col.rho, col.nu, col.kappa, spec.bed_elevation,
-            np.uint64(spec.seed), spec.correlated, elapsed, fluct, lifetime, draws,
+            state.particles.pos, self.stream_key if held is None else held, f.selected, col.faces,
+            self.reynolds, col.rho, col.nu, col.kappa, spec.bed_elevation, np.uint64(spec.seed),
+            spec.correlated, elapsed, self.fluct, self.fluct_lifetime, self.fluct_draws,
         )  # fmt: skip
-        if whole is not None:
-            self.fluct[...] = fluct[held]
-            self.fluct_lifetime[...] = lifetime[held]
-            self.fluct_draws[...] = draws[held]
 
     # ---------------------------------------------------------------- checks and schedule
 
@@ -375,7 +369,8 @@ class Vans1d(FluidModule):
         """after_step on one MPI rank's part (physics/rank_steps.py): `held` the global indices of
         its particles, whole(*arrays) the arrays of every rank's own particles in global order.
         The drag of each particle held is its own; the profiles, sums over every particle in
-        one rank's order, and the column after them are the same on every rank, bit for bit."""
+        one rank's order, and the column after them are the same on every rank, bit for bit;
+        so is each particle's fluctuation, drawn where it is held from its own random stream."""
         self._step(state, whole, held)
 
     def _step(self, state, whole=None, held=None) -> None:
@@ -388,7 +383,7 @@ class Vans1d(FluidModule):
                 self.fluid_steps,
             )  # fmt: skip
             if self.fluctuating:
-                self._fluctuate(state, self.fluid_dt, whole, held)
+                self._fluctuate(state, self.fluid_dt, held)
 
     def _average(self, state, whole=None) -> None:
         """Solid profiles of the current particles, the drag evaluated with the current fluid.
