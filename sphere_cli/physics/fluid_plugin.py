@@ -128,7 +128,8 @@ class FluidModule(Module):
         communicator (ranks.py World.grid_comm), before each of its steps on ranks
         (step_on_rank), on every rank: a model whose step solves on its grid (Darcy,
         Navier-Stokes) splits its PoissonSolver, and its porosity sampling (and the
-        Navier-Stokes prediction) takes the solver's slabs; the others need nothing."""
+        Navier-Stokes momentum exchange and prediction) takes the solver's slabs; the 1D VANS
+        column shares its layers out among the ranks of comm at each of its steps."""
 
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the

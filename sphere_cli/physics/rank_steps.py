@@ -50,11 +50,11 @@ Navier-Stokes self-induced velocity's drag coefficients per cell) is taken, for 
 this rank's particles can visit, over every rank's own particles in them in global order
 (`_near`). Its own step (its `step_on_rank`: the VANS column, the Darcy pore pressure, the
 Navier-Stokes grid) runs on every rank alike from every rank's own particles and their fluid
-arrays in global order (`_whole`; on a split grid only those its slab's cells reach,
-`_near`), nothing gathered at the lead nor sent back: the grids are cut only for the pressure
-solve, the porosity, the Navier-Stokes momentum exchange and prediction (physics/fluid/
-poisson.py Slabs), and each rank computes the rest of the fluid whole. A failure there is met
-by every rank at once and reported by the lead alone.
+arrays in global order (`_whole`; on a split grid, and for the VANS layers shared out, only
+those its cells or layers reach, `_near`), nothing gathered at the lead nor sent back: the
+grids are cut only for the pressure solve, the porosity, the Navier-Stokes momentum exchange
+and prediction (physics/fluid/poisson.py Slabs), and each rank computes the rest of the fluid
+whole. A failure there is met by every rank at once and reported by the lead alone.
 
 It covers the particles, their pair contacts (both laws, friction, rolling, materials),
 gravity, walls of every mode, stages, periodic boundaries and the fluids coupled to particles
@@ -204,7 +204,8 @@ class EveryRank:
     arrays of this rank's particles, the arrays of every rank's own particles in global order
     (RankSteps._whole); near(needed, *arrays) only those of them that needed(own) ((ranks, n)
     bool of own, the local indices of this rank's own particles) marks for this rank, in global
-    order (RankSteps._near); every_mask(mask) every rank's mask."""
+    order (RankSteps._near); own() this rank's own particles; every_mask(mask) every rank's
+    mask."""
 
     def __init__(self, steps: RankSteps):
         self.steps = steps
@@ -214,6 +215,10 @@ class EveryRank:
 
     def near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         return self.steps._near(needed, *arrays)
+
+    def own(self) -> np.ndarray:
+        """The local indices of this rank's own particles (ascending)."""
+        return self.steps._everyone()[0]
 
     def every_mask(self, mask: np.ndarray) -> np.ndarray:
         """(ranks, m) bool: every rank's mask (m,) bool (one Allgather of its bits)."""

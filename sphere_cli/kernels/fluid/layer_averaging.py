@@ -14,7 +14,9 @@ The part of a sphere below the first face or above the last one is not counted.
 
 Arguments: pos, vel_p (N,3) [m, m/s] (vx_p = vel_p[:, 0]); radius (N,) [m]; selected (N,) uint8 (1 = counted);
 drag_coef (N,) [kg/s]; drag_x (N,) [N]; faces (n+1,) increasing [m]; area [m^2];
-outputs solid, vel, exchange, drag (n,) and the scratch volume (n,) [m^3].
+outputs solid, vel, exchange, drag (n,) and the scratch volume (n,) [m^3], of the layers
+[first, last) (every layer, or an MPI rank's share: physics/fluid/vans1d.py), the others left
+as they are.
 
 Serial in the particle order: the sums do not depend on the thread count, and the work
 (a few layers per particle, at the coupling interval only) is far below a DEM step's.
@@ -50,10 +52,11 @@ def layer_of(faces, z):
 
 @njit(cache=True)
 def layer_average(
-    pos, vel_p, radius, selected, drag_coef, drag_x, faces, area, solid, vel, exchange, drag, volume
-):
+    pos, vel_p, radius, selected, drag_coef, drag_x, faces, area, solid, vel, exchange, drag, volume, first,
+    last,
+):  # fmt: skip
     n = faces.shape[0] - 1
-    for k in range(n):
+    for k in range(first, last):
         volume[k] = 0.0
         vel[k] = 0.0
         exchange[k] = 0.0
@@ -66,7 +69,7 @@ def layer_average(
         if z + r <= faces[0] or z - r >= faces[n]:
             continue
         v_p = 4.0 / 3.0 * math.pi * r * r * r
-        for k in range(layer_of(faces, z - r), layer_of(faces, z + r) + 1):
+        for k in range(max(first, layer_of(faces, z - r)), min(last, layer_of(faces, z + r) + 1)):
             vk = slice_volume(z, r, faces[k], faces[k + 1])
             if vk <= 0.0:
                 continue
@@ -74,7 +77,7 @@ def layer_average(
             vel[k] += vk * vel_p[i, 0]
             exchange[k] += vk / v_p * drag_coef[i]
             drag[k] += vk / v_p * drag_x[i]
-    for k in range(n):
+    for k in range(first, last):
         layer = area * (faces[k + 1] - faces[k])
         solid[k] = volume[k] / layer
         vel[k] = vel[k] / volume[k] if volume[k] > 0.0 else 0.0

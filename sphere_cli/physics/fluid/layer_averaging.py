@@ -46,8 +46,15 @@ class LayerProfiles:
     def zeros(cls, cells: int) -> LayerProfiles:
         return cls(*(np.zeros(cells) for _ in range(5)))
 
-    def average(self, pos, vel, radius, selected, drag_coef, drag_x, faces, area) -> None:
+    def average(self, pos, vel, radius, selected, drag_coef, drag_x, faces, area, layers=None) -> None:
+        """The profiles of the particles (kernels/fluid/layer_averaging.py); layers: a Slabs of
+        the layers as (n, 1, 1) planes (physics/fluid/poisson.py), this MPI rank's share
+        [lo, hi) averaged from the particles given, the others gathered from their ranks."""
+        first, last = (0, faces.size - 1) if layers is None else (layers.lo, layers.hi)
         layer_average(
             pos, vel, radius, selected, drag_coef, drag_x, faces, area,
-            self.solid_fraction, self.vel, self.exchange_coefficient, self.drag, self.volume,
+            self.solid_fraction, self.vel, self.exchange_coefficient, self.drag, self.volume, first, last,
         )  # fmt: skip
+        if layers is not None and layers.split:
+            for profile in (self.solid_fraction, self.vel, self.exchange_coefficient, self.drag):
+                layers.gather(profile)

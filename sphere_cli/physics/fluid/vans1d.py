@@ -36,6 +36,7 @@ from ...kernels.fluid.vans1d import (
 from ...kernels.serial import use_serial
 from ..fluid_plugin import FluidModule, GpuSteps
 from .layer_averaging import LayerProfiles, layer_faces
+from .poisson import Slabs
 
 
 class FluidColumn:
@@ -124,6 +125,7 @@ class Vans1d(FluidModule):
 
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
+        self.layer_comm = None  # on MPI ranks the grid's communicator (split_grid): layers shared out
         cfg = loaded.case.fluid
         self.cfg = cfg
         box = state.box
@@ -390,7 +392,9 @@ class Vans1d(FluidModule):
         Every particle is in them, as in YADE's HydroForceEngine: a fixed rough bed or particles
         of materials that do not feel the fluid hold its solid fraction and take its drag (at their
         own velocity, zero when fixed), though only the selected mobile ones receive forces. On
-        MPI ranks the profiles sum whole(*arrays), every rank's particles."""
+        MPI ranks (split_grid) the layers are shared out, each rank about as many particles'
+        centres, and each rank averages its layers from every rank's own particles that reach
+        them, in global order (whole.near), as one rank sums them; the profiles are gathered."""
         p, f = state.particles, state.fluid
         col, cfg = f.column, self.cfg
         drag_coefficients(
@@ -399,12 +403,47 @@ class Vans1d(FluidModule):
             f.drag_coef, f.drag_x,
         )  # fmt: skip
         summed = (p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x)
-        if whole is not None:
+        layers = None
+        if whole is not None and self.layer_comm is not None:
+            layers = self._layers(state, whole.own())
+            summed = whole.near(lambda own: self._reaching(state, own, layers.bounds), *summed)
+        elif whole is not None:
             summed = whole(*summed)
-        f.profiles.average(*summed, col.faces, self.area)
+        f.profiles.average(*summed, col.faces, self.area, layers)
         if self.imposed is not None:
             f.profiles.solid_fraction[:] = self.imposed
         col.update_mixing_length(f.profiles.solid_fraction)
+
+    def split_grid(self, comm) -> None:
+        self.layer_comm = comm if comm.Get_size() > 1 else None
+
+    def _layers(self, state, own: np.ndarray) -> Slabs:
+        """Collective: this rank's share of the layers, as Slabs of (n, 1, 1) planes: the bounds
+        that give each rank about as many of the counted particles' centres (counted over every
+        rank's own particles)."""
+        faces = state.fluid.column.faces
+        n = faces.size - 1
+        counted = own[state.fluid.counted[own] == 1]
+        centre = np.clip(np.searchsorted(faces, state.particles.pos[counted, 2], side="right") - 1, 0, n - 1)
+        counts = self.layer_comm.allreduce(np.bincount(centre, minlength=n).astype(np.int64))
+        below = np.concatenate(([0], np.cumsum(counts)))
+        size = self.layer_comm.Get_size()
+        inner = np.searchsorted(below, np.arange(1, size) * (below[-1] / size), side="left")
+        bounds = np.concatenate(([0], np.minimum(inner, n), [n])).astype(np.int64)
+        return Slabs((n, 1, 1), self.layer_comm, bounds)
+
+    @staticmethod
+    def _reaching(state, own: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+        """(ranks, n) bool: which ranks' layers each of the particles own (local indices) reaches
+        (layer_of its lowest and highest points, as the average takes them); none for a particle
+        not counted."""
+        faces = state.fluid.column.faces
+        n = faces.size - 1
+        z, r = state.particles.pos[own, 2], state.particles.radius[own]
+        lowest = np.clip(np.searchsorted(faces, z - r, side="right") - 1, 0, n - 1)
+        highest = np.clip(np.searchsorted(faces, z + r, side="right") - 1, 0, n - 1)
+        marks = (lowest[None, :] < bounds[1:, None]) & (highest[None, :] >= bounds[:-1, None])
+        return marks & (state.fluid.counted[own] == 1)[None, :]
 
     def _steady_start(self, state, tol: float = 1e-9, max_rounds: int = 20000) -> None:
         """Advance the fluid over the fixed initial particles until its profile stops changing:
