@@ -369,7 +369,7 @@ class Vans1d(FluidModule):
 
     def step_on_rank(self, state, whole, held) -> None:
         """after_step on one MPI rank's part (physics/rank_steps.py): `held` the global indices of
-        its particles, whole(*arrays) the arrays of every rank's own particles in global order.
+        its particles, `whole` what it takes of every rank's own particles (EveryRank).
         The drag of each particle held is its own; the profiles, sums over every particle in
         one rank's order, and the column after them are the same on every rank, bit for bit;
         so is each particle's fluctuation, drawn where it is held from its own random stream."""
@@ -404,18 +404,16 @@ class Vans1d(FluidModule):
         )  # fmt: skip
         summed = (p.pos, p.vel, p.radius, f.counted, f.drag_coef, f.drag_x)
         layers = None
-        if whole is not None and self.layer_comm is not None:
+        if whole is not None:  # (split_grid has given the ranks' communicator)
             layers = self._layers(state, whole.own())
             summed = whole.near(lambda own: self._reaching(state, own, layers.bounds), *summed)
-        elif whole is not None:
-            summed = whole(*summed)
         f.profiles.average(*summed, col.faces, self.area, layers)
         if self.imposed is not None:
             f.profiles.solid_fraction[:] = self.imposed
         col.update_mixing_length(f.profiles.solid_fraction)
 
     def split_grid(self, comm) -> None:
-        self.layer_comm = comm if comm.Get_size() > 1 else None
+        self.layer_comm = comm
 
     def _layers(self, state, own: np.ndarray) -> Slabs:
         """Collective: this rank's share of the layers, as Slabs of (n, 1, 1) planes: the bounds
