@@ -413,3 +413,19 @@ def drop_ghost_pairs(owned, nbr, nbr_count, start, hist, springs):
         nbr_count[i] = kept
         first += kept
     start[nbr.shape[0]] = first
+
+
+@njit(cache=True)
+def rows_out(source, local, box, first):
+    """box[m, first : first + k] = source[local[m]] (source (n, k)): a rank's ghost message."""
+    for m in range(local.shape[0]):
+        for a in range(source.shape[1]):
+            box[m, first + a] = source[local[m], a]
+
+
+@njit(cache=True)
+def rows_in(box, local, target, first):
+    """target[local[m]] = box[m, first : first + k] (target (n, k)): a ghost message received."""
+    for m in range(local.shape[0]):
+        for a in range(target.shape[1]):
+            target[local[m], a] = box[m, first + a]

@@ -77,7 +77,15 @@ import numpy as np
 
 from ..errors import UsageError
 from ..kernels.motion import first_unstable, kick, kick_drift, kick_drift_serial, kick_serial
-from ..kernels.neighbors import drop_ghost_pairs, fill_rows, local_partners, row_starts, rows_by_global_index
+from ..kernels.neighbors import (
+    drop_ghost_pairs,
+    fill_rows,
+    local_partners,
+    row_starts,
+    rows_by_global_index,
+    rows_in,
+    rows_out,
+)
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
@@ -180,6 +188,9 @@ class Part:
     receive: dict  # rank -> local indices of the ghosts it owns, ascending
     # its own particles, every rank's count of them and their global order (RankSteps._everyone)
     everyone: tuple | None = None
+    # the ghosts' messages (RankSteps._ghost_forces): the boxes received and sent, by rank, made
+    # at the part's first step
+    mail: tuple | None = None
 
 
 def _refusal(scene) -> str | None:
@@ -522,8 +533,9 @@ class RankSteps:
 
     def _ghost_forces(self) -> None:
         """Each owner sends the force and torque of its particles that are ghosts elsewhere, and
-        the fluid's ghost_arrays of them."""
-        part, comm = self.part, self.world.comm
+        the fluid's ghost_arrays of them: one message to each rank, packed and unpacked by
+        compiled loops in boxes made once a part."""
+        part = self.part
         p = part.state.particles
         sent = [p.force, p.torque]
         if part.fluid is not None:
@@ -532,19 +544,25 @@ class RankSteps:
                 holder, attribute = arrays[name]
                 sent.append(getattr(holder, attribute))
         width = sum(c.shape[1] for c in sent)  # each (n, k)
-        requests, inbox = [], {}
-        for rank, local in part.receive.items():
-            inbox[rank] = np.empty((local.size, width))
-            requests.append(comm.Irecv(inbox[rank], source=rank, tag=1))
-        outbox = []
+        if part.mail is None:  # the boxes, `width` doubles a particle, made once a part
+            part.mail = tuple(
+                {rank: np.empty((local.size, width)) for rank, local in ghosts.items()}
+                for ghosts in (part.receive, part.send)
+            )
+        inbox, outbox = part.mail
+        comm = self.world.comm
+        requests = [comm.Irecv(box, source=rank, tag=1) for rank, box in inbox.items()]
         for rank, local in part.send.items():
-            outbox.append(np.concatenate([c[local] for c in sent], axis=1))
-            requests.append(comm.Isend(outbox[-1], dest=rank, tag=1))
+            first = 0
+            for c in sent:
+                rows_out(c, local, outbox[rank], first)
+                first += c.shape[1]
+            requests.append(comm.Isend(outbox[rank], dest=rank, tag=1))
         self.world.mpi.Request.Waitall(requests)
         for rank, local in part.receive.items():
             first = 0
             for c in sent:
-                c[local] = inbox[rank][:, first : first + c.shape[1]]
+                rows_in(inbox[rank], local, c, first)
                 first += c.shape[1]
 
     def _wall_kick(self, state: State) -> None:

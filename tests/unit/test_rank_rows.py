@@ -1,6 +1,7 @@
 """The half rows a rank sends at a list build, by global index, and the list another rank makes
 of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
-physics/rank_steps.py), and the pairs of two ghosts left out of it (drop_ghost_pairs)."""
+physics/rank_steps.py), the pairs of two ghosts left out of it (drop_ghost_pairs), and the
+ghosts' forces packed into one message and out of it (rows_out, rows_in)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from sphere_cli.kernels.neighbors import (
     local_partners,
     row_starts,
     rows_by_global_index,
+    rows_in,
+    rows_out,
 )
 
 
@@ -87,3 +90,20 @@ def test_the_pairs_of_two_ghosts_are_left_out_and_the_rest_keep_their_order_and_
     assert np.array_equal(
         hist[: start[-1]], np.array([[i, j, 10 * i + j] for i, j in kept], dtype=np.float64)
     )
+
+
+def test_a_ghost_message_carries_each_array_in_its_columns_and_back():
+    """Force (n, 3) and a (n, 1) array of particles 4, 1 and 3 packed side by side into a box of
+    4 columns, then into other arrays at other places: each row where it came from."""
+    rng = np.random.default_rng(5)
+    force, other = rng.standard_normal((6, 3)), rng.standard_normal((6, 1))
+    box = np.full((3, 4), np.nan)
+    rows_out(force, np.array([4, 1, 3]), box, 0)
+    rows_out(other, np.array([4, 1, 3]), box, 3)
+    assert np.array_equal(box, np.concatenate([force[[4, 1, 3]], other[[4, 1, 3]]], axis=1))
+    force_there, other_there = np.zeros((5, 3)), np.zeros((5, 1))
+    rows_in(box, np.array([0, 2, 4]), force_there, 0)
+    rows_in(box, np.array([0, 2, 4]), other_there, 3)
+    assert np.array_equal(force_there[[0, 2, 4]], force[[4, 1, 3]])
+    assert np.array_equal(other_there[[0, 2, 4]], other[[4, 1, 3]])
+    assert not force_there[[1, 3]].any() and not other_there[[1, 3]].any()
