@@ -55,6 +55,9 @@ class LayerProfiles:
             pos, vel, radius, selected, drag_coef, drag_x, faces, area,
             self.solid_fraction, self.vel, self.exchange_coefficient, self.drag, self.volume, first, last,
         )  # fmt: skip
-        if layers is not None and layers.split:
-            for profile in (self.solid_fraction, self.vel, self.exchange_coefficient, self.drag):
-                layers.gather(profile)
+        if layers is not None and layers.split:  # the four in one message, layer by layer
+            profiles = (self.solid_fraction, self.vel, self.exchange_coefficient, self.drag)
+            every = np.stack(profiles, axis=1)
+            layers.gather(every)
+            for column, profile in enumerate(profiles):
+                profile[:] = every[:, column]
