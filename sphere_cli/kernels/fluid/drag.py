@@ -61,6 +61,7 @@ GIDASPOW = 0
 DI_FELICE = 1
 ERGUN_POROSITY = 0.8  # Gidaspow: Ergun at or below, Wen-Yu above
 GAIN_CAP = 0.5  # largest share of its own drag a particle's self-induced velocity may take back
+BANDS = 6  # the bands of each particle's self-induced velocity (physics/fluid/self_induced.py MODES)
 
 
 @njit(cache=True, inline="always")
@@ -236,19 +237,39 @@ def kick_with_drag(
         force[i, a] = fo + fd
         angvel[i, a] += half * torque[i, a] * inv_inertia[i]
         if corrected:
+            screened = _screened_weights(weight, rate, a, screening)  # each band's W s^2, once
             gain = 0.0
-            for j in range(disturbance.shape[2]):
-                share = rate[a, j] / (rate[a, j] + screening)
-                gain += weight[a, j] * share * share
+            for j in range(BANDS):
+                gain += screened[j]
             gain *= k / mu
             mobility = mean_drag / mu
             if gain > GAIN_CAP:
                 mobility *= GAIN_CAP / gain
-            for j in range(disturbance.shape[2]):
-                share = rate[a, j] / (rate[a, j] + screening)
-                target = -weight[a, j] * share * share * mobility
+            for j in range(BANDS):
+                target = -screened[j] * mobility
                 decay = band_decay[a, j] * screen_decay
                 disturbance[i, a, j] = target + (disturbance[i, a, j] - target) * decay
+
+
+@njit(cache=True, inline="always")
+def _screened_weight(weight, rate, a, j, screening):
+    """W s^2 of band j of component a, s = lambda/(lambda + kappa^2) (drag_kick)."""
+    share = rate[a, j] / (rate[a, j] + screening)
+    return weight[a, j] * share * share
+
+
+@njit(cache=True, inline="always")
+def _screened_weights(weight, rate, a, screening):
+    """_screened_weight of the BANDS bands of component a, as a tuple: the kick reads each
+    twice, and its division is most of the kick's cost."""
+    return (
+        _screened_weight(weight, rate, a, 0, screening),
+        _screened_weight(weight, rate, a, 1, screening),
+        _screened_weight(weight, rate, a, 2, screening),
+        _screened_weight(weight, rate, a, 3, screening),
+        _screened_weight(weight, rate, a, 4, screening),
+        _screened_weight(weight, rate, a, 5, screening),
+    )
 
 
 @njit(cache=True)

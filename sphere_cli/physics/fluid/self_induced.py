@@ -52,7 +52,9 @@ from __future__ import annotations
 
 import numpy as np
 
-MODES = 6  # bands of lambda: [0, e_1], then a factor 4 each up to the largest
+from ...kernels.fluid.drag import BANDS
+
+MODES = BANDS  # bands of lambda: [0, e_1], then a factor 4 each up to the largest (the kick's)
 
 
 def _bands(spacing: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
