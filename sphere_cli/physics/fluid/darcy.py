@@ -294,7 +294,7 @@ class Darcy(FluidModule):
 
     def split_grid(self, comm) -> None:
         self.pore.solver.split(comm)
-        self.porosity.slabs = self.pore.solver.slabs
+        self.porosity.split(comm, self.pore.solver.slabs)
 
     def _reached_by(self, pos: np.ndarray) -> np.ndarray:
         """Which ranks' porosity cells can reach each of the particles at pos (whole.near)."""

@@ -645,7 +645,7 @@ class NavierStokes(FluidModule):
 
     def split_grid(self, comm) -> None:
         self.solver.poisson.split(comm)  # the twins' and their source's
-        self.porosity.slabs = self.solver.poisson.slabs
+        self.porosity.split(comm, self.solver.poisson.slabs)
 
     def step_on_rank(self, state, whole, held) -> None:
         """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin: the

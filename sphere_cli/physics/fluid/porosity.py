@@ -125,6 +125,18 @@ class Porosity:
             (k.sample_cells, cells, sample),
         ], clamped
 
+    def split(self, comm, solved) -> None:
+        """Sample on slabs of x planes, one per rank of the MPI communicator comm: those of the
+        pressure solve (`solved`, a Slabs) where it is split, else the planes shared out
+        evenly (a grid too small for its solve to be split may hold many particles: each rank
+        then still takes only those its cells reach). Again with the same comm: nothing."""
+        if solved.split:
+            self.slabs = solved
+        elif self.slabs.comm is not comm:
+            nx, size = int(self.shape[0]), comm.Get_size()
+            bounds = (np.arange(size + 1) * nx) // size
+            self.slabs = Slabs(tuple(int(n) for n in self.shape), comm, bounds)
+
     def needed_by(self, pos: np.ndarray, largest: float) -> np.ndarray:
         """(ranks, n) bool: which ranks of a split run sample cells that can reach each of these
         particles (pos (n, 3) [m]): those whose slab of x planes, widened by the reach of the
