@@ -117,10 +117,11 @@ class FluidModule(Module):
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split
         across ranks. A model that runs split also defines step_on_rank(state, whole, held),
         after_step on one rank's part: `state` the part's (its particles those the rank holds,
-        `held` their global indices), whole(*arrays) the arrays of every rank's own particles in
-        global order (a collective; whole.near(needed, *arrays) only those needed(own) marks for
-        this rank: physics/rank_steps.py EveryRank); every rank takes the same step from them,
-        bit for bit one rank's, so nothing is gathered at the lead nor sent back."""
+        `held` their global indices), `whole` what it takes of the whole scene (collectives:
+        whole.near(needed, *arrays) the arrays of those of every rank's own particles that
+        needed(own) marks for this rank, in global order; physics/rank_steps.py EveryRank);
+        every rank takes the same step from them, bit for bit one rank's, so nothing is gathered
+        at the lead nor sent back."""
         return None
 
     def split_grid(self, comm) -> None:
@@ -139,9 +140,9 @@ class FluidModule(Module):
 
     def rank_copy(self, whole) -> FluidModule:
         """A copy of the module for one MPI rank's particles (physics/rank_steps.py): the
-        holders of its particle_arrays its own, the fluid's own arrays shared. whole(*arrays):
-        the arrays of every rank's own particles, in one rank's order, for a sum over all the
-        particles in its step."""
+        holders of its particle_arrays its own, the fluid's own arrays shared. `whole`
+        (EveryRank): what it takes of every rank's particles, in one rank's order, for a sum over
+        particles inside its forces or kick."""
         return copy.copy(self)
 
     def dt_limit(self) -> tuple[float, str]:

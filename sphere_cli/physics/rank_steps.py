@@ -49,9 +49,9 @@ f_other) go to the ghosts with the force, and a sum over particles inside its ki
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken, for the cells
 this rank's particles can visit, over every rank's own particles in them in global order
 (`_near`). Its own step (its `step_on_rank`: the VANS column, the Darcy pore pressure, the
-Navier-Stokes grid) runs on every rank alike from every rank's own particles and their fluid
-arrays in global order (`_whole`; on a split grid, and for the VANS layers shared out, only
-those its cells or layers reach, `_near`), nothing gathered at the lead nor sent back: the
+Navier-Stokes grid) runs on every rank alike from the particles its cells (the grid's slabs of
+x planes) or layers (the VANS column's, shared out) reach and their fluid arrays, taken from
+every rank's owners in global order (`_near`), nothing gathered at the lead nor sent back: the
 grids are cut only for the pressure solve, the porosity, the Navier-Stokes momentum exchange
 and prediction (physics/fluid/poisson.py Slabs), and each rank computes the rest of the fluid
 whole. A failure there is met by every rank at once and reported by the lead alone.
@@ -186,8 +186,7 @@ class Part:
     glued_order: np.ndarray  # (k,) their places in the lead's list of glued spheres
     send: dict  # rank -> local indices of own particles that are ghosts there, ascending
     receive: dict  # rank -> local indices of the ghosts it owns, ascending
-    # its own particles, every rank's count of them and their global order (RankSteps._everyone)
-    everyone: tuple | None = None
+    own: np.ndarray | None = None  # its own particles' local indices (RankSteps._own)
     # the ghosts' messages (RankSteps._ghost_forces): the boxes received and sent, by rank, made
     # at the part's first step
     mail: tuple | None = None
@@ -211,25 +210,21 @@ def _refusal(scene) -> str | None:
 
 
 class EveryRank:
-    """The `whole` a fluid's rank_copy and step_on_rank are given (collectives): called with
-    arrays of this rank's particles, the arrays of every rank's own particles in global order
-    (RankSteps._whole); near(needed, *arrays) only those of them that needed(own) ((ranks, n)
-    bool of own, the local indices of this rank's own particles) marks for this rank, in global
-    order (RankSteps._near); own() this rank's own particles; every_mask(mask) every rank's
-    mask."""
+    """The `whole` a fluid's rank_copy and step_on_rank are given, what they take of the whole
+    scene (collectives): near(needed, *arrays), called with arrays of this rank's particles,
+    those of every rank's own particles that needed(own) ((ranks, n) bool of own, the local
+    indices of an owner's own particles) marks for this rank, in global order (RankSteps._near);
+    own() this rank's own particles; every_mask(mask) every rank's mask."""
 
     def __init__(self, steps: RankSteps):
         self.steps = steps
-
-    def __call__(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-        return self.steps._whole(*arrays)
 
     def near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         return self.steps._near(needed, *arrays)
 
     def own(self) -> np.ndarray:
         """The local indices of this rank's own particles (ascending)."""
-        return self.steps._everyone()[0]
+        return self.steps._own()
 
     def every_mask(self, mask: np.ndarray) -> np.ndarray:
         """(ranks, m) bool: every rank's mask (m,) bool (one Allgather of its bits)."""
@@ -599,30 +594,13 @@ class RankSteps:
         dt = state.clock.dt
         wall_kick(*kick, (state.clock.step + 1) * dt, dt)
 
-    def _whole(self, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Collective: the arrays (n, ...) of this rank's particles, of every rank's own
-        particles, in global index order (the order one rank sums them in). They travel as
-        columns of doubles (integers below 2^53 are exact there), in one Allgatherv."""
-        own, counts, order = self._everyone()
-        columns = [a[own].reshape(own.size, -1) for a in arrays]
-        widths = [c.shape[1] for c in columns]
-        mine = np.concatenate(columns, axis=1, dtype=np.float64)
-        every = np.empty((int(counts.sum()), sum(widths)))
-        self.world.comm.Allgatherv(mine.ravel(), [every, counts * sum(widths)])
-        every = every[order]
-        out, first = [], 0
-        for a, width in zip(arrays, widths, strict=True):
-            out.append(every[:, first : first + width].astype(a.dtype).reshape(-1, *a.shape[1:]))
-            first += width
-        return tuple(out)
-
     def _near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         """Collective: the arrays (n, ...) of this rank's particles, of those of every rank's own
         particles that needed(own) ((ranks, n) bool of the owner's own particles, own their local
         indices) marks for this rank, in global index order: each owner sends each rank what it
         needs (one Alltoallv, the global index travelling as a column of doubles, exact below
         2^53), and each rank sorts what arrives by it."""
-        own, _, _ = self._everyone()
+        own = self._own()
         part, comm, size = self.part, self.world.comm, self.world.size
         marks = needed(own)
         columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
@@ -641,18 +619,13 @@ class RankSteps:
             first += width
         return tuple(out)
 
-    def _everyone(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Collective: this rank's own particles (local indices), every rank's count of them and
-        the order that sorts them all, rank after rank, by global index; found once a list build
-        (the owners change only there)."""
+    def _own(self) -> np.ndarray:
+        """This rank's own particles (local indices, ascending); found once a list build (the
+        owners change only there)."""
         part = self.part
-        if part.everyone is None:
-            own = np.flatnonzero(part.owned)
-            counts = np.array(self.world.comm.allgather(own.size), dtype=np.int64)
-            gids = np.empty(int(counts.sum()), dtype=np.int64)
-            self.world.comm.Allgatherv(part.gid[own], [gids, counts])
-            part.everyone = (own, counts, np.argsort(gids, kind="stable"))
-        return part.everyone
+        if part.own is None:
+            part.own = np.flatnonzero(part.owned)
+        return part.own
 
     def _stable(self) -> bool:
         """Collective: no rank's particles, and no rank's view of the fluid (its own arrays

@@ -280,16 +280,12 @@ class Darcy(FluidModule):
         self._step(state, state.particles)
 
     def step_on_rank(self, state, whole, held) -> None:
-        """after_step on one MPI rank's part (physics/rank_steps.py), whole(*arrays) the arrays
-        of every rank's own particles in global order: the porosity is measured from all of
-        them, as on one rank, and the pore pressure stepped alike on every rank, bit for bit.
-        Where the porosity is sampled on slabs (split_grid), a rank takes only the particles its
-        cells can reach (whole.near), in the same order, so each cell's sum is one rank's."""
+        """after_step on one MPI rank's part (physics/rank_steps.py): the porosity is sampled on
+        slabs (split_grid), each rank its own cells from the particles they can reach, taken
+        from every rank's owners in global order (whole.near), so each cell's sum is one rank's;
+        the fields are gathered and the pore pressure stepped alike on every rank, bit for bit."""
         p = state.particles
-        if self.porosity.slabs.split:
-            pos, vel, radius = whole.near(lambda own: self._reached_by(p.pos[own]), p.pos, p.vel, p.radius)
-        else:
-            pos, vel, radius = whole(p.pos, p.vel, p.radius)
+        pos, vel, radius = whole.near(lambda own: self._reached_by(p.pos[own]), p.pos, p.vel, p.radius)
         self._step(state, types.SimpleNamespace(pos=pos, vel=vel, radius=radius))
 
     def split_grid(self, comm) -> None:

@@ -111,8 +111,8 @@ class FluidParticleDrag:
         self.warned = False
         self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
         self.exchanged_on_device = False  # a GPU takes the momentum exchange (gpu_steps)
-        # on MPI ranks: whole(*arrays), the arrays of every rank's own particles in one rank's
-        # order (physics/rank_steps.py EveryRank); None on one rank, which holds them all
+        # on MPI ranks: what it takes of every rank's particles (physics/rank_steps.py
+        # EveryRank); None on one rank, which holds them all
         self.whole = None
         # on MPI ranks: (ranks, C) bool, the cells each rank's particles can visit until the
         # next list build, and the (list builds, spacing) they are for (_cell_coefficients)

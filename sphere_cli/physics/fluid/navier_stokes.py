@@ -650,20 +650,17 @@ class NavierStokes(FluidModule):
     def step_on_rank(self, state, whole, held) -> None:
         """after_step on one MPI rank's part (physics/rank_steps.py), on this rank's twin: the
         module it was copied from (the lead's scene's own at rank 0), whose fields are kept whole
-        on every rank, takes the step from the particles and drag arrays the step reads, of
-        every rank's own particles in global order (whole(*arrays)), as one rank does, bit for
-        bit on every rank. Where the grid is split into slabs (split_grid), only those the
-        rank's cells can reach (whole.near): each rank measures the porosity and settles the
-        momentum exchange of its slab's cells, which are gathered. The step hands every
-        particle's drag impulse to the fluid: the twin's restart from zero."""
+        on every rank, takes the step as one rank does, bit for bit on every rank. The porosity
+        and the momentum exchange are split on slabs (split_grid): each rank measures and
+        settles its slab's cells from the particles (and the drag arrays the step reads) those
+        cells can reach, taken from every rank's owners in global order (whole.near), and the
+        cells' fields are gathered. The step hands every particle's drag impulse to the fluid:
+        the twin's restart from zero."""
         source, p = self.source, state.particles
         drag = source.drag
         read = ("cell_of", "coef", "f_other", "impulse") + (("disturbance",) if drag.corrected else ())
         arrays = (p.pos, p.vel, p.radius, p.inv_mass, *(getattr(self.drag, name) for name in read))
-        if self.porosity.slabs.split:
-            pos, vel, radius, inv_mass, *taken = whole.near(lambda own: self._reached_by(p.pos[own]), *arrays)
-        else:
-            pos, vel, radius, inv_mass, *taken = whole(*arrays)
+        pos, vel, radius, inv_mass, *taken = whole.near(lambda own: self._reached_by(p.pos[own]), *arrays)
         kept = {name: getattr(drag, name) for name in read}  # the lead's scene's own, at rank 0
         for name, array in zip(read, taken, strict=True):
             setattr(drag, name, array)
