@@ -496,7 +496,8 @@ def test_a_fluid_bed_on_slabs_is_one_ranks_on_two_and_three(case, tmp_path):
     cells are not gathered."""
     (tmp_path / "case.toml").write_text(case)
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
-    for ranks in (2, 3):
+    # the variants of the Navier-Stokes bed on 3 ranks alone (the suite's time)
+    for ranks in (2, 3) if case in (DARCY_SLABS, NAVIER_STOKES_SLABS) else (3,):
         run_ok(sphere("run", "case.toml", "-o", f"split{ranks}", "-q", ranks=ranks, cwd=tmp_path))
         assert_runs_bitwise(tmp_path / "one", tmp_path / f"split{ranks}")
 
