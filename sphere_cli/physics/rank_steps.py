@@ -23,7 +23,7 @@ each pair across a cut is computed on both sides with the same inputs and spring
 force misses its pairs beyond the ghosts: after the forces, each owner sends its ghosts' force
 and torque, so that every rank's kick, and next drift, of a ghost is its owner's, bit for bit.
 The pairs of two ghosts are therefore left out of a rank's list (kernels/neighbors.py
-drop_ghost_pairs): they would add only to forces that the owners' replace.
+drop_ghost_pairs): they would add only to forces that their owners' replace.
 The largest displacement that decides a rebuild is the maximum over ranks (exact in any order).
 The stability check runs on every rank, on its particles and its view of a fluid; the lead
 gathers the scene to report the first failure only when some rank finds one.

@@ -354,9 +354,9 @@ class FluidParticleDrag:
             self.solid,
         )  # fmt: skip
         if slabs.split:
-            for field in (fs.f_i, fs.k_drag, self.predicted.reshape(self.shape[0], -1)):
+            nx = self.shape[0]
+            for field in (fs.f_i, fs.k_drag, self.predicted.reshape(nx, -1), self.solid.reshape(nx, -1)):
                 slabs.gather(field)
-            slabs.gather(self.solid.reshape(self.shape[0], -1))
 
     def measure_cell_means(self, state: State, porosity, phi, largest: float | None = None) -> None:
         """The cell-averaged drag's means (the porosity estimate's lens-weighted mean diameter and
