@@ -603,11 +603,18 @@ class RankSteps:
         own = self._own()
         part, comm, size = self.part, self.world.comm, self.world.size
         marks = needed(own)
-        columns = [part.gid[own].reshape(-1, 1)] + [a[own].reshape(own.size, -1) for a in arrays]
+        columns = [part.gid.reshape(-1, 1)] + [a.reshape(a.shape[0], -1) for a in arrays]
         widths = [c.shape[1] for c in columns]
-        mine = np.concatenate(columns, axis=1, dtype=np.float64)
-        sending = np.concatenate([mine[marks[rank]] for rank in range(size)])
-        send_counts = np.count_nonzero(marks, axis=1).astype(np.int64)
+        rows = [own[marks[rank]] for rank in range(size)]  # each rank's, in ascending global index
+        send_counts = np.array([r.size for r in rows], dtype=np.int64)
+        sending = np.empty((int(send_counts.sum()), sum(widths)))
+        start = 0
+        for local in rows:  # (compiled copies: the columns of each row, as doubles)
+            first = 0
+            for c in columns:
+                rows_out(c, local, sending[start : start + local.size], first)
+                first += c.shape[1]
+            start += local.size
         receive_counts = np.empty(size, dtype=np.int64)
         comm.Alltoall(send_counts, receive_counts)
         arrived = np.empty((int(receive_counts.sum()), sum(widths)))
