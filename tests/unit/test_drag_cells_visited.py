@@ -1,7 +1,7 @@
 """The cells a rank's particles can visit until the next list build (physics/fluid/drag.py
 FluidParticleDrag._cells_visited): on MPI ranks each rank sums the drag coefficients of those
 cells only, for its particles' self-induced velocities, so a cell left out would give a kick
-other than one rank's."""
+other than one rank's; and when the mask is learnt again (_cell_coefficients)."""
 
 from __future__ import annotations
 
@@ -61,3 +61,42 @@ def test_a_skin_wider_than_the_cells_reaches_every_cell_between():
 
 def test_no_particles_visit_no_cells():
     assert not visited(np.zeros((0, 3)), skin=1e-4).any()
+
+
+class Ranks:
+    """The few calls of physics/rank_steps.py EveryRank that the drag's sums make, for one rank
+    alone: every rank's mask is its own; near() hands back its own particles' arrays."""
+
+    def __init__(self):
+        self.masks = 0
+
+    def every_mask(self, mask):
+        self.masks += 1
+        return mask[None, :]
+
+    def near(self, needed, *arrays):
+        assert needed(np.arange(arrays[0].shape[0])).shape == (1, arrays[0].shape[0])
+        return arrays
+
+
+def test_the_cells_visited_are_found_again_at_a_list_build_or_when_the_cells_change():
+    """The mask of visited cells is learnt once a list build: again after a build, and again
+    when the grid's spacing changes (a grid following the top wall stretches its cells, which
+    moves particles between cells without a build)."""
+    grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
+    drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, 3, False)
+    drag.whole = ranks = Ranks()
+    drag.cell_of[:] = [0, 5, 5]
+    drag.coef[:] = [1.0, 2.0, 3.0]
+    neighbors = types.SimpleNamespace(ref_pos=np.full((3, 3), 0.2e-3), skin=1e-5, builds=4)
+    state = types.SimpleNamespace(neighbors=neighbors)
+    drag._cell_coefficients(state)
+    drag._cell_coefficients(state)
+    assert ranks.masks == 1
+    assert drag.cell_coef[0] == 1.0 and drag.cell_coef[5] == 5.0
+    drag.spacing[2] *= 1.01  # the grid's own array, stretched in place
+    drag._cell_coefficients(state)
+    assert ranks.masks == 2
+    neighbors.builds += 1
+    drag._cell_coefficients(state)
+    assert ranks.masks == 3
