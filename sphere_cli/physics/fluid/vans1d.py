@@ -422,7 +422,7 @@ class Vans1d(FluidModule):
         faces = state.fluid.column.faces
         n = faces.size - 1
         counted = own[state.fluid.counted[own] == 1]
-        centre = np.clip(np.searchsorted(faces, state.particles.pos[counted, 2], side="right") - 1, 0, n - 1)
+        centre = _layers_of(faces, state.particles.pos[counted, 2])
         counts = self.layer_comm.allreduce(np.bincount(centre, minlength=n).astype(np.int64))
         below = np.concatenate(([0], np.cumsum(counts)))
         size = self.layer_comm.Get_size()
@@ -436,10 +436,8 @@ class Vans1d(FluidModule):
         (layer_of its lowest and highest points, as the average takes them); none for a particle
         not counted."""
         faces = state.fluid.column.faces
-        n = faces.size - 1
         z, r = state.particles.pos[own, 2], state.particles.radius[own]
-        lowest = np.clip(np.searchsorted(faces, z - r, side="right") - 1, 0, n - 1)
-        highest = np.clip(np.searchsorted(faces, z + r, side="right") - 1, 0, n - 1)
+        lowest, highest = _layers_of(faces, z - r), _layers_of(faces, z + r)
         marks = (lowest[None, :] < bounds[1:, None]) & (highest[None, :] >= bounds[:-1, None])
         return marks & (state.fluid.counted[own] == 1)[None, :]
 
@@ -588,3 +586,9 @@ def prescribed_profile(flow, z: np.ndarray) -> np.ndarray:
     if isinstance(flow, ProfileFlow):
         return np.interp(z, flow.z, flow.u)
     raise TypeError(f"not a prescribed flow: {flow!r}")
+
+
+def _layers_of(faces: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The layer of each height z [m], as kernels/fluid/layer_averaging.py layer_of takes it
+    (faces[k] <= z < faces[k+1], clipped to 0 .. n-1)."""
+    return np.clip(np.searchsorted(faces, z, side="right") - 1, 0, faces.size - 2)
