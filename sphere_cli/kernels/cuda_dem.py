@@ -47,20 +47,39 @@ def for_gpu(function):
     operations)."""
     if config.ENABLE_CUDASIM:
         return _python(function)
-    if function.targetoptions.get("inline") == "always":
+    return _inlined(function)
+
+
+def _calls(function) -> dict:
+    """The @njit functions that `function` calls, by the global names it calls them by."""
+    source = function.py_func
+    return {
+        name: value
+        for name in source.__code__.co_names
+        if isinstance(value := source.__globals__.get(name), Dispatcher)
+    }
+
+
+def _inlined(function):
+    """`function` inlined where it is called, with every @njit function it calls inlined too, down
+    (one that the CPU compiles as a call of its own, for a shorter compile, taken again from its
+    Python source with inline="always")."""
+    called = _calls(function)
+    calls = {name: _inlined(value) for name, value in called.items()}
+    if function.targetoptions.get("inline") == "always" and all(calls[n] is called[n] for n in called):
         return function
-    return njit(inline="always")(function.py_func)
+    source = function.py_func
+    scope = {**source.__globals__, **calls}
+    code, name = source.__code__, source.__name__
+    twin = types.FunctionType(code, scope, name, source.__defaults__, source.__closure__)
+    return njit(inline="always")(twin)
 
 
 def _python(function):
     """The Python function of an @njit function, with each @njit function it calls replaced by
     its own Python function, and so on down."""
     source = function.py_func
-    calls = {
-        name: _python(value)
-        for name in source.__code__.co_names
-        if isinstance(value := source.__globals__.get(name), Dispatcher)
-    }
+    calls = {name: _python(value) for name, value in _calls(function).items()}
     if not calls:
         return source
     scope = {**source.__globals__, **calls}
