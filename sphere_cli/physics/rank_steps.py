@@ -71,6 +71,7 @@ import time
 import types
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -86,6 +87,7 @@ from ..kernels.neighbors import (
     rows_in,
     rows_out,
 )
+from ..kernels.rank_messages import rank_dem_steps, rank_dem_steps_serial
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
@@ -94,6 +96,7 @@ from .compiled_steps import plain_step, step_arguments
 from .contact import PairContactForces
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
 from .observe.energy_budget import EnergyBudget
+from .rank_calls import compiled_calls, ghost_mail
 from .walls import PlaneWallForces, WallMotion, push_scratch
 
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
@@ -190,6 +193,18 @@ class Part:
     # the ghosts' messages (RankSteps._ghost_forces): the boxes received and sent, by rank, made
     # at the part's first step
     mail: tuple | None = None
+    # the same for the compiled steps (physics/rank_calls.py ghost_mail), made at their first call
+    compiled_mail: tuple | None = None
+
+
+class StepCalls(NamedTuple):
+    """A part's kernels as (kernel, arguments): the kick-drift, the contacts, the kick, and the
+    compiled loop of whole steps (None where the part's step is not all in it)."""
+
+    drift: tuple | None
+    contacts: tuple | None
+    kick: tuple | None
+    loop: tuple | None
 
 
 def _refusal(scene) -> str | None:
@@ -258,6 +273,7 @@ class RankSteps:
         self.fluid = None  # the lead: its scene's fluid module
         self.budget = None  # the lead: its scene's EnergyBudget
         self.every = EveryRank(self)  # what a fluid's step on the rank sums over
+        self.calls = None  # the MPI functions of the compiled steps (rank_calls.compiled_calls)
 
     # --- set-up ----------------------------------------------------------------------------
 
@@ -442,49 +458,32 @@ class RankSteps:
 
     def _steps(self, steps: int) -> None:
         """The one-rank step on this rank's particles (physics/module.py order), with the ghosts'
-        forces from their owners and the rebuild decided over every rank."""
-        comm, mpi = self.world.comm, self.world.mpi
+        forces from their owners and the rebuild decided over every rank. A part of fixed walls,
+        no fluid and no energy budget takes its steps in one compiled call
+        (kernels/rank_messages.py) up to a list build, which ends that step here."""
         moved, largest = np.zeros(1), np.zeros(1)
         fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
-        drift_call, contacts_call, kick_call = self._kernels()
-        for _ in range(steps):
-            part = self.part
-            state = part.state
-            if part.wall_motion is not None:
-                part.wall_motion.kick_drift(state)
-            if state.particles.count:
-                state.neighbors.moved2 = drift_call[0](*drift_call[1])
-            moved[0] = state.neighbors.moved2
-            comm.Allreduce(moved, largest, op=mpi.MAX)
-            moved2 = state.neighbors.moved2 = float(largest[0])
-            if moved2 > self.t.threshold2:
-                self._rebuild()
-                part = self.part
-                state = part.state
-                drift_call, contacts_call, kick_call = self._kernels()
-            started = time.perf_counter()
-            if part.budget is not None:  # before the contacts: it keeps the springs of the last step
-                part.budget.forces(state)
-            if state.particles.count:
-                if part.wall_motion is None:
-                    contacts_call[0](*contacts_call[1])
-                else:  # the walls have moved: their near-wall list may be out of date
-                    part.contact.forces(state)
-                    if part.walls is not None:
-                        part.walls.forces(state)
-            if part.fluid is not None:  # (on a rank without particles too: a fluid may push a wall)
-                part.fluid.forces(state)
-            self.busy += time.perf_counter() - started
-            self._ghost_forces()
-            if part.wall_motion is not None:
-                self._wall_kick(state)
-            if fluid_kicks:  # on every rank, its sums over all particles (rank_copy) a collective
-                part.fluid.kick(state)
-            elif state.particles.count:
-                kick_call[0](*kick_call[1])
-            if part.budget is not None:
-                part.budget.finish_step(state)
-            state.clock.step += 1
+        calls = self._kernels()
+        left = steps
+        while left > 0:
+            if calls.loop is not None:
+                taken, moved2, stale, busy, code = calls.loop[0](left, *calls.loop[1])
+                if code != 0:
+                    raise RuntimeError(f"MPI error {code} in the ranks' compiled steps")
+                self.part.state.clock.step += taken
+                self.part.state.neighbors.moved2 = moved2
+                self.busy += busy
+                left -= taken
+                if not stale:
+                    continue
+                self._rebuild()  # the drift of the next step is taken: build, then end the step
+                calls = self._kernels()
+            else:
+                if self._drift_and_decide(calls, moved, largest):
+                    calls = self._kernels()
+            self._rest_of_step(calls, fluid_kicks)
+            left -= 1
+        state = self.part.state
         fluid = self.t.fluid
         if fluid is not None and fluid.after_due(state.clock.step, state.clock):
             try:
@@ -498,23 +497,82 @@ class RankSteps:
                     time.sleep(FAILURE_GRACE)
                 raise
 
-    def _kernels(self) -> tuple:
+    def _drift_and_decide(self, calls, moved: np.ndarray, largest: np.ndarray) -> bool:
+        """The step's kick-drift, and the list built again if a particle on any rank has moved
+        half the skin since the last build; True if it was."""
+        part = self.part
+        state = part.state
+        if part.wall_motion is not None:
+            part.wall_motion.kick_drift(state)
+        if state.particles.count:
+            state.neighbors.moved2 = calls.drift[0](*calls.drift[1])
+        moved[0] = state.neighbors.moved2
+        self.world.comm.Allreduce(moved, largest, op=self.world.mpi.MAX)
+        state.neighbors.moved2 = float(largest[0])
+        if state.neighbors.moved2 > self.t.threshold2:
+            self._rebuild()
+            return True
+        return False
+
+    def _rest_of_step(self, calls, fluid_kicks: bool) -> None:
+        """The step after its kick-drift: forces, the ghosts' forces from their owners, kick."""
+        part = self.part
+        state = part.state
+        started = time.perf_counter()
+        if part.budget is not None:  # before the contacts: it keeps the springs of the last step
+            part.budget.forces(state)
+        if state.particles.count:
+            if part.wall_motion is None:
+                calls.contacts[0](*calls.contacts[1])
+            else:  # the walls have moved: their near-wall list may be out of date
+                part.contact.forces(state)
+                if part.walls is not None:
+                    part.walls.forces(state)
+        if part.fluid is not None:  # (on a rank without particles too: a fluid may push a wall)
+            part.fluid.forces(state)
+        self.busy += time.perf_counter() - started
+        self._ghost_forces()
+        if part.wall_motion is not None:
+            self._wall_kick(state)
+        if fluid_kicks:  # on every rank, its sums over all particles (rank_copy) a collective
+            part.fluid.kick(state)
+        elif state.particles.count:
+            calls.kick[0](*calls.kick[1])
+        if part.budget is not None:
+            part.budget.finish_step(state)
+        state.clock.step += 1
+
+    def _kernels(self) -> StepCalls:
         """The kick-drift, the contacts (pairs, then plane walls) and the kick of this rank's
         part as (compiled kernel, its arguments), those the hooks Motion.kick_drift,
         PairContactForces.forces, PlaneWallForces.forces and Motion.kick call, as
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
-        step (120 beads on 2 ranks: 64 -> 55 us a step). Valid until the next build while no
-        wall moves."""
-        state = self.part.state
+        step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part of fixed walls, no
+        fluid and no energy budget, the loop of those steps with their messages
+        (kernels/rank_messages.py). Valid until the next build while no wall moves."""
+        part = self.part
+        state = part.state
         if not state.particles.count:
-            return None, None, None
+            return StepCalls(None, None, None, None)
         serial = use_serial(state.particles.count)
-        fixed_walls = self.part.walls if self.part.wall_motion is None else None
-        drift, cross, pairs, walls, kicks = step_arguments(state, self.part.contact, fixed_walls)
-        return (
+        fixed_walls = part.walls if part.wall_motion is None else None
+        drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, fixed_walls)
+        loop = None
+        if part.wall_motion is None and part.fluid is None and part.budget is None:
+            if self.calls is None:
+                self.calls = compiled_calls(self.world)
+            mpi, request_type = self.calls
+            if part.compiled_mail is None:
+                part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
+            scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
+            mail = part.compiled_mail
+            arguments = (self.t.threshold2, drift, cross, pairs, walls, kicks, mpi, mail, scratch)
+            loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
+        return StepCalls(
             (kick_drift_serial if serial else kick_drift, drift),
             (contacts_serial if serial else contacts, (cross, pairs, walls)),
             (kick_serial if serial else kick, kicks),
+            loop,
         )
 
     def _fluid_for(self, state: State, pick):

@@ -1,0 +1,82 @@
+"""The MPI functions called from compiled code (physics/rank_calls.py, kernels/rank_messages.py),
+on two ranks started by the mpich wheel's mpiexec: the reduction and the ghosts' message give
+what MPI should, and a second launch loads the compiled functions from Numba's cache instead of
+compiling them again (what numba-mpi's calls could not do)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+MPIEXEC = Path(sys.executable).with_name("mpiexec")
+pytestmark = pytest.mark.skipif(
+    not MPIEXEC.is_file() or shutil.which("mpiexec", path=str(MPIEXEC.parent)) is None,
+    reason="no mpiexec beside this Python (the test extra installs the mpich wheel on Linux)",
+)
+
+SCRIPT = """\
+import json
+import types
+
+import numpy as np
+from mpi4py import MPI
+
+from sphere_cli.kernels.rank_messages import largest_everywhere, send_ghost_forces
+from sphere_cli.physics.rank_calls import compiled_calls, ghost_mail
+
+comm = MPI.COMM_WORLD
+rank, other = comm.rank, 1 - comm.rank
+world = types.SimpleNamespace(mpi=MPI, comm=comm)
+mpi, request_type = compiled_calls(world)
+
+mine, largest = np.array([10.0 + rank]), np.zeros(1)
+code = largest_everywhere(mpi, mine, largest)
+
+# 4 particles a rank: rows 1 and 3 are owned and ghosts on the other rank, where they are
+# rows 0 and 2; each rank's forces are 100 * rank + row, torques their negatives
+force = np.array([[100.0 * rank + i] * 3 for i in range(4)])
+torque = -force
+mail = ghost_mail(world, {other: np.array([1, 3])}, {other: np.array([0, 2])}, request_type)
+sent = send_ghost_forces(force, torque, mpi, mail)
+
+open(f"rank{rank}.json", "w").write(json.dumps({
+    "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
+    "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(),
+    "compiled": sum(sum(f.stats.cache_misses.values()) for f in (largest_everywhere, send_ghost_forces)),
+    "loaded": sum(sum(f.stats.cache_hits.values()) for f in (largest_everywhere, send_ghost_forces)),
+}))
+"""
+
+
+def launch(tmp_path: Path) -> list[dict]:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_NUM_THREADS": "1"}
+    result = subprocess.run(
+        [str(MPIEXEC), "-n", "2", sys.executable, str(tmp_path / "script.py")],
+        capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Warning" not in result.stderr, result.stderr
+    return [json.loads((tmp_path / f"rank{rank}.json").read_text()) for rank in (0, 1)]
+
+
+def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
+    (tmp_path / "script.py").write_text(SCRIPT)
+    first = launch(tmp_path)
+    for r in first:
+        assert r["code"] == 0 and r["sent"] == 0
+        assert r["largest"] == 11.0  # the larger of 10 and 11, on both ranks
+        theirs = 100.0 * (1 - r["rank"])
+        mine = 100.0 * r["rank"]
+        # rows 0 and 2 now hold the owner's rows 1 and 3; rows 1 and 3 are untouched
+        assert r["force"] == [theirs + 1, mine + 1, theirs + 3, mine + 3]
+        assert r["torque"] == [-(theirs + 1), -(mine + 1), -(theirs + 3), -(mine + 3)]
+        assert r["compiled"] > 0 and r["loaded"] == 0
+    again = launch(tmp_path)
+    for r in again:
+        assert r["compiled"] == 0 and r["loaded"] > 0
