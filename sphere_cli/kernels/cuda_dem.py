@@ -26,6 +26,7 @@ int64, cell_count (cells,) int32, cell_members (cells,K) int32; `worst` (1,) flo
 `longest` (2,) int32: the reductions (a max, exact in any order).
 """
 
+import functools
 import math
 import types
 
@@ -60,6 +61,7 @@ def _calls(function) -> dict:
     }
 
 
+@functools.cache
 def _inlined(function):
     """`function` inlined where it is called, with every @njit function it calls inlined too, down
     (one that the CPU compiles as a call of its own, for a shorter compile, taken again from its
