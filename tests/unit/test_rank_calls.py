@@ -22,12 +22,13 @@ pytestmark = pytest.mark.skipif(
 
 SCRIPT = """\
 import json
+import time
 import types
 
 import numpy as np
 from mpi4py import MPI
 
-from sphere_cli.kernels.rank_messages import largest_everywhere, send_ghost_forces
+from sphere_cli.kernels.rank_messages import largest_everywhere, seconds, send_ghost_forces
 from sphere_cli.physics.rank_calls import compiled_calls, ghost_mail
 
 comm = MPI.COMM_WORLD
@@ -45,11 +46,18 @@ torque = -force
 mail = ghost_mail(world, {other: np.array([1, 3])}, {other: np.array([0, 2])}, request_type)
 sent = send_ghost_forces(force, torque, mpi, mail)
 
+# the monotonic clock the loop times its forces by (rank_balance = "time"), over a 50 ms sleep
+clock = np.zeros(2, dtype=np.int64)
+before, started = seconds(mpi, clock), time.perf_counter()
+time.sleep(0.05)
+slept, elapsed = seconds(mpi, clock) - before, time.perf_counter() - started
+
+KERNELS = (largest_everywhere, send_ghost_forces, seconds)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
-    "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(),
-    "compiled": sum(sum(f.stats.cache_misses.values()) for f in (largest_everywhere, send_ghost_forces)),
-    "loaded": sum(sum(f.stats.cache_hits.values()) for f in (largest_everywhere, send_ghost_forces)),
+    "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "slept": slept, "elapsed": elapsed,
+    "compiled": sum(sum(f.stats.cache_misses.values()) for f in KERNELS),
+    "loaded": sum(sum(f.stats.cache_hits.values()) for f in KERNELS),
 }))
 """
 
@@ -77,6 +85,7 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         assert r["force"] == [theirs + 1, mine + 1, theirs + 3, mine + 3]
         assert r["torque"] == [-(theirs + 1), -(mine + 1), -(theirs + 3), -(mine + 3)]
         assert r["compiled"] > 0 and r["loaded"] == 0
+        assert 0.05 <= r["slept"] <= r["elapsed"] + 1e-3  # the clocks agree to a millisecond
     again = launch(tmp_path)
     for r in again:
         assert r["compiled"] == 0 and r["loaded"] > 0
