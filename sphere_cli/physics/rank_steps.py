@@ -618,6 +618,26 @@ class RankSteps:
                 rows_in(inbox[rank], local, c, first)
                 first += c.shape[1]
 
+    def _gather_rows(self, *tables: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Collective: each table (n, k) of doubles of every rank, the ranks' rows in rank order
+        (an Allgather of the row counts, then one Allgatherv: no pickles). An index travels as a
+        double, exact below 2^53."""
+        comm, size = self.world.comm, self.world.size
+        counts = np.array([t.shape[0] for t in tables], dtype=np.int64)
+        every = np.empty((size, len(tables)), dtype=np.int64)
+        comm.Allgather(counts, every)
+        widths = np.array([t.shape[1] for t in tables], dtype=np.int64)
+        sizes = every @ widths
+        arrived = np.empty(int(sizes.sum()))
+        comm.Allgatherv(np.concatenate([t.ravel() for t in tables]), [arrived, sizes])
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        gathered = []
+        for k, width in enumerate(widths):
+            first = starts[:-1] + every[:, :k] @ widths[:k]  # table k's rows of each rank
+            rows = [arrived[f : f + n * width] for f, n in zip(first, every[:, k], strict=True)]
+            gathered.append(np.concatenate(rows).reshape(-1, width))
+        return tuple(gathered)
+
     def _wall_kick(self, state: State) -> None:
         """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
         in its tree over global particle indices (kernels/walls.py particle_pushes), from the
@@ -629,9 +649,12 @@ class RankSteps:
         pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
         glued = part.owned[part.glued]
         local = part.glued[glued]
-        mine = (part.gid[pushing], w.pforce[pushing], part.glued_order[glued], p.force[local], p.mass[local])
-        every = self.world.comm.allgather(mine)
-        gid, pforce, order, total, mass = (np.concatenate([x[k] for x in every]) for k in range(5))
+        width = w.pforce[0].size  # W x 3 of a particle
+        pushes = np.column_stack([part.gid[pushing], w.pforce[pushing].reshape(pushing.size, width)])
+        glue = np.column_stack([part.glued_order[glued], p.force[local], p.mass[local]])
+        pushes, glue = self._gather_rows(pushes, glue)
+        gid, pforce = pushes[:, 0].astype(np.int64), pushes[:, 1:].reshape(-1, *w.pforce.shape[1:])
+        order, total, mass = glue[:, 0].astype(np.int64), glue[:, 1:4], glue[:, 4]
         by_index, by_glue = np.argsort(gid, kind="stable"), np.argsort(order, kind="stable")
         psum, pushes = push_scratch(w, self.t.count)
         sparse_particle_pushes(
