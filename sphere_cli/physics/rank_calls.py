@@ -45,7 +45,8 @@ def _handle(mpi, kind) -> tuple:
 
 
 def compiled_calls(world) -> tuple:
-    """The `mpi` argument of kernels/rank_messages.py for the ranks' communicator (world.comm)."""
+    """(The `mpi` argument of kernels/rank_messages.py for the ranks' communicator world.comm,
+    the NumPy type of an MPI request: that of ghost_mail's requests)."""
     mpi = world.mpi
     library = ctypes.CDLL(mpi.__file__)
     handle, value = _handle(mpi, mpi.Comm)
