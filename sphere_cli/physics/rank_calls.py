@@ -23,6 +23,9 @@ from numba import types
 warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
 
 
+FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall")
+
+
 class _CFunction(numba.types.WrapperAddressProtocol):
     """A C function of a loaded library, by name, with its Numba signature."""
 
@@ -44,11 +47,18 @@ def _handle(mpi, kind) -> tuple:
     return types.intp, np.intp
 
 
-def compiled_calls(world) -> tuple:
+def compiled_calls(world) -> tuple | None:
     """(The `mpi` argument of kernels/rank_messages.py for the ranks' communicator world.comm,
-    the NumPy type of an MPI request: that of ghost_mail's requests)."""
+    the NumPy type of an MPI request: that of ghost_mail's requests), or None where the MPI
+    functions cannot be found through the library of mpi4py's module (an mpi4py that loads its
+    MPI privately): the ranks then step from Python, with mpi4py's messages."""
     mpi = world.mpi
-    library = ctypes.CDLL(mpi.__file__)
+    try:
+        library = ctypes.CDLL(mpi.__file__)
+        for name in FUNCTIONS:
+            getattr(library, name)
+    except (OSError, AttributeError):
+        return None
     handle, value = _handle(mpi, mpi.Comm)
     request, _ = _handle(mpi, mpi.Request)
     i32, address = types.int32, types.uintp

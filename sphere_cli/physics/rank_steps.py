@@ -273,7 +273,8 @@ class RankSteps:
         self.fluid = None  # the lead: its scene's fluid module
         self.budget = None  # the lead: its scene's EnergyBudget
         self.every = EveryRank(self)  # what a fluid's step on the rank sums over
-        self.calls = None  # the MPI functions of the compiled steps (rank_calls.compiled_calls)
+        # the MPI functions of the compiled steps (rank_calls.compiled_calls; () where not found)
+        self.calls = None
 
     # --- set-up ----------------------------------------------------------------------------
 
@@ -558,9 +559,9 @@ class RankSteps:
         fixed_walls = part.walls if part.wall_motion is None else None
         drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, fixed_walls)
         loop = None
-        if part.wall_motion is None and part.fluid is None and part.budget is None:
-            if self.calls is None:
-                self.calls = compiled_calls(self.world)
+        if self.calls is None:
+            self.calls = compiled_calls(self.world) or ()
+        if part.wall_motion is None and part.fluid is None and part.budget is None and self.calls:
             mpi, request_type = self.calls
             if part.compiled_mail is None:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)

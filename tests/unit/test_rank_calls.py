@@ -5,11 +5,13 @@ compiling them again (what numba-mpi's calls could not do)."""
 
 from __future__ import annotations
 
+import ctypes.util
 import json
 import os
 import shutil
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -89,3 +91,15 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
     again = launch(tmp_path)
     for r in again:
         assert r["compiled"] == 0 and r["loaded"] > 0
+
+
+def test_an_mpi_whose_functions_cannot_be_found_leaves_the_steps_to_python(tmp_path):
+    """An mpi4py module through whose library MPI_Allreduce & co. cannot be found (one loading its
+    MPI privately, or none at that path): no compiled calls, so the ranks step from Python."""
+    from sphere_cli.physics.rank_calls import compiled_calls
+
+    libc = ctypes.util.find_library("c")
+    assert libc is not None
+    for library in (libc, str(tmp_path / "missing.so")):
+        world = types.SimpleNamespace(mpi=types.SimpleNamespace(__file__=library), comm=None)
+        assert compiled_calls(world) is None
