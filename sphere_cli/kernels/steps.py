@@ -9,8 +9,8 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
 chunk), chunk_pair_forces, wall_forces (None without walls) and kick; motion, None where no wall
-moves, else (the argument tuples of wall_kick_drift, wall_areas, wall_totals and of wall_kick
-but its time and dt, the wall positions the list of particles near walls was made at, half the
+moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_totals and of
+wall_kick but its time and dt, the wall positions the list of particles near walls was made at, half the
 skin [m], the clock's step at the call, dt [s]): the walls move before the particles drift and
 are kicked before them, as their hooks run (physics/walls.py WallMotion). Returns (the complete
 steps taken, the last squared displacement, whether a drift ended the loop: a particle beyond
@@ -25,7 +25,7 @@ from numba import njit
 from .contact import chunk_pair_forces, cross_chunk_pairs
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .serial import serial_twin
-from .walls import wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift, wall_totals
+from .walls import listed_wall_totals, wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift
 
 
 @njit(cache=True)
@@ -62,7 +62,7 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion):
         contacts(cross, pairs, walls)
         if motion is not None:
             wall_areas(*motion[1])
-            wall_totals(*motion[2])
+            listed_wall_totals(*motion[2])
             wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
         kick(*kicks)
     return steps, moved2, False

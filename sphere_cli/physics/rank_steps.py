@@ -659,7 +659,7 @@ class RankSteps:
         by_index, by_glue = np.argsort(gid, kind="stable"), np.argsort(order, kind="stable")
         psum, pushes = push_scratch(w, self.t.count)
         sparse_particle_pushes(
-            np.ascontiguousarray(gid[by_index]), np.ascontiguousarray(pforce[by_index]), self.t.count,
+            np.ascontiguousarray(gid[by_index]), np.ascontiguousarray(pforce), by_index, self.t.count,
             w.record, psum, pushes,
         )  # fmt: skip
         finish_wall_totals(

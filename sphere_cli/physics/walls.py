@@ -241,6 +241,11 @@ class PlaneWallForces(Module):
             self._pieces = self._cut(self._near[: self._near_count], w.hist)
         return self._near[: self._near_count]
 
+    def near_list(self, state: State) -> np.ndarray:
+        """The particles listed near the walls (ascending local indices), as kernel_arguments
+        last made the list: only their rows of pforce may not be zero."""
+        return self._near[: self._near_count]
+
     def near_list_made_at(self, state: State) -> tuple[np.ndarray, float]:
         """The wall positions the near-wall list was made at, and how far [m] a wall may move
         from them before it is made again (half the neighbour skin; for kernels/steps.py)."""

@@ -144,6 +144,31 @@ def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
+def test_the_walls_totals_from_the_near_wall_list_are_the_dense_sums_bitwise():
+    """The compiled loop sums the particles' pushes on moving walls over the near-wall list
+    (listed_wall_totals), the hooks over every particle (wall_totals): the same bits, with the
+    forces spread over 16 orders of magnitude (the order of a sum shows in its bits) on the
+    listed particles, every fifth of them not touching, the others zero as wall_forces leaves
+    them; three of four walls recorded, 30 glued spheres."""
+    rng = np.random.default_rng(3)
+    n, walls = 1000, 4
+    listed = np.sort(rng.choice(n, 300, replace=False))
+    pforce = np.zeros((n, walls, 3))
+    shape = (listed.size, walls, 3)
+    pforce[listed] = rng.standard_normal(shape) * 10.0 ** rng.integers(-8, 9, shape)
+    pforce[listed[2::5]] = 0.0
+    record = np.array([1, 0, 1, 1], dtype=np.uint8)
+    glued = (rng.choice(n, 30, replace=False), rng.integers(0, walls, 30))
+    rest = (rng.standard_normal((n, 3)), rng.random(n), np.array([0.0, 0.0, -9.81]), rng.random((walls, 3)))
+    dense, sparse = np.zeros((walls, 3)), np.zeros((walls, 3))
+    scratch = (np.zeros((2, 16, walls, 3)), np.zeros((walls, 3)))
+    kernels_walls.wall_totals(pforce, record, *scratch, *glued, *rest, dense)
+    scratch = (np.zeros((2, 16, walls, 3)), np.zeros((walls, 3)))
+    kernels_walls.listed_wall_totals(listed, pforce, record, *scratch, *glued, *rest, sparse)
+    assert dense.tobytes() == sparse.tobytes()
+    assert np.count_nonzero(dense[[0, 2, 3]] != rest[3][[0, 2, 3]]) == 9
+
+
 def test_3d_fluids_keep_the_step_by_step_loop():
     """The Navier-Stokes force on the particles is more than one kernel call, and its implicit
     drag takes over the kick."""
