@@ -23,7 +23,7 @@ from numba import types
 warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
 
 
-FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall")
+FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall", "MPI_Allgather", "MPI_Allgatherv")
 
 
 class _CFunction(numba.types.WrapperAddressProtocol):
@@ -73,6 +73,11 @@ def compiled_calls(world) -> tuple | None:
         value(mpi.DOUBLE.handle),
         value(mpi.MAX.handle),
         np.int32(time.CLOCK_MONOTONIC),
+        _CFunction(library, "MPI_Allgather", i32(address, i32, handle, address, i32, handle, handle)),
+        _CFunction(
+            library, "MPI_Allgatherv", i32(address, i32, handle, address, address, address, handle, handle)
+        ),
+        value(mpi.INT64_T.handle),
     ), np.dtype(np.int32 if request == types.int32 else np.intp)
 
 

@@ -36,11 +36,14 @@ follows the longest row over all ranks, so a checkpoint's layout is one rank's.
 **The host.** The lead keeps the whole scene (physics/rank_steps is its scene.step.compiled,
 like a GPU's physics/device_steps.py): `to_host` gathers the owners' particles and rows into it
 before frames, observables and checkpoints, so files are those of one rank and a checkpoint
-resumes on any rank count. The steps run one at a time in Python with mpi4py's messages (an
-exchange of ghost forces and one reduction a step).
+resumes on any rank count. A dry part's steps up to a list build run in one compiled call with
+their messages inside (kernels/rank_messages.py, through physics/rank_calls.py); a fluid's or
+the energy budget's, one at a time in Python with mpi4py's messages (an exchange of ghost forces
+and one reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed in
-one rank's order over the ranks (`_wall_kick`). **Stages** run at the lead on its whole scene,
+one rank's order over the ranks (kernels/rank_messages.py rank_wall_totals, or `_wall_kick`
+from Python, with the same messages). **Stages** run at the lead on its whole scene,
 gathered for the steps where a stage may end; when one begins, the scene is shared out again.
 A **fluid** keeps its own arrays (profiles, grids) whole on every rank. Its force and kick run
 on every rank, its per-particle arrays (`particle_arrays`) travelling with the particles; those
@@ -477,7 +480,10 @@ class RankSteps:
                 left -= taken
                 if not stale:
                     continue
-                self._rebuild()  # the drift of the next step is taken: build, then end the step
+                # the drift of the next step is taken: the list built (or the near-wall list
+                # made again for walls that have moved), then the step ended here
+                if moved2 > self.t.threshold2:
+                    self._rebuild()
                 calls = self._kernels()
             else:
                 if self._drift_and_decide(calls, moved, largest):
@@ -550,24 +556,27 @@ class RankSteps:
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
         step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part of fixed walls, no
         fluid and no energy budget, the loop of those steps with their messages
-        (kernels/rank_messages.py). Valid until the next build while no wall moves."""
+        (kernels/rank_messages.py), moving walls included. Valid until the next build while no
+        wall moves, and for the loop until the next build or a wall's move beyond the reach of
+        the near-wall list (the loop stops there)."""
         part = self.part
         state = part.state
         if not state.particles.count:
             return StepCalls(None, None, None, None)
         serial = use_serial(state.particles.count)
-        fixed_walls = part.walls if part.wall_motion is None else None
-        drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, fixed_walls)
+        drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, part.walls)
         loop = None
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
-        if part.wall_motion is None and part.fluid is None and part.budget is None and self.calls:
+        moving = part.wall_motion is not None
+        if part.fluid is None and part.budget is None and self.calls and (walls is not None or not moving):
             mpi, request_type = self.calls
             if part.compiled_mail is None:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
-            arguments = (self.t.threshold2, drift, cross, pairs, walls, kicks, mpi, mail, scratch)
+            motion = self._motion(state) if moving else None
+            arguments = (self.t.threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch)
             loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
         return StepCalls(
             (kick_drift_serial if serial else kick_drift, drift),
@@ -575,6 +584,27 @@ class RankSteps:
             (kick_serial if serial else kick, kicks),
             loop,
         )
+
+    def _motion(self, state: State) -> tuple:
+        """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py
+        dem_steps's, with rank_wall_totals's arguments (this rank's own particles near the walls
+        and own glued spheres, the lead's glued spheres' walls) in place of listed_wall_totals's."""
+        part, w, p = self.part, state.walls, state.particles
+        drift, areas, _, kick = WallMotion.kernel_arguments(state)
+        glued = part.owned[part.glued]
+        size = self.world.size
+        gather = (
+            np.zeros(2, dtype=np.int64), np.zeros((size, 2), dtype=np.int64), np.zeros(size, dtype=np.int32),
+            np.zeros(size, dtype=np.int32),
+        )  # fmt: skip
+        near = part.walls.near_list(state)  # as step_arguments made it
+        totals = (
+            near[part.owned[near]], part.gid, w.pforce, w.record, part.glued[glued], part.glued_order[glued],
+            p.force, p.mass, self.t.attached_wall, self.t.count, *push_scratch(w, self.t.count),
+            state.box.body_acc, w.fluid_force, w.force, gather,
+        )  # fmt: skip
+        listed_at, reach = part.walls.near_list_made_at(state)
+        return drift, areas, totals, kick, listed_at, reach, state.clock.step, state.clock.dt
 
     def _fluid_for(self, state: State, pick):
         """The lead's fluid (the template's) for a rank's particles: its own arrays shared,
@@ -626,7 +656,8 @@ class RankSteps:
         comm, size = self.world.comm, self.world.size
         counts = np.array([t.shape[0] for t in tables], dtype=np.int64)
         every = np.empty((size, len(tables)), dtype=np.int64)
-        comm.Allgather(counts, every)
+        int64 = self.world.mpi.INT64_T  # as kernels/rank_messages.py rank_wall_totals sends them
+        comm.Allgather([counts, int64], [every, int64])
         widths = np.array([t.shape[1] for t in tables], dtype=np.int64)
         sizes = every @ widths
         arrived = np.empty(int(sizes.sum()))

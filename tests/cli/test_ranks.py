@@ -242,15 +242,27 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
     """On three ranks the box is cut into slabs. On four, 300 of the spheres settling in a
     square box between walls, into pencils of 2 x 2 at every list build: a rank's ghosts lie on
     two sides and across a corner, where pairs touch diagonally, and particles move between four
-    ranks. One rank's run either way (the four-rank run fails without the diagonal ghosts)."""
+    ranks. One rank's run either way (the four-rank run fails without the diagonal ghosts). On
+    four, a stage from the start moves the lid down at 0.4 m/s (past the reach of the near-wall
+    list: it is made again) and the x+ wall keeps 100 Pa on the bed: the particles' pushes on it,
+    gathered from every rank in the compiled rank loop (kernels/rank_messages.py
+    rank_wall_totals), and the walls' motion are one rank's too."""
     square = SETTLING
     for old, new in (
         ("upper = [0.016, 0.006, 0.012]", "upper = [0.012, 0.012, 0.012]"),
         ("region_upper = [0.016, 0.006, 0.009]", "region_upper = [0.012, 0.012, 0.009]"),
         ("count = 200", "count = 300"),
+        ('face = "y+"\n', 'face = "y+"\n[[walls]]\nface = "z+"\n'),
+        (
+            "[output.frames]",
+            '[[stages]]\nname = "press"\nduration = 0.01\n[[stages.walls]]\nface = "z+"\nmode = "velocity"\n'
+            'velocity = 0.4\n[[stages.walls]]\nface = "x+"\nmode = "stress"\nstress = 100.0\n\n'
+            "[output.frames]",
+        ),
     ):
         assert old in square
         square = square.replace(old, new)
+    square += '\n[output.observables]\nquantities = ["stress"]\n'
     for ranks, case in ((3, SETTLING), (4, square)):
         root = tmp_path / str(ranks)
         root.mkdir()
@@ -259,6 +271,9 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
         run_ok(sphere("run", "case.toml", "-o", "split", "-q", ranks=ranks, cwd=root))
         assert "cut by measured work" in (root / "split" / "run.log").read_text()
         assert_runs_bitwise(root / "one", root / "split")
+    with h5py.File(tmp_path / "4" / "one" / "trajectory.h5", "r") as f:
+        assert f["observables/wall_normal_stress/value"][-1, 2] > 10.0  # x+ (of z-, x-, x+, ...) pushed
+        assert f["observables/wall_position/value"][-1, 5] < 0.009  # the lid moved down 3 mm
 
 
 def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_two(tmp_path):

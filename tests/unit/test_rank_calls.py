@@ -1,6 +1,7 @@
 """The MPI functions called from compiled code (physics/rank_calls.py, kernels/rank_messages.py),
 on two ranks started by the mpich wheel's mpiexec: the reduction and the ghosts' message give
-what MPI should, and a second launch loads the compiled functions from Numba's cache instead of
+what MPI should, the moving walls' totals gathered from both ranks are one rank's bit for bit,
+and a second launch loads the compiled functions from Numba's cache instead of
 compiling them again (what numba-mpi's calls could not do)."""
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ import types
 import numpy as np
 from mpi4py import MPI
 
-from sphere_cli.kernels.rank_messages import largest_everywhere, seconds, send_ghost_forces
+from sphere_cli.kernels.rank_messages import largest_everywhere, rank_wall_totals, seconds, send_ghost_forces
+from sphere_cli.kernels.walls import wall_totals
 from sphere_cli.physics.rank_calls import compiled_calls, ghost_mail
 
 comm = MPI.COMM_WORLD
@@ -54,10 +56,37 @@ before, started = seconds(mpi, clock), time.perf_counter()
 time.sleep(0.05)
 slept, elapsed = seconds(mpi, clock) - before, time.perf_counter() - started
 
-KERNELS = (largest_everywhere, send_ghost_forces, seconds)
+# the walls' totals: 300 particles, half of them pushing walls 0 and 2 (recorded) and 1 (not),
+# with forces from 1e-8 to 1e8 (the order of a sum shows in its bits), and 20 glued spheres
+# (forces as spread); each rank owns blocks of 7 particles in turn (so chunks of 64 mix the
+# ranks' rows) and sums its share with the other's as one rank sums them all
+rng = np.random.default_rng(7)
+n, walls = 300, 3
+pforce = np.zeros((n, walls, 3))
+pushing = rng.random(n) < 0.5
+shape = (pushing.sum(), walls, 3)
+pforce[pushing] = rng.standard_normal(shape) * 10.0 ** rng.integers(-8, 9, shape)
+record = np.array([1, 0, 1], dtype=np.uint8)
+totals_of, mass = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-8, 9, (n, 3)), rng.random(n)
+attached, attached_wall = rng.permutation(n)[:20], rng.integers(0, walls, 20)
+body_acc, fluid_force = np.array([0.0, 0.0, -9.81]), rng.standard_normal((walls, 3))
+one, split = np.zeros((walls, 3)), np.zeros((walls, 3))
+scratch = lambda: (np.zeros((2, 5, walls, 3)), np.zeros((walls, 3)))
+wall_totals(pforce, record, *scratch(), attached, attached_wall, totals_of, mass, body_acc, fluid_force, one)
+gid = np.arange(n)
+own = gid[(gid // 7) % 2 == rank]
+glued_order = np.flatnonzero((attached // 7) % 2 == rank)
+gather = (np.zeros(2, np.int64), np.zeros((2, 2), np.int64), np.zeros(2, np.int32), np.zeros(2, np.int32))
+totals = rank_wall_totals(
+    mpi, own, gid, pforce, record, attached[glued_order], glued_order, totals_of, mass, attached_wall, n,
+    *scratch(), body_acc, fluid_force, split, gather,
+)
+
+KERNELS = (largest_everywhere, send_ghost_forces, seconds, rank_wall_totals)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
     "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "slept": slept, "elapsed": elapsed,
+    "totals": int(totals), "one": one.tolist(), "split": split.tolist(), "fluid": fluid_force.tolist(),
     "compiled": sum(sum(f.stats.cache_misses.values()) for f in KERNELS),
     "loaded": sum(sum(f.stats.cache_hits.values()) for f in KERNELS),
 }))
@@ -88,6 +117,9 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         assert r["torque"] == [-(theirs + 1), -(mine + 1), -(theirs + 3), -(mine + 3)]
         assert r["compiled"] > 0 and r["loaded"] == 0
         assert 0.05 <= r["slept"] <= r["elapsed"] + 1e-3  # the clocks agree to a millisecond
+        assert r["totals"] == 0
+        assert r["split"] == r["one"]  # bitwise: the floats' repr is exact
+        assert r["one"][1] == r["fluid"][1] and r["one"][0] != r["fluid"][0]  # wall 1 not recorded
     again = launch(tmp_path)
     for r in again:
         assert r["compiled"] == 0 and r["loaded"] > 0
