@@ -261,6 +261,14 @@ def _numbers(text: str, option: str = "--threads") -> tuple[int, ...]:
         raise typer.BadParameter(f"{option} {text!r}: expected comma-separated integers") from None
 
 
+def _lids(walls: str) -> tuple[str, ...]:
+    """The lids of --walls: fixed and/or moving."""
+    lids = tuple(s.strip() for s in walls.split(",") if s.strip())
+    if not lids or not set(lids) <= {"fixed", "moving"}:
+        raise typer.BadParameter(f"--walls {walls!r}: expected fixed and/or moving")
+    return lids
+
+
 def _bench(run) -> None:
     try:
         run()
@@ -321,9 +329,7 @@ def bench_gpu(
     chosen = tuple(s.strip() for s in states.split(",") if s.strip())
     if not set(chosen) <= {"loose", "settled"}:
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
-    lids = tuple(s.strip() for s in walls.split(",") if s.strip())
-    if not lids or not set(lids) <= {"fixed", "moving"}:
-        raise typer.BadParameter(f"--walls {walls!r}: expected fixed and/or moving")
+    lids = _lids(walls)
     media = tuple(s.strip() for s in fluids.split(",") if s.strip())
     if not media or not set(media) <= {"none", "navier-stokes"}:
         raise typer.BadParameter(f"--fluids {fluids!r}: expected none and/or navier-stokes")
@@ -340,22 +346,28 @@ def bench_ranks(
     steps: int = typer.Option(100, "--steps", min=1, help="Steps per timing."),
     repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per rank count and round (median)."),
     rounds: int = typer.Option(3, "--rounds", min=1, help="Rounds, the rank counts alternating."),
+    walls: str = typer.Option(
+        "fixed",
+        "--walls",
+        help="fixed and/or moving: moving puts the lid onto the bed, keeping a stress and sliding.",
+    ),
     output: Path = OUTPUT_OPTION,
 ) -> None:
     """The settled canonical bed on several MPI ranks (one thread each), side by side: particle-steps
     per second and the speed-up over the first rank count, round by round (needs mpiexec)."""
     from .bench.ranks import run_ranks_benchmark
 
-    counts = _numbers(rank_counts, "--ranks")
-    _bench(lambda: run_ranks_benchmark(_numbers(sizes, "--sizes"), counts, steps, repeats, rounds, output))
+    counts, lids = _numbers(rank_counts, "--ranks"), _lids(walls)
+    sized = _numbers(sizes, "--sizes")
+    _bench(lambda: run_ranks_benchmark(sized, counts, steps, repeats, rounds, output, walls=lids))
 
 
 @bench_app.command("ranks-member", hidden=True)
-def bench_ranks_member(n: int, steps: int, repeats: int) -> None:
+def bench_ranks_member(n: int, steps: int, repeats: int, lid: str = typer.Option("fixed", "--lid")) -> None:
     """One rank count of `sphere bench ranks` (started by it under mpiexec)."""
     from .bench.ranks import member
 
-    _bench(lambda: member(n, steps, repeats))
+    _bench(lambda: member(n, steps, repeats, lid))
 
 
 @bench_app.command("fluid")

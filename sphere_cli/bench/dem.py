@@ -112,6 +112,13 @@ def on_device(text: str, device: str) -> str:
     )
 
 
+# the canonical scene's lid, and the same stress-controlled and sliding (`sphere bench gpu` and
+# `sphere bench ranks` with --walls moving)
+FIXED_LID = '[[walls]]\nface = "z+"'
+MOVING_LID = FIXED_LID + '\nmode = "stress"\nstress = 1000.0\nshear_axis = "x"\nshear_velocity = 0.01'
+PRESSED_SIDES = 200.0  # [Pa] ~ K0 phi rho g h/2 of the settled bed (0.5 x 0.6 x 2500 x 9.81 x 0.027)
+
+
 def settled_cache_dir(n: int, device: str = "cpu") -> Path:
     """Where the settled bed of N spheres is kept: the user cache, keyed by the text of the
     settling case (N, every parameter and the device that settles it) and the checkpoint format
@@ -124,9 +131,12 @@ def settled_cache_dir(n: int, device: str = "cpu") -> Path:
     return base / "sphere" / "bench" / f"settled-{n}-{digest[:12]}"
 
 
-def settled_scene(n: int, log, device: str = "cpu"):
+def settled_scene(n: int, log, device: str = "cpu", lid: str = "fixed"):
     """The canonical scene from its settled bed, settled on `device` (the GPU settles the beds of
-    sphere bench gpu, too large for the CPU)."""
+    sphere bench gpu, too large for the CPU); with `lid` "moving", its lid stress-controlled and
+    sliding (MOVING_LID) and put down onto the bed, touching its highest sphere, and its x+ and
+    y+ walls keeping PRESSED_SIDES (about the bed's lateral stress half-way up): each step then
+    moves the walls and sums the pushes of the particles along two sides and under the lid."""
     from .. import api
 
     run_dir = settled_cache_dir(n, device)
@@ -143,7 +153,17 @@ def settled_scene(n: int, log, device: str = "cpu"):
         else:
             api.resume(run_dir)
         ck = newest_valid_checkpoint(run_dir / "checkpoints")
-    return build_scene(parse_case(on_device(canonical_case(n), device)), restart=ck)
+    text = canonical_case(n)
+    if lid == "moving":
+        text = text.replace(FIXED_LID, MOVING_LID)
+        for face in ("x+", "y+"):
+            side = f'[[walls]]\nface = "{face}"\n'
+            text = text.replace(side, f'{side}mode = "stress"\nstress = {PRESSED_SIDES}\n')
+    scene = build_scene(parse_case(on_device(text, device)), restart=ck)
+    if lid == "moving":
+        p, w = scene.state.particles, scene.state.walls
+        w.coord[w.faces.index("z+")] = float(np.max(p.pos[:, 2] + p.radius))
+    return scene
 
 
 def time_steps(scene, steps: int, repeats: int) -> list[float]:

@@ -28,11 +28,8 @@ from ..config.load import parse_case
 from ..scene.builder import build_scene
 from ..simulation import advance
 from . import machine
-from .dem import SPACING, canonical_case, on_device, settled_scene
+from .dem import FIXED_LID, MOVING_LID, SPACING, canonical_case, on_device, settled_scene
 
-# the canonical scene's lid, stress-controlled and sliding (`walls` "moving")
-FIXED_LID = '[[walls]]\nface = "z+"'
-MOVING_LID = FIXED_LID + '\nmode = "stress"\nstress = 1000.0\nshear_axis = "x"\nshear_velocity = 0.01'
 # the canonical scene in water (`fluids` "navier-stokes"): cells about four diameters wide
 COUPLING_STEPS = 10
 NAVIER_STOKES = """
