@@ -554,9 +554,9 @@ class RankSteps:
         part as (compiled kernel, its arguments), those the hooks Motion.kick_drift,
         PairContactForces.forces, PlaneWallForces.forces and Motion.kick call, as
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
-        step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part of fixed walls, no
-        fluid and no energy budget, the loop of those steps with their messages
-        (kernels/rank_messages.py), moving walls included. Valid until the next build while no
+        step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part with no fluid and no
+        energy budget, the loop of those steps with their messages (kernels/rank_messages.py),
+        moving walls included. Valid until the next build while no
         wall moves, and for the loop until the next build or a wall's move beyond the reach of
         the near-wall list (the loop stops there)."""
         part = self.part
@@ -568,14 +568,13 @@ class RankSteps:
         loop = None
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
-        moving = part.wall_motion is not None
-        if part.fluid is None and part.budget is None and self.calls and (walls is not None or not moving):
+        if part.fluid is None and part.budget is None and self.calls:
             mpi, request_type = self.calls
             if part.compiled_mail is None:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
-            motion = self._motion(state) if moving else None
+            motion = None if part.wall_motion is None else self._motion(state)
             arguments = (self.t.threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch)
             loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
         return StepCalls(
@@ -673,7 +672,11 @@ class RankSteps:
     def _wall_kick(self, state: State) -> None:
         """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
         in its tree over global particle indices (kernels/walls.py particle_pushes), from the
-        rows that are not zero, then the glued spheres in the lead's order."""
+        rows that are not zero, then the glued spheres in the lead's order, with the messages of
+        the compiled loop's rank_wall_totals (ranks taking either meet). Not that function called
+        from here: Numba types the MPI functions' address objects at every call from Python,
+        about 0.1 ms, more than this costs on small parts (the direct shear with the energy
+        budget on 2 ranks: 0.86-0.94 -> 0.72 M particle-steps/s)."""
         part, w, p, box = self.part, state.walls, state.particles, state.box
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
