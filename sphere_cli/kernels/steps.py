@@ -9,13 +9,13 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
 chunk), chunk_pair_forces, wall_forces (None without walls) and kick; motion, None where no wall
-moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_totals and of
-wall_kick but its time and dt, the wall positions the list of particles near walls was made at, half the
-skin [m], the clock's step at the call, dt [s]): the walls move before the particles drift and
-are kicked before them, as their hooks run (physics/walls.py WallMotion). Returns (the complete
-steps taken, the last squared displacement, whether a drift ended the loop: a particle beyond
-half the skin, or a wall as far from where the near-wall list was made, which the wall hook
-then makes again).
+moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_totals (the
+near-wall list first) and of wall_kick but its time and dt, the wall positions the list of
+particles near walls was made at, half the skin [m], the clock's step at the call, dt [s]): the
+walls move before the particles drift and are kicked before them, as their hooks run
+(physics/walls.py WallMotion). Returns (the complete steps taken, the last squared displacement,
+whether a drift ended the loop: a particle beyond half the skin, or a wall as far from where the
+near-wall list was made, which the wall hook then makes again).
 A fluid whose force on the particles is one kernel has its own loop calling `contacts` and that
 kernel (kernels/fluid/profile_forces.py vans1d_steps): a kernel passed as an argument would key
 Numba's cache by an object that differs in every process, so it would compile on every run."""
