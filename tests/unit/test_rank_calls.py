@@ -93,6 +93,9 @@ open(f"rank{rank}.json", "w").write(json.dumps({
 """
 
 
+KERNEL_NAMES = ("largest_everywhere", "send_ghost_forces", "seconds", "rank_wall_totals")  # the script's
+
+
 def launch(tmp_path: Path) -> list[dict]:
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_NUM_THREADS": "1"}
     result = subprocess.run(
@@ -115,14 +118,16 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         # rows 0 and 2 now hold the owner's rows 1 and 3; rows 1 and 3 are untouched
         assert r["force"] == [theirs + 1, mine + 1, theirs + 3, mine + 3]
         assert r["torque"] == [-(theirs + 1), -(mine + 1), -(theirs + 3), -(mine + 3)]
-        assert r["compiled"] > 0 and r["loaded"] == 0
+        # each kernel compiled by one rank or both (the other may find it in the shared cache)
+        assert r["compiled"] + r["loaded"] == len(KERNEL_NAMES)
         assert 0.05 <= r["slept"] <= r["elapsed"] + 1e-3  # the clocks agree to a millisecond
         assert r["totals"] == 0
         assert r["split"] == r["one"]  # bitwise: the floats' repr is exact
         assert r["one"][1] == r["fluid"][1] and r["one"][0] != r["fluid"][0]  # wall 1 not recorded
+    assert sum(r["compiled"] for r in first) >= len(KERNEL_NAMES)
     again = launch(tmp_path)
     for r in again:
-        assert r["compiled"] == 0 and r["loaded"] > 0
+        assert r["compiled"] == 0 and r["loaded"] == len(KERNEL_NAMES)
 
 
 def test_an_mpi_whose_functions_cannot_be_found_leaves_the_steps_to_python(tmp_path):
