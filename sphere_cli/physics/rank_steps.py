@@ -680,7 +680,8 @@ class RankSteps:
         part, w, p, box = self.part, state.walls, state.particles, state.box
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
-        own = np.flatnonzero(part.owned)
+        near = part.walls.near_list(state)  # the only rows of pforce that may not be zero
+        own = near[part.owned[near]]
         pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
         glued = part.owned[part.glued]
         local = part.glued[glued]
