@@ -8,7 +8,7 @@ them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -136,6 +136,10 @@ class Walls:
     # (W,3) [N] force of the pore fluid on a wall that bounds a Darcy fluid (an impermeable top
     # wall the grid follows; physics/fluid/darcy.py sets it every fluid step), else zero
     fluid_force: np.ndarray = None
+    # (n,) int64 ascending: the particles listed near the walls, the only rows of pforce that
+    # may not be zero (physics/walls.py PlaneWallForces lists them, zeroing every row; none
+    # before the first list)
+    listed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     PROGNOSTIC = ("coord", "hist", "vel", "acc", "shift", "force", "attached", "attached_wall")
 

@@ -163,7 +163,7 @@ class CompiledSteps:
                 # walls.kernel_arguments above made the near-wall list at the walls' positions now
                 listed_at, reach = self.walls.near_list_made_at(state)
                 drift_walls, areas, totals, wall_kick = WallMotion.kernel_arguments(state)
-                totals = (self.walls.near_list(state), *totals)  # listed_wall_totals's
+                totals = (state.walls.listed, *totals)  # listed_wall_totals's
                 motion = (drift_walls, areas, totals, wall_kick, listed_at, reach, clock.step, clock.dt)
             loop = dem_steps_serial if serial else dem_steps
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion)

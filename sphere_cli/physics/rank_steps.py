@@ -596,7 +596,7 @@ class RankSteps:
             np.zeros(2, dtype=np.int64), np.zeros((size, 2), dtype=np.int64), np.zeros(size, dtype=np.int32),
             np.zeros(size, dtype=np.int32),
         )  # fmt: skip
-        near = part.walls.near_list(state)  # as step_arguments made it
+        near = w.listed  # as step_arguments made it
         totals = (
             near[part.owned[near]], part.gid, w.pforce, w.record, part.glued[glued], part.glued_order[glued],
             p.force, p.mass, self.t.attached_wall, self.t.count, *push_scratch(w, self.t.count),
@@ -680,7 +680,7 @@ class RankSteps:
         part, w, p, box = self.part, state.walls, state.particles, state.box
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
-        near = part.walls.near_list(state)  # the only rows of pforce that may not be zero
+        near = w.listed  # the only rows of pforce that may not be zero
         own = near[part.owned[near]]
         pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
         glued = part.owned[part.glued]

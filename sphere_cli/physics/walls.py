@@ -52,6 +52,7 @@ from ..kernels.walls import (
     STRESS,
     VELOCITY,
     chunk_count,
+    listed_wall_totals,
     near_walls,
     wall_areas,
     wall_forces,
@@ -237,13 +238,9 @@ class PlaneWallForces(Module):
             self._pieces = self._cut(self._near[: self._near_count], w.hist)
             if w.pforce.shape[0]:
                 w.pforce[...] = 0.0  # only listed particles are written from now on
+            w.listed = self._near[: self._near_count]
         elif self._pieces.size != numba.get_num_threads() + 1:
             self._pieces = self._cut(self._near[: self._near_count], w.hist)
-        return self._near[: self._near_count]
-
-    def near_list(self, state: State) -> np.ndarray:
-        """The particles listed near the walls (ascending local indices), as kernel_arguments
-        last made the list: only their rows of pforce may not be zero."""
         return self._near[: self._near_count]
 
     def near_list_made_at(self, state: State) -> tuple[np.ndarray, float]:
@@ -440,8 +437,9 @@ class WallMotion(Module):
 
     @staticmethod
     def kernel_arguments(state: State) -> tuple:
-        """The arguments of wall_kick_drift, wall_areas, wall_totals and of wall_kick but its time
-        and dt (kernels/walls.py; also for kernels/steps.py)."""
+        """The arguments of wall_kick_drift, wall_areas, wall_totals (listed_wall_totals's after
+        walls.listed) and of wall_kick but its time and dt (kernels/walls.py; also for
+        kernels/steps.py)."""
         w, p, box = state.walls, state.particles, state.box
         return (
             (w.axis, w.sign, w.mode, w.control, w.coord, w.vel, w.acc, w.vel_pred, w.shift, state.clock.dt,
@@ -458,6 +456,6 @@ class WallMotion(Module):
     def kick(self, state: State) -> None:
         _, areas, totals, kick = self.kernel_arguments(state)
         wall_areas(*areas)
-        wall_totals(*totals)
+        listed_wall_totals(state.walls.listed, *totals)
         dt = state.clock.dt
         wall_kick(*kick, (state.clock.step + 1) * dt, dt)
