@@ -81,12 +81,33 @@ totals = rank_wall_totals(
     mpi, own, gid, pforce, record, attached[glued_order], glued_order, totals_of, mass, attached_wall, n,
     *scratch(), body_acc, fluid_force, split, gather,
 )
+# again with rank 1 sending its rows from Python (RankSteps._gather_rows, as a rank stepping
+# with the energy budget or holding no particle does) while rank 0 takes them in compiled code:
+# the same messages
+mixed = np.zeros((walls, 3))
+if rank == 0:
+    rank_wall_totals(
+        mpi, own, gid, pforce, record, attached[glued_order], glued_order, totals_of, mass, attached_wall,
+        n, *scratch(), body_acc, fluid_force, mixed, gather,
+    )
+    gathered = []
+else:
+    mine = own[np.any(pforce[own][:, record.astype(bool)] != 0.0, axis=(1, 2))]
+    glued = attached[glued_order]
+    rows = np.column_stack([gid[mine], pforce[mine].reshape(mine.size, -1)])
+    glue = np.column_stack([glued_order, totals_of[glued], mass[glued]])
+    from sphere_cli.physics.rank_steps import RankSteps
+    both = types.SimpleNamespace(world=types.SimpleNamespace(mpi=MPI, comm=comm, size=comm.size))
+    pushes_in, glue_in = RankSteps._gather_rows(both, rows, glue)
+    gathered = [sorted(pushes_in[:, 0].tolist()), sorted(glue_in[:, 0].tolist())]
 
 KERNELS = (largest_everywhere, send_ghost_forces, seconds, rank_wall_totals)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
     "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "slept": slept, "elapsed": elapsed,
     "totals": int(totals), "one": one.tolist(), "split": split.tolist(), "fluid": fluid_force.tolist(),
+    "mixed": mixed.tolist(), "gathered": gathered,
+    "pushing": np.flatnonzero(np.any(pforce[:, [0, 2]] != 0.0, axis=(1, 2))).tolist(),
     "compiled": sum(sum(f.stats.cache_misses.values()) for f in KERNELS),
     "loaded": sum(sum(f.stats.cache_hits.values()) for f in KERNELS),
 }))
@@ -124,6 +145,9 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         assert r["totals"] == 0
         assert r["split"] == r["one"]  # bitwise: the floats' repr is exact
         assert r["one"][1] == r["fluid"][1] and r["one"][0] != r["fluid"][0]  # wall 1 not recorded
+    # rank 0's compiled gather met rank 1's from Python: one rank's totals, every row at rank 1
+    assert first[0]["mixed"] == first[0]["one"]
+    assert first[1]["gathered"] == [first[1]["pushing"], list(range(20))]
     assert sum(r["compiled"] for r in first) >= len(KERNEL_NAMES)
     again = launch(tmp_path)
     for r in again:
