@@ -196,13 +196,14 @@ def rank_wall_totals(
 
 
 @njit(cache=True)
-def rank_dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch):
-    """Up to `steps` steps of a rank's part (kernels/steps.py dem_steps): returns (the complete
-    steps taken, the last squared displacement over every rank, whether a drift made the list
-    stale or a wall left the reach of the near-wall list (the caller ends that step), the
-    seconds in the forces, MPI's first error code). motion: None where no wall moves, else
-    dem_steps's with rank_wall_totals's arguments but mpi in place of listed_wall_totals's. scratch:
-    (2,) float64, (2,) int64: the reduction's and the clock's."""
+def rank_dem_steps(steps, step, threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch):
+    """Up to `steps` steps of a rank's part from the clock's `step` (kernels/steps.py dem_steps):
+    returns (the complete steps taken, the last squared displacement over every rank, whether a
+    drift made the list stale or a wall left the reach of the near-wall list (the caller ends
+    that step), the seconds in the forces, MPI's first error code). motion: None where no wall
+    moves, else dem_steps's with rank_wall_totals's arguments but mpi in place of
+    listed_wall_totals's, and without the clock's step (the arguments outlive a call: the step
+    comes with each). scratch: (2,) float64, (2,) int64: the reduction's and the clock's."""
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
     busy = 0.0
@@ -229,7 +230,7 @@ def rank_dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion,
             code = rank_wall_totals(mpi, *motion[2])
             if code != 0:
                 return done, largest[0], False, busy, code
-            wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
+            wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
         kick(*kicks)
     return steps, largest[0], False, busy, 0
 

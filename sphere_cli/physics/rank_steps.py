@@ -471,7 +471,8 @@ class RankSteps:
         left = steps
         while left > 0:
             if calls.loop is not None:
-                taken, moved2, stale, busy, code = calls.loop[0](left, *calls.loop[1])
+                step = self.part.state.clock.step
+                taken, moved2, stale, busy, code = calls.loop[0](left, step, *calls.loop[1])
                 if code != 0:
                     raise RuntimeError(f"MPI error {code} in the ranks' compiled steps")
                 self.part.state.clock.step += taken
@@ -587,7 +588,8 @@ class RankSteps:
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py
         dem_steps's, with rank_wall_totals's arguments (this rank's own particles near the walls
-        and own glued spheres, the lead's glued spheres' walls) in place of listed_wall_totals's."""
+        and own glued spheres, the lead's glued spheres' walls) in place of listed_wall_totals's,
+        and without the clock's step (the loop takes it at each call)."""
         part, w, p = self.part, state.walls, state.particles
         drift, areas, _, kick = WallMotion.kernel_arguments(state)
         glued = part.owned[part.glued]
@@ -603,7 +605,7 @@ class RankSteps:
             state.box.body_acc, w.fluid_force, w.force, gather,
         )  # fmt: skip
         listed_at, reach = part.walls.near_list_made_at(state)
-        return drift, areas, totals, kick, listed_at, reach, state.clock.step, state.clock.dt
+        return drift, areas, totals, kick, listed_at, reach, state.clock.dt
 
     def _fluid_for(self, state: State, pick):
         """The lead's fluid (the template's) for a rank's particles: its own arrays shared,

@@ -244,7 +244,8 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
     two sides and across a corner, where pairs touch diagonally, and particles move between four
     ranks. One rank's run either way (the four-rank run fails without the diagonal ghosts). On
     four, a stage from the start moves the lid down at 0.4 m/s (past the reach of the near-wall
-    list: it is made again) and the x+ wall keeps 100 Pa on the bed: the particles' pushes on it,
+    list: it is made again) and the x+ wall keeps 100 +- 50 Pa at 300 Hz on the bed (its target
+    follows the step's time): the particles' pushes on it,
     gathered from every rank in the compiled rank loop (kernels/rank_messages.py
     rank_wall_totals), and the walls' motion are one rank's too."""
     square = SETTLING
@@ -256,8 +257,8 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
         (
             "[output.frames]",
             '[[stages]]\nname = "press"\nduration = 0.01\n[[stages.walls]]\nface = "z+"\nmode = "velocity"\n'
-            'velocity = 0.4\n[[stages.walls]]\nface = "x+"\nmode = "stress"\nstress = 100.0\n\n'
-            "[output.frames]",
+            'velocity = 0.4\n[[stages.walls]]\nface = "x+"\nmode = "stress"\nstress = 100.0\n'
+            "stress_amplitude = 50.0\nfrequency = 300.0\n\n[output.frames]",
         ),
     ):
         assert old in square
