@@ -14,7 +14,7 @@ import time
 import warnings
 
 import numba
-import numba.experimental.function_type  # noqa: F401 - registers the typing of such an object
+import numba.experimental.function_type  # noqa: F401 - registers how such an object is passed and called
 import numpy as np
 from numba import types
 from numba.extending import typeof_impl

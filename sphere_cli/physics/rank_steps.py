@@ -462,9 +462,10 @@ class RankSteps:
 
     def _steps(self, steps: int) -> None:
         """The one-rank step on this rank's particles (physics/module.py order), with the ghosts'
-        forces from their owners and the rebuild decided over every rank. A part of fixed walls,
-        no fluid and no energy budget takes its steps in one compiled call
-        (kernels/rank_messages.py) up to a list build, which ends that step here."""
+        forces from their owners and the rebuild decided over every rank. A part with no fluid
+        and no energy budget takes its steps in one compiled call (kernels/rank_messages.py) up
+        to a list build or a wall's move out of its near-wall list's reach, and that step ends
+        here."""
         moved, largest = np.zeros(1), np.zeros(1)
         fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
         calls = self._kernels()
@@ -557,9 +558,9 @@ class RankSteps:
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
         step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part with no fluid and no
         energy budget, the loop of those steps with their messages (kernels/rank_messages.py),
-        moving walls included. Valid until the next build while no
-        wall moves, and for the loop until the next build or a wall's move beyond the reach of
-        the near-wall list (the loop stops there)."""
+        moving walls included. Valid until the next build while no wall moves, and for the loop
+        until the next build or a wall's move beyond the reach of the near-wall list (the loop
+        stops there)."""
         part = self.part
         state = part.state
         if not state.particles.count:
@@ -676,9 +677,10 @@ class RankSteps:
         in its tree over global particle indices (kernels/walls.py particle_pushes), from the
         rows that are not zero, then the glued spheres in the lead's order, with the messages of
         the compiled loop's rank_wall_totals (ranks taking either meet). Not that function called
-        from here: Numba types the MPI functions' address objects at every call from Python,
-        about 0.1 ms, more than this costs on small parts (the direct shear with the energy
-        budget on 2 ranks: 0.86-0.94 -> 0.72 M particle-steps/s)."""
+        from here: each call from Python types the MPI functions' tuple (about 80 us when this
+        was tried, 42 us since rank_calls makes each function's type once), more than this
+        costs on small parts (the direct shear with the energy budget on 2 ranks: 0.86-0.94 ->
+        0.72 M particle-steps/s then)."""
         part, w, p, box = self.part, state.walls, state.particles, state.box
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
