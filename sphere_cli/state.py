@@ -129,10 +129,9 @@ class Walls:
     vel_pred: np.ndarray = None
     pforce: np.ndarray = None
     record: np.ndarray = None
-    # the tree sum of pforce (kernels/walls.py particle_pushes): its levels (2, chunks, W, 3)
-    # and the sum (W,3); sized for the particles by physics/walls.py push_scratch
-    psum: np.ndarray = None
-    push_total: np.ndarray = None
+    # the exact sums of the forces on the walls (kernels/walls.py wall_totals), (W, 3, WORDS)
+    # int64, made by physics/walls.py wall_sums
+    sums: np.ndarray = None
     # (W,3) [N] force of the pore fluid on a wall that bounds a Darcy fluid (an impermeable top
     # wall the grid follows; physics/fluid/darcy.py sets it every fluid step), else zero
     fluid_force: np.ndarray = None

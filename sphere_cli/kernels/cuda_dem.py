@@ -30,10 +30,10 @@ import functools
 import math
 import types
 
-from numba import config, cuda, float64, njit
+from numba import config, cuda, njit
 from numba.core.dispatcher import Dispatcher
 
-from . import contact_probe, motion, neighbors, walls
+from . import contact_probe, exact_sum, motion, neighbors, walls
 from .laws import D_N, D_T, HERTZ_MINDLIN, K_N, K_T, MU, MU_R, contact_response, reduced
 from .neighbors import minimum_image, wrap_cell
 
@@ -94,13 +94,14 @@ insert_ascending = for_gpu(neighbors.insert_ascending)
 wall_normal = for_gpu(contact_probe.wall_normal)
 unstable_reason = for_gpu(motion.unstable_reason)
 wall_kick_drift = for_gpu(walls.wall_kick_drift)
-chunk_difference = for_gpu(walls.chunk_difference)
-tree_total = for_gpu(walls.tree_total)
+exact_parts = for_gpu(exact_sum.exact_parts)
+add_glued = for_gpu(walls.add_glued)
 finish_wall_totals = for_gpu(walls.finish_wall_totals)
+clear_sums = for_gpu(walls.clear_sums)
 wall_areas = for_gpu(walls.wall_areas)
 wall_kick = for_gpu(walls.wall_kick)
-# a module global, so that Numba takes it as a constant (a shared array's size must be one)
-SUM_CHUNK = walls.SUM_CHUNK
+# module globals, so that Numba takes them as constants
+BINS = exact_sum.BINS
 
 
 @cuda.jit(device=True, inline=True)
@@ -499,57 +500,42 @@ def wall_motion_drift(
 
 
 @cuda.jit
-def push_chunks(values, rows, record, out):
-    """One level of the tree sum of the particles' forces on the walls (kernels/walls.py
-    chunk_differences): thread (c, w, b) makes out[c, w, b] from its chunk's rows, in order."""
-    t = cuda.grid(1)
-    nw = record.shape[0]
-    c = t // (3 * nw)
-    w = (t // 3) % nw
-    b = t % 3
-    if c * SUM_CHUNK < max(rows, 1) and record[w]:
-        out[c, w, b] = chunk_difference(values, rows, c, w, b)
-
-
-@cuda.jit
-def push_two_levels(values, rows, record, out):
-    """Two levels of that tree in one launch: block (g, w, b) of SUM_CHUNK threads makes the
-    sums of chunks g * SUM_CHUNK + t (one a thread, into shared memory), then its thread 0 sums
-    those in order into out[g, w, b] (chunk_differences twice, without the level between
-    going through global memory)."""
-    nw = record.shape[0]
-    g = cuda.blockIdx.x // (3 * nw)
-    w = (cuda.blockIdx.x // 3) % nw
-    b = cuda.blockIdx.x % 3
-    if not record[w]:  # the whole block: no thread waits at the barrier below
+def push_sums(pforce, rows, record, sums):
+    """Each particle's push on the walls marked in record (the first `rows` of pforce) into
+    their exact sums (kernels/walls.py add_pushes), by integer atomics: exact, so the same
+    whatever the order of the threads."""
+    i = cuda.grid(1)
+    if i >= rows:
         return
-    t = cuda.threadIdx.x
-    sums = cuda.shared.array(SUM_CHUNK, float64)
-    chunks = walls.chunk_count(rows)
-    c = g * SUM_CHUNK + t
-    if c < chunks:
-        sums[t] = chunk_difference(values, rows, c, w, b)
-    cuda.syncthreads()
-    if t == 0:
-        s = 0.0
-        for k in range(min(SUM_CHUNK, chunks - g * SUM_CHUNK)):
-            s -= sums[k]
-        out[g, w, b] = s
+    for w in range(record.shape[0]):
+        if record[w]:
+            for b in range(3):
+                value = -pforce[i, w, b]
+                if value == 0.0:
+                    continue
+                if not math.isfinite(value):
+                    cuda.atomic.add(sums, (w, b, BINS), 1)
+                    continue
+                k, low, middle, high = exact_parts(value)
+                if value < 0.0:
+                    low, middle, high = -low, -middle, -high
+                cuda.atomic.add(sums, (w, b, k), low)
+                cuda.atomic.add(sums, (w, b, k + 1), middle)
+                cuda.atomic.add(sums, (w, b, k + 2), high)
 
 
 @cuda.jit
 def wall_motion_kick(
-    psum, level, positive, record, total, attached, attached_wall, pforce_total, mass, body_acc, fluid_force,
-    wall_force, wall_axis, wall_sign, coord, lower, upper, area, mode, control, vel, acc, time, dt,
+    sums, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force, wall_axis,
+    wall_sign, coord, lower, upper, area, mode, control, vel, acc, time, dt,
 ):  # fmt: skip
     """The second half kick of the walls on one thread (physics/walls.py WallMotion.kick): the
-    tree sum's last level (in psum[level]), the forces on the walls (finish_wall_totals), their
-    areas, and the kick at `time`."""
+    glued particles into the sums, the forces on the walls (finish_wall_totals), their areas,
+    the kick at `time`, and the sums cleared for the next step's push_sums."""
     if cuda.grid(1) == 0:
-        tree_total(psum, level, positive, record, total)
-        finish_wall_totals(
-            total, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
-        )
+        add_glued(attached, attached_wall, pforce_total, mass, body_acc, record, sums)
+        finish_wall_totals(sums, record, fluid_force, wall_force)
+        clear_sums(sums)
         wall_areas(wall_axis, wall_sign, coord, lower, upper, area)
         wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, time, dt)
 

@@ -11,13 +11,13 @@ rank of every run. The kernels, the arguments and their order are the Python loo
 share of a rank's step.
 
 Moving walls (`motion`, as kernels/steps.py dem_steps takes it but for the walls' totals) are
-stepped on every rank alike; the particles' force on them is summed as one rank sums it: each
-rank's rows of particles pushing a wall and of glued spheres gathered to every rank (MPI_Allgather
-of the counts, MPI_Allgatherv of the rows, as RankSteps._gather_rows sends them), put in global
-order and summed in the tree of kernels/walls.py (rank_wall_totals).
+stepped on every rank alike; the particles' force on them is summed exactly (kernels/walls.py):
+each rank adds its own particles' pushes and its own glued spheres' forces into the words of the
+sums, and MPI_Allreduce adds those words over the ranks (rank_wall_totals): one rank's total,
+bitwise, from a message of a fixed size (W x 3 x WORDS int64) whatever the particles' number.
 
 mpi: (allreduce, irecv, isend, waitall, clock_gettime, the communicator, MPI_DOUBLE, MPI_MAX,
-the monotonic clock's id, allgather, allgatherv, MPI_INT64_T); mail (rank_calls.ghost_mail): the
+the monotonic clock's id, MPI_INT64_T, MPI_SUM); mail (rank_calls.ghost_mail): the
 ranks sent to and their rows (a rank m's are local[start[m]:start[m + 1]], its box the same rows
 of `out`), the same for the ranks received from, the requests and statuses of one step's
 messages; clock (2,) int64 scratch.
@@ -30,10 +30,17 @@ from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .neighbors import rows_in, rows_out
 from .serial import serial_twin
 from .steps import contacts, contacts_serial, walls_moved
-from .walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick, wall_kick_drift
+from .walls import (
+    add_glued,
+    add_pushes,
+    clear_sums,
+    finish_wall_totals,
+    wall_areas,
+    wall_kick,
+    wall_kick_drift,
+)
 
 TAG = 1  # the ghosts' forces (the Python exchange's tag: the same messages)
-GLUE = 5  # a glued sphere's row: its place in the lead's list, its force (3), its mass
 
 
 @njit(cache=True)
@@ -88,110 +95,28 @@ def send_ghost_forces(force, torque, mpi, mail):
 
 
 @njit(cache=True)
-def _pushes(pforce, record, i):
-    """True if particle i has a force on a wall whose total is recorded."""
-    for w in range(record.shape[0]):
-        if record[w]:
-            for b in range(3):
-                if pforce[i, w, b] != 0.0:
-                    return True
-    return False
-
-
-@njit(cache=True)
-def _own_wall_rows(own, gid, pforce, record, glued, glued_order, force, mass, rows):
-    """This rank's rows for the walls' totals into rows, flat: [global index, pforce (W x 3)] of
-    each particle of `own` (its own particles near the walls, ascending) pushing a recorded wall,
-    then [its place in the lead's list, force (3), mass] of each own glued sphere (glued: local
-    indices)."""
-    width = 1 + 3 * record.shape[0]
-    r = 0
+def own_wall_sums(own, pforce, record, glued, glued_wall, force, mass, body_acc, sums):
+    """This rank's share of the walls' exact sums (kernels/walls.py wall_totals) into sums
+    (cleared first): the pushes of `own` (its own particles near the walls) and the glued spheres
+    it owns (glued: local indices, glued_wall: the wall of each)."""
+    clear_sums(sums)
     for i in own:
-        if _pushes(pforce, record, i):
-            rows[r] = gid[i]
-            for w in range(record.shape[0]):
-                for b in range(3):
-                    rows[r + 1 + 3 * w + b] = pforce[i, w, b]
-            r += width
-    for k in range(glued.shape[0]):
-        i = glued[k]
-        rows[r] = glued_order[k]
-        for b in range(3):
-            rows[r + 1 + b] = force[i, b]
-        rows[r + 4] = mass[i]
-        r += GLUE
+        add_pushes(pforce, i, record, sums)
+    add_glued(glued, glued_wall, force, mass, body_acc, record, sums)
 
 
 @njit(cache=True)
 def rank_wall_totals(
-    mpi, own, gid, pforce, record, glued, glued_order, force, mass, attached_wall, count, psum, total,
-    body_acc, fluid_force, wall_force, gather,
+    mpi, own, pforce, record, glued, glued_wall, force, mass, body_acc, sums, summed, fluid_force, wall_force
 ):  # fmt: skip
-    """Collective: wall_force as one rank's wall_totals makes it (kernels/walls.py), from every
-    rank's own particles pushing a wall (own: those near the walls, the only ones whose pforce
-    may not be zero) and own glued spheres, gathered and put in global order: the pushes summed
-    by sparse_particle_pushes (psum, total its scratch; count the scene's particles), the glued
-    spheres in the lead's order (attached_wall: the lead's wall of each).
-    gather: (2,) int64, (ranks, 2) int64, (ranks,) int32 twice: scratch. Returns MPI's error code."""
-    counts, every, sizes, starts = gather
-    walls = record.shape[0]
-    width = 1 + 3 * walls
-    counts[0] = 0
-    for i in own:
-        if _pushes(pforce, record, i):
-            counts[0] += 1
-    counts[1] = glued.shape[0]
-    code = mpi[9](counts.ctypes.data, np.int32(2), mpi[11], every.ctypes.data, np.int32(2), mpi[11], mpi[5])
+    """Collective: wall_force as one rank's wall_totals makes it, bitwise: each rank's share of
+    the exact sums (own_wall_sums) added over the ranks (MPI_Allreduce, MPI_SUM of int64: exact,
+    so in any order) into summed, then rounded. Returns MPI's error code."""
+    own_wall_sums(own, pforce, record, glued, glued_wall, force, mass, body_acc, sums)
+    code = mpi[0](sums.ctypes.data, summed.ctypes.data, np.int32(sums.size), mpi[9], mpi[10], mpi[5])
     if code != 0:
         return code
-    arriving = 0
-    for rank in range(every.shape[0]):
-        sizes[rank] = every[rank, 0] * width + every[rank, 1] * GLUE
-        starts[rank] = arriving
-        arriving += sizes[rank]
-    # one buffer, this rank's rows then every rank's: MPI reads and writes it by address, and
-    # Numba keeps an array only up to its last use in the code (here arrived, a view of it)
-    mine = counts[0] * width + counts[1] * GLUE
-    buffer = np.empty(mine + arriving)
-    _own_wall_rows(own, gid, pforce, record, glued, glued_order, force, mass, buffer)
-    code = mpi[10](
-        buffer.ctypes.data, np.int32(mine), mpi[6], buffer[mine:].ctypes.data, sizes.ctypes.data,
-        starts.ctypes.data, mpi[6], mpi[5],
-    )  # fmt: skip
-    if code != 0:
-        return code
-    arrived = buffer[mine:]
-    index, index_at = np.empty(every[:, 0].sum(), np.int64), np.empty(every[:, 0].sum(), np.int64)
-    order, order_at = np.empty(every[:, 1].sum(), np.int64), np.empty(every[:, 1].sum(), np.int64)
-    p = g = 0
-    for rank in range(every.shape[0]):
-        first = starts[rank]
-        for _ in range(every[rank, 0]):
-            index[p], index_at[p] = np.int64(arrived[first]), first
-            first += width
-            p += 1
-        for _ in range(every[rank, 1]):
-            order[g], order_at[g] = np.int64(arrived[first]), first
-            first += GLUE
-            g += 1
-    pushes = np.empty((index.size, walls, 3))  # in the order they arrived
-    for q in range(index.size):
-        for w in range(walls):
-            for b in range(3):
-                pushes[q, w, b] = arrived[index_at[q] + 1 + 3 * w + b]
-    by_index = np.argsort(index, kind="mergesort")
-    sparse_particle_pushes(index[by_index], pushes, by_index, count, record, psum, total)
-    by_order = np.argsort(order, kind="mergesort")
-    glued_total, glued_mass = np.empty((order.size, 3)), np.empty(order.size)
-    for q in range(order.size):
-        at = order_at[by_order[q]]
-        for b in range(3):
-            glued_total[q, b] = arrived[at + 1 + b]
-        glued_mass[q] = arrived[at + 4]
-    finish_wall_totals(
-        total, record, np.arange(order.size), attached_wall[order[by_order]], glued_total, glued_mass,
-        body_acc, fluid_force, wall_force,
-    )  # fmt: skip
+    finish_wall_totals(summed, record, fluid_force, wall_force)
     return 0
 
 

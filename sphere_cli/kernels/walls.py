@@ -78,6 +78,7 @@ from .contact import (
     wall_law,
 )
 from .contact_probe import wall_normal
+from .exact_sum import WORDS, add_exact, exact_value
 from .laws import COLUMNS
 from .layout import U1, U2, U3, flat
 from .serial import serial_twin
@@ -392,138 +393,78 @@ def wall_areas(wall_axis, wall_sign, coord, lower, upper, area):
             area[w] = (hi0 - lo0) * (hi1 - lo1)
 
 
-# The particles' force on a wall is summed in a fixed tree: chunks of SUM_CHUNK particles in
-# index order, then chunks of those sums, until one is left. Each sum starts at +0.0 and
-# subtracts, so it is never -0.0 and a row of zeros leaves it bitwise as it was: the total is the
-# same on any number of threads, on ranks that sum only the rows that are not zero
-# (physics/rank_steps.py), and on a GPU (kernels/cuda_dem.py), whose threads take one chunk each.
-SUM_CHUNK = 64
-
-
-@njit(cache=True, inline="always")
-def chunk_count(rows):
-    """The chunks of SUM_CHUNK rows that `rows` rows make (at least one)."""
-    return max(1, (rows + SUM_CHUNK - 1) // SUM_CHUNK)
-
-
-@njit(cache=True, inline="always")
-def chunk_difference(values, rows, c, w, b):
-    """+0.0 minus values[i, w, b] for the rows i of chunk c below `rows`, in order."""
-    s = 0.0
-    for i in range(c * SUM_CHUNK, min((c + 1) * SUM_CHUNK, rows)):
-        s -= values[i, w, b]
-    return s
+# The particles' force on a wall is summed exactly (kernels/exact_sum.py): sums (W, 3, WORDS)
+# int64 holds, for each wall and direction, the words of the sum. Exact, it is the same on any
+# number of threads, on MPI ranks that add their own particles' words with MPI_SUM
+# (kernels/rank_messages.py rank_wall_totals), and on a GPU (kernels/cuda_dem.py, integer
+# atomics); and the message between ranks is these words, whatever the number of particles.
 
 
 @njit(cache=True)
-def chunk_differences(values, rows, record, out):
-    """out[c, w, b]: chunk_difference of every chunk c of the first `rows` rows, for the walls
-    marked in record; returns the chunk count (the next level's rows)."""
-    chunks = chunk_count(rows)
-    for c in range(chunks):
-        for w in range(record.shape[0]):
-            if record[w]:
-                for b in range(3):
-                    out[c, w, b] = chunk_difference(values, rows, c, w, b)
-    return chunks
+def clear_sums(sums):
+    for w in range(sums.shape[0]):
+        for b in range(3):
+            for k in range(WORDS):
+                sums[w, b, k] = 0
 
 
 @njit(cache=True, inline="always")
-def tree_total(psum, level, positive, record, total):
-    """total (W,3): the one sum left in psum[level], made positive (the sign of a sum flips at
-    every level of differences; a negation is exact)."""
+def add_pushes(pforce, i, record, sums):
+    """Particle i's push on each wall marked in record (minus the wall's force on it) into sums."""
     for w in range(record.shape[0]):
-        for b in range(3):
-            total[w, b] = 0.0
-            if record[w]:
-                total[w, b] = psum[level, 0, w, b] if positive else -psum[level, 0, w, b]
-
-
-@njit(cache=True)
-def _reduce_levels(rows, record, psum, total):
-    """The tree's levels above the first (in psum[0], `rows` chunk sums), into total."""
-    level = 0
-    positive = False
-    while rows > 1:
-        rows = chunk_differences(psum[level], rows, record, psum[1 - level])
-        level = 1 - level
-        positive = not positive
-    tree_total(psum, level, positive, record, total)
-
-
-@njit(cache=True)
-def particle_pushes(pforce, record, psum, total):
-    """total[w, b]: the sum over the particles of pforce[i, w, b] for the walls marked in record,
-    in the tree above; psum (2, >= chunk_count(N), W, 3) is its scratch."""
-    rows = chunk_differences(pforce, pforce.shape[0], record, psum[0])
-    _reduce_levels(rows, record, psum, total)
-
-
-@njit(cache=True)
-def sparse_particle_pushes(index, pforce, rows, count, record, psum, total):
-    """particle_pushes from only the particles whose forces may not be zero: particle index[r]
-    of `count`, the indices ascending, has the forces pforce[rows[r]]; bitwise the dense sum
-    (a zero row changes no chunk's sum)."""
-    chunks = chunk_count(count)
-    for c in range(chunks):
-        for w in range(record.shape[0]):
+        if record[w]:
             for b in range(3):
-                psum[0, c, w, b] = 0.0
-    for r in range(index.shape[0]):
-        c = index[r] // SUM_CHUNK
-        for w in range(record.shape[0]):
-            if record[w]:
-                for b in range(3):
-                    psum[0, c, w, b] -= pforce[rows[r], w, b]
-    _reduce_levels(chunks, record, psum, total)
+                add_exact(sums[w, b], -pforce[i, w, b])
 
 
 @njit(cache=True)
-def finish_wall_totals(
-    total, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
-):
-    """Force on each wall [N]: that of the pore fluid (fluid_force (W,3), zero but for a wall
-    bounding a Darcy fluid) plus, on each wall marked in record, that of the particles: minus
-    the wall forces on free particles (total, their sum from particle_pushes) plus the contact
-    forces on the particles glued to it (their total force pforce_total less their weight), in
-    the order of `attached`."""
-    nw = wall_force.shape[0]
-    for w in range(nw):
-        for b in range(3):
-            wall_force[w, b] = fluid_force[w, b] - total[w, b] if record[w] else fluid_force[w, b]
+def add_glued(attached, attached_wall, pforce_total, mass, body_acc, record, sums):
+    """The contact forces on the particles glued to each wall marked in record (their total
+    force pforce_total less their weight) into sums."""
     for k in range(attached.shape[0]):
         i = attached[k]
         w = attached_wall[k]
         if record[w]:
             for b in range(3):
-                wall_force[w, b] += pforce_total[i, b] - mass[i] * body_acc[b]
+                add_exact(sums[w, b], pforce_total[i, b] - mass[i] * body_acc[b])
+
+
+@njit(cache=True)
+def finish_wall_totals(sums, record, fluid_force, wall_force):
+    """Force on each wall [N]: that of the pore fluid (fluid_force (W,3), zero but for a wall
+    bounding a Darcy fluid) plus, on each wall marked in record, that of the particles, the sum
+    in sums (add_pushes, add_glued; normalised in place)."""
+    for w in range(wall_force.shape[0]):
+        for b in range(3):
+            wall_force[w, b] = fluid_force[w, b] + exact_value(sums[w, b]) if record[w] else fluid_force[w, b]
 
 
 @njit(cache=True)
 def wall_totals(
-    pforce, record, psum, total, attached, attached_wall, pforce_total, mass, body_acc, fluid_force,
-    wall_force,
+    pforce, record, sums, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
 ):  # fmt: skip
-    """finish_wall_totals from each particle's wall forces pforce (N,W,3), summed by
-    particle_pushes (psum and total its scratch)."""
-    particle_pushes(pforce, record, psum, total)
-    finish_wall_totals(
-        total, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
-    )
+    """finish_wall_totals from each particle's wall forces pforce (N,W,3) and the glued
+    particles (sums its scratch)."""
+    clear_sums(sums)
+    for i in range(pforce.shape[0]):
+        add_pushes(pforce, i, record, sums)
+    add_glued(attached, attached_wall, pforce_total, mass, body_acc, record, sums)
+    finish_wall_totals(sums, record, fluid_force, wall_force)
 
 
 @njit(cache=True)
 def listed_wall_totals(
-    listed, pforce, record, psum, total, attached, attached_wall, pforce_total, mass, body_acc,
-    fluid_force, wall_force,
+    listed, pforce, record, sums, attached, attached_wall, pforce_total, mass, body_acc, fluid_force,
+    wall_force,
 ):  # fmt: skip
-    """wall_totals, bitwise, from the rows of the particles listed near the walls (ascending:
-    wall_forces writes no other row, and the rows are zeroed when the list is made), not every
-    particle's: at 100 000 spheres, 0.85 ms a step less for the dense pass over pforce."""
-    sparse_particle_pushes(listed, pforce, listed, pforce.shape[0], record, psum, total)
-    finish_wall_totals(
-        total, record, attached, attached_wall, pforce_total, mass, body_acc, fluid_force, wall_force
-    )
+    """wall_totals, bitwise, from the rows of the particles listed near the walls (wall_forces
+    writes no other row, and the rows are zeroed when the list is made), not every particle's:
+    at 100 000 spheres, 0.85 ms a step less than the dense pass over pforce."""
+    clear_sums(sums)
+    for i in listed:
+        add_pushes(pforce, i, record, sums)
+    add_glued(attached, attached_wall, pforce_total, mass, body_acc, record, sums)
+    finish_wall_totals(sums, record, fluid_force, wall_force)
 
 
 @njit(cache=True)

@@ -9,7 +9,8 @@ It takes the place of physics/compiled_steps.py for the scenes it covers: partic
 contacts (both laws, friction, rolling, several materials), gravity, plane walls (fixed, moving at
 a set velocity or keeping a stress, with spheres glued to them) and periodic boundaries. The
 walls' own steps run on one GPU thread each half step (a few walls); the particles' forces on
-them are summed in the CPU's fixed tree (kernels/walls.py particle_pushes), one thread per chunk.
+them are summed exactly as on the CPU (kernels/exact_sum.py), one thread a particle, by integer
+atomics, which give the same sum in any order.
 Stages run on the host, as on the CPU: what their test reads comes back before each step where
 a stage may end (Stages.after_due), the whole state where one does end (Stages.ends_at), and it
 goes up again when the next has begun (its walls' modes, its friction, an approach). So does a
@@ -42,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CaseError
+from ..kernels.exact_sum import WORDS
 from ..kernels.neighbors import count_half_rows, fill_half_rows, row_starts
-from ..kernels.walls import SUM_CHUNK, chunk_count
 from ..state import State
 from .compiled_steps import plain_step
 from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
@@ -134,29 +135,6 @@ def _fluid_on_gpu(scene):
     """The scene's fluid if its force runs on the GPU (FluidModule.on_gpu), else None."""
     fluid = scene.fluid
     return fluid if fluid is not None and fluid.on_gpu else None
-
-
-def push_levels(launch, kernels, pforce, rows: int, record, psum) -> tuple[int, bool]:
-    """The tree sum of pforce's first `rows` rows on the device as the CPU's particle_pushes
-    makes it (kernels/walls.py): two levels a launch (push_two_levels, a block of SUM_CHUNK
-    threads per chunk of chunks), then the last one alone if one is left (push_chunks); returns
-    where the one sum left lies in psum and whether it is positive (for tree_total)."""
-    nw = record.shape[0]
-    values, level, made = pforce, 0, 0  # made: levels summed so far (each flips the sign)
-    while True:
-        chunks = chunk_count(rows)
-        if chunks == 1:
-            launch(kernels.push_chunks, nw * 3, values, rows, record, psum[level])
-            return level, (made + 1) % 2 == 0
-        above = chunk_count(chunks)
-        blocks = above * nw * 3  # of SUM_CHUNK threads
-        launch(
-            kernels.push_two_levels, blocks * SUM_CHUNK, values, rows, record, psum[level], block=SUM_CHUNK
-        )
-        made += 2
-        if above == 1:
-            return level, made % 2 == 0
-        rows, values, level = above, psum[level], 1 - level
 
 
 @dataclass
@@ -305,8 +283,7 @@ class DeviceSteps:
                     {f"wall_{name}": to(getattr(w, name)) for name in MOVED[3:] + DRIVING},
                     attached=to(w.attached),
                     attached_wall=to(w.attached_wall),
-                    psum=to(np.zeros((2, chunk_count(p.count), len(w.faces), 3))),
-                    push_total=to(np.zeros((len(w.faces), 3))),
+                    sums=to(np.zeros((len(w.faces), 3, WORDS), dtype=np.int64)),
                 )
         if self.budget is not None:
             self._budget_arrays(state)
@@ -648,15 +625,15 @@ class DeviceSteps:
         )  # fmt: skip
 
     def _wall_kick(self, n: int, time: float, dt: float) -> None:
-        """The particles' forces on the walls summed in the CPU's tree, then the walls' second
-        half kick (physics/walls.py WallMotion.kick)."""
+        """The particles' forces on the walls summed exactly, as on the CPU (push_sums), then
+        the walls' second half kick (physics/walls.py WallMotion.kick)."""
         d = self.d
-        level, positive = push_levels(self._launch, self.k, d["pforce"], n, d["record"], d["psum"])
+        self._launch(self.k.push_sums, n, d["pforce"], n, d["record"], d["sums"])
         self._launch(
-            self.k.wall_motion_kick, 1, d["psum"], level, positive, d["record"], d["push_total"],
-            d["attached"], d["attached_wall"], d["force"], d["mass"], d["body_acc"], d["wall_fluid_force"],
-            d["wall_force"], d["wall_axis"], d["wall_sign"], d["wall_coord"], d["lower"], d["upper"],
-            d["wall_area"], d["wall_mode"], d["wall_control"], d["wall_vel"], d["wall_acc"], time, dt,
+            self.k.wall_motion_kick, 1, d["sums"], d["record"], d["attached"], d["attached_wall"], d["force"],
+            d["mass"], d["body_acc"], d["wall_fluid_force"], d["wall_force"], d["wall_axis"], d["wall_sign"],
+            d["wall_coord"], d["lower"], d["upper"], d["wall_area"], d["wall_mode"], d["wall_control"],
+            d["wall_vel"], d["wall_acc"], time, dt,
         )  # fmt: skip
 
     def rebuild(self, state: State) -> None:

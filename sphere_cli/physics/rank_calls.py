@@ -24,7 +24,7 @@ from numba.extending import typeof_impl
 warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
 
 
-FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall", "MPI_Allgather", "MPI_Allgatherv")
+FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall")
 
 
 class _CFunction(numba.types.WrapperAddressProtocol):
@@ -82,11 +82,8 @@ def compiled_calls(world) -> tuple | None:
         value(mpi.DOUBLE.handle),
         value(mpi.MAX.handle),
         np.int32(time.CLOCK_MONOTONIC),
-        _CFunction(library, "MPI_Allgather", i32(address, i32, handle, address, i32, handle, handle)),
-        _CFunction(
-            library, "MPI_Allgatherv", i32(address, i32, handle, address, address, address, handle, handle)
-        ),
         value(mpi.INT64_T.handle),
+        value(mpi.SUM.handle),
     ), np.dtype(np.int32 if request == types.int32 else np.intp)
 
 

@@ -41,9 +41,10 @@ their messages inside (kernels/rank_messages.py, through physics/rank_calls.py);
 the energy budget's, one at a time in Python with mpi4py's messages (an exchange of ghost forces
 and one reduction a step).
 
-**Moving walls** are stepped on every rank alike; the particles' force on them is summed in
-one rank's order over the ranks (kernels/rank_messages.py rank_wall_totals, or `_wall_kick`
-from Python, with the same messages). **Stages** run at the lead on its whole scene,
+**Moving walls** are stepped on every rank alike; the particles' force on them is summed
+exactly (kernels/exact_sum.py): each rank adds its own particles' share into the sums' words
+and one Allreduce adds those (kernels/rank_messages.py rank_wall_totals, or `_wall_kick` from
+Python, with the same message), one rank's total bitwise. **Stages** run at the lead on its whole scene,
 gathered for the steps where a stage may end; when one begins, the scene is shared out again.
 A **fluid** keeps its own arrays (profiles, grids) whole on every rank. Its force and kick run
 on every rank, its per-particle arrays (`particle_arrays`) travelling with the particles; those
@@ -90,17 +91,17 @@ from ..kernels.neighbors import (
     rows_in,
     rows_out,
 )
-from ..kernels.rank_messages import rank_dem_steps, rank_dem_steps_serial
+from ..kernels.rank_messages import own_wall_sums, rank_dem_steps, rank_dem_steps_serial
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
-from ..kernels.walls import finish_wall_totals, sparse_particle_pushes, wall_areas, wall_kick
+from ..kernels.walls import finish_wall_totals, wall_areas, wall_kick
 from ..state import Clock, NeighborList, Particles, State, Walls
 from .compiled_steps import plain_step, step_arguments
 from .contact import PairContactForces
 from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
 from .observe.energy_budget import EnergyBudget
 from .rank_calls import compiled_calls, ghost_mail
-from .walls import PlaneWallForces, WallMotion, push_scratch
+from .walls import PlaneWallForces, WallMotion, wall_sums
 
 # per-particle arrays a particle carries between ranks (Particles; the predicted velocities
 # too: the kick-drift of a build's step set them, and the forces read them)
@@ -250,6 +251,14 @@ class EveryRank:
         every = np.empty((self.steps.world.size, packed.size), dtype=np.uint8)
         self.steps.world.comm.Allgather(packed, every)
         return np.unpackbits(every, axis=1, count=mask.size).astype(bool)
+
+
+def summed_over_ranks(world, sums: np.ndarray) -> np.ndarray:
+    """Collective: the words of every rank's exact sums (int64) added over the ranks, exactly:
+    the message of kernels/rank_messages.py rank_wall_totals, from Python."""
+    summed = np.empty_like(sums)
+    world.comm.Allreduce([sums, world.mpi.INT64_T], [summed, world.mpi.INT64_T], op=world.mpi.SUM)
+    return summed
 
 
 class RankSteps:
@@ -589,21 +598,14 @@ class RankSteps:
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py
         dem_steps's, with rank_wall_totals's arguments (this rank's own particles near the walls
-        and own glued spheres, the lead's glued spheres' walls) in place of listed_wall_totals's,
+        and own glued spheres with their walls) in place of listed_wall_totals's,
         and without the clock's step (the loop takes it at each call)."""
         part, w, p = self.part, state.walls, state.particles
         drift, areas, _, kick = WallMotion.kernel_arguments(state)
-        glued = part.owned[part.glued]
-        size = self.world.size
-        gather = (
-            np.zeros(2, dtype=np.int64), np.zeros((size, 2), dtype=np.int64), np.zeros(size, dtype=np.int32),
-            np.zeros(size, dtype=np.int32),
-        )  # fmt: skip
         near = w.listed  # as step_arguments made it
         totals = (
-            near[part.owned[near]], part.gid, w.pforce, w.record, part.glued[glued], part.glued_order[glued],
-            p.force, p.mass, self.t.attached_wall, self.t.count, *push_scratch(w, self.t.count),
-            state.box.body_acc, w.fluid_force, w.force, gather,
+            near[part.owned[near]], w.pforce, w.record, *self._own_glued(), p.force, p.mass,
+            state.box.body_acc, wall_sums(w), np.zeros_like(wall_sums(w)), w.fluid_force, w.force,
         )  # fmt: skip
         listed_at, reach = part.walls.near_list_made_at(state)
         return drift, areas, totals, kick, listed_at, reach, state.clock.dt
@@ -651,67 +653,27 @@ class RankSteps:
                 rows_in(inbox[rank], local, c, first)
                 first += c.shape[1]
 
-    def _gather_rows(self, *tables: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Collective: each table (n, k) of doubles of every rank, the ranks' rows in rank order
-        (an Allgather of the row counts, then one Allgatherv: no pickles). An index travels as a
-        double, exact below 2^53."""
-        comm, size = self.world.comm, self.world.size
-        counts = np.array([t.shape[0] for t in tables], dtype=np.int64)
-        every = np.empty((size, len(tables)), dtype=np.int64)
-        int64 = self.world.mpi.INT64_T  # as kernels/rank_messages.py rank_wall_totals sends them
-        comm.Allgather([counts, int64], [every, int64])
-        widths = np.array([t.shape[1] for t in tables], dtype=np.int64)
-        sizes = every @ widths
-        arrived = np.empty(int(sizes.sum()))
-        comm.Allgatherv(np.concatenate([t.ravel() for t in tables]), [arrived, sizes])
-        starts = np.concatenate([[0], np.cumsum(sizes)])
-        gathered = []
-        for k, width in enumerate(widths):
-            first = starts[:-1] + every[:, :k] @ widths[:k]  # table k's rows of each rank
-            rows = [arrived[f : f + n * width] for f, n in zip(first, every[:, k], strict=True)]
-            gathered.append(np.concatenate(rows).reshape(-1, width))
-        return tuple(gathered)
+    def _own_glued(self) -> tuple[np.ndarray, np.ndarray]:
+        """The glued spheres this rank owns (local indices) and the wall of each."""
+        part = self.part
+        glued = part.owned[part.glued]
+        return part.glued[glued], self.t.attached_wall[part.glued_order[glued]]
 
     def _wall_kick(self, state: State) -> None:
-        """WallMotion.kick with the particles' force on each wall summed as one rank sums it:
-        in its tree over global particle indices (kernels/walls.py particle_pushes), from the
-        rows that are not zero, then the glued spheres in the lead's order, with the messages of
-        the compiled loop's rank_wall_totals (ranks taking either meet). Not that function called
-        from here: each call from Python types the MPI functions' tuple (about 80 us when this
-        was tried, 42 us since rank_calls makes each function's type once), more than this
-        costs on small parts (the direct shear with the energy budget on 2 ranks: 0.86-0.94 ->
-        0.72 M particle-steps/s then)."""
-        part, w, p, box = self.part, state.walls, state.particles, state.box
+        """WallMotion.kick with the particles' force on each wall summed as one rank sums it,
+        bitwise, with the messages of the compiled loop's rank_wall_totals (ranks taking either
+        meet): this rank's share of the exact sums (own_wall_sums), added over the ranks by an
+        Allreduce of their words."""
+        part, w, p = self.part, state.walls, state.particles
         _, areas, _, kick = WallMotion.kernel_arguments(state)
         wall_areas(*areas)
         near = w.listed  # the only rows of pforce that may not be zero
-        own = near[part.owned[near]]
-        pushing = own[np.any(w.pforce[own][:, w.record.astype(bool)] != 0.0, axis=(1, 2))]
-        glued = part.owned[part.glued]
-        local = part.glued[glued]
-        width = w.pforce[0].size  # W x 3 of a particle
-        pushes = np.column_stack([part.gid[pushing], w.pforce[pushing].reshape(pushing.size, width)])
-        glue = np.column_stack([part.glued_order[glued], p.force[local], p.mass[local]])
-        pushes, glue = self._gather_rows(pushes, glue)
-        gid, pforce = pushes[:, 0].astype(np.int64), pushes[:, 1:].reshape(-1, *w.pforce.shape[1:])
-        order, total, mass = glue[:, 0].astype(np.int64), glue[:, 1:4], glue[:, 4]
-        by_index, by_glue = np.argsort(gid, kind="stable"), np.argsort(order, kind="stable")
-        psum, pushes = push_scratch(w, self.t.count)
-        sparse_particle_pushes(
-            np.ascontiguousarray(gid[by_index]), np.ascontiguousarray(pforce), by_index, self.t.count,
-            w.record, psum, pushes,
+        sums = wall_sums(w)
+        own_wall_sums(
+            near[part.owned[near]], w.pforce, w.record, *self._own_glued(), p.force, p.mass,
+            state.box.body_acc, sums,
         )  # fmt: skip
-        finish_wall_totals(
-            pushes,
-            w.record,
-            np.arange(order.size, dtype=np.int64),
-            self.t.attached_wall[order[by_glue]],
-            np.ascontiguousarray(total[by_glue]),
-            np.ascontiguousarray(mass[by_glue]),
-            box.body_acc,
-            w.fluid_force,
-            w.force,
-        )
+        finish_wall_totals(summed_over_ranks(self.world, sums), w.record, w.fluid_force, w.force)
         dt = state.clock.dt
         wall_kick(*kick, (state.clock.step + 1) * dt, dt)
 

@@ -35,6 +35,7 @@ import numba
 import numpy as np
 
 from ..kernels.contact import BLOCK, FIELDS
+from ..kernels.exact_sum import WORDS
 from ..kernels.observe.energy import wall_elastic_energy
 from ..kernels.serial import use_serial
 from ..kernels.walls import (
@@ -51,7 +52,6 @@ from ..kernels.walls import (
     FIXED,
     STRESS,
     VELOCITY,
-    chunk_count,
     listed_wall_totals,
     near_walls,
     wall_areas,
@@ -112,14 +112,12 @@ class WallScales:
         return verlet_limit(self.stiffness_per_area[w] * area + fluid, 0.0, 0.0, self.mass(spec, area))
 
 
-def push_scratch(walls: Walls, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """The scratch of the tree sum of `count` particles' forces on the walls (kernels/walls.py
-    particle_pushes), made once, and again only for more particles."""
-    chunks = chunk_count(count)
-    if walls.psum is None or walls.psum.shape[1] < chunks:
-        walls.psum = np.zeros((2, chunks, len(walls.faces), 3))
-        walls.push_total = np.zeros((len(walls.faces), 3))
-    return walls.psum, walls.push_total
+def wall_sums(walls: Walls) -> np.ndarray:
+    """The words of the exact sums of the forces on the walls (kernels/walls.py wall_totals),
+    made once."""
+    if walls.sums is None:
+        walls.sums = np.zeros((len(walls.faces), 3, WORDS), dtype=np.int64)
+    return walls.sums
 
 
 def bed_height(walls: Walls, w: int, coord, box) -> float:
@@ -380,7 +378,7 @@ class PlaneWallForces(Module):
         wall_totals(
             pforce,
             every,
-            *push_scratch(w, p.count),
+            wall_sums(w),
             w.attached,
             w.attached_wall,
             p.force,
@@ -445,7 +443,7 @@ class WallMotion(Module):
             (w.axis, w.sign, w.mode, w.control, w.coord, w.vel, w.acc, w.vel_pred, w.shift, state.clock.dt,
              w.attached, w.attached_wall, p.vel),
             (w.axis, w.sign, w.coord, box.lower, box.upper, w.area),
-            (w.pforce, w.record, *push_scratch(w, p.count), w.attached, w.attached_wall, p.force, p.mass,
+            (w.pforce, w.record, wall_sums(w), w.attached, w.attached_wall, p.force, p.mass,
              box.body_acc, w.fluid_force, w.force),
             (w.axis, w.sign, w.mode, w.control, w.force, w.area, w.vel, w.acc),
         )  # fmt: skip

@@ -18,7 +18,8 @@ V = t.float64[:]  # (N,) or (3,)
 M = t.float64[:, :]  # (N,3)
 H = t.float64[:, :, :]  # springs (N,F,3), contact table (M,M,6)
 I1, I2, L1, L2 = t.int32[:], t.int32[:, :], t.int64[:], t.int64[:, :]
-H4 = t.float64[:, :, :, :]  # the tree sum's levels (2, chunks, W, 3)
+L3 = t.int64[:, :, :]  # the exact sums' words (W, 3, WORDS)
+H4 = t.float64[:, :, :, :]
 B = t.uint8[:]  # periodic axes
 F, INT, BOOL = t.float64, t.int64, t.boolean
 
@@ -61,34 +62,8 @@ SIGNATURES = {
     "find_unstable": (M, M, M, V, V, V, B, F, L1),
     "wall_forces": (M, M, M, M, M, V, V, V, V, I1, L1, V, V, M, M, H, H, BOOL, INT, BOOL, F, F, M, M, B, H),
     "wall_motion_drift": (L1, V, L2, M, V, M, M, M, M, F, L1, L1, M),
-    "push_chunks": (H, INT, B, H),
-    "push_two_levels": (H, INT, B, H),
-    "wall_motion_kick": (
-        H4,
-        INT,
-        BOOL,
-        B,
-        M,
-        L1,
-        L1,
-        M,
-        V,
-        V,
-        M,
-        M,
-        L1,
-        V,
-        V,
-        V,
-        V,
-        V,
-        L2,
-        M,
-        M,
-        M,
-        F,
-        F,
-    ),  # fmt: skip
+    "push_sums": (H, INT, B, L3),
+    "wall_motion_kick": (L3, B, L1, L1, M, V, V, M, M, L1, V, V, V, V, V, L2, M, M, M, F, F),
 }
 
 # the fluids' forces (kernels/fluid/cuda_profile_forces.py, kernels/fluid/cuda_darcy.py)

@@ -19,6 +19,7 @@ from sphere_cli.kernels import motion as kernels_motion
 from sphere_cli.kernels import serial
 from sphere_cli.kernels import steps as kernels_steps
 from sphere_cli.kernels import walls as kernels_walls
+from sphere_cli.kernels.exact_sum import WORDS
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
@@ -161,10 +162,9 @@ def test_the_walls_totals_from_the_near_wall_list_are_the_dense_sums_bitwise():
     glued = (rng.choice(n, 30, replace=False), rng.integers(0, walls, 30))
     rest = (rng.standard_normal((n, 3)), rng.random(n), np.array([0.0, 0.0, -9.81]), rng.random((walls, 3)))
     dense, sparse = np.zeros((walls, 3)), np.zeros((walls, 3))
-    scratch = (np.zeros((2, 16, walls, 3)), np.zeros((walls, 3)))
-    kernels_walls.wall_totals(pforce, record, *scratch, *glued, *rest, dense)
-    scratch = (np.zeros((2, 16, walls, 3)), np.zeros((walls, 3)))
-    kernels_walls.listed_wall_totals(listed, pforce, record, *scratch, *glued, *rest, sparse)
+    sums = np.zeros((walls, 3, WORDS), dtype=np.int64)
+    kernels_walls.wall_totals(pforce, record, sums, *glued, *rest, dense)
+    kernels_walls.listed_wall_totals(listed, pforce, record, sums, *glued, *rest, sparse)
     assert dense.tobytes() == sparse.tobytes()
     assert np.count_nonzero(dense[[0, 2, 3]] != rest[3][[0, 2, 3]]) == 9
 

@@ -280,42 +280,53 @@ def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path, grid):
         np.testing.assert_allclose(one, other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
 
 
-@pytest.mark.parametrize(
-    "n, where",
-    [(5000, (1, False)), (1000, (0, True)), (40, (0, False))],
-    ids=["three-levels", "two-levels", "one-level"],
-)
-def test_the_device_sums_the_forces_on_the_walls_in_the_cpus_tree(n, where):
-    """The particles' forces on the walls, most of them zero, summed on the device in its
-    launches (two levels of the tree at a time, then a last one alone: 5000 -> 79 -> 2 -> 1,
-    1000 -> 16 -> 1, 40 -> 1): bitwise the CPU's sum (kernels/walls.py particle_pushes), also on
-    a GPU, since a sum of differences has no multiply to fuse."""
+def test_the_device_sums_the_forces_on_the_walls_as_the_cpu_does():
+    """The particles' forces on the walls (most of them zero, over 16 orders of magnitude, so the
+    order of a float sum would show in its bits) and the glued spheres', summed on the device by
+    integer atomics (push_sums, then wall_motion_kick): bitwise the CPU's wall_totals, and the
+    sums' words cleared for the next step."""
     from numba import cuda
 
     from sphere_cli.kernels import cuda_dem
-    from sphere_cli.kernels.walls import chunk_count, particle_pushes, tree_total
-    from sphere_cli.physics.device_steps import push_levels
+    from sphere_cli.kernels.exact_sum import WORDS
+    from sphere_cli.kernels.walls import C_MASS, NC, wall_totals
 
     rng = np.random.default_rng(2)
-    pforce = rng.normal(0.0, 1.0, (n, 3, 3)) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
+    n = 3000
+    pforce = rng.normal(0.0, 1.0, (n, 3, 3)) * 10.0 ** rng.integers(-8, 9, (n, 3, 3))
     pforce[rng.random(n) < 0.8] = 0.0
     record = np.array([1, 0, 1], dtype=np.uint8)
-    psum = np.zeros((2, chunk_count(n), 3, 3))
+    attached, attached_wall = rng.choice(n, 20, replace=False), rng.integers(0, 3, 20)
+    total, mass = rng.normal(0.0, 1.0, (n, 3)), rng.random(n)
+    body_acc, fluid_force = np.array([0.0, 0.0, -9.81]), rng.normal(0.0, 1.0, (3, 3))
     expected = np.zeros((3, 3))
-    particle_pushes(pforce, record, psum, expected)
+    sums = np.zeros((3, 3, WORDS), dtype=np.int64)
+    wall_totals(pforce, record, sums, attached, attached_wall, total, mass, body_acc, fluid_force, expected)
 
-    def launch(kernel, size, *args, block=None):
-        threads = block or min(128, size)
-        kernel[-(-size // threads), threads](*args)
-
-    on_device = cuda.to_device(np.zeros_like(psum))
-    pushes, marked = cuda.to_device(pforce), cuda.to_device(record)
-    level, positive = push_levels(launch, cuda_dem, pushes, n, marked, on_device)
-    assert (level, positive) == where  # where the CPU's levels leave the sum, and its sign
-    total = np.zeros((3, 3))
-    tree_total(on_device.copy_to_host(), level, positive, record, total)
-    assert np.array_equal(total, expected) and np.abs(expected[0]).min() > 0.0
-    assert np.allclose(expected, pforce.sum(axis=0) * record[:, None], rtol=1e-12)
+    on_device = cuda.to_device(np.zeros_like(sums))
+    marked, force = cuda.to_device(record), cuda.to_device(np.zeros((3, 3)))
+    cuda_dem.push_sums[-(-n // 128), 128](cuda.to_device(pforce), n, marked, on_device)
+    # the walls fixed (mode 0) and at rest: only their forces matter here
+    control = np.zeros((3, NC))
+    control[:, C_MASS] = 1.0
+    axis, sign = np.array([0, 1, 2]), np.ones(3)
+    walls = [cuda.to_device(a) for a in (axis, sign, np.zeros(3), np.zeros(3), np.ones(3), np.zeros(3))]
+    cuda_dem.wall_motion_kick[1, 1](
+        on_device, marked, cuda.to_device(attached), cuda.to_device(attached_wall), cuda.to_device(total),
+        cuda.to_device(mass), cuda.to_device(body_acc), cuda.to_device(fluid_force), force, *walls,
+        cuda.to_device(np.zeros((3, 2), dtype=np.int64)), cuda.to_device(control),
+        cuda.to_device(np.zeros((3, 3))), cuda.to_device(np.zeros((3, 3))), 0.0, 1e-6,
+    )  # fmt: skip
+    assert force.copy_to_host().tobytes() == expected.tobytes()
+    assert not on_device.copy_to_host().any()
+    assert np.array_equal(expected[1], fluid_force[1])  # not recorded: the fluid's alone
+    for w in (0, 2):  # the exact sum, rounded, plus the fluid's force: within two roundings
+        glued = attached[attached_wall == w]
+        for b in range(3):
+            terms = [*-pforce[:, w, b], *(total[glued, b] - mass[glued] * body_acc[b])]
+            pushed = math.fsum(terms)  # correctly rounded
+            exact = pushed + fluid_force[w, b]
+            assert abs(expected[w, b] - exact) <= math.ulp(pushed) + math.ulp(exact)
 
 
 def test_rows_and_cells_that_overflow_grow_on_the_device(tmp_path, monkeypatch):
@@ -595,9 +606,9 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
     assert 200 < row["device_bytes_per_particle"] < 5000
     assert set(row["kernel_shares"]) == {"kick_drift", "pair_forces", "wall_forces", "kick"}
     assert abs(sum(row["kernel_shares"].values()) - 1.0) < 1e-9
-    # the lid keeping a stress: the walls' own kernels and the tree sum are timed too
+    # the lid keeping a stress: the walls' own kernels and their sums are timed too
     assert (row["walls"], moving["walls"]) == ("fixed", "moving")
-    walls_own = {"wall_motion_drift", "push_chunks", "wall_motion_kick"}
+    walls_own = {"wall_motion_drift", "push_sums", "wall_motion_kick"}
     assert set(moving["kernel_shares"]) == {*row["kernel_shares"], *walls_own}
     # in water: the drag and its kick every step (the self-induced velocity's sums by cell), the
     # porosity and the momentum exchange before the fluid step of the third step

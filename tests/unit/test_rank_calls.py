@@ -1,6 +1,6 @@
 """The MPI functions called from compiled code (physics/rank_calls.py, kernels/rank_messages.py),
 on two ranks started by the mpich wheel's mpiexec: the reduction and the ghosts' message give
-what MPI should, the moving walls' totals gathered from both ranks are one rank's bit for bit,
+what MPI should, the moving walls' totals summed over both ranks are one rank's bit for bit,
 and a second launch loads the compiled functions from Numba's cache instead of
 compiling them again (what numba-mpi's calls could not do)."""
 
@@ -31,8 +31,11 @@ import types
 import numpy as np
 from mpi4py import MPI
 
-from sphere_cli.kernels.rank_messages import largest_everywhere, rank_wall_totals, seconds, send_ghost_forces
-from sphere_cli.kernels.walls import wall_totals
+from sphere_cli.kernels.exact_sum import WORDS
+from sphere_cli.kernels.rank_messages import (
+    largest_everywhere, own_wall_sums, rank_wall_totals, seconds, send_ghost_forces,
+)
+from sphere_cli.kernels.walls import finish_wall_totals, wall_totals
 from sphere_cli.physics.rank_calls import compiled_calls, ghost_mail
 
 comm = MPI.COMM_WORLD
@@ -57,9 +60,9 @@ time.sleep(0.05)
 slept, elapsed = seconds(mpi, clock) - before, time.perf_counter() - started
 
 # the walls' totals: 300 particles, half of them pushing walls 0 and 2 (recorded) and 1 (not),
-# with forces from 1e-8 to 1e8 (the order of a sum shows in its bits), and 20 glued spheres
-# (forces as spread); each rank owns blocks of 7 particles in turn (so chunks of 64 mix the
-# ranks' rows) and sums its share with the other's as one rank sums them all
+# with forces from 1e-8 to 1e8 (the order of a float sum shows in its bits), and 20 glued spheres
+# (forces as spread); each rank owns blocks of 7 particles in turn and adds its share to the
+# other's: one rank's totals
 rng = np.random.default_rng(7)
 n, walls = 300, 3
 pforce = np.zeros((n, walls, 3))
@@ -71,43 +74,33 @@ totals_of, mass = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-8, 9, (n, 
 attached, attached_wall = rng.permutation(n)[:20], rng.integers(0, walls, 20)
 body_acc, fluid_force = np.array([0.0, 0.0, -9.81]), rng.standard_normal((walls, 3))
 one, split = np.zeros((walls, 3)), np.zeros((walls, 3))
-scratch = lambda: (np.zeros((2, 5, walls, 3)), np.zeros((walls, 3)))
-wall_totals(pforce, record, *scratch(), attached, attached_wall, totals_of, mass, body_acc, fluid_force, one)
+words = lambda: np.zeros((walls, 3, WORDS), dtype=np.int64)
+wall_totals(pforce, record, words(), attached, attached_wall, totals_of, mass, body_acc, fluid_force, one)
 gid = np.arange(n)
 own = gid[(gid // 7) % 2 == rank]
-glued_order = np.flatnonzero((attached // 7) % 2 == rank)
-gather = (np.zeros(2, np.int64), np.zeros((2, 2), np.int64), np.zeros(2, np.int32), np.zeros(2, np.int32))
-totals = rank_wall_totals(
-    mpi, own, gid, pforce, record, attached[glued_order], glued_order, totals_of, mass, attached_wall, n,
-    *scratch(), body_acc, fluid_force, split, gather,
-)
-# again with rank 1 sending its rows from Python (RankSteps._gather_rows, as a rank stepping
-# with the energy budget or holding no particle does) while rank 0 takes them in compiled code:
-# the same messages
+glued = attached[(attached // 7) % 2 == rank]
+glued_wall = attached_wall[(attached // 7) % 2 == rank]
+share = (own, pforce, record, glued, glued_wall, totals_of, mass, body_acc)
+totals = rank_wall_totals(mpi, *share, words(), words(), fluid_force, split)
+# again with rank 1 adding its share from Python (summed_over_ranks, as a rank stepping with the
+# energy budget or holding no particle does) while rank 0 takes it in compiled code: the same
+# message
 mixed = np.zeros((walls, 3))
 if rank == 0:
-    rank_wall_totals(
-        mpi, own, gid, pforce, record, attached[glued_order], glued_order, totals_of, mass, attached_wall,
-        n, *scratch(), body_acc, fluid_force, mixed, gather,
-    )
-    gathered = []
+    rank_wall_totals(mpi, *share, words(), words(), fluid_force, mixed)
 else:
-    mine = own[np.any(pforce[own][:, record.astype(bool)] != 0.0, axis=(1, 2))]
-    glued = attached[glued_order]
-    rows = np.column_stack([gid[mine], pforce[mine].reshape(mine.size, -1)])
-    glue = np.column_stack([glued_order, totals_of[glued], mass[glued]])
-    from sphere_cli.physics.rank_steps import RankSteps
-    both = types.SimpleNamespace(world=types.SimpleNamespace(mpi=MPI, comm=comm, size=comm.size))
-    pushes_in, glue_in = RankSteps._gather_rows(both, rows, glue)
-    gathered = [sorted(pushes_in[:, 0].tolist()), sorted(glue_in[:, 0].tolist())]
+    from sphere_cli.physics.rank_steps import summed_over_ranks
+
+    sums = words()
+    own_wall_sums(*share, sums)
+    finish_wall_totals(summed_over_ranks(world, sums), record, fluid_force, mixed)
 
 KERNELS = (largest_everywhere, send_ghost_forces, seconds, rank_wall_totals)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
     "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "slept": slept, "elapsed": elapsed,
     "totals": int(totals), "one": one.tolist(), "split": split.tolist(), "fluid": fluid_force.tolist(),
-    "mixed": mixed.tolist(), "gathered": gathered,
-    "pushing": np.flatnonzero(np.any(pforce[:, [0, 2]] != 0.0, axis=(1, 2))).tolist(),
+    "mixed": mixed.tolist(),
     "compiled": sum(sum(f.stats.cache_misses.values()) for f in KERNELS),
     "loaded": sum(sum(f.stats.cache_hits.values()) for f in KERNELS),
 }))
@@ -145,9 +138,9 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         assert r["totals"] == 0
         assert r["split"] == r["one"]  # bitwise: the floats' repr is exact
         assert r["one"][1] == r["fluid"][1] and r["one"][0] != r["fluid"][0]  # wall 1 not recorded
-    # rank 0's compiled gather met rank 1's from Python: one rank's totals, every row at rank 1
-    assert first[0]["mixed"] == first[0]["one"]
-    assert first[1]["gathered"] == [first[1]["pushing"], list(range(20))]
+    # rank 0's compiled reduction met rank 1's from Python: one rank's totals on both
+    for r in first:
+        assert r["mixed"] == r["one"]
     assert sum(r["compiled"] for r in first) >= len(KERNEL_NAMES)
     again = launch(tmp_path)
     for r in again:
