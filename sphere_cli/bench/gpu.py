@@ -8,7 +8,7 @@ last kernel; bringing the state back to the host (what a run does for each outpu
 apart, and the rate with one such copy per `steps` steps is given beside it: at 10^6 spheres the
 copy costs as much as a few hundred steps. `walls` "moving" adds loose rows whose lid keeps a
 normal stress and slides along x at a set velocity (MOVING_LID): the walls' own steps and the
-tree sum of the particles' forces on them, on top of the same scene. `fluids` "navier-stokes"
+exact sum of the particles' forces on them, on top of the same scene. `fluids` "navier-stokes"
 adds loose rows in water, periodic across (without the side walls), on a Navier-Stokes grid of
 cells about four diameters wide solved on the host every COUPLING_STEPS steps (NAVIER_STOKES):
 the drag and its kick every step, the porosity and the momentum exchange on the device and the

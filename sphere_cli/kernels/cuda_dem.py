@@ -516,9 +516,7 @@ def push_sums(pforce, rows, record, sums):
                 if not math.isfinite(value):
                     cuda.atomic.add(sums, (w, b, BINS), 1)
                     continue
-                k, low, middle, high = exact_parts(value)
-                if value < 0.0:
-                    low, middle, high = -low, -middle, -high
+                k, low, middle, high = exact_parts(value)  # as kernels/exact_sum.py add_exact adds them
                 cuda.atomic.add(sums, (w, b, k), low)
                 cuda.atomic.add(sums, (w, b, k + 1), middle)
                 cuda.atomic.add(sums, (w, b, k + 2), high)

@@ -1,6 +1,6 @@
 """Sums of doubles that are exact, so the same in any order: a fixed-point accumulator.
 
-A finite double is m 2^q with |m| < 2^53 and -1074 <= q <= 971: bits 0 to 2098 of an integer
+A finite double is m 2^q with |m| < 2^53 and -1074 <= q <= 971: bits 0 to 2097 of an integer
 counted from 2^-1074. The accumulator keeps that integer in BINS signed 64-bit words of 32 bits
 each (word k weighs 2^(32 k - 1074)); a value is added as three parts of at most 33 bits to three
 words, without rounding. Integer addition is associative, so a sum taken by one thread in index
@@ -21,7 +21,7 @@ from numba import njit
 BIN_BITS = 32
 LOW_BITS = np.int64((1 << BIN_BITS) - 1)
 LOWEST = 1074  # 2^-1074, the smallest subnormal, is bit 0
-# the top value's bits end at 2045 + 53; its carries from 2^30 values at 2128: 67 words, one more
+# the largest value's bits end at 2097; carries from 2^30 values, at 2127: 67 words, one more
 # for the sign
 BINS = 68
 WORDS = BINS + 1  # the last counts the values that were not finite
@@ -31,8 +31,8 @@ TWO_32 = 4294967296.0
 
 @njit(cache=True, inline="always")
 def exact_parts(value):
-    """(k, a, b, c): |value| (finite, not zero) is a 2^(32 k - 1074) + b 2^(32 (k + 1) - 1074)
-    + c 2^(32 (k + 2) - 1074), with 0 <= a < 2^32, 0 <= b < 2^33, 0 <= c < 2^21."""
+    """(k, a, b, c): value (finite, not zero) is a 2^(32 k - 1074) + b 2^(32 (k + 1) - 1074)
+    + c 2^(32 (k + 2) - 1074), with |a| < 2^32, |b| < 2^33, |c| < 2^21 of value's sign."""
     fraction, exponent = math.frexp(abs(value))  # |value| = fraction 2^exponent, 1/2 <= fraction < 1
     m = np.int64(fraction * TWO_53)  # exact: the 53 bits of the significand
     q = exponent - 53
@@ -44,7 +44,10 @@ def exact_parts(value):
     shift = bit & 31
     low = (m & LOW_BITS) << shift  # < 2^63
     high = (m >> BIN_BITS) << shift  # < 2^52
-    return k, low & LOW_BITS, (low >> BIN_BITS) + (high & LOW_BITS), high >> BIN_BITS
+    a, b, c = low & LOW_BITS, (low >> BIN_BITS) + (high & LOW_BITS), high >> BIN_BITS
+    if value < 0.0:
+        return k, -a, -b, -c
+    return k, a, b, c
 
 
 @njit(cache=True, inline="always")
@@ -56,14 +59,9 @@ def add_exact(words, value):
         words[BINS] += 1
         return
     k, a, b, c = exact_parts(value)
-    if value < 0.0:
-        words[k] -= a
-        words[k + 1] -= b
-        words[k + 2] -= c
-    else:
-        words[k] += a
-        words[k + 1] += b
-        words[k + 2] += c
+    words[k] += a
+    words[k + 1] += b
+    words[k + 2] += c
 
 
 @njit(cache=True, inline="always")

@@ -246,7 +246,7 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
     four, a stage from the start moves the lid down at 0.4 m/s (past the reach of the near-wall
     list: it is made again) and the x+ wall keeps 100 +- 50 Pa at 300 Hz on the bed (its target
     follows the step's time): the particles' pushes on it,
-    gathered from every rank in the compiled rank loop (kernels/rank_messages.py
+    summed over every rank in the compiled rank loop (kernels/rank_messages.py
     rank_wall_totals), and the walls' motion are one rank's too."""
     square = SETTLING
     for old, new in (
@@ -280,7 +280,7 @@ def test_a_bed_settling_between_walls_is_one_ranks_on_three_and_four(tmp_path):
 def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_two(tmp_path):
     """configs/direct-shear.toml, its stages shortened: deposit (frictionless, a kinetic-energy
     stop), consolidate (the top wall approaches, then keeps 1 kPa) and shear (the rough top wall
-    moves sideways): the moving walls' forces are summed over the ranks in one rank's order, and
+    moves sideways): the moving walls' forces are summed exactly over the ranks, and
     the walls, the glued spheres and the friction set by each stage reach every rank. With the
     energy budget: each rank books its own particles' shares (their rows as one rank has them),
     which travel with them, so its observables and checkpoints are one rank's too."""
