@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numba
 
+from . import compile_lock
+
 # OpenMP first: measured faster than TBB and workqueue at 2 threads (docs/performance.md).
 # An explicit NUMBA_THREADING_LAYER in the environment still wins.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
@@ -37,3 +39,5 @@ def _use_kernel_cache_dir() -> None:
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     _use_kernel_cache_dir()
+
+compile_lock.install()  # processes starting together compile each kernel once (compile_lock.py)
