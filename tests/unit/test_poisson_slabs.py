@@ -3,11 +3,11 @@ run with the real launcher: the mpich wheel's `mpiexec` (test extra).
 
 On 2, 3 and 4 ranks (sub-communicators of one 4-rank launch) every rank must return one rank's
 solution, iteration count and residual, bit for bit: the slabs change who computes a column,
-never what is computed nor the order of any sum. The systems cover what the slabs meet: the
-multigrid levels split down to the coarsest, split only in part, or not at all (an odd plane
-count), the diagonal preconditioner, the singular all-no-flux system (its means), periodic x
-(the halo wraps around), a right-hand side far from unit size (rescaled), a non-zero first
-guess, and more ranks than planes.
+never what is computed, and the sums are exact (kernels/exact_sum.py), so in any order. The
+systems cover what the slabs meet: the multigrid levels split down to the coarsest, split only
+in part, or not at all (an odd plane count), the diagonal preconditioner, the singular
+all-no-flux system (its means), periodic x (the halo wraps around), a right-hand side far from
+unit size (rescaled), a non-zero first guess, and more ranks than planes.
 """
 
 from __future__ import annotations

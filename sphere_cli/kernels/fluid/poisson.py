@@ -24,11 +24,13 @@ Arguments (grid nx, ny, nz):
   rank, whose neighbours' planes physics/fluid/poisson.py brings in (0, nx on one rank).
 
 Deterministic: every prange writes only its own cells and its own column's partial sum; the
-partial sums are added in column order by `ordered_sum`, so results do not depend on the
-number of threads.
+partial sums are added exactly (`column_words`, kernels/exact_sum.py), so results depend
+neither on the number of threads nor on how the columns are shared among MPI ranks.
 """
 
 from numba import njit, prange
+
+from ..exact_sum import WORDS, add_exact, exact_value
 
 
 @njit(cache=True, inline="always")
@@ -169,12 +171,19 @@ def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial, 
 
 
 @njit(cache=True)
-def ordered_sum(partial):
-    """Sum of the column partial sums in column order (thread-count independent)."""
-    s = 0.0
-    for col in range(partial.shape[0]):
-        s += partial[col]
-    return s
+def column_words(partial, first, last, words):
+    """words (WORDS,) int64: the exact sum (kernels/exact_sum.py) of the column partial sums
+    partial[first:last]."""
+    for k in range(WORDS):
+        words[k] = 0
+    for col in range(first, last):
+        add_exact(words, partial[col])
+
+
+@njit(cache=True)
+def words_value(words):
+    """The sum the words hold, rounded once (normalises them in place)."""
+    return exact_value(words)
 
 
 @njit(cache=True, parallel=True)

@@ -24,10 +24,11 @@ The solver object holds all its scratch arrays: a solve allocates nothing.
 Across MPI ranks (`PoissonSolver.split`, a fluid stepped on every rank of a split run) the
 conjugate gradient and the multigrid levels whose planes allow it work on slabs of x planes, one
 per rank (`Slabs`): each rank updates its own columns, brings in the planes beside its slab
-before a stencil reads them, and every sum gathers the column partial sums of all ranks before
-adding them in column order, so the iterates, the iteration count and the solution are one
-rank's, bit for bit. The right-hand side, the coefficients and the coarse levels the slabs do not
-fit are computed whole on every rank; the solution is gathered whole on every rank at the end.
+before a stencil reads them, and every sum adds the column partial sums exactly (each rank its
+own columns, then one Allreduce of the sum's integer words: kernels/exact_sum.py), so the
+iterates, the iteration count and the solution are one rank's, bit for bit. The right-hand
+side, the coefficients and the coarse levels the slabs do not fit are computed whole on every
+rank; the solution is gathered whole on every rank at the end.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...kernels.exact_sum import WORDS
 from ...kernels.fluid.poisson import (
     apply_operator,
     cg_step,
@@ -44,17 +46,18 @@ from ...kernels.fluid.poisson import (
     column_dots,
     column_squares,
     column_sums,
+    column_words,
     jacobi_smooth,
     jacobi_smooth_pairs,
     jacobi_sweep,
     new_direction,
-    ordered_sum,
     precondition,
     prepare_system,
     prolong_add,
     residual,
     restrict,
     shift,
+    words_value,
 )
 from .grid import FluidGrid
 
@@ -99,7 +102,7 @@ class Slabs:
         rank = 0 if comm is None else comm.Get_rank()
         self.lo, self.hi = int(bounds[rank]), int(bounds[rank + 1])
         self.bounds = bounds
-        self.columns = (np.diff(bounds) * ny, bounds[:-1] * ny)
+        self.words = np.zeros(WORDS, dtype=np.int64)  # scratch of the exact sums
         # (plane to receive, its owner, tag) and (plane to send, to whom, tag) beside the slab;
         # tag 0: a slab's first plane, which is its left neighbour's right halo, 1: its last
         self.receive, self.send = [], []
@@ -144,10 +147,20 @@ class Slabs:
         self.mpi.Request.Waitall(held[1])
 
     def sum(self, partial: np.ndarray) -> float:
-        """The sum of every rank's column partial sums, in column order (ordered_sum)."""
+        """The sum of every rank's column partial sums: each rank's columns summed exactly
+        (kernels/exact_sum.py) and the words added over the ranks (an Allreduce of 69 int64),
+        so the same double on any number of ranks."""
+        ny = self.shape[1]
+        column_words(partial, self.lo * ny, self.hi * ny, self.words)
         if self.comm is not None:
-            self.comm.Allgatherv(self.mpi.IN_PLACE, [partial, *self.columns, self.mpi.DOUBLE])
-        return ordered_sum(partial)
+            self.comm.Allreduce(self.mpi.IN_PLACE, [self.words, self.mpi.INT64_T], op=self.mpi.SUM)
+        return words_value(self.words)
+
+    def whole_sum(self, partial: np.ndarray) -> float:
+        """The sum of every column partial sum of this rank's partial (a field kept whole on
+        every rank), as `sum` makes it."""
+        column_words(partial, 0, partial.shape[0], self.words)
+        return words_value(self.words)
 
     def total(self, count: int) -> int:
         """The sum of every rank's count."""
@@ -423,10 +436,10 @@ class PoissonSolver:
         nx = self.grid.shape[0]
         if singular:  # the right-hand side stays whole on every rank
             column_sums(self.rhs, self.part_c, 0, nx)
-            mean_removed = ordered_sum(self.part_c) / self.rhs.size
+            mean_removed = self.slabs.whole_sum(self.part_c) / self.rhs.size
             shift(self.rhs, mean_removed, 0, nx)
             column_squares(self.rhs, self.part_a, 0, nx)
-        rhs_norm = math.sqrt(ordered_sum(self.part_a))
+        rhs_norm = math.sqrt(self.slabs.whole_sum(self.part_a))
         if rhs_norm == 0.0 and not self.rhs.any():
             x[:] = 0.0
             return PoissonResult(0, 0.0, True, mean_removed)
@@ -439,7 +452,7 @@ class PoissonSolver:
             np.ldexp(self.rhs, -exponent, out=self.rhs)
             np.ldexp(x, -exponent, out=x)
             column_squares(self.rhs, self.part_a, 0, nx)
-            rhs_norm = math.sqrt(ordered_sum(self.part_a))
+            rhs_norm = math.sqrt(self.slabs.whole_sum(self.part_a))
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
             iterations, res = self._pcg(x, c, ax, ay, az, singular, scale)
@@ -567,7 +580,7 @@ class PoissonSolver:
                 self.rhs, src, self.diag, self.inv_diag, ax, ay, az,
                 self.periodic_x, self.periodic_y, self.ih2, dst, self.part_a,
             )  # fmt: skip
-            res = math.sqrt(ordered_sum(self.part_a)) * scale  # of src
+            res = math.sqrt(self.slabs.whole_sum(self.part_a)) * scale  # of src
             if res <= self.tolerance or iterations >= self.max_iterations:
                 break
             iterations += 1
