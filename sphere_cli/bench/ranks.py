@@ -2,8 +2,9 @@
 1, 2, ... MPI ranks (physics/rank_steps.py), one thread each, side by side: the rank counts
 alternate round by round (this machine's speed drifts by tens of per cent between minutes), and
 each round's speed-up over one rank is reported with its spread. With `walls` "moving" the
-bed's lid keeps a stress and slides (bench/dem.py MOVING_LID, put down onto the bed): the walls'
-steps and the particles' pushes on the lid summed over the ranks, each step.
+bed's lid keeps a stress and slides (bench/dem.py MOVING_LID, put down onto the bed) and its x+
+and y+ walls keep PRESSED_SIDES: the walls' steps and the particles' pushes on them summed over
+the ranks, each step.
 
 A timing is one call of advance as the run loop makes it between two outputs (the ranks'
 steps), after one such call untimed; the gather of the state at the lead that an output then
