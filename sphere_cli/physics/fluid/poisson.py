@@ -107,7 +107,13 @@ class Slabs:
         # tag 0: a slab's first plane, which is its left neighbour's right halo, 1: its last
         self.receive, self.send = [], []
         self.persistent = {}  # id(field) -> (field, its persistent requests): `halo`
-        if comm is None or self.lo == self.hi:
+        self.counts = {}  # plane size -> (counts, displacements) of `gather`
+        if comm is None:
+            return
+        from mpi4py import MPI
+
+        self.mpi = MPI  # looked up once: the solver's messages number thousands a solve
+        if self.lo == self.hi:
             return
 
         def owner(plane):
@@ -171,14 +177,10 @@ class Slabs:
         every rank."""
         if self.comm is not None:
             plane = field[0].size
-            counts = (np.diff(self.bounds) * plane, self.bounds[:-1] * plane)
+            counts = self.counts.get(plane)
+            if counts is None:
+                counts = self.counts[plane] = (np.diff(self.bounds) * plane, self.bounds[:-1] * plane)
             self.comm.Allgatherv(self.mpi.IN_PLACE, [field, *counts, self.mpi.DOUBLE])
-
-    @property
-    def mpi(self):
-        from mpi4py import MPI
-
-        return MPI
 
 
 class _Level:
