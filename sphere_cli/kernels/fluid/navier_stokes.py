@@ -92,8 +92,10 @@ import numpy as np
 from numba import njit, prange
 
 
-# Not inline="always": Numba's IR inlining of this index wrap at some hundred call sites was
-# most of the module's compile time; LLVM still inlines it, the run time is unchanged.
+# Not inline="always" (nor _shift, _far, _limited_face_value): Numba's IR inlining of these
+# scalar helpers at some hundred call sites was much of the module's compile time, and LLVM
+# inlines them still, the run time unchanged. The helpers that take arrays stay inlined by Numba:
+# without that the fluid step ran twice as long (docs/performance.md).
 @njit(cache=True)
 def _wrap(i, n):
     if i < 0:
@@ -103,7 +105,7 @@ def _wrap(i, n):
     return i
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _shift(i, j, k, a, s):
     """The index s (= +1 or -1) steps from (i,j,k) along axis a (not wrapped)."""
     if a == 0:
@@ -113,7 +115,7 @@ def _shift(i, j, k, a, s):
     return i, j, k + s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _far(i, j, k, a, s, nx, ny):
     """The index two steps s (= +1 or -1) from (i,j,k) along axis a, wrapped in x and y so that
     the single wrap of the readers suffices even on a grid one cell wide."""
@@ -304,7 +306,7 @@ def _viscous(normal, shear, i, j, k, c, spacing):
     return total
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _limited_face_value(upwind_upwind, upwind, downwind):
     """v_U + 0.5 L(v_U - v_UU, v_D - v_U) with van Leer's limited slope L(a, b) = 2ab/(a + b),
     0 unless a and b have the same sign."""
