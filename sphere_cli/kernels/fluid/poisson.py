@@ -30,7 +30,7 @@ neither on the number of threads nor on how the columns are shared among MPI ran
 
 from numba import njit, prange
 
-from ..exact_sum import WORDS, add_exact, exact_value
+from ..exact_sum import WORDS, add_exact
 
 
 @njit(cache=True, inline="always")
@@ -178,12 +178,6 @@ def column_words(partial, first, last, words):
         words[k] = 0
     for col in range(first, last):
         add_exact(words, partial[col])
-
-
-@njit(cache=True)
-def words_value(words):
-    """The sum the words hold, rounded once (normalises them in place)."""
-    return exact_value(words)
 
 
 @njit(cache=True, parallel=True)

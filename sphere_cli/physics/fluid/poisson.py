@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...kernels.exact_sum import WORDS
+from ...kernels.exact_sum import WORDS, exact_value
 from ...kernels.fluid.poisson import (
     apply_operator,
     cg_step,
@@ -57,7 +57,6 @@ from ...kernels.fluid.poisson import (
     residual,
     restrict,
     shift,
-    words_value,
 )
 from .grid import FluidGrid
 
@@ -160,13 +159,13 @@ class Slabs:
         column_words(partial, self.lo * ny, self.hi * ny, self.words)
         if self.comm is not None:
             self.comm.Allreduce(self.mpi.IN_PLACE, [self.words, self.mpi.INT64_T], op=self.mpi.SUM)
-        return words_value(self.words)
+        return exact_value(self.words)
 
     def whole_sum(self, partial: np.ndarray) -> float:
         """The sum of every column partial sum of this rank's partial (a field kept whole on
         every rank), as `sum` makes it."""
         column_words(partial, 0, partial.shape[0], self.words)
-        return words_value(self.words)
+        return exact_value(self.words)
 
     def total(self, count: int) -> int:
         """The sum of every rank's count."""
