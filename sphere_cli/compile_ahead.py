@@ -60,7 +60,7 @@ def helper_jobs(scene) -> list[tuple]:
     from .physics.motion import Motion
 
     state = scene.state
-    serial = use_serial(state.particles.count)
+    serial = use_serial()
     jobs = [
         (build_lists, scene.neighbors.list_arguments(state)),
         (kick_drift_serial if serial else kick_drift, Motion.drift_arguments(state)),

@@ -58,6 +58,7 @@ from .laws import (
 )
 from .layout import U1, U2, U3, flat
 from .neighbors import minimum_image
+from .serial import serial_twin
 
 # Rows of a block (module docstring). 64 contacts: the block's 43 rows (22 KB) stay in L1.
 BLOCK = 64
@@ -672,3 +673,8 @@ def chunk_pair_forces(
             buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
             radius, nbr_count, start, hist, cap, slots, force, torque,
         )  # fmt: skip
+
+
+# one thread: the sweep without a parallel region (kernels/serial.py); its arrays are the
+# particles', the list's and this kernel's scratch (physics/contact.py), none a view of another
+chunk_pair_forces_serial = serial_twin(chunk_pair_forces, distinct=True)

@@ -122,6 +122,7 @@ def first_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt):
     return -1, 0
 
 
-# one thread: the same kernels without parallel regions (kernels/serial.py)
-kick_drift_serial = serial_twin(kick_drift)
-kick_serial = serial_twin(kick)
+# one thread: the same kernels without parallel regions (kernels/serial.py); their array
+# arguments are the particles' own arrays, never views of one another
+kick_drift_serial = serial_twin(kick_drift, distinct=True)
+kick_serial = serial_twin(kick, distinct=True)

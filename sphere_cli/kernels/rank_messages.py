@@ -160,7 +160,7 @@ def rank_dem_steps(steps, step, threshold2, drift, cross, pairs, walls, kicks, m
     return steps, largest[0], False, busy, 0
 
 
-# one thread and a small part: the loop without parallel regions (kernels/serial.py)
+# one thread: the loop without parallel regions (kernels/serial.py)
 rank_dem_steps_serial = serial_twin(
     rank_dem_steps, kick_drift=kick_drift_serial, kick=kick_serial, contacts=contacts_serial
 )

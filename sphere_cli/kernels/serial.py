@@ -1,13 +1,24 @@
 """Serial twins: a parallel kernel compiled a second time without threads (prange as range),
-for small scenes on one thread.
+which one thread runs instead of the kernel.
 
 On one thread a parallel region gains nothing and still costs: about 1 us to start each, and
 the per-thread buffers of a reduction, together most of a small scene's step (docs/performance.md,
-"Fixed cost per step"). But compiled serially, a kernel's loops vectorise less (only a parallel
-region's outlined body tells the compiler that its arrays do not alias): the kick-drift ran
-2.3 x slower per particle and the pair sweep 3 x, so the pair sweep keeps its parallel kernel
-and the twins run only below SERIAL_BELOW particles, where the regions cost more than the
-slower loops (measured: 10 spheres 8.1 -> 4.4 us a step, 100: 10.1 -> 8.3, 300: 14.4 -> 15.5).
+"Fixed cost per step"). Compiled as a plain function, though, a loop lacks two things that
+Numba gives a parallel region's outlined body, and without them it ran 1.5-3 x slower per
+particle: freedom from reference counting (the array views and calls inside the pair sweep's
+loops counted references with atomic instructions: 36 % of its time), and the promise that its
+arrays do not overlap (without it the compiler keeps a loop scalar, or re-checks the overlap at
+run time). Every twin is compiled without the reference-counting runtime (so a twin must not
+allocate: Numba refuses to compile one that does). A twin marked `distinct` is also compiled
+with every pointer argument declared not to overlap another (Numba's noalias flag, which Numba
+sets itself for a parallel body whose arrays it finds unaliased). So made, the twins run as
+fast per particle as the parallel kernels on one thread, or faster (docs/performance.md), and
+one thread runs them at every scene size.
+
+`distinct` is a promise the caller keeps: no array argument shares memory with another argument
+that the kernel writes (empty arrays excepted: nothing is read or written through them). The
+step loops, which pass the same arrays to several kernels, are twins without it; a kernel they
+call keeps its own declaration, valid inside it.
 
 A twin runs the same operations in the same order as the parallel kernel does on one chunk or
 many (the kernels are written so that their results do not depend on the thread count: design
@@ -19,9 +30,19 @@ not by compile options, so a twin of the same name would overwrite the parallel 
 import types
 
 import numba
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 
-def serial_twin(kernel, **callees):
+class _DistinctArrays(CompilerBase):
+    """Numba's nopython pipeline with the noalias flag set: every pointer argument of the
+    compiled function (the arrays' data among them) is declared not to overlap another."""
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+
+def serial_twin(kernel, distinct: bool = False, **callees):
     func = kernel.py_func
     scope = dict(func.__globals__)
     scope.update(callees)
@@ -32,14 +53,13 @@ def serial_twin(kernel, **callees):
     options = {**kernel.targetoptions, "parallel": False}
     if kernel.targetoptions.get("parallel"):
         options["error_model"] = "numpy"  # as Numba compiles a parallel loop's body
+    options["_nrt"] = False
+    if distinct:
+        options["pipeline_class"] = _DistinctArrays
     # cached like every kernel here (caching is not among a dispatcher's target options)
     return numba.jit(**options, cache=True)(twin)
 
 
-SERIAL_BELOW = 200  # particles
-
-
-def use_serial(particles: int) -> bool:
-    """True when the serial twins run: one thread, and a scene of fewer than SERIAL_BELOW
-    particles."""
-    return particles < SERIAL_BELOW and numba.get_num_threads() == 1
+def use_serial() -> bool:
+    """True when the serial twins run: on one thread."""
+    return numba.get_num_threads() == 1

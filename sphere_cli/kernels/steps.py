@@ -22,7 +22,7 @@ Numba's cache by an object that differs in every process, so it would compile on
 
 from numba import njit
 
-from .contact import chunk_pair_forces, cross_chunk_pairs
+from .contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .serial import serial_twin
 from .walls import listed_wall_totals, wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift
@@ -68,10 +68,11 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion):
     return steps, moved2, False
 
 
-# one thread: the same loop without parallel regions (kernels/serial.py), but for the pair
-# sweep: compiled serially its law's block loop is not vectorised (only the parallel region's
-# outlined body tells the compiler its arrays do not alias) and it ran 3 x slower
-contacts_serial = serial_twin(contacts, wall_forces=wall_forces_serial)
+# one thread: the same loop without parallel regions (kernels/serial.py); one chunk, so no
+# pairs across chunks
+contacts_serial = serial_twin(
+    contacts, chunk_pair_forces=chunk_pair_forces_serial, wall_forces=wall_forces_serial
+)
 dem_steps_serial = serial_twin(
     dem_steps, kick_drift=kick_drift_serial, kick=kick_serial, contacts=contacts_serial
 )

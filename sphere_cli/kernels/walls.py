@@ -492,5 +492,6 @@ def wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, t
             acc[w, t] = (drive - control[w, C_DAMPING] * vel[w, t]) / mass
 
 
-# one thread: the same kernel without parallel regions (kernels/serial.py)
-wall_forces_serial = serial_twin(wall_forces)
+# one thread: the same kernel without parallel regions (kernels/serial.py); every array argument
+# is an array of its own (physics/walls.py PlaneWallForces._arguments)
+wall_forces_serial = serial_twin(wall_forces, distinct=True)

@@ -155,7 +155,7 @@ class CompiledSteps:
         caller finishes that step with the hooks, from `prepare` on)."""
         drift, cross, pairs, walls, kicks = step_arguments(state, self.contact, self.walls)
         threshold2 = self.search.threshold2
-        serial = use_serial(state.particles.count)  # without parallel regions (kernels/serial.py)
+        serial = use_serial()  # without parallel regions (kernels/serial.py)
         if self.extra is None:
             motion = None
             if self.moving:

@@ -28,9 +28,10 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import BLOCK, FIELDS, chunk_pair_forces, cross_chunk_pairs
+from ..kernels.contact import BLOCK, FIELDS, chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
 from ..kernels.laws import K_T
 from ..kernels.observe.energy import pair_elastic_energy
+from ..kernels.serial import use_serial
 from ..state import State
 from .laws import ContactLaw
 from .materials import ContactTables
@@ -112,7 +113,7 @@ class PairContactForces(Module):
         cross, pairs = self.kernel_arguments(state, spring_dt)
         if cross is not None:
             cross_chunk_pairs(*cross)
-        chunk_pair_forces(*pairs)
+        (chunk_pair_forces_serial if use_serial() else chunk_pair_forces)(*pairs)
 
     def kernel_arguments(self, state: State, spring_dt: float | None = None) -> tuple:
         """The arguments of cross_chunk_pairs (None with one chunk: nothing crosses) and of

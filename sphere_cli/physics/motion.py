@@ -14,11 +14,11 @@ class Motion(Module):
     def kick_drift(self, state: State) -> None:
         """The drift also measures how far the particles have moved since the neighbour list
         was built (NeighborSearch.prepare, next in the step, reads it)."""
-        kernel = kick_drift_serial if use_serial(state.particles.count) else kick_drift
+        kernel = kick_drift_serial if use_serial() else kick_drift
         state.neighbors.moved2 = kernel(*self.drift_arguments(state))
 
     def kick(self, state: State) -> None:
-        (kick_serial if use_serial(state.particles.count) else kick)(*self.kick_arguments(state))
+        (kick_serial if use_serial() else kick)(*self.kick_arguments(state))
 
     @staticmethod
     def drift_arguments(state: State) -> tuple:

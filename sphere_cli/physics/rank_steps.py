@@ -574,7 +574,7 @@ class RankSteps:
         state = part.state
         if not state.particles.count:
             return StepCalls(None, None, None, None)
-        serial = use_serial(state.particles.count)
+        serial = use_serial()
         drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, part.walls)
         loop = None
         if self.calls is None:

@@ -270,7 +270,7 @@ class PlaneWallForces(Module):
         return np.concatenate(([0], cuts, [near.size])).astype(np.int64)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
-        kernel = wall_forces_serial if use_serial(state.particles.count) else wall_forces
+        kernel = wall_forces_serial if use_serial() else wall_forces
         kernel(*self.kernel_arguments(state, spring_dt))
 
     def kernel_arguments(self, state: State, spring_dt: float | None = None) -> tuple:

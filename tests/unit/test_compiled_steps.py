@@ -15,14 +15,15 @@ from sphere_cli import api
 from sphere_cli.bench.dem import canonical_case
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
+from sphere_cli.kernels import contact as kernels_contact
 from sphere_cli.kernels import motion as kernels_motion
-from sphere_cli.kernels import serial
 from sphere_cli.kernels import steps as kernels_steps
 from sphere_cli.kernels import walls as kernels_walls
 from sphere_cli.kernels.exact_sum import WORDS
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
+from sphere_cli.physics import contact as contact_module
 from sphere_cli.physics import motion as motion_module
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
@@ -226,26 +227,27 @@ def test_run_frames_and_checkpoints_fall_on_their_steps(tmp_path):
 
 @pytest.mark.parametrize("name", ["hertz-mixture", "canonical", "periodic", "bedload"])
 def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_parallel_kernels(name, monkeypatch):
-    """kernels/serial.py: on one thread, below SERIAL_BELOW particles (raised here to cover these
-    scenes of 400-1000), the hooks and the compiled loops run the kernels' serial twins; on two
-    threads the parallel kernels. The runs are bitwise the same."""
-    monkeypatch.setattr(serial, "SERIAL_BELOW", 10**6)
+    """kernels/serial.py: on one thread the hooks and the compiled loops run the kernels' serial
+    twins (compiled without reference counting, the leaf kernels with their arrays declared
+    distinct); on two threads the parallel kernels. The runs are bitwise the same."""
     loop = vans1d_steps_serial if name == "bedload" else dem_steps_serial
     runs = {}
     try:
         for threads in (2, 1):
             numba.set_num_threads(threads)
             calls = []
-            twin = kernels_motion.kick_serial
-            monkeypatch.setattr(
-                motion_module, "kick_serial", lambda *a, c=calls, k=twin: c.append(1) or k(*a)
-            )
+            for module, twin in (
+                (motion_module, "kick_serial"),
+                (contact_module, "chunk_pair_forces_serial"),
+            ):
+                kernel = getattr(module, twin)
+                monkeypatch.setattr(module, twin, lambda *a, c=calls, k=kernel, n=twin: c.append(n) or k(*a))
             scene = build_scene(_case(name))
             advance(scene, STEPS)
             assert scene.state.neighbors.builds >= 2
             runs[threads] = _state(scene)
-            # the list builds end their steps through the hooks: the twin's kick there on one thread
-            assert bool(calls) == (threads == 1)
+            # the list builds end their steps through the hooks: the twins there on one thread
+            assert set(calls) == ({"kick_serial", "chunk_pair_forces_serial"} if threads == 1 else set())
             if threads == 1:
                 assert loop.overloads  # the compiled loop's twin, called from Python (compiled or loaded)
     finally:
@@ -254,20 +256,75 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
         assert np.array_equal(runs[1][key], runs[2][key]), key
 
 
-def test_the_serial_twins_run_only_for_small_scenes_on_one_thread(monkeypatch):
+def test_the_serial_twins_run_on_one_thread_at_every_size(monkeypatch):
     calls = []
     monkeypatch.setattr(motion_module, "kick_serial", lambda *args: calls.append("serial"))
     monkeypatch.setattr(motion_module, "kick", lambda *args: calls.append("parallel"))
-    scene = build_scene(parse_case(canonical_case(serial.SERIAL_BELOW - 1)))
-    big = build_scene(parse_case(canonical_case(serial.SERIAL_BELOW)))
+    scenes = [build_scene(parse_case(canonical_case(n))) for n in (8, 1000)]
     try:
         for threads in (1, 2):
             numba.set_num_threads(threads)
-            for each in (scene, big):
+            for each in scenes:
                 next(m for m in each.modules if m.name == "particles").kick(each.state)
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    assert calls == ["serial", "parallel", "parallel", "parallel"]
+    assert calls == ["serial", "serial", "parallel", "parallel"]
+
+
+def _written_elsewhere(arguments: tuple, written: set[int]) -> list[tuple[int, int]]:
+    """Pairs (k, m) of non-empty array arguments that share memory, one of them written."""
+    arrays = [(k, a) for k, a in enumerate(arguments) if isinstance(a, np.ndarray) and a.size]
+    return [
+        (k, m)
+        for n, (k, a) in enumerate(arrays)
+        for m, b in arrays[n + 1 :]
+        if (k in written or m in written) and np.shares_memory(a, b)
+    ]
+
+
+@pytest.mark.parametrize("name", ["hertz-mixture", "canonical", "periodic", "bedload", "direct-shear"])
+def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
+    """kernels/serial.py: a twin marked `distinct` is compiled with its array arguments declared
+    not to overlap; where an argument it writes shared memory with another, the compiler could
+    reorder their reads and writes. The argument tuples the scenes give them share none."""
+    from sphere_cli.kernels.contact import chunk_pair_forces
+    from sphere_cli.kernels.fluid.profile_forces import profile_forces
+    from sphere_cli.kernels.motion import kick, kick_drift
+    from sphere_cli.kernels.walls import wall_forces
+    from sphere_cli.physics.compiled_steps import step_arguments
+    from sphere_cli.physics.contact import PairContactForces
+    from sphere_cli.physics.walls import PlaneWallForces
+
+    def written(kernel, names):
+        params = list(kernel.py_func.__code__.co_varnames[: kernel.py_func.__code__.co_argcount])
+        return {params.index(n) for n in names}
+
+    scene = build_scene(load_case(CONFIGS / "direct-shear.toml") if name == "direct-shear" else _case(name))
+    advance(scene, 200)
+    contact = next(m for m in scene.modules if isinstance(m, PairContactForces))
+    walls = next((m for m in scene.modules if isinstance(m, PlaneWallForces)), None)
+    drift, _, pairs, wall, kicks = step_arguments(scene.state, contact, walls)
+    checked = [
+        (drift, written(kick_drift, ("pos", "vel", "angvel", "vel_pred", "angvel_pred"))),
+        (kicks, written(kick, ("vel", "angvel"))),
+        (
+            pairs,
+            written(
+                chunk_pair_forces, ("hist", "slots", "blocks", "block_ids", "block_rows", "force", "torque")
+            ),
+        ),
+    ]
+    if wall is not None:
+        names = ("wall_hist", "force", "torque", "pforce", "springs", "blocks", "block_ids")
+        checked.append((wall, written(wall_forces, names)))
+    if name == "bedload":
+        fluid = next(m for m in scene.modules if hasattr(m, "force_arguments"))
+        checked.append(
+            (fluid.force_arguments(scene.state), written(profile_forces, ("force", "drag_coef", "drag_x")))
+        )
+    for arguments, writes in checked:
+        assert writes
+        assert _written_elsewhere(arguments, writes) == []
 
 
 def test_the_serial_twins_are_cached_apart_from_their_kernels():
@@ -277,6 +334,7 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
         kernels_motion: ("kick_drift", "kick"),
         kernels_walls: ("wall_forces",),
         kernels_steps: ("contacts", "dem_steps"),
+        kernels_contact: ("chunk_pair_forces",),
         kernels_profile: ("profile_forces", "vans1d_steps"),
     }
     for module, names in twins.items():

@@ -231,7 +231,7 @@ def vans1d_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks):
 
 
 # one thread: the same kernels without parallel regions (kernels/serial.py)
-profile_forces_serial = serial_twin(profile_forces)
+profile_forces_serial = serial_twin(profile_forces, distinct=True)  # arrays of their own
 vans1d_steps_serial = serial_twin(
     vans1d_steps,
     kick_drift=kick_drift_serial,

@@ -346,7 +346,7 @@ class Vans1d(FluidModule):
         return GpuSteps(forces, written=drag, checked=drag)
 
     def forces(self, state, spring_dt=None) -> None:
-        kernel = profile_forces_serial if use_serial(state.particles.count) else profile_forces
+        kernel = profile_forces_serial if use_serial() else profile_forces
         kernel(*self.force_arguments(state))
 
     def force_arguments(self, state) -> tuple:
