@@ -350,7 +350,8 @@ def run_in_memory(text: str, steps: int, base_dir: Path | None = None):
     from .simulation import advance
 
     loaded = parse_case(text, None if base_dir is None else base_dir / "case.toml")
-    set_threads(loaded.case)
+    if loaded.case.simulation.threads is not None:
+        set_threads(loaded.case)
     scene = build_scene(loaded)
     advance(scene, steps)
     return scene

@@ -151,21 +151,36 @@ def refuse_many_ranks(joined: bool) -> None:
             )
 
 
+# Without `simulation.threads`, a scene whose work is its particles gets a thread for each
+# PARTICLES_PER_THREAD of them. Each parallel region of a step costs about 3 us to start on two
+# threads against none for the serial twins one thread runs (kernels/serial.py), about 18 us a
+# step: two threads overtook one at about 700 particles of a settled bed, 10 000 of a loose one
+# (docs/performance.md, 2026-12-05 evening)
+PARTICLES_PER_THREAD = 500
+
+
 def run_threads(case) -> int:
-    """The run's thread count: `simulation.threads`, or all that NUMBA_NUM_THREADS allows, never
-    more (read from Numba's configuration: asking Numba itself would start its threads)."""
+    """The run's thread count, never more than NUMBA_NUM_THREADS allows (read from Numba's
+    configuration: asking Numba itself would start its threads): `simulation.threads`; else,
+    for particles alone or under the 1D VANS fluid, one per PARTICLES_PER_THREAD particles (at
+    least one); else (a Navier-Stokes or Darcy grid, or particles placed from a file, whose
+    count the case does not say) all of them."""
     import numba
 
     allowed = numba.config.NUMBA_NUM_THREADS
-    return allowed if case.simulation.threads is None else min(case.simulation.threads, allowed)
+    if case.simulation.threads is not None:
+        return min(case.simulation.threads, allowed)
+    count = case.particles.count
+    if count is None or (case.fluid is not None and case.fluid.model != "vans1d"):
+        return allowed
+    return max(1, min(allowed, count // PARTICLES_PER_THREAD))
 
 
 def set_threads(case) -> None:
-    """The Numba threads of `simulation.threads` (run_threads); left as they are without it."""
-    if case.simulation.threads is not None:
-        import numba
+    """The run's Numba threads (run_threads)."""
+    import numba
 
-        numba.set_num_threads(run_threads(case))
+    numba.set_num_threads(run_threads(case))
 
 
 def threads_started() -> bool:

@@ -52,7 +52,13 @@ class Simulation(Strict):
         ),
     )
     threads: Count | None = Field(
-        None, ge=1, description="Numba threads (default: all cores). Results do not depend on it."
+        None,
+        ge=1,
+        description=(
+            "Numba threads (default: one per 500 particles, at least one, for particles alone or "
+            "under the vans1d fluid; all cores with a navier-stokes or darcy grid or particles "
+            "placed from a file; never more than NUMBA_NUM_THREADS). Results do not depend on it."
+        ),
     )
     neighbor_skin: Real = Field(
         0.2,

@@ -98,8 +98,10 @@ def test_a_busy_process_on_every_core_is_seen():
     assert busy is not None and 0.6 * cores <= busy <= 1.02 * cores
 
 
-# a case whose thread count is NUMBA_NUM_THREADS (set_threads leaves the test's threads alone)
-ALL_THREADS = SimpleNamespace(simulation=SimpleNamespace(threads=None))
+# a case whose thread count is NUMBA_NUM_THREADS: particles placed from a file (no count)
+ALL_THREADS = SimpleNamespace(
+    simulation=SimpleNamespace(threads=None), particles=SimpleNamespace(count=None), fluid=None
+)
 
 
 @pytest.fixture
@@ -157,3 +159,58 @@ def test_a_case_run_in_memory_gets_its_threads():
         assert numba.get_num_threads() == 1
     finally:
         numba.set_num_threads(before)
+
+
+@pytest.mark.parametrize(
+    "count, fluid, threads",
+    [
+        (10, None, 1),  # a verification case's handful of spheres
+        (999, None, 1),
+        (1000, None, 2),
+        (2600, None, 5),
+        (100_000, None, 8),  # capped by NUMBA_NUM_THREADS
+        (200, "vans1d", 1),  # the 1D column is no work beside its particles
+        (200, "navier-stokes", 8),  # the grid's kernels are: every thread
+        (200, "darcy", 8),
+    ],
+)
+def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
+    monkeypatch, count, fluid, threads
+):
+    """runtime.run_threads: on two threads a step's parallel regions cost about 18 us more than
+    one thread's serial twins, which a small scene's work does not recover (docs/performance.md)."""
+    import numba
+
+    from sphere_cli.runtime import PARTICLES_PER_THREAD, run_threads
+
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
+    assert PARTICLES_PER_THREAD == 500
+    case = SimpleNamespace(
+        simulation=SimpleNamespace(threads=None),
+        particles=SimpleNamespace(count=count),
+        fluid=None if fluid is None else SimpleNamespace(model=fluid),
+    )
+    assert run_threads(case) == threads
+    case.simulation.threads = 3  # the case's own count wins, capped likewise
+    assert run_threads(case) == 3
+    case.simulation.threads = 12
+    assert run_threads(case) == 8
+
+
+def test_a_run_of_a_few_spheres_takes_one_thread(tmp_path):
+    """`sphere run` without simulation.threads, where two threads are allowed: the run's
+    provenance records the one thread a scene of 8 spheres gets."""
+    import subprocess
+    import sys
+
+    import h5py
+
+    from sphere_cli.bench.dem import canonical_case
+
+    case = tmp_path / "case.toml"
+    case.write_text(canonical_case(8, duration=4e-5))
+    env = {**os.environ, "NUMBA_NUM_THREADS": "2"}
+    cmd = [sys.executable, "-m", "sphere_cli", "run", str(case), "-o", str(tmp_path / "run"), "-q"]
+    subprocess.run(cmd, check=True, env=env, capture_output=True)
+    with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
+        assert f["sphere/provenance"].attrs["threads"] == 1
