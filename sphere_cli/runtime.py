@@ -154,7 +154,7 @@ def refuse_many_ranks(joined: bool) -> None:
 # Without `simulation.threads`, a scene whose work is its particles gets a thread for each
 # PARTICLES_PER_THREAD of them. Each parallel region of a step costs about 3 us to start on two
 # threads against none for the serial twins one thread runs (kernels/serial.py), about 18 us a
-# step: two threads overtook one at about 700 particles of a settled bed, 10 000 of a loose one
+# step: two threads overtook one at about 700 particles of a settled bed, 3 000-10 000 of a loose one
 # (docs/performance.md, 2026-12-05 evening)
 PARTICLES_PER_THREAD = 500
 
