@@ -24,7 +24,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from .errors import SphereError, UsageError
-from .runtime import MPI_SIZE_VARIABLES, usable_cores
+from .runtime import launched_size, usable_cores
 
 # the exit code of a rank that failed on its own (aborts every rank), and of a stop on request
 FAILED = 70
@@ -35,15 +35,6 @@ STOPPED = 75
 WAIT_SPIN = 0.01
 WAIT_SLEEP = 0.0005
 LEAD_GRACE = 600.0
-
-
-def launched_size() -> int:
-    """The rank count the MPI launcher gave this process (1 outside a launcher)."""
-    for name in MPI_SIZE_VARIABLES:
-        value = os.environ.get(name, "")
-        if value.isdigit() and int(value) > 1:
-            return int(value)
-    return 1
 
 
 class World:

@@ -159,6 +159,15 @@ def refuse_many_ranks(joined: bool) -> None:
 PARTICLES_PER_THREAD = 500
 
 
+def launched_size() -> int:
+    """The rank count the MPI launcher gave this process (1 outside a launcher)."""
+    for name in MPI_SIZE_VARIABLES:
+        value = os.environ.get(name, "")
+        if value.isdigit() and int(value) > 1:
+            return int(value)
+    return 1
+
+
 def run_threads(case) -> int:
     """The run's thread count, never more than NUMBA_NUM_THREADS allows (read from Numba's
     configuration: asking Numba itself would start its threads): `simulation.threads`; else,
@@ -177,9 +186,12 @@ def run_threads(case) -> int:
 
 
 def set_threads(case) -> None:
-    """The run's Numba threads (run_threads)."""
+    """The run's Numba threads (run_threads); on MPI ranks without `simulation.threads`, those
+    sphere_cli/ranks.py gave each rank (the node's cores shared between its ranks) instead."""
     import numba
 
+    if case.simulation.threads is None and launched_size() > 1:
+        return
     numba.set_num_threads(run_threads(case))
 
 

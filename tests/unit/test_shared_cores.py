@@ -214,3 +214,24 @@ def test_a_run_of_a_few_spheres_takes_one_thread(tmp_path):
     subprocess.run(cmd, check=True, env=env, capture_output=True)
     with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
         assert f["sphere/provenance"].attrs["threads"] == 1
+
+
+def test_on_mpi_ranks_a_case_without_threads_keeps_each_ranks_share(monkeypatch):
+    """sphere_cli/ranks.py gives each rank the node's cores divided by its ranks; a case without
+    simulation.threads leaves that as it is, one with it sets its own."""
+    import numba
+
+    from sphere_cli.runtime import set_threads
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: one thread either way")
+    monkeypatch.setenv("PMI_SIZE", "2")
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)  # the rank's share
+        set_threads(ALL_THREADS)
+        assert numba.get_num_threads() == 1
+        set_threads(SimpleNamespace(simulation=SimpleNamespace(threads=2)))
+        assert numba.get_num_threads() == 2
+    finally:
+        numba.set_num_threads(before)
