@@ -27,7 +27,14 @@ from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
 from .io.trajectory import TrajectoryLost
-from .runtime import StopFlag, refuse_many_ranks, set_threads, signal_handlers, start_threads
+from .runtime import (
+    StopFlag,
+    refuse_many_ranks,
+    set_threads,
+    signal_handlers,
+    start_threads,
+    threads_restored,
+)
 from .scene.builder import build_scene
 from .simulation import Loop
 
@@ -197,31 +204,32 @@ def run(
         loaded = dataclasses.replace(loaded, origin=Path(origin))
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
-    note = start_threads(loaded.case)
-    try:
-        # the directory and status.json exist from the start: a batch job's monitor sees the run
-        # while its first scene compiles the kernels (a minute or more on a machine's first run)
-        rundir.prepare_new(overwrite, loaded.text, Path(origin if origin is not None else case_path))
+    with threads_restored():
+        note = start_threads(loaded.case)
         try:
-            log = rundir.logger()
-            log.info("case %s -> %s", case_path, rundir.path)
-            _starting(rundir, show_progress)
-            scene = build_scene(loaded)
-        except BaseException:
-            rundir.discard_new()  # a case refused while building leaves nothing behind
-            raise
-        try:
-            if rundir.replaced is not None:
-                log.info("the run replaced is kept at %s until the first checkpoint", rundir.replaced)
-            _log_note(log, note)
-            output = start_output(scene, rundir, loaded, log)
-        except BaseException:
-            rundir.abandon_new()
-            raise
-        return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
-    finally:
-        rundir.close_logger()
-        rundir.unlock()
+            # the directory and status.json exist from the start: a batch job's monitor sees the run
+            # while its first scene compiles the kernels (a minute or more on a machine's first run)
+            rundir.prepare_new(overwrite, loaded.text, Path(origin if origin is not None else case_path))
+            try:
+                log = rundir.logger()
+                log.info("case %s -> %s", case_path, rundir.path)
+                _starting(rundir, show_progress)
+                scene = build_scene(loaded)
+            except BaseException:
+                rundir.discard_new()  # a case refused while building leaves nothing behind
+                raise
+            try:
+                if rundir.replaced is not None:
+                    log.info("the run replaced is kept at %s until the first checkpoint", rundir.replaced)
+                _log_note(log, note)
+                output = start_output(scene, rundir, loaded, log)
+            except BaseException:
+                rundir.abandon_new()
+                raise
+            return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+        finally:
+            rundir.close_logger()
+            rundir.unlock()
 
 
 def _starting(rundir: RunDirectory, show_progress: bool) -> None:
@@ -265,7 +273,8 @@ def resume(
         raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
     rundir.lock()
     try:
-        return _resume_locked(rundir, until, max_wall_time, handle_signals, show_progress, device)
+        with threads_restored():
+            return _resume_locked(rundir, until, max_wall_time, handle_signals, show_progress, device)
     finally:
         rundir.close_logger()
         rundir.unlock()
@@ -345,8 +354,9 @@ def _changed_keys(old, new, prefix: str = "") -> list[str]:
 
 def run_in_memory(text: str, steps: int, base_dir: Path | None = None):
     """Build a scene from TOML text and advance it `steps` steps (tests, notebooks), on the
-    threads of its `simulation.threads` if it sets them (for this process from then on, as a
-    run's), else on the process's."""
+    threads of its `simulation.threads` if it sets them (for this process from then on: the
+    scene it returns steps on them), else on the process's. (`run` and `resume` give the process
+    its thread count back when they end.)"""
     from .simulation import advance
 
     loaded = parse_case(text, None if base_dir is None else base_dir / "case.toml")

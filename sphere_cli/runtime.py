@@ -195,6 +195,20 @@ def set_threads(case) -> None:
     numba.set_num_threads(run_threads(case))
 
 
+@contextmanager
+def threads_restored():
+    """Around a run in a process that goes on after it (a notebook, a test): the Numba thread
+    count the process had, given back when the run ends (the run sets its own: set_threads)."""
+    import numba
+
+    before = numba.get_num_threads() if threads_started() else numba.config.NUMBA_NUM_THREADS
+    try:
+        yield
+    finally:
+        if threads_started():
+            numba.set_num_threads(before)
+
+
 def threads_started() -> bool:
     """True once Numba's threading layer runs in this process (any thread count asked or set
     starts it): OpenMP has then read OMP_WAIT_POLICY, and setting it changes nothing."""

@@ -235,3 +235,27 @@ def test_on_mpi_ranks_a_case_without_threads_keeps_each_ranks_share(monkeypatch)
         assert numba.get_num_threads() == 2
     finally:
         numba.set_num_threads(before)
+
+
+def test_a_run_in_a_process_that_goes_on_gives_its_threads_back(tmp_path):
+    """api.run sets the run's own threads (one for 8 spheres) and, when it ends, the process's
+    count again (a notebook's, a test worker's)."""
+    import h5py
+    import numba
+
+    from sphere_cli import api
+    from sphere_cli.bench.dem import canonical_case
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: one thread either way")
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(2)
+        case = tmp_path / "case.toml"
+        case.write_text(canonical_case(8, duration=4e-5))
+        api.run(case, tmp_path / "run")
+        assert numba.get_num_threads() == 2
+        with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
+            assert f["sphere/provenance"].attrs["threads"] == 1
+    finally:
+        numba.set_num_threads(before)
