@@ -140,15 +140,15 @@ def refuse_many_ranks(joined: bool) -> None:
     (a library call or a sweep member under mpiexec -n 4; the `sphere run` and `sphere resume`
     commands join them: sphere_cli/ranks.py) would be that many copies of one scene racing for
     one run directory: refused before anything is written."""
-    for name in MPI_SIZE_VARIABLES:
-        value = os.environ.get(name, "")
-        if value.isdigit() and int(value) > 1 and not joined:
-            raise UsageError(
-                f"started as {value} MPI ranks ({name}={value}) outside `sphere run` / `sphere resume`: "
-                "each rank would run the whole scene into one run directory. Split one scene across "
-                "ranks with `mpiexec -n N sphere run CASE`; run independent cases with `sphere sweep`; "
-                "or start one process"
-            )
+    launcher = _launcher_ranks()
+    if launcher is not None and not joined:
+        name, value = launcher
+        raise UsageError(
+            f"started as {value} MPI ranks ({name}={value}) outside `sphere run` / `sphere resume`: "
+            "each rank would run the whole scene into one run directory. Split one scene across "
+            "ranks with `mpiexec -n N sphere run CASE`; run independent cases with `sphere sweep`; "
+            "or start one process"
+        )
 
 
 # Without `simulation.threads`, a scene whose work is its particles gets a thread for each
@@ -159,13 +159,20 @@ def refuse_many_ranks(joined: bool) -> None:
 PARTICLES_PER_THREAD = 500
 
 
-def launched_size() -> int:
-    """The rank count the MPI launcher gave this process (1 outside a launcher)."""
+def _launcher_ranks() -> tuple[str, str] | None:
+    """(the launcher's variable, its value: the rank count) where an MPI launcher started this
+    process as one of several ranks, else None."""
     for name in MPI_SIZE_VARIABLES:
         value = os.environ.get(name, "")
         if value.isdigit() and int(value) > 1:
-            return int(value)
-    return 1
+            return name, value
+    return None
+
+
+def launched_size() -> int:
+    """The rank count the MPI launcher gave this process (1 outside a launcher)."""
+    launcher = _launcher_ranks()
+    return 1 if launcher is None else int(launcher[1])
 
 
 def run_threads(case) -> int:
