@@ -114,6 +114,7 @@ def _drive(
         clock.dt,
         scene.state.particles.count,
     )
+    log.info("threads: %s", _threads_line(scene))
     gpu = getattr(scene.step.compiled, "device_name", None)
     if gpu is not None:
         log.info("steps on the GPU (simulation.device = cuda): %s", gpu)
@@ -183,6 +184,17 @@ def _record_internal_error(exc: Exception, scene, rundir: RunDirectory, output: 
         output.close(scene)
     except Exception as late:
         log.error("while recording it: %s: %s", type(late).__name__, late)
+
+
+def _threads_line(scene) -> str:
+    """The threads the run's parallel kernels take (runtime.run_threads, grid_threads)."""
+    import numba
+
+    line = f"{numba.get_num_threads()} for the particles' kernels"
+    grid = getattr(scene.fluid, "step_threads", None)
+    if grid is not None:
+        line += f", {grid} for the fluid grid's own step (by its cells)"
+    return line
 
 
 def run(

@@ -151,12 +151,19 @@ def refuse_many_ranks(joined: bool) -> None:
         )
 
 
-# Without `simulation.threads`, a scene whose work is its particles gets a thread for each
-# PARTICLES_PER_THREAD of them. Each parallel region of a step costs about 3 us to start on two
-# threads against none for the serial twins one thread runs (kernels/serial.py), about 18 us a
-# step: two threads overtook one at about 700 particles of a settled bed, 3 000-10 000 of a loose one
-# (docs/performance.md, 2026-12-05 evening)
+# Without `simulation.threads`, each part of a step gets a thread for so much of its work: the
+# particles' kernels one for each PARTICLES_PER_THREAD particles, a fluid grid's own step one
+# for each CELLS_PER_THREAD cells. Each parallel region costs about 3 us to start on two
+# spinning threads against none for the serial twins one thread runs (kernels/serial.py), about
+# 18 us a DEM step: two threads overtook one at about 700 particles of a settled bed, 3 000-10 000
+# of a loose one, and on a Navier-Stokes grid at about 1 000 cells. Threads that sleep between
+# regions (OMP_WAIT_POLICY=PASSIVE) are woken at each, about 45 us a region on the 2-core test
+# machine: there two threads overtook one at about 8 000 particles and 40 000 cells, and a
+# Darcy grid of 192 cells stepped 14 x slower on two (docs/performance.md, 2026-12-05 night)
 PARTICLES_PER_THREAD = 500
+CELLS_PER_THREAD = 2048
+PASSIVE_PARTICLES_PER_THREAD = 8000
+PASSIVE_CELLS_PER_THREAD = 32768
 
 
 def _launcher_ranks() -> tuple[str, str] | None:
@@ -175,21 +182,58 @@ def launched_size() -> int:
     return 1 if launcher is None else int(launcher[1])
 
 
+def waits_passively() -> bool:
+    """Whether the threads sleep between parallel regions (OMP_WAIT_POLICY=PASSIVE, the user's
+    or start_threads'), so that each region pays for waking them."""
+    return os.environ.get("OMP_WAIT_POLICY", "").strip().upper() == "PASSIVE"
+
+
 def run_threads(case) -> int:
     """The run's thread count, never more than NUMBA_NUM_THREADS allows (read from Numba's
-    configuration: asking Numba itself would start its threads): `simulation.threads`; else,
-    for particles alone or under the 1D VANS fluid, one per PARTICLES_PER_THREAD particles (at
-    least one); else (a Navier-Stokes or Darcy grid, or particles placed from a file, whose
-    count the case does not say) all of them."""
+    configuration: asking Numba itself would start its threads): `simulation.threads`; else
+    one per PARTICLES_PER_THREAD particles (PASSIVE_PARTICLES_PER_THREAD where the threads wait
+    passively), at least one; else (particles placed from a file, whose count the case does not
+    say) all of them. A fluid grid's own step takes its own count (grid_threads)."""
     import numba
 
     allowed = numba.config.NUMBA_NUM_THREADS
     if case.simulation.threads is not None:
         return min(case.simulation.threads, allowed)
     count = case.particles.count
-    if count is None or (case.fluid is not None and case.fluid.model != "vans1d"):
+    if count is None:
         return allowed
-    return max(1, min(allowed, count // PARTICLES_PER_THREAD))
+    per_thread = PASSIVE_PARTICLES_PER_THREAD if waits_passively() else PARTICLES_PER_THREAD
+    return max(1, min(allowed, count // per_thread))
+
+
+def grid_threads(case, cells: int) -> int | None:
+    """The thread count of a fluid grid's own step (physics/fluid_plugin.py), once the run's are
+    set: None (the run's) where `simulation.threads` is set; else one per CELLS_PER_THREAD of its
+    cells (PASSIVE_CELLS_PER_THREAD where the threads wait passively), at least one, at most
+    NUMBA_NUM_THREADS, or on MPI ranks the rank's share (sphere_cli/ranks.py)."""
+    import numba
+
+    if case.simulation.threads is not None:
+        return None
+    allowed = numba.get_num_threads() if launched_size() > 1 else numba.config.NUMBA_NUM_THREADS
+    per_thread = PASSIVE_CELLS_PER_THREAD if waits_passively() else CELLS_PER_THREAD
+    return max(1, min(allowed, cells // per_thread))
+
+
+@contextmanager
+def threads_set_to(count: int | None):
+    """Parallel kernels inside run on `count` threads (None: as they are), then as before."""
+    import numba
+
+    before = numba.get_num_threads()
+    if count is None or count == before:
+        yield
+        return
+    numba.set_num_threads(count)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def set_threads(case) -> None:

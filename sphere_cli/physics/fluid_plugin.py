@@ -19,6 +19,7 @@ import numpy as np
 from ..config.fluid_common import PressureBoundary
 from ..config.load import warn
 from ..errors import CaseError, MissingInputError
+from ..runtime import grid_threads, threads_set_to
 from .module import Module
 
 # model tag -> "module:class", imported on demand
@@ -76,6 +77,9 @@ class FluidModule(Module):
     # split across MPI ranks (physics/rank_steps.py), the last step after which every rank took
     # its own step (step_on_rank), which the lead's after_step then leaves out
     stepped_on_ranks: int | None = None
+    # the threads of its own step on its grid (runtime.grid_threads: by its cells, not by the
+    # particles as the rest of the step); None: the run's
+    step_threads: int | None = None
 
     def __init__(self, loaded, state):
         """Check the model against the rest of the case (raise loaded.error(...)) and allocate
@@ -90,6 +94,15 @@ class FluidModule(Module):
                 if problem is not None:
                     kind = MissingInputError if problem.startswith("file not found") else CaseError
                     raise kind(loaded.describe(("fluid", face, "series"), problem))
+
+    def share_threads_by_cells(self, cells: int) -> None:
+        """Its own grid step (on_its_threads) on a thread count of its cells' (a model with a
+        grid calls this once the grid is made)."""
+        self.step_threads = grid_threads(self.loaded.case, cells)
+
+    def on_its_threads(self):
+        """A context in which its parallel kernels run on its own step's threads."""
+        return threads_set_to(self.step_threads)
 
     def start(self, state) -> None:
         """Called once state.clock.dt is known, for a new run and a resumed one alike: sets

@@ -170,8 +170,9 @@ def test_a_case_run_in_memory_gets_its_threads():
         (2600, None, 5),
         (100_000, None, 8),  # capped by NUMBA_NUM_THREADS
         (200, "vans1d", 1),  # the 1D column is no work beside its particles
-        (200, "navier-stokes", 8),  # the grid's kernels are: every thread
-        (200, "darcy", 8),
+        (200, "navier-stokes", 1),  # a grid's own step takes its own count (grid_threads)
+        (200, "darcy", 1),
+        (None, None, 8),  # placed from a file: the count is not known before the build
     ],
 )
 def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
@@ -184,6 +185,7 @@ def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
     from sphere_cli.runtime import PARTICLES_PER_THREAD, run_threads
 
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
     assert PARTICLES_PER_THREAD == 500
     case = SimpleNamespace(
         simulation=SimpleNamespace(threads=None),
@@ -195,6 +197,129 @@ def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
     assert run_threads(case) == 3
     case.simulation.threads = 12
     assert run_threads(case) == 8
+
+
+@pytest.mark.parametrize("count, threads", [(1000, 1), (7999, 1), (16_000, 2), (100_000, 8)])
+def test_threads_that_sleep_between_regions_get_more_particles_each(monkeypatch, count, threads):
+    """Woken at every parallel region (OMP_WAIT_POLICY=PASSIVE, which make test and a run on
+    busy cores use), two threads cost about 45 us a region on this project's 2-core machine: 1 000
+    spheres stepped 4.4 x slower on two than on one (docs/performance.md, 2026-12-05 night)."""
+    import numba
+
+    from sphere_cli.runtime import PASSIVE_PARTICLES_PER_THREAD, run_threads
+
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
+    monkeypatch.setenv("OMP_WAIT_POLICY", "passive")
+    assert PASSIVE_PARTICLES_PER_THREAD == 8000
+    case = SimpleNamespace(simulation=SimpleNamespace(threads=None), particles=SimpleNamespace(count=count))
+    assert run_threads(case) == threads
+
+
+@pytest.mark.parametrize(
+    "cells, policy, threads",
+    [
+        (192, "ACTIVE", 1),  # the Darcy grid of configs/seepage-pulses-darcy.toml
+        (2047, "ACTIVE", 1),
+        (4096, "ACTIVE", 2),
+        (65_536, "ACTIVE", 8),  # capped by NUMBA_NUM_THREADS
+        (4096, "PASSIVE", 1),
+        (65_536, "PASSIVE", 2),
+    ],
+)
+def test_a_fluid_grid_steps_on_a_thread_per_so_many_cells(monkeypatch, cells, policy, threads):
+    """runtime.grid_threads: a grid's step starts about a hundred parallel regions (its pressure
+    solve's sweeps), each worth its threads from about 1 000 cells on spinning threads and 40 000
+    on sleeping ones (docs/performance.md, 2026-12-05 night); a case's own simulation.threads
+    leaves the grid on the run's threads (None)."""
+    import numba
+
+    from sphere_cli.runtime import grid_threads
+
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
+    monkeypatch.setenv("OMP_WAIT_POLICY", policy)
+    case = SimpleNamespace(simulation=SimpleNamespace(threads=None))
+    assert grid_threads(case, cells) == threads
+    case.simulation.threads = 8
+    assert grid_threads(case, cells) is None
+
+
+def test_on_mpi_ranks_a_grid_takes_at_most_the_ranks_share(monkeypatch):
+    import numba
+
+    from sphere_cli.runtime import grid_threads
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: one thread either way")
+    monkeypatch.setenv("PMI_SIZE", "2")
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)  # the rank's share (sphere_cli/ranks.py)
+        assert grid_threads(SimpleNamespace(simulation=SimpleNamespace(threads=None)), 10**6) == 1
+    finally:
+        numba.set_num_threads(before)
+
+
+NAVIER_STOKES_BED = """
+[simulation]
+duration = 1e-3
+dt = 1e-5
+
+[domain]
+upper = [0.032, 0.032, 0.032]
+periodic = [true, true, false]
+
+[particles]
+count = 8
+density = 2500.0
+radius = { distribution = "fixed", value = 0.0005 }
+placement = { method = "lattice", spacing = 1.0, region_upper = [0.004, 0.004, 0.001] }
+
+[contact]
+model = "linear"
+normal_stiffness = 100.0
+restitution = 0.5
+
+[fluid]
+model = "navier-stokes"
+grid = { cells = [16, 16, 16] }
+bottom = { type = "pressure", pressure = 160.0 }
+top = { type = "pressure", pressure = 0.0 }
+
+[fluid.coupling]
+steps = 2
+"""
+
+
+def test_the_grid_steps_on_its_threads_and_the_particles_on_theirs(monkeypatch):
+    """8 spheres under a grid of 4 096 cells, spinning threads: the particles' kernels on the
+    process's one thread, the grid's own step on two, and back to one after it."""
+    import numba
+
+    from sphere_cli.api import run_in_memory
+    from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: one thread either way")
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 2)
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    seen = []
+    step = NavierStokesSolver.step
+
+    def counted(self, *args):
+        seen.append(numba.get_num_threads())
+        return step(self, *args)
+
+    monkeypatch.setattr(NavierStokesSolver, "step", counted)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        scene = run_in_memory(NAVIER_STOKES_BED, 4)
+        assert scene.fluid.step_threads == 2
+        assert seen == [2, 2]
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(before)
 
 
 def test_a_run_of_a_few_spheres_takes_one_thread(tmp_path):

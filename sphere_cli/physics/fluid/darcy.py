@@ -97,6 +97,7 @@ class Darcy(FluidModule):
         volume = 4.0 / 3.0 * np.pi * particles.radius[moving] ** 3
         self.lightest_density = float(np.min(particles.mass[moving] / volume)) if moving.any() else math.inf
         self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0 or None)
+        self.share_threads_by_cells(int(np.prod(grid.shape)))
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
@@ -302,6 +303,10 @@ class Darcy(FluidModule):
         return self
 
     def _step(self, state, particles) -> None:
+        with self.on_its_threads():
+            self._grid_step(state, particles)
+
+    def _grid_step(self, state, particles) -> None:
         clock = state.clock
         s = self.pore.state
         grid_speed = self._follow_wall(state) if self.top_wall is not None else 0.0

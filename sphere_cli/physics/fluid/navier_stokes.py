@@ -461,6 +461,7 @@ class NavierStokes(FluidModule):
             )
         self.config = cfg
         self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
+        self.share_threads_by_cells(int(np.prod(self._grid.shape)))
         if self._grid.shape[2] < 2:
             raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
         self.top_wall = None  # index of the wall the grid's top follows
@@ -683,6 +684,10 @@ class NavierStokes(FluidModule):
         self._step(state)
 
     def _step(self, state) -> None:
+        with self.on_its_threads():
+            self._grid_step(state)
+
+    def _grid_step(self, state) -> None:
         clock = state.clock
         fs = self.fs
         if self.top_wall is not None:
