@@ -65,7 +65,8 @@ class DarcySolver(Strict):
     method: Literal["pcg", "jacobi"] = Field(
         "pcg",
         description=(
-            'Iterative method: "pcg" (conjugate gradients with a diagonal preconditioner) or '
+            'Iterative method: "pcg" (conjugate gradients preconditioned with a multigrid V-cycle '
+            "on a grid of 4096 cells or more whose counts halve, else the diagonal) or "
             '"jacobi" (the original sphere\'s iteration, much slower; for comparison).'
         ),
     )

@@ -81,7 +81,8 @@ class PressureSolverConfig(Strict):
         "pcg",
         description=(
             '"pcg": conjugate gradient preconditioned with a multigrid V-cycle (the diagonal on a '
-            'grid that does not halve; physics/fluid/poisson.py), fast; "jacobi": the reference\'s '
+            "grid that does not halve or has fewer than 4096 cells; physics/fluid/poisson.py), "
+            'fast; "jacobi": the reference\'s '
             "Jacobi iteration, kept to compare (needs far more iterations) [-]."
         ),
     )

@@ -342,3 +342,46 @@ def test_kernels_without_jit_agree():
     namespace: dict = {}
     exec(code.replace("print(repr(x.ravel().tolist()))\n", ""), namespace)
     assert np.abs(pure - namespace["x"].ravel()).max() <= 1e-12 * np.abs(pure).max()
+
+
+@pytest.mark.parametrize(
+    "shape, expected", [((4, 4, 12), "jacobi"), ((16, 16, 15), "jacobi"), ((16, 16, 16), "multigrid")]
+)
+def test_a_fluids_grid_of_few_cells_takes_the_diagonal_preconditioner(shape, expected):
+    """Below MULTIGRID_FROM cells the diagonal's iterations, a few kernels each, cost less than
+    the V-cycle's fewer ones (docs/performance.md, 2026-12-05 night); the Darcy and
+    Navier-Stokes models take the preconditioner of preconditioner_for, and both reach the
+    tolerance on the same system."""
+    from sphere_cli.physics.fluid.poisson import preconditioner_for
+
+    grid = make_grid(shape)
+    assert preconditioner_for(grid) == expected
+    rng = np.random.default_rng(3)
+    b = rng.normal(size=shape)
+    c, solutions = np.zeros(shape), []
+    for preconditioner in ("multigrid", "jacobi"):
+        solver = PoissonSolver(grid, "dirichlet", "no-flux", preconditioner=preconditioner, tolerance=1e-10)
+        ax, ay, az = solver.face_arrays()
+        for face in (ax, ay, az):
+            face[:] = 1.0
+        x = np.zeros(shape)
+        assert solver.solve(x, b, c, ax, ay, az).converged
+        solutions.append(x)
+    scale = np.abs(solutions[0]).max()
+    assert np.abs(solutions[0] - solutions[1]).max() <= 1e-8 * scale
+
+
+def test_the_fluid_models_take_the_preconditioner_of_their_grid():
+    from sphere_cli.config.fluid_darcy import DarcyFluid
+    from sphere_cli.config.fluid_navier_stokes import NavierStokesFluid
+    from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
+    from sphere_cli.physics.fluid.pore_pressure import PorePressure
+
+    config = NavierStokesFluid.model_validate({"model": "navier-stokes"})
+    small = NavierStokesSolver(config, make_grid((4, 4, 12)), (0.0, 0.0, -9.81))
+    large = NavierStokesSolver(config, make_grid((16, 16, 16)), (0.0, 0.0, -9.81))
+    assert small.poisson.multigrid is None and large.poisson.multigrid is not None
+    darcy = DarcyFluid.model_validate({"model": "darcy"})
+    small = PorePressure(darcy, make_grid((4, 4, 12)), 1e-9)
+    large = PorePressure(darcy, make_grid((16, 16, 16)), 1e-9)
+    assert small.solver.multigrid is None and large.solver.multigrid is not None

@@ -46,7 +46,7 @@ from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .fixed_bed import FixedBed
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
-from .poisson import PoissonResult, PoissonSolver
+from .poisson import PoissonResult, PoissonSolver, preconditioner_for
 from .porosity import Porosity
 
 
@@ -149,7 +149,7 @@ class NavierStokesSolver:
         solver = config.solver
         self.poisson = PoissonSolver(
             grid, kinds[0], kinds[1], solver.method, solver.tolerance, solver.max_iterations,
-            split_cells=solver.rank_split_cells,
+            preconditioner_for(grid), solver.rank_split_cells,
         )  # fmt: skip
         self.p_bound = np.zeros(2)  # boundary pressures at the new time [Pa]
         self.p_old = np.zeros(2)  # and at the old time [Pa]

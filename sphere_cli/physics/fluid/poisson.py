@@ -71,6 +71,11 @@ SWEEPS = 2
 COARSEST_SWEEPS = 40
 COARSEST_TARGET = 64
 COARSEST_LIMIT = 4096
+# a fluid's grid of fewer cells is solved faster with the diagonal preconditioner (more
+# iterations, each a few kernels instead of a V-cycle's dozen calls): from zero to 1e-8, one
+# thread, 6^3 0.30 against 0.72 ms, 12^3 1.24 against 1.65, 16^3 2.4 against 2.5, 24^3 10.4
+# against 6.1 (docs/performance.md, 2026-12-05 night)
+MULTIGRID_FROM = 4096
 BOUNDARIES = ("dirichlet", "no-flux")
 TINY = np.finfo(np.float64).tiny
 RESCALE_EXPONENT = 100  # a right-hand side norm outside 2^-100 .. 2^100 is rescaled
@@ -307,6 +312,12 @@ class Multigrid:
         self._cycle(index + 1, coarse.b, coarse.x, fine)
         prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
         self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs)
+
+
+def preconditioner_for(grid: FluidGrid) -> str:
+    """The conjugate gradient's preconditioner for a fluid's grid: the multigrid V-cycle from
+    MULTIGRID_FROM cells (where the shape allows one), else the diagonal."""
+    return "multigrid" if grid.cell_count >= MULTIGRID_FROM else "jacobi"
 
 
 class PoissonSolver:

@@ -37,7 +37,7 @@ from ...kernels.fluid.pore_pressure import (
     solid_divergence,
 )
 from .grid import FluidGrid
-from .poisson import PoissonResult, PoissonSolver
+from .poisson import PoissonResult, PoissonSolver, preconditioner_for
 
 
 def boundary_pressure(boundary, time: float) -> float:
@@ -116,6 +116,7 @@ class PorePressure:
             method=solver.method,
             tolerance=solver.tolerance,
             max_iterations=solver.max_iterations,
+            preconditioner=preconditioner_for(grid),
             split_cells=solver.rank_split_cells,
         )
         self.periodic = np.asarray(grid.periodic, dtype=np.uint8)
