@@ -47,6 +47,7 @@ from ...kernels.fluid.poisson import (
     column_squares,
     column_sums,
     column_words,
+    diagonal_cg,
     jacobi_smooth,
     jacobi_smooth_pairs,
     jacobi_sweep,
@@ -526,6 +527,7 @@ class PoissonSolver:
         fine = (self.diag, self.inv_diag, ax, ay, az, self.ih2)
         if self.multigrid is not None:
             self.multigrid.setup(c, ax, ay, az)
+        compiled = self.multigrid is None and not slabs.split  # the inner loop in one call
         # restarted from the true residual if the recursively updated one drifted from it
         while res > self.tolerance and iterations < self.max_iterations:
             precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c, lo, hi)
@@ -533,6 +535,16 @@ class PoissonSolver:
             rz = slabs.sum(self.part_b)
             z_mean = slabs.sum(self.part_c) / n if singular else 0.0
             new_direction(self.p, self.z, 0.0, z_mean, lo, hi)
+            if compiled:
+                iterations, status = diagonal_cg(
+                    x, self.r, self.p, self.q, self.z, self.diag, self.inv_diag, ax, ay, az,
+                    self.periodic_x, self.periodic_y, self.ih2, self.part_a, self.part_b, self.part_c,
+                    slabs.words, rz, singular, scale, self.tolerance, iterations, self.max_iterations,
+                )  # fmt: skip
+                if status == 2:
+                    return iterations, self._true_residual(x, ax, ay, az) * scale
+                res = self._true_residual(x, ax, ay, az) * scale
+                continue
             while iterations < self.max_iterations:
                 slabs.halo(self.p)
                 apply_operator(
