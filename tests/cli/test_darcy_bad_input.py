@@ -3,6 +3,8 @@ no traceback (the checks of config/fluid_darcy.py and physics/fluid/darcy.py).""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from cli_test_support import TINY, assert_clean_error, edit, line_of, sphere_inproc
 
@@ -176,3 +178,5 @@ def test_a_modulation_resolved_by_few_fluid_steps_is_warned_once_on_stderr_and_i
     assert result.stderr.count("fluid.top.period") == (1 if warned else 0), result.stderr
     log = (tmp_path / "out" / "run.log").read_text()
     assert ("below 20 steps a period" in log) == warned, log
+    # its grid's own step on a thread count of its cells' (runtime.grid_threads), named in run.log
+    assert re.search(r"threads: \d+ for the particles' kernels, \d+ for the fluid grid's own step", log), log

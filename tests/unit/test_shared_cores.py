@@ -260,64 +260,42 @@ def test_on_mpi_ranks_a_grid_takes_at_most_the_ranks_share(monkeypatch):
         numba.set_num_threads(before)
 
 
-NAVIER_STOKES_BED = """
-[simulation]
-duration = 1e-3
-dt = 1e-5
-
-[domain]
-upper = [0.032, 0.032, 0.032]
-periodic = [true, true, false]
-
-[particles]
-count = 8
-density = 2500.0
-radius = { distribution = "fixed", value = 0.0005 }
-placement = { method = "lattice", spacing = 1.0, region_upper = [0.004, 0.004, 0.001] }
-
-[contact]
-model = "linear"
-normal_stiffness = 100.0
-restitution = 0.5
-
-[fluid]
-model = "navier-stokes"
-grid = { cells = [16, 16, 16] }
-bottom = { type = "pressure", pressure = 160.0 }
-top = { type = "pressure", pressure = 0.0 }
-
-[fluid.coupling]
-steps = 2
-"""
-
-
-def test_the_grid_steps_on_its_threads_and_the_particles_on_theirs(monkeypatch):
-    """8 spheres under a grid of 4 096 cells, spinning threads: the particles' kernels on the
-    process's one thread, the grid's own step on two, and back to one after it."""
+def test_the_grid_steps_on_its_threads_and_gives_the_runs_back(monkeypatch):
+    """The Navier-Stokes and Darcy models take their grid's step (the step of after_step and of
+    every MPI rank's step_on_rank) inside FluidModule.on_its_threads: on the module's
+    step_threads, then on the run's count again, even where the step raises."""
     import numba
 
-    from sphere_cli.api import run_in_memory
-    from sphere_cli.physics.fluid.navier_stokes import NavierStokesSolver
+    from sphere_cli.physics.fluid.darcy import Darcy
+    from sphere_cli.physics.fluid.navier_stokes import NavierStokes
+    from sphere_cli.physics.fluid_plugin import FluidModule
 
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("one core: one thread either way")
-    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 2)
-    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
     seen = []
-    step = NavierStokesSolver.step
 
-    def counted(self, *args):
-        seen.append(numba.get_num_threads())
-        return step(self, *args)
+    class Grid:
+        step_threads = 2
+        on_its_threads = FluidModule.on_its_threads
 
-    monkeypatch.setattr(NavierStokesSolver, "step", counted)
+        def _grid_step(self, *args):
+            seen.append(numba.get_num_threads())
+            if len(seen) == 3:
+                raise RuntimeError("the step failed")
+
     before = numba.get_num_threads()
     try:
-        numba.set_num_threads(1)
-        scene = run_in_memory(NAVIER_STOKES_BED, 4)
-        assert scene.fluid.step_threads == 2
-        assert seen == [2, 2]
+        numba.set_num_threads(1)  # the particles' share
+        NavierStokes._step(Grid(), None)
+        Darcy._step(Grid(), None, None)
+        with pytest.raises(RuntimeError):
+            NavierStokes._step(Grid(), None)
+        assert seen == [2, 2, 2]
         assert numba.get_num_threads() == 1
+        unset = Grid()
+        unset.step_threads = None  # simulation.threads set: the run's count
+        Darcy._step(unset, None, None)
+        assert seen[-1] == 1
     finally:
         numba.set_num_threads(before)
 
