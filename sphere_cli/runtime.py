@@ -81,9 +81,7 @@ def shared_cores(
     OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
     if threads < 2:
         return None
-    if wait_policy is None:
-        wait_policy = os.environ.get("OMP_WAIT_POLICY", "")
-    if wait_policy.strip().lower() == "passive":
+    if waits_passively(wait_policy):
         return None
     if layer is None:
         layer = os.environ.get("NUMBA_THREADING_LAYER", "default")
@@ -182,10 +180,13 @@ def launched_size() -> int:
     return 1 if launcher is None else int(launcher[1])
 
 
-def waits_passively() -> bool:
+def waits_passively(policy: str | None = None) -> bool:
     """Whether the threads sleep between parallel regions (OMP_WAIT_POLICY=PASSIVE, the user's
-    or start_threads'), so that each region pays for waking them."""
-    return os.environ.get("OMP_WAIT_POLICY", "").strip().upper() == "PASSIVE"
+    or start_threads'; `policy` instead of the variable's value), so that each region pays for
+    waking them."""
+    if policy is None:
+        policy = os.environ.get("OMP_WAIT_POLICY", "")
+    return policy.strip().lower() == "passive"
 
 
 def run_threads(case) -> int:

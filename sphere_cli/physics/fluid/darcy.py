@@ -97,7 +97,7 @@ class Darcy(FluidModule):
         volume = 4.0 / 3.0 * np.pi * particles.radius[moving] ** 3
         self.lightest_density = float(np.min(particles.mass[moving] / volume)) if moving.any() else math.inf
         self.pore = PorePressure(config, grid, self.mean_diameter**2 / 180.0 or None)
-        self.share_threads_by_cells(int(np.prod(grid.shape)))
+        self.share_threads_by_cells(grid.cell_count)
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)

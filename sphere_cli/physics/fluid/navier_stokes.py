@@ -461,7 +461,7 @@ class NavierStokes(FluidModule):
             )
         self.config = cfg
         self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
-        self.share_threads_by_cells(int(np.prod(self._grid.shape)))
+        self.share_threads_by_cells(self._grid.cell_count)
         if self._grid.shape[2] < 2:
             raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
         self.top_wall = None  # index of the wall the grid's top follows
