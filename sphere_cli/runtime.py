@@ -81,12 +81,8 @@ def shared_cores(
     OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
     if threads < 2:
         return None
-    if waits_passively(wait_policy):
+    if waits_passively(wait_policy, layer):
         return None
-    if layer is None:
-        layer = os.environ.get("NUMBA_THREADING_LAYER", "default")
-    if layer.strip().lower() in ("workqueue", "tbb"):
-        return None  # threads that do not spin (TBB yields after a short spin)
     if cores is None:
         cores = os.cpu_count() or 1
     if busy is None:
@@ -155,9 +151,10 @@ def refuse_many_ranks(joined: bool) -> None:
 # spinning threads against none for the serial twins one thread runs (kernels/serial.py), about
 # 18 us a DEM step: two threads overtook one at about 700 particles of a settled bed, 3 000-10 000
 # of a loose one, and on a Navier-Stokes grid at about 1 000 cells. Threads that sleep between
-# regions (OMP_WAIT_POLICY=PASSIVE) are woken at each, about 45 us a region on the 2-core test
-# machine: there two threads overtook one at about 8 000 particles and 40 000 cells, and a
-# Darcy grid of 192 cells stepped 14 x slower on two (docs/performance.md, 2026-12-05 night)
+# regions (OMP_WAIT_POLICY=PASSIVE; the workqueue and TBB layers) are woken at each, about
+# 45 us a region under OpenMP on the 2-core test machine: there two threads overtook one at
+# about 8 000 particles and 40 000 cells, and a Darcy grid of 192 cells stepped 14 x slower on
+# two (docs/performance.md, 2026-12-05 night)
 PARTICLES_PER_THREAD = 500
 CELLS_PER_THREAD = 2048
 PASSIVE_PARTICLES_PER_THREAD = 8000
@@ -180,13 +177,17 @@ def launched_size() -> int:
     return 1 if launcher is None else int(launcher[1])
 
 
-def waits_passively(policy: str | None = None) -> bool:
-    """Whether the threads sleep between parallel regions (OMP_WAIT_POLICY=PASSIVE, the user's
-    or start_threads'; `policy` instead of the variable's value), so that each region pays for
-    waking them."""
+def waits_passively(policy: str | None = None, layer: str | None = None) -> bool:
+    """Whether the threads sleep between parallel regions, so that each region pays for waking
+    them: OpenMP's under OMP_WAIT_POLICY=PASSIVE (the user's or start_threads'), and those of
+    Numba's workqueue and TBB layers, which do not spin (TBB yields after a short spin; two
+    workqueue threads stepped 1 000 spheres at 2.3 M particle-steps/s against one thread's 14.8 M).
+    `policy` and `layer` instead of OMP_WAIT_POLICY and NUMBA_THREADING_LAYER."""
     if policy is None:
         policy = os.environ.get("OMP_WAIT_POLICY", "")
-    return policy.strip().lower() == "passive"
+    if layer is None:
+        layer = os.environ.get("NUMBA_THREADING_LAYER", "default")
+    return policy.strip().lower() == "passive" or layer.strip().lower() in ("workqueue", "tbb")
 
 
 def run_threads(case) -> int:

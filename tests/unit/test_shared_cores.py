@@ -186,6 +186,7 @@ def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
 
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
     monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    monkeypatch.delenv("NUMBA_THREADING_LAYER", raising=False)
     assert PARTICLES_PER_THREAD == 500
     case = SimpleNamespace(
         simulation=SimpleNamespace(threads=None),
@@ -200,16 +201,24 @@ def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
 
 
 @pytest.mark.parametrize("count, threads", [(1000, 1), (7999, 1), (16_000, 2), (100_000, 8)])
-def test_threads_that_sleep_between_regions_get_more_particles_each(monkeypatch, count, threads):
+@pytest.mark.parametrize(
+    "variable, value", [("OMP_WAIT_POLICY", "passive"), ("NUMBA_THREADING_LAYER", "workqueue")]
+)
+def test_threads_that_sleep_between_regions_get_more_particles_each(
+    monkeypatch, count, threads, variable, value
+):
     """Woken at every parallel region (OMP_WAIT_POLICY=PASSIVE, which make test and a run on
-    busy cores use), two threads cost about 45 us a region on this project's 2-core machine: 1 000
-    spheres stepped 4.4 x slower on two than on one (docs/performance.md, 2026-12-05 night)."""
+    busy cores use; Numba's workqueue layer), two threads cost about 45 us a region on this
+    project's 2-core machine: 1 000 spheres stepped 4.4 x slower on two than on one, 6.4 x on two
+    of the workqueue's (docs/performance.md, 2026-12-05 night)."""
     import numba
 
     from sphere_cli.runtime import PASSIVE_PARTICLES_PER_THREAD, run_threads
 
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
-    monkeypatch.setenv("OMP_WAIT_POLICY", "passive")
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    monkeypatch.delenv("NUMBA_THREADING_LAYER", raising=False)
+    monkeypatch.setenv(variable, value)
     assert PASSIVE_PARTICLES_PER_THREAD == 8000
     case = SimpleNamespace(simulation=SimpleNamespace(threads=None), particles=SimpleNamespace(count=count))
     assert run_threads(case) == threads
@@ -237,6 +246,7 @@ def test_a_fluid_grid_steps_on_a_thread_per_so_many_cells(monkeypatch, cells, po
 
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
     monkeypatch.setenv("OMP_WAIT_POLICY", policy)
+    monkeypatch.delenv("NUMBA_THREADING_LAYER", raising=False)
     case = SimpleNamespace(simulation=SimpleNamespace(threads=None))
     assert grid_threads(case, cells) == threads
     case.simulation.threads = 8
