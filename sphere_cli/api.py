@@ -36,6 +36,7 @@ from .runtime import (
     threads_restored,
 )
 from .scene.builder import build_scene
+from .scene.packing import placed_count
 from .simulation import Loop
 
 
@@ -186,6 +187,15 @@ def _record_internal_error(exc: Exception, scene, rundir: RunDirectory, output: 
         log.error("while recording it: %s: %s", type(late).__name__, late)
 
 
+def _placed(loaded: LoadedCase) -> int | None:
+    """The particles of a case that places them from a file (its count sizes the run's threads),
+    else None (the case says, or there is no such file)."""
+    placement = loaded.case.particles.placement
+    if loaded.case.particles.count is not None or getattr(placement, "method", None) != "file":
+        return None
+    return placed_count(placement, loaded.base_dir)
+
+
 def _threads_line(scene) -> str:
     """The threads the run's parallel kernels take (runtime.run_threads, grid_threads)."""
     import numba
@@ -217,7 +227,7 @@ def run(
     rundir = RunDirectory(Path(run_dir) if run_dir is not None else Path("runs") / Path(case_path).stem)
     rundir.check_new(overwrite)
     with threads_restored():
-        note = start_threads(loaded.case)
+        note = start_threads(loaded.case, _placed(loaded))
         try:
             # the directory and status.json exist from the start: a batch job's monitor sees the run
             # while its first scene compiles the kernels (a minute or more on a machine's first run)
@@ -307,7 +317,7 @@ def _resume_locked(
         log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_simulation(fresh, duration=until, device=device)
-        note = start_threads(fresh.case)
+        note = start_threads(fresh.case, _placed(fresh))
         _starting(rundir, show_progress)
         scene = build_scene(fresh)
         _log_note(log, note)
@@ -332,7 +342,7 @@ def _resume_locked(
             f"{rundir.case}: output.fields changed from {old_fields} to {loaded.case.output.fields}; "
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
-    note = start_threads(loaded.case)
+    note = start_threads(loaded.case, _placed(loaded))
     _starting(rundir, show_progress)
     scene = build_scene(loaded, restart=ck)
     log.info("resuming from %s (step %d)", ck.path.name, ck.step)

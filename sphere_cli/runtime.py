@@ -190,18 +190,20 @@ def waits_passively(policy: str | None = None, layer: str | None = None) -> bool
     return policy.strip().lower() == "passive" or layer.strip().lower() in ("workqueue", "tbb")
 
 
-def run_threads(case) -> int:
+def run_threads(case, count: int | None = None) -> int:
     """The run's thread count, never more than NUMBA_NUM_THREADS allows (read from Numba's
     configuration: asking Numba itself would start its threads): `simulation.threads`; else
     one per PARTICLES_PER_THREAD particles (PASSIVE_PARTICLES_PER_THREAD where the threads wait
-    passively), at least one; else (particles placed from a file, whose count the case does not
-    say) all of them. A fluid grid's own step takes its own count (grid_threads)."""
+    passively), at least one, of `count` particles, or the case's particles.count; else (particles
+    placed from a file the caller did not count) all of them. A fluid grid's own step takes its
+    own count (grid_threads)."""
     import numba
 
     allowed = numba.config.NUMBA_NUM_THREADS
     if case.simulation.threads is not None:
         return min(case.simulation.threads, allowed)
-    count = case.particles.count
+    if count is None:
+        count = case.particles.count
     if count is None:
         return allowed
     per_thread = PASSIVE_PARTICLES_PER_THREAD if waits_passively() else PARTICLES_PER_THREAD
@@ -238,14 +240,14 @@ def threads_set_to(count: int | None):
         numba.set_num_threads(before)
 
 
-def set_threads(case) -> None:
+def set_threads(case, count: int | None = None) -> None:
     """The run's Numba threads (run_threads); on MPI ranks without `simulation.threads`, those
     sphere_cli/ranks.py gave each rank (the node's cores shared between its ranks) instead."""
     import numba
 
     if case.simulation.threads is None and launched_size() > 1:
         return
-    numba.set_num_threads(run_threads(case))
+    numba.set_num_threads(run_threads(case, count))
 
 
 @contextmanager
@@ -274,18 +276,19 @@ def threads_started() -> bool:
     return True
 
 
-def start_threads(case) -> str | None:
+def start_threads(case, count: int | None = None) -> str | None:
     """The run's threads, with a wait policy for the cores they get. Where other busy processes
     share those cores (shared_cores), OMP_WAIT_POLICY is unset and the threads have not
     started in this process, the threads are made to wait passively (a note on stderr); where
     the policy is the user's, or too late to set, a warning says what to do. Returns that line
     for the run's log. Called once the command is known to go ahead and before any kernel runs,
-    so that no thread of this run counts as busy."""
+    so that no thread of this run counts as busy. `count`: the particles, where the case does not
+    say (run_threads)."""
     import numba
 
     chosen = os.environ.get("OMP_WAIT_POLICY", "").strip()
     if not chosen and not threads_started():
-        threads = run_threads(case)
+        threads = run_threads(case, count)
         shared = shared_cores(threads)
         note = None
         if shared is not None:
@@ -295,9 +298,9 @@ def start_threads(case) -> str | None:
                 "(OMP_WAIT_POLICY=PASSIVE) instead of spinning; OMP_WAIT_POLICY=ACTIVE keeps them spinning"
             )
             print(f"sphere: note: {note}", file=sys.stderr)
-        set_threads(case)
+        set_threads(case, count)
         return note
-    set_threads(case)
+    set_threads(case, count)
     note = shared_cores_note(numba.get_num_threads())
     if note is not None:
         print(f"sphere: warning: {note}", file=sys.stderr)

@@ -58,7 +58,7 @@ class Simulation(Strict):
             "Numba threads (default: one per 500 particles, 8000 where threads sleep between "
             "parallel regions: OMP_WAIT_POLICY=PASSIVE or the workqueue or tbb threading layer; "
             "at least one; a navier-stokes or darcy grid's own step one per 2048 cells, 32768 "
-            "where they sleep; all cores with particles placed from a file; never more than "
+            "where they sleep; particles placed from a file are counted from it first; never more than "
             "NUMBA_NUM_THREADS). Set, every part of the step takes it. Results do not depend on it."
         ),
     )

@@ -99,10 +99,30 @@ VECTORS = {"velocity": ("vx", "vy", "vz"), "angular_velocity": ("wx", "wy", "wz"
 FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
 
 
-def read_particle_file(placement: FilePlacement, base_dir: Path) -> ParticleFile:
+def _particle_file_path(placement: FilePlacement, base_dir: Path) -> Path:
     path = Path(placement.path)
-    if not path.is_absolute():
-        path = base_dir / path
+    return path if path.is_absolute() else base_dir / path
+
+
+def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
+    """How many particles a placement file holds, counted without reading them (the CSV's data
+    lines, the HDF5 file's rows of 'position'), to size the run's threads before the scene is
+    built; None where it cannot tell (the build then reports what is wrong with the file)."""
+    path = _particle_file_path(placement, base_dir)
+    try:
+        if path.suffix.lower() in (".h5", ".hdf5"):
+            import h5py
+
+            with h5py.File(path, "r") as f:
+                return int(f["position"].shape[0])
+        with path.open(encoding="utf-8") as lines:
+            return max(0, sum(1 for line in lines if line.split("#")[0].strip()) - 1)  # the header
+    except (OSError, ValueError, KeyError, TypeError, IndexError):
+        return None
+
+
+def read_particle_file(placement: FilePlacement, base_dir: Path) -> ParticleFile:
+    path = _particle_file_path(placement, base_dir)
     if not path.is_file():
         raise case_error(
             placement, ("particles", "placement", "path"), f"file not found ({path})", MissingInputError

@@ -172,7 +172,7 @@ def test_a_case_run_in_memory_gets_its_threads():
         (200, "vans1d", 1),  # the 1D column is no work beside its particles
         (200, "navier-stokes", 1),  # a grid's own step takes its own count (grid_threads)
         (200, "darcy", 1),
-        (None, None, 8),  # placed from a file: the count is not known before the build
+        (None, None, 8),  # placed from a file the caller did not count (api._placed counts it)
     ],
 )
 def test_without_simulation_threads_a_scene_gets_a_thread_per_500_particles(
@@ -327,6 +327,59 @@ def test_a_run_of_a_few_spheres_takes_one_thread(tmp_path):
     subprocess.run(cmd, check=True, env=env, capture_output=True)
     with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
         assert f["sphere/provenance"].attrs["threads"] == 1
+
+
+def test_a_placement_files_particles_are_counted_before_the_build(tmp_path):
+    """scene/packing.py placed_count: the data lines of a CSV (header, blank lines and comments
+    left out), the rows of an HDF5 file's 'position'; None where it cannot tell (the build then
+    reports the file), so the run keeps every thread."""
+    import h5py
+    import numpy as np
+
+    from sphere_cli.scene.packing import placed_count
+
+    csv = tmp_path / "bed.csv"
+    csv.write_text("x,y,z,r  # a header\n\n0,0,0,1\n# a comment\n1,0,0,1\n2,0,0,1 # the last\n")
+    with h5py.File(tmp_path / "bed.h5", "w") as f:
+        f["position"] = np.zeros((5, 3))
+    with h5py.File(tmp_path / "empty.h5", "w") as f:
+        f["radius"] = np.ones(5)
+    counts = {
+        name: placed_count(SimpleNamespace(path=name), tmp_path)
+        for name in ("bed.csv", "bed.h5", "empty.h5", "missing.csv")
+    }
+    assert counts == {"bed.csv": 3, "bed.h5": 5, "empty.h5": None, "missing.csv": None}
+    assert placed_count(SimpleNamespace(path=str(csv)), tmp_path / "elsewhere") == 3  # absolute
+
+
+def test_a_run_of_a_few_spheres_from_a_file_takes_one_thread(tmp_path):
+    """`sphere run` of 8 spheres placed from a CSV file, two threads allowed: one thread, as
+    for 8 spheres of a lattice (every thread before the file was counted)."""
+    import subprocess
+    import sys
+
+    import h5py
+
+    from sphere_cli.bench.dem import canonical_case
+
+    rows = "\n".join(
+        f"{0.0016 + 0.0024 * (k % 2)},{0.0016 + 0.0024 * (k // 2 % 2)},{0.002 + 0.0025 * (k // 4)}"
+        for k in range(8)
+    )
+    (tmp_path / "bed.csv").write_text("x,y,z\n" + rows + "\n")
+    text = canonical_case(8, duration=4e-5).replace("count = 8\n", "")
+    text = text.replace(
+        'placement = { method = "lattice", spacing = 1.2, jitter = 1.0 }',
+        'placement = { method = "file", path = "bed.csv" }',
+    )
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    env = {**os.environ, "NUMBA_NUM_THREADS": "2"}
+    cmd = [sys.executable, "-m", "sphere_cli", "run", str(case), "-o", str(tmp_path / "run"), "-q"]
+    subprocess.run(cmd, check=True, env=env, capture_output=True)
+    with h5py.File(tmp_path / "run" / "trajectory.h5", "r") as f:
+        assert f["sphere/provenance"].attrs["threads"] == 1
+        assert f["particles/trajectory/position/value"].shape[1] == 8
 
 
 def test_on_mpi_ranks_a_case_without_threads_keeps_each_ranks_share(monkeypatch):
