@@ -377,14 +377,17 @@ def _changed_keys(old, new, prefix: str = "") -> list[str]:
 def run_in_memory(text: str, steps: int, base_dir: Path | None = None):
     """Build a scene from TOML text and advance it `steps` steps (tests, notebooks), on the
     threads of its `simulation.threads` if it sets them (for this process from then on: the
-    scene it returns steps on them), else on the process's. (`run` and `resume` give the process
-    its thread count back when they end.)"""
+    scene it returns steps on them), else on the process's, its fluid grid's step too (which
+    `run` sizes by the grid: runtime.grid_threads). (`run` and `resume` give the process its
+    thread count back when they end.)"""
     from .simulation import advance
 
     loaded = parse_case(text, None if base_dir is None else base_dir / "case.toml")
     if loaded.case.simulation.threads is not None:
         set_threads(loaded.case)
     scene = build_scene(loaded)
+    if scene.fluid is not None:
+        scene.fluid.step_threads = None
     advance(scene, steps)
     return scene
 

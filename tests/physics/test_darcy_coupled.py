@@ -368,3 +368,11 @@ def test_a_wall_pushed_by_a_stiffer_fluid_than_its_time_step_counted_is_warned_o
         advance(scene, 3)
     warned = [r for r in caplog.records if "stiff" in r.getMessage()]
     assert len(warned) == 1 and "1 N/m the time step was chosen for" in warned[0].getMessage()
+
+
+def test_a_scene_run_in_memory_steps_its_grid_on_the_process_threads():
+    """api.run_in_memory (tests, notebooks) keeps the process's thread count for every part,
+    as it says; `sphere run` sizes the grid's step by its cells (tests/unit/test_shared_cores.py)."""
+    from sphere_cli.bench.darcy import case_text
+
+    assert api.run_in_memory(case_text(4, 27, 1e-8), 0).fluid.step_threads is None
