@@ -206,8 +206,7 @@ def run_threads(case, count: int | None = None) -> int:
         count = case.particles.count
     if count is None:
         return allowed
-    per_thread = PASSIVE_PARTICLES_PER_THREAD if waits_passively() else PARTICLES_PER_THREAD
-    return max(1, min(allowed, count // per_thread))
+    return _share(count, PARTICLES_PER_THREAD, PASSIVE_PARTICLES_PER_THREAD, allowed)
 
 
 def grid_threads(case, cells: int) -> int | None:
@@ -220,8 +219,13 @@ def grid_threads(case, cells: int) -> int | None:
     if case.simulation.threads is not None:
         return None
     allowed = numba.get_num_threads() if launched_size() > 1 else numba.config.NUMBA_NUM_THREADS
-    per_thread = PASSIVE_CELLS_PER_THREAD if waits_passively() else CELLS_PER_THREAD
-    return max(1, min(allowed, cells // per_thread))
+    return _share(cells, CELLS_PER_THREAD, PASSIVE_CELLS_PER_THREAD, allowed)
+
+
+def _share(work: int, spinning: int, sleeping: int, allowed: int) -> int:
+    """One thread for each `spinning` items of work (`sleeping` where the threads wait
+    passively), at least one, at most `allowed`."""
+    return max(1, min(allowed, work // (sleeping if waits_passively() else spinning)))
 
 
 @contextmanager

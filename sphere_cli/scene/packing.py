@@ -116,7 +116,7 @@ def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
             with h5py.File(path, "r") as f:
                 return int(f["position"].shape[0])
         with path.open(encoding="utf-8") as lines:
-            return max(0, sum(1 for line in lines if line.split("#")[0].strip()) - 1)  # the header
+            return max(0, sum(1 for line in lines if _content(line).strip()) - 1)  # the header
     except (OSError, ValueError, KeyError, TypeError, IndexError):
         return None
 
@@ -132,6 +132,12 @@ def read_particle_file(placement: FilePlacement, base_dir: Path) -> ParticleFile
     return _checked(path, _read_csv(path))
 
 
+def _content(line: str) -> str:
+    """A CSV line without its comment (text after #): blank, it holds no row (placed_count
+    counts the rows _read_csv reads)."""
+    return line.split("#")[0]
+
+
 def _read_csv(path: Path) -> ParticleFile:
     """Comma-separated, a header of column names first; blank lines and text after # are skipped.
     A field that is not what its column needs is refused by its line and column."""
@@ -140,9 +146,9 @@ def _read_csv(path: Path) -> ParticleFile:
     except (ValueError, OSError) as exc:  # UnicodeDecodeError is a ValueError
         raise CaseError(f"{path}: not a readable CSV particle file ({exc})") from None
     rows = [
-        (number, [field.strip() for field in line.split("#")[0].split(",")])
+        (number, [field.strip() for field in _content(line).split(",")])
         for number, line in enumerate(text.splitlines(), start=1)
-        if line.split("#")[0].strip()
+        if _content(line).strip()
     ]
     names = rows[0][1] if rows else []
     for name in names:
