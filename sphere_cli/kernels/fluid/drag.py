@@ -155,6 +155,12 @@ def drag_on_particle(
     c = cell_of[i]
     d = 2.0 * radius[i]
     volume = math.pi / 6.0 * d * d * d
+    # the fluid velocity the particle feels, summed over its disturbance's bands once
+    seen = (
+        _seen(u, c, disturbance, i, 0, corrected),
+        _seen(u, c, disturbance, i, 1, corrected),
+        _seen(u, c, disturbance, i, 2, corrected),
+    )
     if averaged and cell_diameter[c] > 0.0 and cell_share[c] > 0.0:
         w0 = u[c, 0] - cell_velocity[c, 0]
         w1 = u[c, 1] - cell_velocity[c, 1]
@@ -162,9 +168,9 @@ def drag_on_particle(
         w = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         k = volume * cell_share[c] * drag_rate(law, phi[c], cell_diameter[c], w, rho, mu, floor)
     else:
-        w0 = _seen(u, c, disturbance, i, 0, corrected) - vel[i, 0]
-        w1 = _seen(u, c, disturbance, i, 1, corrected) - vel[i, 1]
-        w2 = _seen(u, c, disturbance, i, 2, corrected) - vel[i, 2]
+        w0 = seen[0] - vel[i, 0]
+        w1 = seen[1] - vel[i, 1]
+        w2 = seen[2] - vel[i, 2]
         k = volume * drag_rate(law, phi[c], d, math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), rho, mu, floor)
     coef[i] = k
     g = phi1(k * inv_mass[i] * half)
@@ -172,7 +178,7 @@ def drag_on_particle(
         fo = force[i, a]
         if pressure_force:
             fo -= volume * grad_p[c, a]
-        fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        fd = g * k * (seen[a] - vel[i, a]) + (g - 1.0) * fo
         f_other[i, a] = fo
         if initial:
             f_drag[i, a] = fd
@@ -228,11 +234,12 @@ def kick_with_drag(
             screen_decay = math.exp(-nu * screening * dt)
     for a in range(3):
         fo = f_other[i, a]
-        now = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        seen = _seen(u, c, disturbance, i, a, corrected)  # its bands change only at the end
+        now = g * k * (seen - vel[i, a]) + (g - 1.0) * fo
         mean_drag = 0.5 * (f_drag[i, a] + now)  # over the step: this half kick's and the first's
         impulse[i, a] += dt * mean_drag
         vel[i, a] += half * (fo + now) * im
-        fd = g * k * (_seen(u, c, disturbance, i, a, corrected) - vel[i, a]) + (g - 1.0) * fo
+        fd = g * k * (seen - vel[i, a]) + (g - 1.0) * fo
         f_drag[i, a] = fd
         force[i, a] = fo + fd
         angvel[i, a] += half * torque[i, a] * inv_inertia[i]
