@@ -117,7 +117,7 @@ POROSITY_SIGNATURES = {
     "cell_starts": (I1, I1, I1),
     "fill_cells": (L1, I1, I1),
     "sort_cells": (I1, I1, I1),
-    "sample_cells": (M, M, V, V, V, L1, B, F, L1, I1, I1, BOOL, H, H4, H, I1),
+    "sample_cells": (M, M, V, V, V, L1, B, F, F, L1, I1, I1, BOOL, H, H4, H, I1),
 }
 # the energy budget (kernels/observe/cuda_energy_budget.py)
 BUDGET_SIGNATURES = {

@@ -292,3 +292,36 @@ def test_a_rank_is_sent_the_particles_its_slab_of_cells_can_reach(periodic):
     assert reached[1] == {2, 3, 4, 5}
     assert reached[0] == ({0, 1, 2, 3, 7} if periodic else {0, 1, 2, 3})
     assert reached[2] == ({4, 5, 6, 7, 0} if periodic else {4, 5, 6, 7})
+
+
+@pytest.mark.parametrize("periodic", [(True, True, False), (False, True, True)])
+def test_bins_beyond_reach_are_skipped_without_losing_a_particle(periodic):
+    """The sampling sphere (R = 2 mm in 4 mm cells) and particles of up to 1.2 mm reach 3.2 mm,
+    so of the 27 bins around a cell the kernel reads the 13 within that distance: not the
+    corners (3.46 mm away) nor the bins above and below the edge columns (3.46 mm); the edge
+    columns themselves (2.83 mm) it reads. Against the lens volumes of every particle and every
+    periodic image, summed directly, with particles beyond every face (a bounded axis bins them
+    at its ends): a bin skipped wrongly drops whole particles from the sums."""
+    rng = np.random.default_rng(11)
+    shape, edge = (4, 3, 5), 0.004
+    grid = make_grid(shape, edge, periodic=periodic)
+    size = np.array(shape) * edge
+    count = 800
+    pos = rng.uniform(-0.1, 1.1, (count, 3)) * size
+    radius = rng.uniform(0.0001, 0.0012, count)
+    vel = rng.standard_normal((count, 3))
+    phi, vbar = np.zeros(grid.shape), np.zeros(grid.shape + (3,))
+    Porosity(grid, count).measure(particles(pos, radius, vel), phi, vbar)
+
+    big_r = grid.sampling_radius
+    lens = np.vectorize(lambda r, d: lens_volume(big_r, r, d))
+    shifts = np.array(list(itertools.product(*[(-1, 0, 1) if p else (0,) for p in periodic]))) * size
+    images = (np.where(periodic, np.mod(pos, size), pos)[None] + shifts[:, None]).reshape(-1, 3)
+    image_radius, image_vel = np.tile(radius, len(shifts)), np.tile(vel, (len(shifts), 1))
+    solid, moment = np.zeros(grid.shape), np.zeros(grid.shape + (3,))
+    for cell in itertools.product(*(range(n) for n in shape)):
+        volumes = lens(image_radius, np.linalg.norm(images - (np.array(cell) + 0.5) * edge, axis=1))
+        solid[cell], moment[cell] = volumes.sum(), volumes @ image_vel
+    assert np.abs(phi - np.maximum(1.0 - solid / sphere_volume(big_r), 0.0)).max() <= 1e-13
+    assert (phi < 0.9).sum() > 30 and (phi == 0.0).sum() < 3  # solid in most cells, few clamped
+    assert np.abs(vbar - moment / solid[..., None]).max() <= 1e-12

@@ -96,6 +96,14 @@ def _image(u, n):
 
 
 @njit(cache=True, inline="always")
+def _gap(centre, u, lower, width):
+    """Distance [m] along an axis from a cell centre to the bin of unwrapped index u, from
+    lower + u width to one width above. (The end bin of a bounded axis also holds the particles
+    beyond the grid, bin_particle, but those lie farther out, on its side away from the centre.)"""
+    return max(lower + u * width - centre, centre - (lower + (u + 1) * width), 0.0)
+
+
+@njit(cache=True, inline="always")
 def _add_particles(first, last, order, wrapped, vel, radius, sx, sy, sz, cx, cy, cz, big_r, want_means, sums):
     """sums (solid, three velocity moments, diameter moment) with the lens volumes of the
     particles order[first:last], shifted by the image (sx, sy, sz), added."""
@@ -116,6 +124,57 @@ def _add_particles(first, last, order, wrapped, vel, radius, sx, sy, sz, cx, cy,
     return solid, m0, m1, m2, md
 
 
+@njit(cache=True, inline="always")
+def _bins(
+    i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2, trim, reach,
+    cell_start, order, want_means,
+):  # fmt: skip
+    """The sums of sample_cell over the bins about cell (i, j, k) centred at (cx, cy, cz) [m],
+    those farther than sqrt(wide2) [m] skipped where `trim`."""
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    lx, ly, lz = spacing[0] * nx, spacing[1] * ny, spacing[2] * nz
+    sums = (0.0, 0.0, 0.0, 0.0, 0.0)
+    for ux in range(i - reach[0], i + reach[0] + 1):
+        gx, ix = _image(ux, nx)
+        if ix != 0 and not periodic[0]:
+            continue
+        gap_x = _gap(cx, ux, origin[0], spacing[0]) if trim else 0.0
+        for uy in range(j - reach[1], j + reach[1] + 1):
+            gy, iy = _image(uy, ny)
+            if iy != 0 and not periodic[1]:
+                continue
+            gap_y = _gap(cy, uy, origin[1], spacing[1]) if trim else 0.0
+            across = gap_x * gap_x + gap_y * gap_y
+            if trim and across > wide2:
+                continue
+            column = (gx * ny + gy) * nz
+            if periodic[2]:
+                for uz in range(k - reach[2], k + reach[2] + 1):
+                    gap_z = _gap(cz, uz, origin[2], spacing[2]) if trim else 0.0
+                    if trim and across + gap_z * gap_z > wide2:
+                        continue
+                    gz, iz = _image(uz, nz)
+                    g = column + gz
+                    sums = _add_particles(
+                        cell_start[g], cell_start[g + 1], order, wrapped, vel, radius,
+                        ix * lx, iy * ly, iz * lz, cx, cy, cz, big_r, want_means, sums,
+                    )  # fmt: skip
+            else:
+                # the bins of a bounded z range are contiguous in the sorted order; those within
+                # reach of the sphere are a run about k
+                lo = max(k - reach[2], 0)
+                hi = min(k + reach[2], nz - 1)
+                while trim and lo < k and across + _gap(cz, lo, origin[2], spacing[2]) ** 2 > wide2:
+                    lo += 1
+                while trim and hi > k and across + _gap(cz, hi, origin[2], spacing[2]) ** 2 > wide2:
+                    hi -= 1
+                sums = _add_particles(
+                    cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
+                    ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
+                )  # fmt: skip
+    return sums
+
+
 @njit(cache=True, parallel=True)
 def sample_cells(
     wrapped,
@@ -126,6 +185,7 @@ def sample_cells(
     shape,
     periodic,
     sampling_radius,
+    largest,
     reach,
     cell_start,
     order,
@@ -144,55 +204,49 @@ def sample_cells(
     for c in prange(last - first):
         cell = first + np.int64(c)  # the prange index is unsigned
         clamped += sample_cell(
-            cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start,
-            order, want_means, porosity, mean_velocity, mean_diameter,
+            cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
+            cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
         )  # fmt: skip
     return clamped
 
 
 @njit(cache=True, inline="always")
 def sample_cell(
-    cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, reach, cell_start, order,
-    want_means, porosity, mean_velocity, mean_diameter,
+    cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach, cell_start,
+    order, want_means, porosity, mean_velocity, mean_diameter,
 ):  # fmt: skip
     """sample_cells for one cell (also the GPU's, kernels/fluid/cuda_porosity.py): 1 if its
     porosity was clamped at 0, else 0."""
-    nx, ny, nz = shape[0], shape[1], shape[2]
+    ny, nz = shape[1], shape[2]
     big_r = sampling_radius
     sample_volume = 4.0 / 3.0 * math.pi * big_r * big_r * big_r
-    lx, ly, lz = spacing[0] * nx, spacing[1] * ny, spacing[2] * nz
     i = cell // (ny * nz)
     j = (cell // nz) % ny
     k = cell % nz
     cx = origin[0] + (i + 0.5) * spacing[0]
     cy = origin[1] + (j + 0.5) * spacing[1]
     cz = origin[2] + (k + 0.5) * spacing[2]
-    sums = (0.0, 0.0, 0.0, 0.0, 0.0)
-    for ux in range(i - reach[0], i + reach[0] + 1):
-        gx, ix = _image(ux, nx)
-        if ix != 0 and not periodic[0]:
-            continue
-        for uy in range(j - reach[1], j + reach[1] + 1):
-            gy, iy = _image(uy, ny)
-            if iy != 0 and not periodic[1]:
-                continue
-            column = (gx * ny + gy) * nz
-            if periodic[2]:
-                for uz in range(k - reach[2], k + reach[2] + 1):
-                    gz, iz = _image(uz, nz)
-                    g = column + gz
-                    sums = _add_particles(
-                        cell_start[g], cell_start[g + 1], order, wrapped, vel, radius,
-                        ix * lx, iy * ly, iz * lz, cx, cy, cz, big_r, want_means, sums,
-                    )  # fmt: skip
-            else:
-                # the bins of a bounded z range are contiguous in the sorted order
-                lo = max(k - reach[2], 0)
-                hi = min(k + reach[2], nz - 1)
-                sums = _add_particles(
-                    cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
-                    ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
-                )  # fmt: skip
+    # a bin farther from the centre than the sampling radius and the largest particle radius
+    # holds no particle that reaches the sphere (its lens volume is exactly 0, never added): it
+    # is skipped, so the sums are those of every bin, bit for bit. Widened by a relative 1e-9
+    # for the rounding of the binning. Where even the corner bins of the reach are nearer (cells
+    # narrow against the particles), no distance is worked out.
+    wide2 = ((big_r + largest) * (1.0 + 1e-9)) ** 2
+    corner2 = 0.0
+    for a in range(3):
+        far = max(reach[a] - 0.5, 0.0) * spacing[a]
+        corner2 += far * far
+    trim = corner2 > wide2
+    if trim:  # one loop for each, so that the narrow cells' loop does no test at all
+        sums = _bins(
+            i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2, True,
+            reach, cell_start, order, want_means,
+        )  # fmt: skip
+    else:
+        sums = _bins(
+            i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2, False,
+            reach, cell_start, order, want_means,
+        )  # fmt: skip
     phi = 1.0 - sums[0] / sample_volume
     clamped = 0
     if phi < 0.0:

@@ -70,12 +70,12 @@ class Porosity:
         cell_of, wrapped, order = self.cell_of[:n], self.wrapped[:n], self.order[:n]
         bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, cell_of, wrapped)
         counting_sort(cell_of, self.cell_start.size - 1, self.cell_start, order)
-        want, vbar, dbar = self._sampled(radius, mean_velocity, mean_diameter, largest)
+        want, vbar, dbar, largest = self._sampled(radius, mean_velocity, mean_diameter, largest)
         plane = int(self.shape[1] * self.shape[2])
         slabs = self.slabs
         clamped = sample_cells(
             wrapped, particles.vel, radius, self.origin, self.spacing, self.shape, self.periodic,
-            self.sampling_radius, self.reach, self.cell_start, order, want, porosity, vbar, dbar,
+            self.sampling_radius, largest, self.reach, self.cell_start, order, want, porosity, vbar, dbar,
             slabs.lo * plane, slabs.hi * plane,
         )  # fmt: skip
         if slabs.split:
@@ -87,7 +87,7 @@ class Porosity:
     def _sampled(self, radius, mean_velocity, mean_diameter, largest=None) -> tuple:
         """The reach of the sampling spheres into the bins, now (largest: the largest radius of
         all the particles, given where only some are passed); (whether means are wanted, and the
-        arrays for them, given or scratch)."""
+        arrays for them, given or scratch, and the largest radius)."""
         # bins on either side of a cell that a particle touching its sampling sphere can lie in
         if largest is None:
             largest = float(radius.max()) if radius.size else 0.0
@@ -99,7 +99,7 @@ class Porosity:
             vbar = self._scratch("velocity", tuple(self.grid.shape) + (3,)) if want else self._no_velocity
         if dbar is None:
             dbar = self._scratch("diameter", tuple(self.grid.shape)) if want else self._no_diameter
-        return want, vbar, dbar
+        return want, vbar, dbar, largest
 
     def gpu_measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> tuple:
         """`measure` on a GPU (kernels/fluid/cuda_porosity.py), for a grid that keeps its cells:
@@ -110,11 +110,11 @@ class Porosity:
         if self.gpu_sort is None:
             self.gpu_sort = tuple(np.zeros(size, np.int32) for size in (cells, cells + 1, cells, n, 1))
         count, start, following, order, clamped = self.gpu_sort
-        want, vbar, dbar = self._sampled(p.radius, mean_velocity, mean_diameter)
+        want, vbar, dbar, largest = self._sampled(p.radius, mean_velocity, mean_diameter)
         grid = (self.origin, self.spacing, self.shape, self.periodic)
         sample = (
-            self.wrapped, p.vel, p.radius, *grid, self.sampling_radius, self.reach, start, order, want,
-            porosity, vbar, dbar, clamped,
+            self.wrapped, p.vel, p.radius, *grid, self.sampling_radius, largest, self.reach, start, order,
+            want, porosity, vbar, dbar, clamped,
         )  # fmt: skip
         binned = (p.pos, *grid, self.cell_of, self.wrapped)
         return [
