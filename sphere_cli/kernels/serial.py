@@ -43,6 +43,8 @@ class _DistinctArrays(CompilerBase):
 
 
 def serial_twin(kernel, distinct: bool = False, **callees):
+    if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT: a plain function, threads or none
+        return kernel
     func = kernel.py_func
     scope = dict(func.__globals__)
     scope.update(callees)

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from sphere_cli.kernels.fluid.poisson import apply_operator, face_means, prepare_system
+from sphere_cli.physics.fluid import poisson as poisson_module
 from sphere_cli.physics.fluid.grid import FluidGrid
 from sphere_cli.physics.fluid.poisson import PoissonSolver
 
@@ -305,12 +306,18 @@ def test_zero_forcing_gives_exactly_zero(method):
 
 
 @pytest.mark.parametrize("preconditioner", ["multigrid", "jacobi"])
-def test_results_do_not_depend_on_the_thread_count(preconditioner):
+def test_results_do_not_depend_on_the_thread_count(preconditioner, monkeypatch):
+    """Also: one thread takes the diagonal preconditioner's iterations in the serial twin of
+    their compiled loop (kernels/serial.py), two the parallel kernels: the same bits."""
     rng = np.random.default_rng(2)
     shape = (12, 10, 9)
     grid, solver, c, ax, ay, az = random_system(rng, shape, (True, True, False), "dirichlet", "dirichlet")
     solver = PoissonSolver(grid, "dirichlet", "dirichlet", preconditioner=preconditioner)
     b = rng.standard_normal(shape)
+    calls = []
+    for name in ("diagonal_cg", "diagonal_cg_serial"):
+        kernel = getattr(poisson_module, name)
+        monkeypatch.setattr(poisson_module, name, lambda *a, k=kernel, n=name: calls.append(n) or k(*a))
     results = []
     for threads in (1, 2):
         numba.set_num_threads(threads)
@@ -319,6 +326,8 @@ def test_results_do_not_depend_on_the_thread_count(preconditioner):
         results.append((x, result))
     (x1, r1), (x2, r2) = results
     assert np.array_equal(x1, x2) and r1 == r2
+    if preconditioner == "jacobi":
+        assert calls[0] == "diagonal_cg_serial" and calls[-1] == "diagonal_cg", calls
 
 
 def test_kernels_without_jit_agree():

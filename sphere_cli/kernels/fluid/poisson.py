@@ -33,6 +33,7 @@ import math
 from numba import njit, prange
 
 from ..exact_sum import WORDS, add_exact, exact_value
+from ..serial import serial_twin
 
 
 @njit(cache=True, inline="always")
@@ -314,6 +315,16 @@ def new_direction(p, z, beta, z_mean, lo, hi):
         for k in range(nz):
             # beta = 0 (a restart) overwrites p without reading it
             p[i, j, k] = (z[i, j, k] - z_mean) + (beta * p[i, j, k] if beta != 0.0 else 0.0)
+
+
+# one thread: the inner iterations without parallel regions (kernels/serial.py), whose start
+# (about 1 us each, three an iteration) is most of an iteration on a grid of a few hundred cells
+diagonal_cg_serial = serial_twin(
+    diagonal_cg,
+    apply_operator=serial_twin(apply_operator),
+    cg_step=serial_twin(cg_step),
+    new_direction=serial_twin(new_direction),
+)
 
 
 @njit(cache=True, parallel=True)

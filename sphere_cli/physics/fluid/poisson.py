@@ -48,6 +48,7 @@ from ...kernels.fluid.poisson import (
     column_sums,
     column_words,
     diagonal_cg,
+    diagonal_cg_serial,
     jacobi_smooth,
     jacobi_smooth_pairs,
     jacobi_sweep,
@@ -59,6 +60,7 @@ from ...kernels.fluid.poisson import (
     restrict,
     shift,
 )
+from ...kernels.serial import use_serial
 from .grid import FluidGrid
 
 METHODS = ("pcg", "jacobi")
@@ -536,7 +538,8 @@ class PoissonSolver:
             z_mean = slabs.sum(self.part_c) / n if singular else 0.0
             new_direction(self.p, self.z, 0.0, z_mean, lo, hi)
             if compiled:
-                iterations, status = diagonal_cg(
+                inner = diagonal_cg_serial if use_serial() else diagonal_cg
+                iterations, status = inner(
                     x, self.r, self.p, self.q, self.z, self.diag, self.inv_diag, ax, ay, az,
                     self.periodic_x, self.periodic_y, self.ih2, self.part_a, self.part_b, self.part_c,
                     slabs.words, rz, singular, scale, self.tolerance, iterations, self.max_iterations,
