@@ -106,6 +106,31 @@ def test_gradient_ghosts_and_force_in_a_linear_field():
         np.testing.assert_allclose(force, expected, rtol=1e-10)
 
 
+def test_a_periodic_axis_interpolates_across_its_ends():
+    """Along periodic x and y the force blends the last cell with the first: a particle a
+    quarter cell beyond the last centre, or the same distance before the first (and a period
+    away), feels 3/4 of the last cell's gradient and 1/4 of the first's; along bounded z one
+    beyond the outer centres feels the outer cell's alone."""
+    rng = np.random.default_rng(5)
+    grad = rng.uniform(-100.0, 100.0, SHAPE + (3,))
+    phi = np.zeros(SHAPE)
+    h, (nx, ny, _) = SPACING, SHAPE
+    # (x, y) a quarter cell past the last centre, its images, and z below the lowest centre
+    pos = np.array([[(nx - 0.25) * h[0], (ny - 0.25) * h[1], 0.2 * h[2]],
+                    [-0.25 * h[0], -0.25 * h[1], 0.2 * h[2]],
+                    [(2 * nx - 0.25) * h[0], (-ny - 0.25) * h[1], 0.2 * h[2]]])  # fmt: skip
+    radius = np.full(3, 1e-3)
+    force = np.zeros((3, 3))
+    periodic = np.array([1, 1, 0], np.uint8)
+    none = np.zeros(3)
+    add_pressure_forces(pos, radius, grad, phi, np.uint8(0), none, h, periodic, 0.0, none, force)
+    corners = grad[[nx - 1, 0]][:, [ny - 1, 0], 0]  # (x end, y end, component)
+    weights = np.array([0.75, 0.25])
+    expected = -(4.0 / 3.0 * math.pi * 1e-9) * np.einsum("i,j,ijc->c", weights, weights, corners)
+    for row in force:
+        np.testing.assert_allclose(row, expected, rtol=1e-12)
+
+
 def test_kernels_run_as_plain_python():
     """The same tests with NUMBA_DISABLE_JIT=1 (the kernels are valid Python)."""
     env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(ROOT))

@@ -33,7 +33,7 @@ def _corner(x, origin, h, n, periodic):
     w = s - i0
     if periodic:
         i0 = i0 % n
-        return i0, (i0 + 1) % n, w
+        return i0, i0 + 1 if i0 + 1 < n else 0, w  # (a second remainder costs an integer division)
     if i0 < 0:
         return 0, 0, 0.0
     if i0 >= n - 1:
@@ -42,15 +42,30 @@ def _corner(x, origin, h, n, periodic):
 
 
 @njit(cache=True, inline="always")
+def _blend(f000, f100, f010, f110, f001, f101, f011, f111, wx, wy, wz):
+    """Trilinear interpolation between the values at the eight corners (fxyz: 0 lower, 1 upper)."""
+    return (1.0 - wz) * (
+        (1.0 - wy) * ((1.0 - wx) * f000 + wx * f100) + wy * ((1.0 - wx) * f010 + wx * f110)
+    ) + wz * ((1.0 - wy) * ((1.0 - wx) * f001 + wx * f101) + wy * ((1.0 - wx) * f011 + wx * f111))
+
+
+@njit(cache=True, inline="always")
 def _trilinear(f, i0, i1, j0, j1, k0, k1, wx, wy, wz):
     """Trilinear interpolation of a cell field between the eight corners found by _corner."""
-    return (1.0 - wz) * (
-        (1.0 - wy) * ((1.0 - wx) * f[i0, j0, k0] + wx * f[i1, j0, k0])
-        + wy * ((1.0 - wx) * f[i0, j1, k0] + wx * f[i1, j1, k0])
-    ) + wz * (
-        (1.0 - wy) * ((1.0 - wx) * f[i0, j0, k1] + wx * f[i1, j0, k1])
-        + wy * ((1.0 - wx) * f[i0, j1, k1] + wx * f[i1, j1, k1])
-    )
+    return _blend(
+        f[i0, j0, k0], f[i1, j0, k0], f[i0, j1, k0], f[i1, j1, k0],
+        f[i0, j0, k1], f[i1, j0, k1], f[i0, j1, k1], f[i1, j1, k1], wx, wy, wz,
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _trilinear_component(f, a, i0, i1, j0, j1, k0, k1, wx, wy, wz):
+    """_trilinear of component a of a vector cell field (nx, ny, nz, 3), read in place: a view
+    f[:, :, :, a] made for each particle cost a quarter of the force's time."""
+    return _blend(
+        f[i0, j0, k0, a], f[i1, j0, k0, a], f[i0, j1, k0, a], f[i1, j1, k0, a],
+        f[i0, j0, k1, a], f[i1, j0, k1, a], f[i0, j1, k1, a], f[i1, j1, k1, a], wx, wy, wz,
+    )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
@@ -70,7 +85,7 @@ def particle_pressure_force(
     if whole:
         share = vol / (1.0 - _trilinear(porosity, i0, i1, j0, j1, k0, k1, wx, wy, wz))
     for a in range(3):
-        g = _trilinear(grad[:, :, :, a], i0, i1, j0, j1, k0, k1, wx, wy, wz)
+        g = _trilinear_component(grad, a, i0, i1, j0, j1, k0, k1, wx, wy, wz)
         force[n, a] += -share * g - rho_f * vol * gravity[a]
 
 
