@@ -4,13 +4,15 @@ the hooks one step at a time, without the interpreter's ~18 us a step.
 It applies when the step is exactly: the particles' kick-drift, the neighbour search, the pair
 contacts, optionally the plane-wall contacts and one more force from a module that has a
 compiled loop with that force in it (`steps_kernel`, and `force_arguments` for its kernel: the
-1D VANS fluid's force on the particles), the particles' kick, and nothing after the kick
-(physics/module.py); with the plane walls and no such force, the walls' motion (moving or
-stress-controlled walls, their kick-drift and kick around the particles') may be in it too.
-Anything else in the step (the energy budget, a fluid with another force or its own kick, a
-hook replaced by a wrapper) keeps the step-by-step loop. simulation.advance bounds each call by
-the next step where an after_step hook runs (a fluid's coupling, a step where a stage may end),
-so those run in Python.
+1D VANS fluid's force on the particles, the Navier-Stokes drag), the particles' kick or that
+module's own where it takes the kick over (`kick_arguments` for it: the Navier-Stokes drag's
+exact kick), and nothing after the kick (physics/module.py); the module's `steps_taken` then
+reports what its loop found (the Navier-Stokes drag's porosity floor); with the plane walls and
+no such force, the walls' motion (moving or stress-controlled walls, their kick-drift and kick
+around the particles') may be in it too. Anything else in the step (the energy budget, a fluid
+with another force, a hook replaced by a wrapper) keeps the step-by-step loop.
+simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
+coupling, a step where a stage may end), so those run in Python.
 """
 
 from __future__ import annotations
@@ -125,7 +127,6 @@ class CompiledSteps:
             and forces
             and is_hook_of(forces[0], PairContactForces, "forces")
             and len(kick) == 1
-            and is_hook_of(kick[0], Motion, "kick")
             and not step.finish_step
         ):
             return None
@@ -135,6 +136,13 @@ class CompiledSteps:
         if forces and _has_steps_kernel(forces[0]):
             extra = forces.pop(0).__self__
         if forces or (moving and (walls is None or extra is not None)):
+            return None
+        # the kick: the particles' own, or that of the module whose loop kicks them itself
+        if extra is not None and "kick" in extra.takes_over:
+            kicks_own = kick[0].__self__ is extra and is_hook_of(kick[0], type(extra), "kick")
+        else:
+            kicks_own = is_hook_of(kick[0], Motion, "kick")
+        if not kicks_own:
             return None
         return cls(step.prepare[0].__self__, contact, walls, extra, moving)
 
@@ -169,8 +177,11 @@ class CompiledSteps:
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion)
         else:
             extra = self.extra.force_arguments(state)
+            if "kick" in self.extra.takes_over:
+                kicks = self.extra.kick_arguments(state)
             twin = getattr(self.extra, "serial_steps_kernel", None)
             loop = twin if serial and twin is not None else self.extra.steps_kernel
             done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks)
+            self.extra.steps_taken(state, int(done))
         state.neighbors.moved2 = moved2
         return int(done), bool(drifted)

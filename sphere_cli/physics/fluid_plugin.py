@@ -125,6 +125,10 @@ class FluidModule(Module):
         GPU is used."""
         return None
 
+    def steps_taken(self, state, done: int) -> None:
+        """After `done` steps of its compiled loop (`steps_kernel`, physics/compiled_steps.py),
+        before the clock counts them: what the module reports of them (nothing here)."""
+
     def particle_arrays(self, state) -> dict | None:
         """{name: (holder, attribute)} of the arrays it keeps per particle, which travel with the
         particles between MPI ranks (physics/rank_steps.py); None: the model does not run split

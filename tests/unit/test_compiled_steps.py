@@ -21,6 +21,7 @@ from sphere_cli.kernels import steps as kernels_steps
 from sphere_cli.kernels import walls as kernels_walls
 from sphere_cli.kernels.exact_sum import WORDS
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
+from sphere_cli.kernels.fluid.drag import drag_steps
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import contact as contact_module
@@ -39,9 +40,27 @@ def _state(scene) -> dict:
     arrays["nbr"] = nl.nbr
     if w is not None:
         arrays["wall springs"] = w.hist
-    if scene.state.fluid is not None:
+    if scene.state.fluid is not None and hasattr(scene.state.fluid, "column"):  # 1D VANS
         arrays["fluid velocity"] = scene.state.fluid.column.u
+    elif scene.state.fluid is not None:  # Navier-Stokes
+        drag = scene.fluid.drag
+        arrays.update(v=scene.fluid.fs.v, p=scene.fluid.fs.p, impulse=drag.impulse, f_drag=drag.f_drag)
+        arrays["self-induced"] = drag.disturbance
     return arrays
+
+
+def _fluidized(averaging: str, floor: float | None = None):
+    """configs/fluidized-bed.toml (192 beads, 4 of its 12 layers fixed, water forced up through
+    a 1 x 1 x 8 Navier-Stokes grid, a fluid step every 5 DEM steps), the free beads thrown
+    sideways at 0.2 m/s across the periodic faces, so that the list goes stale every ~150
+    steps; the drag per particle less its self-induced velocity, or cell-averaged."""
+    text = (CONFIGS / "fluidized-bed.toml").read_text()
+    text = text.replace('law = "gidaspow"\n', f'law = "gidaspow"\naveraging = "{averaging}"\n')
+    if floor is not None:
+        text = text.replace('law = "gidaspow"\n', f'law = "gidaspow"\nporosity_floor = {floor}\n')
+    text = text.replace("[particles]\n", "[particles]\nvelocity = [0.2, 0.1, 0.0]\n")
+    assert text.count("averaging") == 1 and "0.2, 0.1" in text
+    return parse_case(text)
 
 
 def _case(name: str):
@@ -170,10 +189,56 @@ def test_the_walls_totals_from_the_near_wall_list_are_the_dense_sums_bitwise():
     assert np.count_nonzero(dense[[0, 2, 3]] != rest[3][[0, 2, 3]]) == 9
 
 
-def test_3d_fluids_keep_the_step_by_step_loop():
-    """The Navier-Stokes force on the particles is more than one kernel call, and its implicit
-    drag takes over the kick."""
-    assert build_scene(load_case(CONFIGS / "fluidized-bed.toml")).step.compiled is None
+@pytest.mark.parametrize(("averaging", "threads"), [("particle", 1), ("particle", 2), ("cell", 1)])
+def test_the_navier_stokes_drag_in_the_compiled_loop_is_the_step_by_step_loop_bitwise(averaging, threads):
+    """The Navier-Stokes drag's loop (kernels/fluid/drag.py drag_steps): the particles binned
+    into the fluid's cells, their drag, the sums of the cells' drag coefficients (for the
+    self-induced velocity, with the drag per particle) and the drag's exact kick in place of
+    the particles' kick; the fluid's steps between the calls."""
+    numba.set_num_threads(threads)
+    try:
+        compiled, stepwise = build_scene(_fluidized(averaging)), build_scene(_fluidized(averaging))
+        assert compiled.step.compiled is not None and compiled.step.compiled.extra is compiled.fluid
+        assert compiled.fluid.drag.corrected == (averaging == "particle")
+        stepwise.step.compiled = None
+        for scene in (compiled, stepwise):
+            advance(scene, 1003)  # not coupling steps (every 5th): the calls end between them
+            advance(scene, 8)
+        assert compiled.state.neighbors.builds == stepwise.state.neighbors.builds >= 4
+        assert compiled.state.clock.step == stepwise.state.clock.step == 1011
+        a, b = _state(compiled), _state(stepwise)
+        assert np.count_nonzero(a["impulse"]) > 0 and np.count_nonzero(a["self-induced"]) == (
+            a["self-induced"].size if averaging == "particle" else 0
+        )
+        for key in a:
+            assert np.array_equal(a[key], b[key]), key
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+
+
+def test_the_compiled_loop_warns_of_the_porosity_floor_at_the_step_the_hooks_do():
+    """A porosity under fluid.drag.porosity_floor set between calls (the fluid's next step
+    measures it again): the loop returns after the first step that finds particles under it,
+    and the warning names that step and count, as the hooks' does; once a run."""
+    found = []
+    for compiled in (True, False):
+        scene = build_scene(_fluidized("particle"))
+        if not compiled:
+            scene.step.compiled = None
+        advance(scene, 7)
+        scene.fluid.fs.porosity[...] = 0.05
+        with pytest.warns(RuntimeWarning, match="porosity_floor") as caught:
+            advance(scene, 20)
+        found.append([str(w.message) for w in caught if "porosity_floor" in str(w.message)])
+        assert scene.state.clock.step == 27
+    assert found[0] == found[1] and len(found[0]) == 1
+    assert found[0][0].startswith("step 7: porosity 0.05 in fluid cell")
+    assert "(192 particle(s) this step" in found[0][0]
+
+
+def test_a_darcy_fluid_keeps_the_step_by_step_loop():
+    """Darcy's force on the particles (and on a wall it pushes) has no compiled loop."""
+    assert build_scene(load_case(CONFIGS / "seepage-pulses-darcy.toml")).step.compiled is None
 
 
 def test_a_wrapped_hook_keeps_the_step_by_step_loop():
@@ -202,7 +267,7 @@ def test_the_compiled_loops_take_no_function_arguments():
     process: that loop would compile on every run and add a cache file each time."""
     scene = build_scene(load_case(CONFIGS / "bedload.toml"))
     advance(scene, 50)
-    for loop in (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial):
+    for loop in (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial, drag_steps):
         for signature in loop.signatures:
             assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
     assert vans1d_steps.signatures

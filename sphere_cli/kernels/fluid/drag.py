@@ -57,6 +57,10 @@ import math
 
 from numba import njit, prange
 
+from ..motion import kick_drift
+from ..steps import contacts
+from .porosity import bin_particles
+
 GIDASPOW = 0
 DI_FELICE = 1
 ERGUN_POROSITY = 0.8  # Gidaspow: Ergun at or below, Wen-Yu above
@@ -430,3 +434,39 @@ def cell_drag(law, rho, mu, floor, u, phi, diameter, vp, grad_p, pressure_exchan
             f_i[c, 0] -= solid * grad_p[c, 0]
             f_i[c, 1] -= solid * grad_p[c, 1]
             f_i[c, 2] -= solid * grad_p[c, 2]
+
+
+@njit(cache=True)
+def coefficients_if_any(coefficients):
+    """cell_coefficients with the argument tuple `coefficients`, or nothing for None (an argument,
+    so that Numba leaves out the branch its type rules out)."""
+    if coefficients is not None:
+        cell_coefficients(*coefficients)
+
+
+@njit(cache=True)
+def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
+    """kernels/steps.py dem_steps with the Navier-Stokes drag, in the order of its hooks
+    (physics/fluid/drag.py): after the contacts the particles are binned into the fluid's cells
+    and given the drag (bin_particles, particle_drag), and drag_kick takes the kick's place
+    (`kicks` its arguments), after the sums of each cell's drag coefficients where the
+    self-induced velocity is subtracted. drag = (the arguments of bin_particles, of
+    particle_drag, of cell_coefficients or None, below (1,) int64, stop): the particles found
+    under the porosity floor by the last step that found any are written to below[0], and with
+    `stop` the loop returns after that step (the caller warns of it at its step)."""
+    binning, forces, coefficients, below, stop = drag
+    moved2 = 0.0
+    for done in range(steps):
+        moved2 = kick_drift(*drift)
+        if moved2 > threshold2:
+            return done, moved2, True
+        contacts(cross, pairs, walls)
+        bin_particles(*binning)
+        count = particle_drag(*forces)
+        coefficients_if_any(coefficients)
+        drag_kick(*kicks)
+        if count:
+            below[0] = count
+            if stop:
+                return done + 1, moved2, False
+    return steps, moved2, False

@@ -109,6 +109,7 @@ class FluidParticleDrag:
         self.order = np.zeros(n, dtype=np.int64)
         self.every_cell = Slabs(self.shape)  # the cells one rank settles (fluid_forcing)
         self.warned = False
+        self.found_below = np.zeros(1, dtype=np.int64)  # by the compiled steps (step_arguments)
         self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
         self.exchanged_on_device = False  # a GPU takes the momentum exchange (gpu_steps)
         # on MPI ranks: what it takes of every rank's particles (physics/rank_steps.py
@@ -127,38 +128,50 @@ class FluidParticleDrag:
 
     def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
         """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
-        p = state.particles
-        bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
-        phi = fs.porosity.reshape(-1)
-        below = particle_drag(
-            self.law,
-            self.density,
-            self.viscosity,
-            self.floor,
-            self.pressure_force,
-            self.cell_of,
-            p.vel,
-            p.radius,
-            p.inv_mass,
-            fs.v.reshape(-1, 3),
-            phi,
-            fs.grad_p.reshape(-1, 3),
-            state.clock.dt,
-            spring_dt == 0.0,
-            self.cell_share,
-            self.cell_diameter,
-            self.cell_velocity,
-            self.disturbance,
-            p.force,
-            self.f_other,
-            self.coef,
-            self.f_drag,
-        )
+        bin_particles(*self._binning(state))
+        below = particle_drag(*self._drag_arguments(state, fs, spring_dt == 0.0))
         if below:
-            self._warn_below(state, phi, f"{below} particle(s) this step")
+            self._warn_below(state.clock.step, fs.porosity.reshape(-1), f"{below} particle(s) this step")
 
-    def _warn_below(self, state: State, phi, how_many: str) -> None:
-        """Warn, once a run, that particles' cells are below the porosity floor."""
+    def _binning(self, state: State) -> tuple:
+        """The arguments of bin_particles: each particle's fluid cell into cell_of."""
+        return (
+            state.particles.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of,
+            self.wrapped,
+        )  # fmt: skip
+
+    def _drag_arguments(self, state: State, fs, initial: bool) -> tuple:
+        """The arguments of particle_drag (`initial`: the forces of the initial state)."""
+        p = state.particles
+        return (
+            self.law, self.density, self.viscosity, self.floor, self.pressure_force, self.cell_of, p.vel,
+            p.radius, p.inv_mass, fs.v.reshape(-1, 3), fs.porosity.reshape(-1), fs.grad_p.reshape(-1, 3),
+            state.clock.dt, initial, self.cell_share, self.cell_diameter, self.cell_velocity,
+            self.disturbance, p.force, self.f_other, self.coef, self.f_drag,
+        )  # fmt: skip
+
+    def step_arguments(self, state: State, fs) -> tuple:
+        """The drag's argument of the compiled steps (kernels/fluid/drag.py drag_steps), valid
+        until the next fluid step: the grid's response bands follow its cells here, as the kick
+        would make them (they change only at fluid steps). One rank only: the sums of the cells'
+        drag coefficients are this rank's."""
+        coefficients = None
+        if self.corrected:
+            self._follow_grid(state.clock.dt)
+            coefficients = (self.cell_of, self.coef, self.cell_coef)
+        self.found_below[0] = 0
+        drag = self._drag_arguments(state, fs, False)
+        return self._binning(state), drag, coefficients, self.found_below, not self.warned
+
+    def steps_taken(self, state: State, fs, done: int) -> None:
+        """After `done` compiled steps: warn of the particles the last of them found under the
+        porosity floor, at that step, as `forces` would have."""
+        if self.found_below[0] and not self.warned:
+            since = f"{self.found_below[0]} particle(s) this step"
+            self._warn_below(state.clock.step + done - 1, fs.porosity.reshape(-1), since)
+
+    def _warn_below(self, step: int, phi, how_many: str) -> None:
+        """Warn, once a run, that particles' cells are below the porosity floor at `step`."""
         if self.warned:
             return
         self.warned = True
@@ -169,7 +182,7 @@ class FluidParticleDrag:
             index = tuple(int(k) for k in np.unravel_index(cell, self.shape))
             where = f"porosity {phi[cell]:.3g} in fluid cell {index}"
         warnings.warn(
-            f"step {state.clock.step}: {where} is below fluid.drag.porosity_floor = "
+            f"step {step}: {where} is below fluid.drag.porosity_floor = "
             f"{self.floor}; the drag uses the floor there ({how_many}, not repeated)",
             RuntimeWarning,
             stacklevel=3,
@@ -180,7 +193,7 @@ class FluidParticleDrag:
         the porosity floor since the last one (gpu_steps)."""
         if self.below is not None and self.below[0]:
             since = f"{self.below[0]} particle-step(s) since the last fluid step"
-            self._warn_below(state, fs.porosity.reshape(-1), since)
+            self._warn_below(state.clock.step, fs.porosity.reshape(-1), since)
             self.below[0] = 0
 
     def gpu_steps(self, state: State, fs, fluid_dt: float | None = None) -> GpuSteps:
@@ -215,13 +228,7 @@ class FluidParticleDrag:
         if self.corrected:
             self._follow_grid(dt)
             kick = [*by_cell, (k.cell_coefficients, cells, (start, order, self.coef, count, self.cell_coef))]
-        kick_args = (
-            p.vel, p.angvel, p.torque, p.inv_mass, p.inv_inertia, self.cell_of, u, self.coef, self.f_other,
-            dt, p.force, self.f_drag, self.impulse, self.disturbance, self.cell_coef,
-            1.0 / self.inv_cell_volume, self.band_weight, self.band_rate, self.band_decay, self.viscosity,
-            self.viscosity / self.density,
-        )  # fmt: skip
-        kick.append((k.drag_kick, n, kick_args))
+        kick.append((k.drag_kick, n, self.kick_arguments(state, fs)))
         per_particle = (self.cell_of, self.coef, self.f_other, self.f_drag, self.impulse, self.disturbance)
         steps = GpuSteps([(k.drag_forces, n, forces)], kick, (*per_particle, self.below))
         steps.scratch = (*self.gpu_sort, self.wrapped, self.cell_coef)
@@ -242,33 +249,20 @@ class FluidParticleDrag:
     def kick(self, state: State, fs) -> None:
         """Second half kick of the particles with the drag of the last forces() call; then each
         particle's self-induced velocity follows the drag of the step."""
-        p = state.particles
         if self.corrected:
             self._follow_grid(state.clock.dt)
             self._cell_coefficients(state)
-        drag_kick(
-            p.vel,
-            p.angvel,
-            p.torque,
-            p.inv_mass,
-            p.inv_inertia,
-            self.cell_of,
-            fs.v.reshape(-1, 3),
-            self.coef,
-            self.f_other,
-            state.clock.dt,
-            p.force,
-            self.f_drag,
-            self.impulse,
-            self.disturbance,
-            self.cell_coef,
-            1.0 / self.inv_cell_volume,
-            self.band_weight,
-            self.band_rate,
-            self.band_decay,
-            self.viscosity,
-            self.viscosity / self.density,
-        )
+        drag_kick(*self.kick_arguments(state, fs))
+
+    def kick_arguments(self, state: State, fs) -> tuple:
+        """The arguments of drag_kick (kernels/fluid/drag.py)."""
+        p = state.particles
+        return (
+            p.vel, p.angvel, p.torque, p.inv_mass, p.inv_inertia, self.cell_of, fs.v.reshape(-1, 3),
+            self.coef, self.f_other, state.clock.dt, p.force, self.f_drag, self.impulse, self.disturbance,
+            self.cell_coef, 1.0 / self.inv_cell_volume, self.band_weight, self.band_rate, self.band_decay,
+            self.viscosity, self.viscosity / self.density,
+        )  # fmt: skip
 
     def _cell_coefficients(self, state: State) -> None:
         """cell_coef, the sum of the drag coefficients of each cell's particles in particle

@@ -24,6 +24,7 @@ import numpy as np
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
 from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
 from ...errors import NumericalError
+from ...kernels.fluid.drag import drag_steps
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
     add_grid_source,
@@ -596,6 +597,18 @@ class NavierStokes(FluidModule):
 
     def kick(self, state) -> None:
         self.drag.kick(state, self.fs)
+
+    # the compiled steps with the drag and its kick in the loop (physics/compiled_steps.py)
+    steps_kernel = staticmethod(drag_steps)
+
+    def force_arguments(self, state) -> tuple:
+        return self.drag.step_arguments(state, self.fs)
+
+    def kick_arguments(self, state) -> tuple:
+        return self.drag.kick_arguments(state, self.fs)
+
+    def steps_taken(self, state, done: int) -> None:
+        self.drag.steps_taken(state, self.fs, done)
 
     on_gpu = True
     stability_reads_particles = True  # the fastest particle's cells a fluid step
