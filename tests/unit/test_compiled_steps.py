@@ -20,8 +20,10 @@ from sphere_cli.kernels import motion as kernels_motion
 from sphere_cli.kernels import steps as kernels_steps
 from sphere_cli.kernels import walls as kernels_walls
 from sphere_cli.kernels.exact_sum import WORDS
+from sphere_cli.kernels.fluid import drag as kernels_drag
+from sphere_cli.kernels.fluid import porosity as kernels_porosity
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
-from sphere_cli.kernels.fluid.drag import drag_steps
+from sphere_cli.kernels.fluid.drag import drag_steps, drag_steps_serial
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import contact as contact_module
@@ -216,6 +218,24 @@ def test_the_navier_stokes_drag_in_the_compiled_loop_is_the_step_by_step_loop_bi
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
+def test_the_navier_stokes_twins_on_one_thread_are_the_parallel_kernels_on_two_bitwise():
+    """On one thread the drag's loop and hooks run the serial twins of the binning, the drag and
+    its kick (kernels/serial.py); on two the parallel kernels: the same bits."""
+    runs = {}
+    try:
+        for threads in (2, 1):
+            numba.set_num_threads(threads)
+            scene = build_scene(_fluidized("particle"))
+            advance(scene, 1011)
+            assert scene.state.neighbors.builds >= 4
+            runs[threads] = _state(scene)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert drag_steps_serial.overloads and drag_steps.overloads
+    for key in runs[1]:
+        assert np.array_equal(runs[1][key], runs[2][key]), key
+
+
 def test_the_compiled_loop_warns_of_the_porosity_floor_at_the_step_the_hooks_do():
     """A porosity under fluid.drag.porosity_floor set between calls (the fluid's next step
     measures it again): the loop returns after the first step that finds particles under it,
@@ -265,12 +285,14 @@ def test_a_subclass_with_forces_of_its_own_keeps_the_step_by_step_loop():
 def test_the_compiled_loops_take_no_function_arguments():
     """A kernel passed as an argument keys Numba's cache by an object that is new in every
     process: that loop would compile on every run and add a cache file each time."""
-    scene = build_scene(load_case(CONFIGS / "bedload.toml"))
-    advance(scene, 50)
-    for loop in (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial, drag_steps):
+    for case in (load_case(CONFIGS / "bedload.toml"), _fluidized("particle")):
+        advance(build_scene(case), 50)
+    loops = (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial, drag_steps, drag_steps_serial)
+    for loop in loops:
         for signature in loop.signatures:
             assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
-    assert vans1d_steps.signatures
+    assert vans1d_steps.signatures or vans1d_steps_serial.signatures
+    assert drag_steps.signatures or drag_steps_serial.signatures
 
 
 def test_run_frames_and_checkpoints_fall_on_their_steps(tmp_path):
@@ -347,12 +369,16 @@ def _written_elsewhere(arguments: tuple, written: set[int]) -> list[tuple[int, i
     ]
 
 
-@pytest.mark.parametrize("name", ["hertz-mixture", "canonical", "periodic", "bedload", "direct-shear"])
+@pytest.mark.parametrize(
+    "name", ["hertz-mixture", "canonical", "periodic", "bedload", "direct-shear", "fluidized-bed"]
+)
 def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
     """kernels/serial.py: a twin marked `distinct` is compiled with its array arguments declared
     not to overlap; where an argument it writes shared memory with another, the compiler could
     reorder their reads and writes. The argument tuples the scenes give them share none."""
     from sphere_cli.kernels.contact import chunk_pair_forces
+    from sphere_cli.kernels.fluid.drag import drag_kick, particle_drag
+    from sphere_cli.kernels.fluid.porosity import bin_particles
     from sphere_cli.kernels.fluid.profile_forces import profile_forces
     from sphere_cli.kernels.motion import kick, kick_drift
     from sphere_cli.kernels.walls import wall_forces
@@ -364,7 +390,12 @@ def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
         params = list(kernel.py_func.__code__.co_varnames[: kernel.py_func.__code__.co_argcount])
         return {params.index(n) for n in names}
 
-    scene = build_scene(load_case(CONFIGS / "direct-shear.toml") if name == "direct-shear" else _case(name))
+    if name == "fluidized-bed":
+        scene = build_scene(_fluidized("particle"))
+    elif name == "direct-shear":
+        scene = build_scene(load_case(CONFIGS / "direct-shear.toml"))
+    else:
+        scene = build_scene(_case(name))
     advance(scene, 200)
     contact = next(m for m in scene.modules if isinstance(m, PairContactForces))
     walls = next((m for m in scene.modules if isinstance(m, PlaneWallForces)), None)
@@ -387,6 +418,15 @@ def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
         checked.append(
             (fluid.force_arguments(scene.state), written(profile_forces, ("force", "drag_coef", "drag_x")))
         )
+    if name == "fluidized-bed":
+        binning, drag, _, _, _ = scene.fluid.force_arguments(scene.state)
+        written_by_drag = ("force", "f_other", "coef", "f_drag")
+        written_by_kick = ("vel", "angvel", "force", "f_drag", "impulse", "disturbance")
+        checked += [
+            (binning, written(bin_particles, ("bin_of", "wrapped"))),
+            (drag, written(particle_drag, written_by_drag)),
+            (scene.fluid.kick_arguments(scene.state), written(drag_kick, written_by_kick)),
+        ]
     for arguments, writes in checked:
         assert writes
         assert _written_elsewhere(arguments, writes) == []
@@ -401,6 +441,8 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
         kernels_steps: ("contacts", "dem_steps"),
         kernels_contact: ("chunk_pair_forces",),
         kernels_profile: ("profile_forces", "vans1d_steps"),
+        kernels_drag: ("particle_drag", "drag_kick", "drag_steps"),
+        kernels_porosity: ("bin_particles",),
     }
     for module, names in twins.items():
         for name in names:

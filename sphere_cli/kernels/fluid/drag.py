@@ -57,9 +57,10 @@ import math
 
 from numba import njit, prange
 
-from ..motion import kick_drift
-from ..steps import contacts
-from .porosity import bin_particles
+from ..motion import kick_drift, kick_drift_serial
+from ..serial import serial_twin
+from ..steps import contacts, contacts_serial
+from .porosity import bin_particles, bin_particles_serial
 
 GIDASPOW = 0
 DI_FELICE = 1
@@ -470,3 +471,17 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
             if stop:
                 return done + 1, moved2, False
     return steps, moved2, False
+
+
+# one thread: the loop and its drag kernels without parallel regions (kernels/serial.py); the
+# kernels' arrays are the particles', the drag's and the fluid's own fields, none a view of another
+particle_drag_serial = serial_twin(particle_drag, distinct=True)
+drag_kick_serial = serial_twin(drag_kick, distinct=True)
+drag_steps_serial = serial_twin(
+    drag_steps,
+    kick_drift=kick_drift_serial,
+    contacts=contacts_serial,
+    bin_particles=bin_particles_serial,
+    particle_drag=particle_drag_serial,
+    drag_kick=drag_kick_serial,
+)

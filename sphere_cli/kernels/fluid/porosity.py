@@ -27,6 +27,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..serial import serial_twin
+
 
 @njit(cache=True, inline="always")
 def lens_volume(big_r, r, d):
@@ -80,6 +82,11 @@ def bin_particle(p, pos, origin, spacing, shape, periodic, bin_of, wrapped):
             c = shape[a] - 1
         flat = flat * shape[a] + c
     bin_of[p] = flat
+
+
+# one thread (the Navier-Stokes drag's loop, kernels/fluid/drag.py drag_steps_serial): without a
+# parallel region (kernels/serial.py); its arrays are the particles', the drag's and the grid's own
+bin_particles_serial = serial_twin(bin_particles, distinct=True)
 
 
 @njit(cache=True, inline="always")

@@ -34,12 +34,15 @@ from ...kernels.fluid.drag import (
     cell_coefficients,
     cell_shares,
     drag_kick,
+    drag_kick_serial,
     drag_rate,
     exchange,
     particle_drag,
+    particle_drag_serial,
 )
-from ...kernels.fluid.porosity import bin_particles
+from ...kernels.fluid.porosity import bin_particles, bin_particles_serial
 from ...kernels.neighbors import counting_sort
+from ...kernels.serial import use_serial
 from ...state import State
 from ..fluid_plugin import GpuSteps
 from .poisson import Slabs
@@ -127,9 +130,12 @@ class FluidParticleDrag:
         return 1.0 / float(np.prod(self.spacing))
 
     def forces(self, state: State, fs, spring_dt: float | None = None) -> None:
-        """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's)."""
-        bin_particles(*self._binning(state))
-        below = particle_drag(*self._drag_arguments(state, fs, spring_dt == 0.0))
+        """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's). On
+        one thread the kernels' serial twins (kernels/serial.py), as in the compiled steps."""
+        serial = use_serial()
+        (bin_particles_serial if serial else bin_particles)(*self._binning(state))
+        drag = particle_drag_serial if serial else particle_drag
+        below = drag(*self._drag_arguments(state, fs, spring_dt == 0.0))
         if below:
             self._warn_below(state.clock.step, fs.porosity.reshape(-1), f"{below} particle(s) this step")
 
@@ -252,7 +258,7 @@ class FluidParticleDrag:
         if self.corrected:
             self._follow_grid(state.clock.dt)
             self._cell_coefficients(state)
-        drag_kick(*self.kick_arguments(state, fs))
+        (drag_kick_serial if use_serial() else drag_kick)(*self.kick_arguments(state, fs))
 
     def kick_arguments(self, state: State, fs) -> tuple:
         """The arguments of drag_kick (kernels/fluid/drag.py)."""

@@ -24,7 +24,7 @@ import numpy as np
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
 from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
 from ...errors import NumericalError
-from ...kernels.fluid.drag import drag_steps
+from ...kernels.fluid.drag import drag_steps, drag_steps_serial
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
     add_grid_source,
@@ -600,6 +600,7 @@ class NavierStokes(FluidModule):
 
     # the compiled steps with the drag and its kick in the loop (physics/compiled_steps.py)
     steps_kernel = staticmethod(drag_steps)
+    serial_steps_kernel = staticmethod(drag_steps_serial)  # on one thread (kernels/serial.py)
 
     def force_arguments(self, state) -> tuple:
         return self.drag.step_arguments(state, self.fs)
