@@ -112,7 +112,7 @@ class FluidParticleDrag:
         self.order = np.zeros(n, dtype=np.int64)
         self.every_cell = Slabs(self.shape)  # the cells one rank settles (fluid_forcing)
         self.warned = False
-        self.found_below = np.zeros(1, dtype=np.int64)  # by the compiled steps (step_arguments)
+        self.found_below = np.zeros(1, dtype=np.int64)  # by the compiled steps (loop_arguments)
         self.below = None  # on a GPU: (1,) the particle-steps under the porosity floor (gpu_steps)
         self.exchanged_on_device = False  # a GPU takes the momentum exchange (gpu_steps)
         # on MPI ranks: what it takes of every rank's particles (physics/rank_steps.py
@@ -156,7 +156,7 @@ class FluidParticleDrag:
             self.disturbance, p.force, self.f_other, self.coef, self.f_drag,
         )  # fmt: skip
 
-    def step_arguments(self, state: State, fs) -> tuple:
+    def loop_arguments(self, state: State, fs) -> tuple:
         """The drag's argument of the compiled steps (kernels/fluid/drag.py drag_steps), valid
         until the next fluid step: the grid's response bands follow its cells here, as the kick
         would make them (they change only at fluid steps). One rank only: the sums of the cells'

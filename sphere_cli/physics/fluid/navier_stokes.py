@@ -603,7 +603,7 @@ class NavierStokes(FluidModule):
     serial_steps_kernel = staticmethod(drag_steps_serial)  # on one thread (kernels/serial.py)
 
     def force_arguments(self, state) -> tuple:
-        return self.drag.step_arguments(state, self.fs)
+        return self.drag.loop_arguments(state, self.fs)
 
     def kick_arguments(self, state) -> tuple:
         return self.drag.kick_arguments(state, self.fs)
