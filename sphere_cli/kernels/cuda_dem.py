@@ -1,10 +1,13 @@
-"""The DEM step on a CUDA GPU (numba.cuda), one thread per particle (physics/device_steps.py).
+"""The DEM step on a CUDA GPU (numba.cuda) (physics/device_steps.py). Every kernel strides over
+its particles (or cells): thread t takes items t, t + T, t + 2T, ... of a launch of T threads, so
+any launch gives the same results; a GPU launches one thread per item, Numba's simulator one
+thread for all.
 
 The same physics as the CPU kernels, from the same functions: the law of a contact is
 laws.py contact_response, the periodic image neighbors.py minimum_image, the reduced mass
 laws.py reduced (Numba compiles a CPU @njit function for the GPU where a kernel calls it).
 
-Gather, no atomics in any sum: thread i computes every contact of particle i, in ascending
+Gather, no atomics in any sum: particle i's item computes every contact of i, in ascending
 partner index, so each pair is computed by both its members, each as the pair's owner (the lower
 index, as in kernels/contact.py) computes it; particle i's sum is then m g, minus the pairs
 (j, i) with j < i, plus the pairs (i, j) with j > i, in ascending j: the order of the CPU sweep,
@@ -119,44 +122,39 @@ def kick_drift(
 ):  # fmt: skip
     """kernels/motion.py kick_drift for particle i; the largest squared displacement since the
     list was built into worst[0] (zeroed by the caller)."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0]:
-        return
-    half = 0.5 * dt
-    _half_kick(vel, angvel, force, torque, inv_mass, inv_inertia, half, i)
-    for a in range(3):
-        vel_pred[i, a] = vel[i, a] + half * force[i, a] * inv_mass[i]
-        angvel_pred[i, a] = angvel[i, a] + half * torque[i, a] * inv_inertia[i]
-    moved2 = 0.0
-    for a in range(3):
-        y = pos[i, a] + dt * vel[i, a]
-        if periodic[a]:
-            if y >= lower[a] + length[a]:
-                y -= length[a]
-            elif y < lower[a]:
-                y += length[a]
-        pos[i, a] = y
-        d = minimum_image(y - ref_pos[i, a], length[a], periodic[a])
-        moved2 += d * d
-    cuda.atomic.max(worst, 0, moved2)
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        half = 0.5 * dt
+        _half_kick(vel, angvel, force, torque, inv_mass, inv_inertia, half, i)
+        for a in range(3):
+            vel_pred[i, a] = vel[i, a] + half * force[i, a] * inv_mass[i]
+            angvel_pred[i, a] = angvel[i, a] + half * torque[i, a] * inv_inertia[i]
+        moved2 = 0.0
+        for a in range(3):
+            y = pos[i, a] + dt * vel[i, a]
+            if periodic[a]:
+                if y >= lower[a] + length[a]:
+                    y -= length[a]
+                elif y < lower[a]:
+                    y += length[a]
+            pos[i, a] = y
+            d = minimum_image(y - ref_pos[i, a], length[a], periodic[a])
+            moved2 += d * d
+        cuda.atomic.max(worst, 0, moved2)
 
 
 @cuda.jit
 def kick(vel, angvel, force, torque, inv_mass, inv_inertia, dt, worst):
     """kernels/motion.py kick for particle i; thread 0 zeroes worst[0] for the next step's
     kick-drift (which the kick precedes on the stream: no copy from the host a step)."""
-    i = cuda.grid(1)
-    if i >= vel.shape[0]:
-        return
-    _half_kick(vel, angvel, force, torque, inv_mass, inv_inertia, 0.5 * dt, i)
-    if i == 0:
-        worst[0] = 0.0
+    for i in range(cuda.grid(1), vel.shape[0], cuda.gridsize(1)):
+        _half_kick(vel, angvel, force, torque, inv_mass, inv_inertia, 0.5 * dt, i)
+        if i == 0:
+            worst[0] = 0.0
 
 
 @cuda.jit
 def clear(counts):
-    c = cuda.grid(1)
-    if c < counts.shape[0]:
+    for c in range(cuda.grid(1), counts.shape[0], cuda.gridsize(1)):
         counts[c] = 0
 
 
@@ -164,15 +162,13 @@ def clear(counts):
 def bin_particles(pos, lower, cell_size, ncell, cell_of, cell_count, cell_members, longest):
     """The cell of particle i (the CPU's, kernels/neighbors.py cell_number) and a slot in it;
     the fullest cell's count into longest[1]."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0]:
-        return
-    cell = cell_number(pos, i, lower, cell_size, ncell)
-    cell_of[i] = cell
-    slot = cuda.atomic.add(cell_count, cell, 1)
-    if slot < cell_members.shape[1]:
-        cell_members[cell, slot] = i
-    cuda.atomic.max(longest, 1, slot + 1)
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        cell = cell_number(pos, i, lower, cell_size, ncell)
+        cell_of[i] = cell
+        slot = cuda.atomic.add(cell_count, cell, 1)
+        if slot < cell_members.shape[1]:
+            cell_members[cell, slot] = i
+        cuda.atomic.max(longest, 1, slot + 1)
 
 
 @cuda.jit(device=True, inline=True)
@@ -192,91 +188,85 @@ def build_rows(
 ):
     """Row i: every j != i within r_i + r_j + skin in the 27 cells around i's, ascending; its
     length into fcount[i] (beyond the capacity: counted, not stored) and longest[0]."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0]:
-        return
-    cap = fnbr.shape[1]
-    c = cell_of[i]
-    nz = ncell[2]
-    cz = c % nz
-    cy = (c // nz) % ncell[1]
-    cx = c // (nz * ncell[1])
-    xi = pos[i, 0]
-    yi = pos[i, 1]
-    zi = pos[i, 2]
-    ri = radius[i]
-    count = 0
-    for ox in range(-1, 2):
-        if not _distinct(ox, ncell[0], periodic[0]):
-            continue
-        gx = wrap_cell(cx + ox, ncell[0], periodic[0])
-        if gx < 0:
-            continue
-        for oy in range(-1, 2):
-            if not _distinct(oy, ncell[1], periodic[1]):
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        cap = fnbr.shape[1]
+        c = cell_of[i]
+        nz = ncell[2]
+        cz = c % nz
+        cy = (c // nz) % ncell[1]
+        cx = c // (nz * ncell[1])
+        xi = pos[i, 0]
+        yi = pos[i, 1]
+        zi = pos[i, 2]
+        ri = radius[i]
+        count = 0
+        for ox in range(-1, 2):
+            if not _distinct(ox, ncell[0], periodic[0]):
                 continue
-            gy = wrap_cell(cy + oy, ncell[1], periodic[1])
-            if gy < 0:
+            gx = wrap_cell(cx + ox, ncell[0], periodic[0])
+            if gx < 0:
                 continue
-            for oz in range(-1, 2):
-                if not _distinct(oz, nz, periodic[2]):
+            for oy in range(-1, 2):
+                if not _distinct(oy, ncell[1], periodic[1]):
                     continue
-                gz = wrap_cell(cz + oz, nz, periodic[2])
-                if gz < 0:
+                gy = wrap_cell(cy + oy, ncell[1], periodic[1])
+                if gy < 0:
                     continue
-                cell = (gx * ncell[1] + gy) * nz + gz
-                for s in range(min(cell_count[cell], cell_members.shape[1])):
-                    j = cell_members[cell, s]
-                    if j == i:
+                for oz in range(-1, 2):
+                    if not _distinct(oz, nz, periodic[2]):
                         continue
-                    dx = minimum_image(pos[j, 0] - xi, length[0], periodic[0])
-                    dy = minimum_image(pos[j, 1] - yi, length[1], periodic[1])
-                    dz = minimum_image(pos[j, 2] - zi, length[2], periodic[2])
-                    reach = ri + radius[j] + skin
-                    if dx * dx + dy * dy + dz * dz < reach * reach:
-                        if count < cap:
-                            insert_ascending(fnbr, i, count, j)
-                        count += 1
-    fcount[i] = count
-    cuda.atomic.max(longest, 0, count)
+                    gz = wrap_cell(cz + oz, nz, periodic[2])
+                    if gz < 0:
+                        continue
+                    cell = (gx * ncell[1] + gy) * nz + gz
+                    for s in range(min(cell_count[cell], cell_members.shape[1])):
+                        j = cell_members[cell, s]
+                        if j == i:
+                            continue
+                        dx = minimum_image(pos[j, 0] - xi, length[0], periodic[0])
+                        dy = minimum_image(pos[j, 1] - yi, length[1], periodic[1])
+                        dz = minimum_image(pos[j, 2] - zi, length[2], periodic[2])
+                        reach = ri + radius[j] + skin
+                        if dx * dx + dy * dy + dz * dz < reach * reach:
+                            if count < cap:
+                                insert_ascending(fnbr, i, count, j)
+                            count += 1
+        fcount[i] = count
+        cuda.atomic.max(longest, 0, count)
 
 
 @cuda.jit
 def find_mates(fnbr, fcount, mate):
     """mate[i, k]: the slot of i in the row of j = fnbr[i, k] (the rows are symmetric and
     ascending: a binary search)."""
-    i = cuda.grid(1)
-    if i >= fnbr.shape[0]:
-        return
-    for k in range(fcount[i]):
-        j = fnbr[i, k]
-        low = 0
-        high = fcount[j]
-        while low < high:
-            mid = (low + high) // 2
-            if fnbr[j, mid] < i:
-                low = mid + 1
-            else:
-                high = mid
-        mate[i, k] = low
+    for i in range(cuda.grid(1), fnbr.shape[0], cuda.gridsize(1)):
+        for k in range(fcount[i]):
+            j = fnbr[i, k]
+            low = 0
+            high = fcount[j]
+            while low < high:
+                mid = (low + high) // 2
+                if fnbr[j, mid] < i:
+                    low = mid + 1
+                else:
+                    high = mid
+            mate[i, k] = low
 
 
 @cuda.jit
 def carry_springs(old_nbr, old_count, old_hist, fnbr, fcount, hist):
     """The springs of the owner's slots of the new rows (j > i): a pair listed before keeps its
     spring, a new one starts at zero (both rows ascending: one merge)."""
-    i = cuda.grid(1)
-    if i >= fnbr.shape[0]:
-        return
-    p = 0
-    old = old_count[i]
-    for k in range(fcount[i]):
-        j = fnbr[i, k]
-        while p < old and old_nbr[i, p] < j:
-            p += 1
-        kept = j > i and p < old and old_nbr[i, p] == j
-        for a in range(3):
-            hist[i, k, a] = old_hist[i, p, a] if kept else 0.0
+    for i in range(cuda.grid(1), fnbr.shape[0], cuda.gridsize(1)):
+        p = 0
+        old = old_count[i]
+        for k in range(fcount[i]):
+            j = fnbr[i, k]
+            while p < old and old_nbr[i, p] < j:
+                p += 1
+            kept = j > i and p < old and old_nbr[i, p] == j
+            for a in range(3):
+                hist[i, k, a] = old_hist[i, p, a] if kept else 0.0
 
 
 @cuda.jit(device=True, inline=True)
@@ -340,54 +330,52 @@ def pair_forces(
     """force = m g + the pair forces on i, torque = the pair torques (kernels/contact.py
     chunk_pair_forces, in its order); the owner's new springs into hist_out (springs: whether
     the pairs carry any; without, every spring read is zero and none is written)."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0]:
-        return
-    ri = radius[i]
-    mi = mass[i]
-    f0 = mi * body_acc[0]
-    f1 = mi * body_acc[1]
-    f2 = mi * body_acc[2]
-    t0 = 0.0
-    t1 = 0.0
-    t2 = 0.0
-    for k in range(fcount[i]):
-        j = fnbr[i, k]
-        # the pair as its owner computes it: (j, i) for j < i, whose force on j is negated here
-        # (a - b and a + (-b) round alike), with the spring at the owner's slot
-        owner, partner, s, sign = i, j, k, 1.0
-        if j < i:
-            owner, partner, s, sign = j, i, mate[i, k], -1.0
-        h0 = h1 = h2 = 0.0
-        if springs:
-            h0 = hist_in[owner, s, 0]
-            h1 = hist_in[owner, s, 1]
-            h2 = hist_in[owner, s, 2]
-        touching, e0, e1, e2, c0, c1, c2, m0, m1, m2, x0, x1, x2 = _pair(
-            owner, partner, pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia,
-            material, table, h0, h1, h2, law, rolling, length, periodic, spring_dt, step_dt,
-        )  # fmt: skip
-        if touching:
-            f0 += sign * e0
-            f1 += sign * e1
-            f2 += sign * e2
-            t0 -= ri * c0  # n x F_t flips with n and F_t: the same term for both members
-            t1 -= ri * c1
-            t2 -= ri * c2
-            if rolling:
-                t0 += sign * m0
-                t1 += sign * m1
-                t2 += sign * m2
-        if springs and j > i:  # the owner writes the new spring (zero apart)
-            hist_out[i, k, 0] = x0
-            hist_out[i, k, 1] = x1
-            hist_out[i, k, 2] = x2
-    force[i, 0] = f0
-    force[i, 1] = f1
-    force[i, 2] = f2
-    torque[i, 0] = t0
-    torque[i, 1] = t1
-    torque[i, 2] = t2
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        ri = radius[i]
+        mi = mass[i]
+        f0 = mi * body_acc[0]
+        f1 = mi * body_acc[1]
+        f2 = mi * body_acc[2]
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        for k in range(fcount[i]):
+            j = fnbr[i, k]
+            # the pair as its owner computes it: (j, i) for j < i, whose force on j is negated here
+            # (a - b and a + (-b) round alike), with the spring at the owner's slot
+            owner, partner, s, sign = i, j, k, 1.0
+            if j < i:
+                owner, partner, s, sign = j, i, mate[i, k], -1.0
+            h0 = h1 = h2 = 0.0
+            if springs:
+                h0 = hist_in[owner, s, 0]
+                h1 = hist_in[owner, s, 1]
+                h2 = hist_in[owner, s, 2]
+            touching, e0, e1, e2, c0, c1, c2, m0, m1, m2, x0, x1, x2 = _pair(
+                owner, partner, pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia,
+                material, table, h0, h1, h2, law, rolling, length, periodic, spring_dt, step_dt,
+            )  # fmt: skip
+            if touching:
+                f0 += sign * e0
+                f1 += sign * e1
+                f2 += sign * e2
+                t0 -= ri * c0  # n x F_t flips with n and F_t: the same term for both members
+                t1 -= ri * c1
+                t2 -= ri * c2
+                if rolling:
+                    t0 += sign * m0
+                    t1 += sign * m1
+                    t2 += sign * m2
+            if springs and j > i:  # the owner writes the new spring (zero apart)
+                hist_out[i, k, 0] = x0
+                hist_out[i, k, 1] = x1
+                hist_out[i, k, 2] = x2
+        force[i, 0] = f0
+        force[i, 1] = f1
+        force[i, 2] = f2
+        torque[i, 0] = t0
+        torque[i, 1] = t1
+        torque[i, 2] = t2
 
 
 @cuda.jit(device=True, inline=True)
@@ -411,79 +399,79 @@ def wall_forces(
     I* = I_i); its springs wall_hist[i] are its own, updated in place (springs: whether there are
     any); the force of each wall marked in record into pforce[i] (zero where it does not touch).
     A particle that does not move by forces touches no wall."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0] or inv_mass[i] == 0.0:
-        return
-    ri = radius[i]
-    ci = 0
-    if wall_table.shape[1] > 1:
-        ci = material[i]
-    f0 = f1 = f2 = 0.0
-    t0 = t1 = t2 = 0.0
-    for w in range(wall_axis.shape[0]):
-        touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
-        if not touching:
-            if record[w]:
-                pforce[i, w, 0] = 0.0
-                pforce[i, w, 1] = 0.0
-                pforce[i, w, 2] = 0.0
-            # the spring of a contact that has ended is gone; one that is zero already is not
-            # written again (the rows of wall_hist are 144 bytes apart: six walls' stores from
-            # every thread made this kernel the step's slowest, bound by the L1)
-            if springs and not _cleared(wall_hist, i, w):
-                wall_hist[i, w, 0] = 0.0
-                wall_hist[i, w, 1] = 0.0
-                wall_hist[i, w, 2] = 0.0
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        if inv_mass[i] == 0.0:
             continue
-        h0 = h1 = h2 = 0.0
-        if springs:
-            h0 = wall_hist[i, w, 0]
-            h1 = wall_hist[i, w, 1]
-            h2 = wall_hist[i, w, 2]
-        i_eff = 0.0
-        if rolling:
-            i_eff = inertia[i]
-        e0, e1, e2, c0, c1, c2, m0, m1, m2, x0, x1, x2 = contact_response(
-            (n0, n1, n2), delta, math.sqrt(mass[i]), ri, i_eff,
-            (
-                wall_table[w, ci, K_N], wall_table[w, ci, K_T], wall_table[w, ci, D_N],
-                wall_table[w, ci, D_T], wall_table[w, ci, MU], wall_table[w, ci, MU_R],
-            ),
-            law, rolling, spring_dt, step_dt,
-            (vel[i, 0] - wall_vel[w, 0], vel[i, 1] - wall_vel[w, 1], vel[i, 2] - wall_vel[w, 2]),
-            (ri * angvel[i, 0], ri * angvel[i, 1], ri * angvel[i, 2]),
-            (
-                vel_pred[i, 0] - wall_vel_pred[w, 0], vel_pred[i, 1] - wall_vel_pred[w, 1],
-                vel_pred[i, 2] - wall_vel_pred[w, 2],
-            ),
-            (ri * angvel_pred[i, 0], ri * angvel_pred[i, 1], ri * angvel_pred[i, 2]),
-            (h0, h1, h2),
-            (angvel[i, 0], angvel[i, 1], angvel[i, 2]),
-        )  # fmt: skip
-        if springs:
-            wall_hist[i, w, 0] = x0
-            wall_hist[i, w, 1] = x1
-            wall_hist[i, w, 2] = x2
-        if record[w]:
-            pforce[i, w, 0] = e0
-            pforce[i, w, 1] = e1
-            pforce[i, w, 2] = e2
-        f0 += e0
-        f1 += e1
-        f2 += e2
-        t0 -= ri * c0
-        t1 -= ri * c1
-        t2 -= ri * c2
-        if rolling:
-            t0 += m0
-            t1 += m1
-            t2 += m2
-    force[i, 0] += f0
-    force[i, 1] += f1
-    force[i, 2] += f2
-    torque[i, 0] += t0
-    torque[i, 1] += t1
-    torque[i, 2] += t2
+        ri = radius[i]
+        ci = 0
+        if wall_table.shape[1] > 1:
+            ci = material[i]
+        f0 = f1 = f2 = 0.0
+        t0 = t1 = t2 = 0.0
+        for w in range(wall_axis.shape[0]):
+            touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
+            if not touching:
+                if record[w]:
+                    pforce[i, w, 0] = 0.0
+                    pforce[i, w, 1] = 0.0
+                    pforce[i, w, 2] = 0.0
+                # the spring of a contact that has ended is gone; one that is zero already is not
+                # written again (the rows of wall_hist are 144 bytes apart: six walls' stores from
+                # every thread made this kernel the step's slowest, bound by the L1)
+                if springs and not _cleared(wall_hist, i, w):
+                    wall_hist[i, w, 0] = 0.0
+                    wall_hist[i, w, 1] = 0.0
+                    wall_hist[i, w, 2] = 0.0
+                continue
+            h0 = h1 = h2 = 0.0
+            if springs:
+                h0 = wall_hist[i, w, 0]
+                h1 = wall_hist[i, w, 1]
+                h2 = wall_hist[i, w, 2]
+            i_eff = 0.0
+            if rolling:
+                i_eff = inertia[i]
+            e0, e1, e2, c0, c1, c2, m0, m1, m2, x0, x1, x2 = contact_response(
+                (n0, n1, n2), delta, math.sqrt(mass[i]), ri, i_eff,
+                (
+                    wall_table[w, ci, K_N], wall_table[w, ci, K_T], wall_table[w, ci, D_N],
+                    wall_table[w, ci, D_T], wall_table[w, ci, MU], wall_table[w, ci, MU_R],
+                ),
+                law, rolling, spring_dt, step_dt,
+                (vel[i, 0] - wall_vel[w, 0], vel[i, 1] - wall_vel[w, 1], vel[i, 2] - wall_vel[w, 2]),
+                (ri * angvel[i, 0], ri * angvel[i, 1], ri * angvel[i, 2]),
+                (
+                    vel_pred[i, 0] - wall_vel_pred[w, 0], vel_pred[i, 1] - wall_vel_pred[w, 1],
+                    vel_pred[i, 2] - wall_vel_pred[w, 2],
+                ),
+                (ri * angvel_pred[i, 0], ri * angvel_pred[i, 1], ri * angvel_pred[i, 2]),
+                (h0, h1, h2),
+                (angvel[i, 0], angvel[i, 1], angvel[i, 2]),
+            )  # fmt: skip
+            if springs:
+                wall_hist[i, w, 0] = x0
+                wall_hist[i, w, 1] = x1
+                wall_hist[i, w, 2] = x2
+            if record[w]:
+                pforce[i, w, 0] = e0
+                pforce[i, w, 1] = e1
+                pforce[i, w, 2] = e2
+            f0 += e0
+            f1 += e1
+            f2 += e2
+            t0 -= ri * c0
+            t1 -= ri * c1
+            t2 -= ri * c2
+            if rolling:
+                t0 += m0
+                t1 += m1
+                t2 += m2
+        force[i, 0] += f0
+        force[i, 1] += f1
+        force[i, 2] += f2
+        torque[i, 0] += t0
+        torque[i, 1] += t1
+        torque[i, 2] += t2
 
 
 @cuda.jit
@@ -504,22 +492,20 @@ def push_sums(pforce, rows, record, sums):
     """Each particle's push on the walls marked in record (the first `rows` of pforce) into
     their exact sums (kernels/walls.py add_pushes), by integer atomics: exact, so the same
     whatever the order of the threads."""
-    i = cuda.grid(1)
-    if i >= rows:
-        return
-    for w in range(record.shape[0]):
-        if record[w]:
-            for b in range(3):
-                value = -pforce[i, w, b]
-                if value == 0.0:
-                    continue
-                if not math.isfinite(value):
-                    cuda.atomic.add(sums, (w, b, BINS), 1)
-                    continue
-                k, low, middle, high = exact_parts(value)  # as kernels/exact_sum.py add_exact adds them
-                cuda.atomic.add(sums, (w, b, k), low)
-                cuda.atomic.add(sums, (w, b, k + 1), middle)
-                cuda.atomic.add(sums, (w, b, k + 2), high)
+    for i in range(cuda.grid(1), rows, cuda.gridsize(1)):
+        for w in range(record.shape[0]):
+            if record[w]:
+                for b in range(3):
+                    value = -pforce[i, w, b]
+                    if value == 0.0:
+                        continue
+                    if not math.isfinite(value):
+                        cuda.atomic.add(sums, (w, b, BINS), 1)
+                        continue
+                    k, low, middle, high = exact_parts(value)  # as kernels/exact_sum.py add_exact adds them
+                    cuda.atomic.add(sums, (w, b, k), low)
+                    cuda.atomic.add(sums, (w, b, k + 1), middle)
+                    cuda.atomic.add(sums, (w, b, k + 2), high)
 
 
 @cuda.jit
@@ -542,6 +528,6 @@ def wall_motion_kick(
 def find_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt, first):
     """The lowest index of a particle that has gone bad (kernels/motion.py unstable_reason) into
     first[0] (set to N by the caller): a min, the same whatever the order of the threads."""
-    i = cuda.grid(1)
-    if i < pos.shape[0] and unstable_reason(pos, vel, angvel, radius, lower, upper, periodic, dt, i):
-        cuda.atomic.min(first, 0, i)
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        if unstable_reason(pos, vel, angvel, radius, lower, upper, periodic, dt, i):
+            cuda.atomic.min(first, 0, i)

@@ -41,6 +41,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numba import config
 
 from ..errors import CaseError
 from ..kernels.exact_sum import WORDS
@@ -49,8 +50,13 @@ from ..state import State
 from .compiled_steps import plain_step
 from .neighbors import INITIAL_CAPACITY, SPRING_ROOM, NeighborSearch, listed_slots
 
-# threads per block: any size gives the same results (each thread sums its own particle)
+# threads per block: any size gives the same results (each particle's sums are its own item's)
 THREADS = 128
+# (blocks, threads) of every launch under Numba's CUDA simulator, where each CUDA thread is a
+# Python thread started anew at each launch: one thread striding over the items (40 particles,
+# a light kernel: 1.1 ms a launch against 6.6 ms with 40 threads, and slower still beside
+# other processes); tests change it to check that results do not depend on the launch
+SIMULATOR_LAUNCH = (1, 1)
 # the modules the GPU step runs (the Observer, "observables" or "" where it has no state, only
 # measures, from the host arrays)
 SUPPORTED = (
@@ -111,8 +117,6 @@ def _on_gpu(work):
 
 
 def _gpu_name(cuda) -> str:
-    from numba import config
-
     if config.ENABLE_CUDASIM:
         return "Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1)"
     name = cuda.get_current_device().name
@@ -202,11 +206,14 @@ class DeviceSteps:
 
     # --- host <-> device ------------------------------------------------------------------
 
-    def _launch(self, kernel, size: int, *args, block: int | None = None) -> None:
-        """`kernel` on `size` threads, in blocks of `block` (a kernel that needs its size) or of
-        THREADS."""
-        threads = block or min(THREADS, max(size, 1))  # a small scene: no idle threads (the simulator's)
-        launch = kernel[math.ceil(max(size, 1) / threads), threads]
+    def _launch(self, kernel, size: int, *args) -> None:
+        """`kernel` over `size` items: a thread an item in blocks of THREADS (or fewer: no idle
+        threads), or SIMULATOR_LAUNCH under the simulator."""
+        if config.ENABLE_CUDASIM:
+            launch = kernel[SIMULATOR_LAUNCH]
+        else:
+            threads = min(THREADS, max(size, 1))
+            launch = kernel[math.ceil(max(size, 1) / threads), threads]
         if self.timings is None:
             launch(*args)
             return

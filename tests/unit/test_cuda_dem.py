@@ -31,6 +31,7 @@ from test_contact_blocks import HERTZ_MATERIALS
 
 from sphere_cli.config.load import parse_case
 from sphere_cli.errors import CaseError
+from sphere_cli.physics import device_steps
 from sphere_cli.physics.compiled_steps import CompiledSteps
 from sphere_cli.physics.neighbors import spring_rows
 from sphere_cli.scene.builder import build_scene
@@ -278,6 +279,43 @@ def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path, grid):
     for name in ("coord", "vel", "shift", "force"):
         one, other = getattr(a, name), getattr(b, name)
         np.testing.assert_allclose(one, other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
+
+
+@pytest.mark.parametrize(
+    "scene, launch",
+    [("stages-navier-stokes", (2, 3)), ("moving-walls", (2, 32))],
+    ids=["6-threads-navier-stokes", "64-threads-moving-walls"],
+)
+def test_the_steps_do_not_depend_on_the_launch(tmp_path, monkeypatch, scene, launch):
+    """Every kernel strides over its particles or cells (kernels/cuda_dem.py): launches of 2
+    blocks of 3 threads (each taking 6 or 7 of the 40 particles and 2 of the 12 fluid cells:
+    the neighbour search, the contacts, the stages' walls, the porosity, the drag and its
+    kick) and of 2 blocks of 32 (idle threads) step as the CPU does. On a GPU, blocks of that
+    many threads, a thread an item."""
+    if SIMULATED:
+        monkeypatch.setattr(device_steps, "SIMULATOR_LAUNCH", launch)
+    else:
+        monkeypatch.setattr(device_steps, "THREADS", launch[1])
+    if scene == "moving-walls":
+        gpu, cpu = _scenes(tmp_path, hertz=False, walls=MOVING_WALLS)
+        runs = (1, 29, 30)
+    else:
+        gpu, cpu = _scenes(
+            tmp_path, walls=FLOOR_AND_LID + STAGES + NAVIER_STOKES[NAVIER_STOKES.index("[fluid]") :]
+        )
+        runs = (15, 25, 20)
+    builds = cpu.state.neighbors.builds
+    for steps in runs:
+        advance(gpu, steps)
+        advance(cpu, steps)
+        _compare(gpu, cpu)
+    assert gpu.state.neighbors.builds - builds >= 2
+    np.testing.assert_allclose(gpu.state.walls.force, cpu.state.walls.force, rtol=RTOL)
+    if scene != "moving-walls":
+        assert gpu.stages.index == cpu.stages.index == 1
+        for a, b in ((gpu.fluid.drag.f_drag, cpu.fluid.drag.f_drag), (gpu.fluid.fs.v, cpu.fluid.fs.v)):
+            assert np.abs(b).max() > 0.0  # the fluid did act
+            np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max())
 
 
 def test_the_device_sums_the_forces_on_the_walls_as_the_cpu_does():

@@ -16,8 +16,7 @@ wall_push = for_gpu(on_processor.push_wall)
 @cuda.jit
 def pressure_forces(pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force):
     """kernels/fluid/darcy.py add_pressure_forces for particle n."""
-    n = cuda.grid(1)
-    if n < pos.shape[0]:
+    for n in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
         particle_pressure_force(
             n, pos, radius, grad, porosity, whole, origin, spacing, periodic, rho_f, gravity, force
         )

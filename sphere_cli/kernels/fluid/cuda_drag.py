@@ -31,29 +31,25 @@ def drag_forces(
     """physics/fluid/drag.py FluidParticleDrag.forces for particle i: its fluid cell, then the
     pressure-gradient force and the drag added to its force (never the initial state's: the host
     computes that one)."""
-    i = cuda.grid(1)
-    if i >= pos.shape[0]:
-        return
-    bin_particle(i, pos, origin, spacing, cells, periodic, cell_of, wrapped)
-    if drag_on_particle(
-        i, law, rho, mu, floor, pressure_force, cell_of, vel, radius, inv_mass, u, phi, grad_p, dt, False,
-        cell_share, cell_diameter, cell_velocity, disturbance, force, f_other, coef, f_drag,
-    ):  # fmt: skip
-        cuda.atomic.add(below, 0, 1)
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
+        bin_particle(i, pos, origin, spacing, cells, periodic, cell_of, wrapped)
+        if drag_on_particle(
+            i, law, rho, mu, floor, pressure_force, cell_of, vel, radius, inv_mass, u, phi, grad_p, dt, False,
+            cell_share, cell_diameter, cell_velocity, disturbance, force, f_other, coef, f_drag,
+        ):  # fmt: skip
+            cuda.atomic.add(below, 0, 1)
 
 
 @cuda.jit
 def cell_coefficients(cell_start, cell_order, coef, cell_count, cell_coef):
     """drag.py cell_coefficients for cell c: its particles sorted by index, their coefficients
     summed in that order."""
-    c = cuda.grid(1)
-    if c >= cell_coef.shape[0]:
-        return
-    sort_cell(c, cell_start, cell_order, cell_count)
-    total = 0.0
-    for k in range(cell_start[c], cell_start[c + 1]):
-        total += coef[cell_order[k]]
-    cell_coef[c] = total
+    for c in range(cuda.grid(1), cell_coef.shape[0], cuda.gridsize(1)):
+        sort_cell(c, cell_start, cell_order, cell_count)
+        total = 0.0
+        for k in range(cell_start[c], cell_start[c + 1]):
+            total += coef[cell_order[k]]
+        cell_coef[c] = total
 
 
 @cuda.jit
@@ -62,8 +58,7 @@ def exchange(
     inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
 ):  # fmt: skip
     """drag.py exchange for cell c, its particles sorted (cuda_porosity.py sort_cells)."""
-    c = cuda.grid(1)
-    if c < f_i_coef.shape[0]:
+    for c in range(cuda.grid(1), f_i_coef.shape[0], cuda.gridsize(1)):
         exchange_cell(
             c, start, order, impulse, coef, inv_mass, f_other, vel, radius, u, grad_p, pressure_exchanged,
             fluid_dt, inv_cell_volume, disturbance, f_i, f_i_coef, f_exchange, predicted, solid,
@@ -77,12 +72,10 @@ def drag_kick(
 ):  # fmt: skip
     """drag.py drag_kick for particle i, in place of the particles' own kick (kernels/cuda_dem.py
     kick): thread 0 zeroes worst[0] for the next step's kick-drift, as that one does."""
-    i = cuda.grid(1)
-    if i >= vel.shape[0]:
-        return
-    kick_with_drag(
-        i, vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag, impulse,
-        disturbance, cell_coef, cell_volume, weight, rate, band_decay, mu, nu,
-    )  # fmt: skip
-    if i == 0:
-        worst[0] = 0.0
+    for i in range(cuda.grid(1), vel.shape[0], cuda.gridsize(1)):
+        kick_with_drag(
+            i, vel, angvel, torque, inv_mass, inv_inertia, cell_of, u, coef, f_other, dt, force, f_drag,
+            impulse, disturbance, cell_coef, cell_volume, weight, rate, band_decay, mu, nu,
+        )  # fmt: skip
+        if i == 0:
+            worst[0] = 0.0

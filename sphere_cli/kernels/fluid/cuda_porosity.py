@@ -28,19 +28,17 @@ sample_cell = for_gpu(on_processor.sample_cell)
 def bin_in_fluid_cells(pos, origin, spacing, shape, periodic, bin_of, wrapped, cell_count, clamped):
     """porosity.py bin_particles for particle i, counted in its cell; thread 0 zeroes clamped[0]
     for the sample_cells that follows."""
-    i = cuda.grid(1)
-    if i < pos.shape[0]:
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
         bin_particle(i, pos, origin, spacing, shape, periodic, bin_of, wrapped)
         cuda.atomic.add(cell_count, bin_of[i], 1)
-    if i == 0:
+    if cuda.grid(1) == 0:
         clamped[0] = 0
 
 
 @cuda.jit
 def count_in_cells(cell_of, cell_count):
     """Each particle counted in its cell."""
-    i = cuda.grid(1)
-    if i < cell_of.shape[0]:
+    for i in range(cuda.grid(1), cell_of.shape[0], cuda.gridsize(1)):
         cuda.atomic.add(cell_count, cell_of[i], 1)
 
 
@@ -60,8 +58,7 @@ def cell_starts(cell_count, cell_start, cell_next):
 @cuda.jit
 def fill_cells(cell_of, cell_next, cell_order):
     """Particle i into a free place of its cell's part of cell_order."""
-    i = cuda.grid(1)
-    if i < cell_of.shape[0]:
+    for i in range(cuda.grid(1), cell_of.shape[0], cuda.gridsize(1)):
         cell_order[cuda.atomic.add(cell_next, cell_of[i], 1)] = i
 
 
@@ -115,8 +112,7 @@ def _sift_down(order, first, node, size):
 
 @cuda.jit
 def sort_cells(cell_start, cell_order, cell_count):
-    c = cuda.grid(1)
-    if c < cell_count.shape[0]:
+    for c in range(cuda.grid(1), cell_count.shape[0], cuda.gridsize(1)):
         sort_cell(c, cell_start, cell_order, cell_count)
 
 
@@ -126,9 +122,9 @@ def sample_cells(
     order, want_means, porosity, mean_velocity, mean_diameter, clamped,
 ):  # fmt: skip
     """porosity.py sample_cells for cell c, the clamped cells counted in clamped[0]."""
-    c = cuda.grid(1)
-    if c < porosity.size and sample_cell(
-        c, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
-        cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
-    ):  # fmt: skip
-        cuda.atomic.add(clamped, 0, 1)
+    for c in range(cuda.grid(1), porosity.size, cuda.gridsize(1)):
+        if sample_cell(
+            c, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
+            cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+        ):  # fmt: skip
+            cuda.atomic.add(clamped, 0, 1)

@@ -17,8 +17,7 @@ def profile_forces(
     solid_max, gravity, buoyancy_full, lift_coef, fluctuating, fluct, force, drag_coef, drag_x,
 ):  # fmt: skip
     """kernels/fluid/profile_forces.py profile_forces for particle i."""
-    i = cuda.grid(1)
-    if i < pos.shape[0]:
+    for i in range(cuda.grid(1), pos.shape[0], cuda.gridsize(1)):
         particle_profile_force(
             i, pos, vel, radius, selected, faces, centres, u, solid, top_no_slip, lid_velocity, rho, nu,
             exponent, solid_max, gravity, buoyancy_full, lift_coef, fluctuating, fluct, force, drag_coef,

@@ -26,9 +26,6 @@ def book(
     wall_hist, wall_springs, dt, scratch, booked, no_spring,
 ):  # fmt: skip
     """energy_budget.py accumulate_budget for particle i."""
-    i = cuda.grid(1)
-    if i >= booked.shape[0]:
-        return
     particles = (
         pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel, radius, mass, inertia, inv_mass,
         inv_inertia, material,
@@ -37,8 +34,9 @@ def book(
         wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel, wall_table, wall_hist,
         wall_springs,
     )  # fmt: skip
-    springs = hist[i] if pair_springs else hist[0]  # (a (1,1,3) placeholder without friction)
-    book_particle(
-        i, i, nbr[i], count[i], springs, pair_springs, particles, wall_arrays, table, law, rolling,
-        body_acc, length, periodic, dt, scratch, booked, no_spring,
-    )  # fmt: skip
+    for i in range(cuda.grid(1), booked.shape[0], cuda.gridsize(1)):
+        springs = hist[i] if pair_springs else hist[0]  # (a (1,1,3) placeholder without friction)
+        book_particle(
+            i, i, nbr[i], count[i], springs, pair_springs, particles, wall_arrays, table, law, rolling,
+            body_acc, length, periodic, dt, scratch, booked, no_spring,
+        )  # fmt: skip
