@@ -203,24 +203,24 @@ def run_ok(result: subprocess.CompletedProcess) -> None:
 
 @pytest.fixture(scope="module")
 def sliding(tmp_path_factory) -> Path:
-    """The sliding beads' case, and its one-rank run `one`, stopped at t = 0.03 s (a frame and
+    """The sliding beads' case, and its one-rank run `one`, stopped at t = 0.035 s (a frame and
     the observables are written there, as where the split run stops) and resumed to the end."""
     root = tmp_path_factory.mktemp("sliding")
     (root / "case.toml").write_text(SLIDING)
-    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.03", cwd=root))
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.035", cwd=root))
     run_ok(sphere("resume", "one", "-q", cwd=root))
     return root
 
 
 def test_a_two_rank_checkpoint_resumes_on_one_and_four_ranks_bitwise(sliding):
-    """2 ranks to t = 0.03 s, then on 4 ranks and on 1 to the end: every frame and checkpoint is
+    """2 ranks to t = 0.035 s, then on 4 ranks and on 1 to the end: every frame and checkpoint is
     one rank's, springs included (the beads change rank across the cuts, and where the cut axis
-    turns between z, while the beads fall and bounce, and x, as they slide: by t = 0.03 s each
-    has crossed the box about twice, and on 4 ranks it crosses most of it again). The 4-rank leg
-    is the last quarter: four ranks on a 2-core runner beside another test take most of the
-    file's time."""
+    turns between z, while the beads fall and bounce, and x, as they slide: by t = 0.035 s each
+    has crossed the box about twice, and on 4 ranks it slides about 4 mm more, a third of it).
+    The 4-rank leg is the last eighth: four ranks on a 2-core runner beside another test step
+    at a fraction of one rank's speed."""
     root = sliding
-    run_ok(sphere("run", "case.toml", "-o", "two", "-q", "--until", "0.03", ranks=2, cwd=root))
+    run_ok(sphere("run", "case.toml", "-o", "two", "-q", "--until", "0.035", ranks=2, cwd=root))
     log = (root / "two" / "run.log").read_text()
     assert "split across 2 MPI ranks" in log
     status = json.loads((root / "two" / "status.json").read_text())
