@@ -207,8 +207,8 @@ class DeviceSteps:
     # --- host <-> device ------------------------------------------------------------------
 
     def _launch(self, kernel, size: int, *args) -> None:
-        """`kernel` over `size` items: a thread an item in blocks of THREADS (or fewer: no idle
-        threads), or SIMULATOR_LAUNCH under the simulator."""
+        """`kernel` over `size` items: a thread an item, in blocks of THREADS (one block of `size`
+        threads where that is fewer), or SIMULATOR_LAUNCH under the simulator."""
         if config.ENABLE_CUDASIM:
             launch = kernel[SIMULATOR_LAUNCH]
         else:
