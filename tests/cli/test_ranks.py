@@ -38,7 +38,8 @@ pytestmark = pytest.mark.skipif(
 
 # 120 beads on a floor in a periodic box 12 mm long, sliding at 0.8 m/s along x (the cut axis:
 # five search cells) with spin, friction and rolling resistance: in 0.04 s each crosses the box
-# about 2.7 times, so on four ranks it changes rank about ten times, with its springs.
+# about 2.7 times, changing rank with its springs several times on two ranks, and about once or
+# twice in the last 5 ms, which run on four.
 SLIDING = """\
 [simulation]
 duration = 0.04
