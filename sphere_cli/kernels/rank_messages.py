@@ -10,6 +10,12 @@ rank of every run. The kernels, the arguments and their order are the Python loo
 (RankSteps._steps), so the results are bitwise the same; what is saved is the interpreter's
 share of a rank's step.
 
+A 1D VANS fluid's force on the particles (`fluid`: kernels/fluid/profile_forces.py
+profile_forces's arguments, as its compiled one-rank loop vans1d_steps takes them) comes after
+the contacts, where the forces hooks put it; it reads only the particle's own arrays and the
+fluid's profiles, the same on every rank, so its ghosts' forces need nothing more than the
+contacts' (their owners' sums overwrite them). None: no fluid.
+
 Moving walls (`motion`, as kernels/steps.py dem_steps takes it but for the walls' totals) are
 stepped on every rank alike; the particles' force on them is summed exactly (kernels/walls.py):
 each rank adds its own particles' pushes and its own glued spheres' forces into the words of the
@@ -26,6 +32,7 @@ messages; clock (2,) int64 scratch.
 import numpy as np
 from numba import njit
 
+from .fluid.profile_forces import profile_forces, profile_forces_serial
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .neighbors import rows_in, rows_out
 from .serial import serial_twin
@@ -121,14 +128,17 @@ def rank_wall_totals(
 
 
 @njit(cache=True)
-def rank_dem_steps(steps, step, threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch):
+def rank_dem_steps(
+    steps, step, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, mpi, mail, scratch
+):
     """Up to `steps` steps of a rank's part from the clock's `step` (kernels/steps.py dem_steps):
     returns (the complete steps taken, the last squared displacement over every rank, whether a
     drift made the list stale or a wall left the reach of the near-wall list (the caller ends
     that step), the seconds in the forces, MPI's first error code). motion: None where no wall
     moves, else dem_steps's with rank_wall_totals's arguments but mpi in place of
     listed_wall_totals's, and without the clock's step (the arguments outlive a call: the step
-    comes with each). scratch: (2,) float64, (2,) int64: the reduction's and the clock's."""
+    comes with each). fluid: None, or the 1D VANS force's arguments (module docstring).
+    scratch: (2,) float64, (2,) int64: the reduction's and the clock's."""
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
     busy = 0.0
@@ -146,6 +156,8 @@ def rank_dem_steps(steps, step, threshold2, drift, cross, pairs, walls, kicks, m
             return done, largest[0], True, busy, 0
         started = seconds(mpi, clock)
         contacts(cross, pairs, walls)
+        if fluid is not None:
+            profile_forces(*fluid)
         busy += seconds(mpi, clock) - started
         code = send_ghost_forces(force, torque, mpi, mail)
         if code != 0:
@@ -162,5 +174,9 @@ def rank_dem_steps(steps, step, threshold2, drift, cross, pairs, walls, kicks, m
 
 # one thread: the loop without parallel regions (kernels/serial.py)
 rank_dem_steps_serial = serial_twin(
-    rank_dem_steps, kick_drift=kick_drift_serial, kick=kick_serial, contacts=contacts_serial
+    rank_dem_steps,
+    kick_drift=kick_drift_serial,
+    kick=kick_serial,
+    contacts=contacts_serial,
+    profile_forces=profile_forces_serial,
 )

@@ -363,10 +363,17 @@ class RankSteps:
     def describe(self) -> str:
         """For run.log: ranks, how the slabs are cut and processes."""
         by = "measured work" if self.t.balance == "time" else "particles held"
+        how = (
+            "each rank's steps up to a list build in one compiled call"
+            if self.in_compiled_loop()
+            else "each rank's steps one at a time from Python (a fluid other than the 1D VANS, or "
+            "with moving walls; the energy budget; or an MPI whose functions mpi4py's library does "
+            "not give)"
+        )
         return (
             f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
-            "along the axes where the busiest rank holds the fewest, chosen again at each list build "
-            f"(process ids by rank: {' '.join(map(str, self.pids))})"
+            "along the axes where the busiest rank holds the fewest, chosen again at each list build; "
+            f"{how} (process ids by rank: {' '.join(map(str, self.pids))})"
         )
 
     # --- the lead's side (simulation.advance and check_stable call these) --------------------
@@ -471,10 +478,10 @@ class RankSteps:
 
     def _steps(self, steps: int) -> None:
         """The one-rank step on this rank's particles (physics/module.py order), with the ghosts'
-        forces from their owners and the rebuild decided over every rank. A part with no fluid
-        and no energy budget takes its steps in one compiled call (kernels/rank_messages.py) up
-        to a list build or a wall's move out of its near-wall list's reach, and that step ends
-        here."""
+        forces from their owners and the rebuild decided over every rank. A part in the
+        compiled loop (in_compiled_loop) takes its steps in one compiled call
+        (kernels/rank_messages.py) up to a list build or a wall's move out of its near-wall
+        list's reach, and that step ends here; its fluid's step, if due, then follows here."""
         moved, largest = np.zeros(1), np.zeros(1)
         fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
         calls = self._kernels()
@@ -565,9 +572,10 @@ class RankSteps:
         part as (compiled kernel, its arguments), those the hooks Motion.kick_drift,
         PairContactForces.forces, PlaneWallForces.forces and Motion.kick call, as
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
-        step (120 beads on 2 ranks: 64 -> 55 us a step); and, for a part with no fluid and no
-        energy budget, the loop of those steps with their messages (kernels/rank_messages.py),
-        moving walls included. Valid until the next build while no wall moves, and for the loop
+        step (120 beads on 2 ranks: 64 -> 55 us a step); and, where in_compiled_loop, the loop
+        of those steps with their messages (kernels/rank_messages.py), moving walls and a 1D
+        VANS fluid's force included (its arguments valid until the fluid's next step, which
+        ends the call). Valid until the next build while no wall moves, and for the loop
         until the next build or a wall's move beyond the reach of the near-wall list (the loop
         stops there)."""
         part = self.part
@@ -577,16 +585,17 @@ class RankSteps:
         serial = use_serial()
         drift, cross, pairs, walls, kicks = step_arguments(state, part.contact, part.walls)
         loop = None
-        if self.calls is None:
-            self.calls = compiled_calls(self.world) or ()
-        if part.fluid is None and part.budget is None and self.calls:
+        if self.in_compiled_loop():
             mpi, request_type = self.calls
             if part.compiled_mail is None:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
+            fluid = None if part.fluid is None else part.fluid.force_arguments(state)
             motion = None if part.wall_motion is None else self._motion(state)
-            arguments = (self.t.threshold2, drift, cross, pairs, walls, kicks, motion, mpi, mail, scratch)
+            arguments = (
+                self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, mpi, mail, scratch,
+            )  # fmt: skip
             loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
         return StepCalls(
             (kick_drift_serial if serial else kick_drift, drift),
@@ -594,6 +603,18 @@ class RankSteps:
             (kick_serial if serial else kick, kicks),
             loop,
         )
+
+    def in_compiled_loop(self) -> bool:
+        """True if a part of this scene takes its steps in the compiled rank loop: no fluid, or
+        one whose force the loop calls (FluidModule.force_in_rank_loop: the 1D VANS) with no wall
+        moving (as the one-rank loop, physics/compiled_steps.py), no energy budget, and the MPI
+        functions found (physics/rank_calls.py compiled_calls)."""
+        if self.calls is None:
+            self.calls = compiled_calls(self.world) or ()
+        # the template's (the lead's own before the scene is first shared out: run.log's line)
+        fluid = self.t.fluid if self.t.fluid is not None else self.fluid
+        plain = fluid is None or (fluid.force_in_rank_loop and not self.t.moving)
+        return plain and not self.t.budget and bool(self.calls)
 
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py

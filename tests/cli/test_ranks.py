@@ -311,13 +311,16 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
 def test_bedload_with_turbulent_fluctuations_is_one_ranks_on_three(tmp_path):
     """configs/bedload.toml (a 1D VANS fluid over a bed of 1 000 beads) with turbulent
     fluctuations: the fluid steps at rank 0 on the whole bed, its profiles reach every rank, and
-    each particle's drag and fluctuation travel with it between ranks."""
+    each particle's drag and fluctuation travel with it between ranks. The fluid's force runs
+    inside each rank's compiled steps."""
     text = (REPO / "configs" / "bedload.toml").read_text()
     text = text.replace("cells = 70 ", "fluctuations = { bed_elevation = 0.012 }\ncells = 70 ")
     (tmp_path / "case.toml").write_text(text)
     shutil.copy(REPO / "configs" / "bedload-bed.csv", tmp_path)
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", "--until", "0.03", cwd=tmp_path))
     run_ok(sphere("run", "case.toml", "-o", "three", "-q", "--until", "0.03", ranks=3, cwd=tmp_path))
+    # the fluid's force inside the compiled rank loop (kernels/rank_messages.py), not from Python
+    assert "steps up to a list build in one compiled call" in (tmp_path / "three" / "run.log").read_text()
     assert_runs_bitwise(tmp_path / "one", tmp_path / "three")
     state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
     assert np.count_nonzero(state["sphere/state/fluid/fluctuation"]) > 100  # drawn, and compared
@@ -371,6 +374,7 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     log = (tmp_path / "split" / "run.log").read_text()
     assert "split across 2 MPI ranks" in log and "split across 4 MPI ranks" in log
     assert "cut by measured work" in log
+    assert "steps one at a time from Python" in log  # the drag's kick sums over every rank
     assert_runs_bitwise(tmp_path / "one", tmp_path / "split")
     state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
     assert np.count_nonzero(state["sphere/state/neighbors/hist"]) > 1000  # a bed in contact

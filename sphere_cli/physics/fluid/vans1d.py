@@ -336,6 +336,7 @@ class Vans1d(FluidModule):
     serial_steps_kernel = staticmethod(vans1d_steps_serial)  # on one thread (kernels/serial.py)
 
     on_gpu = True
+    force_in_rank_loop = True  # (forces below)
 
     def gpu_steps(self, state) -> GpuSteps:
         from ...kernels.fluid.cuda_profile_forces import profile_forces
