@@ -35,6 +35,7 @@ from numba import njit
 from .fluid.profile_forces import profile_forces, profile_forces_serial
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .neighbors import rows_in, rows_out
+from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
 from .steps import contacts, contacts_serial, walls_moved
 from .walls import (
@@ -129,7 +130,7 @@ def rank_wall_totals(
 
 @njit(cache=True)
 def rank_dem_steps(
-    steps, step, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, mpi, mail, scratch
+    steps, step, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail, scratch
 ):
     """Up to `steps` steps of a rank's part from the clock's `step` (kernels/steps.py dem_steps):
     returns (the complete steps taken, the last squared displacement over every rank, whether a
@@ -137,7 +138,9 @@ def rank_dem_steps(
     that step), the seconds in the forces, MPI's first error code). motion: None where no wall
     moves, else dem_steps's with rank_wall_totals's arguments but mpi in place of
     listed_wall_totals's, and without the clock's step (the arguments outlive a call: the step
-    comes with each). fluid: None, or the 1D VANS force's arguments (module docstring).
+    comes with each). fluid: None, or the 1D VANS force's arguments (module docstring). budget:
+    None, or the energy budget's as dem_steps takes them (each rank books the particles it
+    holds; their owners' shares are the ones kept).
     scratch: (2,) float64, (2,) int64: the reduction's and the clock's."""
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
@@ -154,6 +157,8 @@ def rank_dem_steps(
             return done, largest[0], True, busy, 0
         if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
             return done, largest[0], True, busy, 0
+        if budget is not None:
+            keep_half_step(*budget[0])
         started = seconds(mpi, clock)
         contacts(cross, pairs, walls)
         if fluid is not None:
@@ -169,6 +174,8 @@ def rank_dem_steps(
                 return done, largest[0], False, busy, code
             wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
         kick(*kicks)
+        if budget is not None:
+            accumulate_budget(*budget[1])
     return steps, largest[0], False, busy, 0
 
 
@@ -179,4 +186,5 @@ rank_dem_steps_serial = serial_twin(
     kick=kick_serial,
     contacts=contacts_serial,
     profile_forces=profile_forces_serial,
+    accumulate_budget=accumulate_budget_serial,
 )

@@ -13,9 +13,11 @@ moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_tot
 near-wall list first) and of wall_kick but its time and dt, the wall positions the list of
 particles near walls was made at, half the skin [m], the clock's step at the call, dt [s]): the
 walls move before the particles drift and are kicked before them, as their hooks run
-(physics/walls.py WallMotion). Returns (the complete steps taken, the last squared displacement,
-whether a drift ended the loop: a particle beyond half the skin, or a wall as far from where the
-near-wall list was made, which the wall hook then makes again).
+(physics/walls.py WallMotion); budget, None without the energy budget, else the argument tuples
+of keep_half_step and accumulate_budget (kernels/observe/energy_budget.py), called before the
+contacts and after the kick as its hooks are. Returns (the complete steps taken, the last
+squared displacement, whether a drift ended the loop: a particle beyond half the skin, or a wall
+as far from where the near-wall list was made, which the wall hook then makes again).
 A fluid whose force on the particles is one kernel has its own loop calling `contacts` and that
 kernel (kernels/fluid/profile_forces.py vans1d_steps): a kernel passed as an argument would key
 Numba's cache by an object that differs in every process, so it would compile on every run."""
@@ -24,6 +26,7 @@ from numba import njit
 
 from .contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
+from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
 from .walls import listed_wall_totals, wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift
 
@@ -49,7 +52,7 @@ def walls_moved(coord, listed_at, reach):
 
 
 @njit(cache=True)
-def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion):
+def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion, budget):
     moved2 = 0.0
     for done in range(steps):
         if motion is not None:
@@ -59,12 +62,16 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion):
             return done, moved2, True
         if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
             return done, moved2, True
+        if budget is not None:
+            keep_half_step(*budget[0])
         contacts(cross, pairs, walls)
         if motion is not None:
             wall_areas(*motion[1])
             listed_wall_totals(*motion[2])
             wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
         kick(*kicks)
+        if budget is not None:
+            accumulate_budget(*budget[1])
     return steps, moved2, False
 
 
@@ -74,5 +81,9 @@ contacts_serial = serial_twin(
     contacts, chunk_pair_forces=chunk_pair_forces_serial, wall_forces=wall_forces_serial
 )
 dem_steps_serial = serial_twin(
-    dem_steps, kick_drift=kick_drift_serial, kick=kick_serial, contacts=contacts_serial
+    dem_steps,
+    kick_drift=kick_drift_serial,
+    kick=kick_serial,
+    contacts=contacts_serial,
+    accumulate_budget=accumulate_budget_serial,
 )

@@ -9,8 +9,9 @@ module's own where it takes the kick over (`kick_arguments` for it: the Navier-S
 exact kick), and nothing after the kick (physics/module.py); the module's `steps_taken` then
 reports what its loop found (the Navier-Stokes drag's porosity floor); with the plane walls and
 no such force, the walls' motion (moving or stress-controlled walls, their kick-drift and kick
-around the particles') may be in it too. Anything else in the step (the energy budget, a fluid
-with another force, a hook replaced by a wrapper) keeps the step-by-step loop.
+around the particles') and the energy budget (its forces hook first of the forces, its
+finish_step the only one) may be in it too. Anything else in the step (a fluid with another
+force, a fluid with the budget, a hook replaced by a wrapper) keeps the step-by-step loop.
 simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
 coupling, a step where a stage may end), so those run in Python.
 """
@@ -24,6 +25,7 @@ from .contact import PairContactForces
 from .module import Step
 from .motion import Motion
 from .neighbors import NeighborSearch
+from .observe.energy_budget import EnergyBudget
 from .walls import PlaneWallForces, WallMotion
 
 
@@ -102,10 +104,12 @@ class CompiledSteps:
     whole_steps = False
 
     def __init__(
-        self, search: NeighborSearch, contact: PairContactForces, walls, extra, moving: bool = False
-    ):
+        self, search: NeighborSearch, contact: PairContactForces, walls, extra, moving: bool = False,
+        budget: EnergyBudget | None = None,
+    ):  # fmt: skip
         self.search, self.contact, self.walls, self.extra = search, contact, walls, extra
         self.moving = moving  # the walls' motion in the loop
+        self.budget = budget  # the energy budget's hooks in the loop
 
     @classmethod
     def of(cls, step: Step) -> CompiledSteps | None:
@@ -119,6 +123,12 @@ class CompiledSteps:
         )
         if moving:
             kick_drift, kick = kick_drift[1:], kick[1:]
+        budget, finish = None, list(step.finish_step)
+        if forces and is_hook_of(forces[0], EnergyBudget, "forces"):  # it runs first of the forces
+            budget = forces.pop(0).__self__
+            if finish and getattr(finish[0], "__self__", None) is budget:
+                if is_hook_of(finish[0], EnergyBudget, "finish_step"):
+                    finish.pop(0)
         if not (
             len(kick_drift) == 1
             and is_hook_of(kick_drift[0], Motion, "kick_drift")
@@ -127,7 +137,8 @@ class CompiledSteps:
             and forces
             and is_hook_of(forces[0], PairContactForces, "forces")
             and len(kick) == 1
-            and not step.finish_step
+            and not finish
+            and (budget is None or len(step.finish_step) == 1)
         ):
             return None
         contact, walls, extra = forces.pop(0).__self__, None, None
@@ -135,7 +146,7 @@ class CompiledSteps:
             walls = forces.pop(0).__self__
         if forces and _has_steps_kernel(forces[0]):
             extra = forces.pop(0).__self__
-        if forces or (moving and (walls is None or extra is not None)):
+        if forces or (moving and (walls is None or extra is not None)) or (budget and extra is not None):
             return None
         # the kick: the particles' own, or that of the module whose loop kicks them itself
         if extra is not None and "kick" in extra.takes_over:
@@ -144,7 +155,7 @@ class CompiledSteps:
             kicks_own = is_hook_of(kick[0], Motion, "kick")
         if not kicks_own:
             return None
-        return cls(step.prepare[0].__self__, contact, walls, extra, moving)
+        return cls(step.prepare[0].__self__, contact, walls, extra, moving, budget)
 
     @staticmethod
     def to_host(state: State) -> None:
@@ -173,8 +184,11 @@ class CompiledSteps:
                 drift_walls, areas, totals, wall_kick = WallMotion.kernel_arguments(state)
                 totals = (state.walls.listed, *totals)  # listed_wall_totals's
                 motion = (drift_walls, areas, totals, wall_kick, listed_at, reach, clock.step, clock.dt)
+            budget = None
+            if self.budget is not None:  # the arguments of its two hooks
+                budget = (self.budget.keep_arguments(state), self.budget.book_arguments(state))
             loop = dem_steps_serial if serial else dem_steps
-            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion)
+            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion, budget)
         else:
             extra = self.extra.force_arguments(state)
             if "kick" in self.extra.takes_over:

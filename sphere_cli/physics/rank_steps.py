@@ -36,10 +36,11 @@ follows the longest row over all ranks, so a checkpoint's layout is one rank's.
 **The host.** The lead keeps the whole scene (physics/rank_steps is its scene.step.compiled,
 like a GPU's physics/device_steps.py): `to_host` gathers the owners' particles and rows into it
 before frames, observables and checkpoints, so files are those of one rank and a checkpoint
-resumes on any rank count. A dry part's steps up to a list build run in one compiled call with
-their messages inside (kernels/rank_messages.py, through physics/rank_calls.py); a fluid's or
-the energy budget's, one at a time in Python with mpi4py's messages (an exchange of ghost forces
-and one reduction a step).
+resumes on any rank count. A part's steps up to a list build run in one compiled call with
+their messages inside (kernels/rank_messages.py, through physics/rank_calls.py), moving walls,
+the energy budget or a 1D VANS fluid's force included (RankSteps.in_compiled_loop); other
+fluids', one at a time in Python with mpi4py's messages (an exchange of ghost forces and one
+reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed
 exactly (kernels/exact_sum.py): each rank adds its own particles' share into the sums' words
@@ -367,8 +368,8 @@ class RankSteps:
             "each rank's steps up to a list build in one compiled call"
             if self.in_compiled_loop()
             else "each rank's steps one at a time from Python (a fluid other than the 1D VANS, or "
-            "with moving walls; the energy budget; or an MPI whose functions mpi4py's library does "
-            "not give)"
+            "with moving walls or the energy budget; or an MPI whose functions mpi4py's library "
+            "does not give)"
         )
         return (
             f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
@@ -593,8 +594,12 @@ class RankSteps:
             mail = part.compiled_mail
             fluid = None if part.fluid is None else part.fluid.force_arguments(state)
             motion = None if part.wall_motion is None else self._motion(state)
+            budget = None
+            if part.budget is not None:
+                budget = (part.budget.keep_arguments(state), part.budget.book_arguments(state))
             arguments = (
-                self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, mpi, mail, scratch,
+                self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail,
+                scratch,
             )  # fmt: skip
             loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
         return StepCalls(
@@ -607,14 +612,14 @@ class RankSteps:
     def in_compiled_loop(self) -> bool:
         """True if a part of this scene takes its steps in the compiled rank loop: no fluid, or
         one whose force the loop calls (FluidModule.force_in_rank_loop: the 1D VANS) with no wall
-        moving (as the one-rank loop, physics/compiled_steps.py), no energy budget, and the MPI
-        functions found (physics/rank_calls.py compiled_calls)."""
+        moving and no energy budget (as the one-rank loop, physics/compiled_steps.py); and the
+        MPI functions found (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
-        plain = fluid is None or (fluid.force_in_rank_loop and not self.t.moving)
-        return plain and not self.t.budget and bool(self.calls)
+        plain = fluid is None or (fluid.force_in_rank_loop and not self.t.moving and not self.t.budget)
+        return plain and bool(self.calls)
 
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py

@@ -287,7 +287,8 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
     moves sideways): the moving walls' forces are summed exactly over the ranks, and
     the walls, the glued spheres and the friction set by each stage reach every rank. With the
     energy budget: each rank books its own particles' shares (their rows as one rank has them),
-    which travel with them, so its observables and checkpoints are one rank's too."""
+    which travel with them, so its observables and checkpoints are one rank's too. The walls'
+    motion and the budget run inside each rank's compiled steps."""
     text = (REPO / "configs" / "direct-shear.toml").read_text()
     assert text.count("\nquantities = [") == 1
     text = text.replace("\nquantities = [", '\nquantities = ["energy_budget", ')
@@ -299,6 +300,7 @@ def test_direct_shear_with_stages_and_a_stress_controlled_wall_is_one_ranks_on_t
     run_ok(sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path))
     log = (tmp_path / "two" / "run.log").read_text()
     assert "now: consolidate" in log and "now: shear" in log and "now: finished" in log
+    assert "steps up to a list build in one compiled call" in log  # walls and budget inside
     assert_runs_bitwise(tmp_path / "one", tmp_path / "two")
     with h5py.File(tmp_path / "one" / "trajectory.h5", "r") as f:
         top = f["observables/wall_position/value"][:, 1]

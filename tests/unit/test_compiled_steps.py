@@ -25,6 +25,7 @@ from sphere_cli.kernels.fluid import porosity as kernels_porosity
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.drag import drag_steps, drag_steps_serial
 from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
+from sphere_cli.kernels.observe import energy_budget as kernels_budget
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import contact as contact_module
 from sphere_cli.physics import motion as motion_module
@@ -106,15 +107,18 @@ def test_compiled_steps_are_the_step_by_step_loop_bitwise(name, threads):
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
-def _direct_shear():
+def _direct_shear(budget: bool = False):
     """configs/direct-shear.toml with its stages shortened: deposit (walls fixed, a kinetic-energy
     stop tested every check_every steps), consolidate (the rough top wall approaches, then
     keeps 1 kPa: stress-controlled) and shear (it also moves sideways); glued spheres on both
-    walls. About 8 000 steps."""
+    walls. About 8 000 steps. With `budget`, the energy budget too (its hooks in the loop)."""
     text = (CONFIGS / "direct-shear.toml").read_text()
     for old, new in (("duration = 0.15", "duration = 0.012"), ("min_time = 0.06", "min_time = 0.006")):
         text = text.replace(old, new)
     text = text.replace("duration = 0.05", "duration = 0.008").replace("duration = 0.08", "duration = 0.008")
+    if budget:
+        assert text.count("\nquantities = [") == 1
+        text = text.replace("\nquantities = [", '\nquantities = ["energy_budget", ')
     return parse_case(text)
 
 
@@ -133,20 +137,26 @@ def _walls_driven():
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("name", ["direct-shear", "walls-driven"])
+@pytest.mark.parametrize("name", ["direct-shear", "walls-driven", "direct-shear-budget"])
 def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_bitwise(name, threads):
     """The walls' motion runs inside the compiled loop (their kick-drift before the particles',
     their kick before the particles', at the step's time), which ends where a stage may end
     (simulation.advance) and where a wall has moved half the skin from where the near-wall list
-    was made."""
-    make = _direct_shear if name == "direct-shear" else _walls_driven
+    was made; so does the energy budget's (what it keeps before the contacts, its booking after
+    the kick), each particle's shares bitwise the hooks'."""
+    make = {
+        "direct-shear": _direct_shear,
+        "walls-driven": _walls_driven,
+        "direct-shear-budget": lambda: _direct_shear(budget=True),
+    }[name]
     numba.set_num_threads(threads)
     try:
         compiled, stepwise = build_scene(make()), build_scene(make())
         assert compiled.step.compiled is not None and compiled.step.compiled.moving
+        assert (compiled.step.compiled.budget is not None) == name.endswith("budget")
         stepwise.step.compiled = None
         for scene in (compiled, stepwise):
-            if name == "direct-shear":
+            if name.startswith("direct-shear"):
                 while not scene.finished:
                     advance(scene, 10**9)
             else:
@@ -157,7 +167,10 @@ def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_
         w, v = compiled.state.walls, stepwise.state.walls
         for wall in "coord", "vel", "acc", "shift", "force", "area":
             a[f"wall {wall}"], b[f"wall {wall}"] = getattr(w, wall), getattr(v, wall)
-        if name == "direct-shear":
+        if name.endswith("budget"):
+            a["booked"], b["booked"] = compiled.budget.booked, stepwise.budget.booked
+            assert np.count_nonzero(a["booked"]) > 0
+        if name.startswith("direct-shear"):
             assert abs(w.shift[1, 0]) > 1e-4  # the top wall has sheared the bed
         else:  # both walls have reached the spheres
             assert np.count_nonzero(np.abs(w.force[[1, 5]]).max(axis=1)) == 2, w.force
@@ -370,7 +383,16 @@ def _written_elsewhere(arguments: tuple, written: set[int]) -> list[tuple[int, i
 
 
 @pytest.mark.parametrize(
-    "name", ["hertz-mixture", "canonical", "periodic", "bedload", "direct-shear", "fluidized-bed"]
+    "name",
+    [
+        "hertz-mixture",
+        "canonical",
+        "periodic",
+        "bedload",
+        "direct-shear",
+        "fluidized-bed",
+        "direct-shear-budget",
+    ],
 )
 def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
     """kernels/serial.py: a twin marked `distinct` is compiled with its array arguments declared
@@ -381,6 +403,7 @@ def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
     from sphere_cli.kernels.fluid.porosity import bin_particles
     from sphere_cli.kernels.fluid.profile_forces import profile_forces
     from sphere_cli.kernels.motion import kick, kick_drift
+    from sphere_cli.kernels.observe.energy_budget import accumulate_budget
     from sphere_cli.kernels.walls import wall_forces
     from sphere_cli.physics.compiled_steps import step_arguments
     from sphere_cli.physics.contact import PairContactForces
@@ -394,6 +417,8 @@ def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
         scene = build_scene(_fluidized("particle"))
     elif name == "direct-shear":
         scene = build_scene(load_case(CONFIGS / "direct-shear.toml"))
+    elif name == "direct-shear-budget":
+        scene = build_scene(_direct_shear(budget=True))
     else:
         scene = build_scene(_case(name))
     advance(scene, 200)
@@ -427,6 +452,10 @@ def test_the_twins_declared_distinct_get_arrays_that_share_no_memory(name):
             (drag, written(particle_drag, written_by_drag)),
             (scene.fluid.kick_arguments(scene.state), written(drag_kick, written_by_kick)),
         ]
+    if scene.budget is not None:
+        checked.append(
+            (scene.budget.book_arguments(scene.state), written(accumulate_budget, ("scratch", "booked")))
+        )
     for arguments, writes in checked:
         assert writes
         assert _written_elsewhere(arguments, writes) == []
@@ -443,6 +472,7 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
         kernels_profile: ("profile_forces", "vans1d_steps"),
         kernels_drag: ("particle_drag", "drag_kick", "drag_steps"),
         kernels_porosity: ("bin_particles",),
+        kernels_budget: ("accumulate_budget",),
     }
     for module, names in twins.items():
         for name in names:

@@ -45,7 +45,6 @@ booked them (each particle's share is booked where it is owned, its row as one r
 
 import math
 
-import numpy as np
 from numba import njit, prange
 
 from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
@@ -64,6 +63,8 @@ from ..laws import (
     rolling_torque,
     tangential_force,
 )
+from ..layout import flat
+from ..serial import serial_twin
 
 GRAVITY = 0
 WALLS = 1
@@ -71,6 +72,26 @@ DAMPING = 2
 FRICTION = 3
 ROLLING = 4
 TERMS = 5
+
+
+@njit(cache=True, inline="always")
+def _copy(into, values):
+    for k in range(values.shape[0]):
+        into[k] = values[k]
+
+
+@njit(cache=True)
+def keep_half_step(hist, kept_hist, wall_hist, kept_wall_hist, wall_vel, kept_wall_vel, vel, kept_vel, angvel,
+                   kept_angvel):  # fmt: skip
+    """What the budget keeps before a step's contact forces (physics/observe/energy_budget.py
+    EnergyBudget.forces, and the compiled loops of kernels/steps.py): copies of the springs of
+    the last step, of the walls' springs and velocities and of the particles' half-step
+    velocities. Every array C-contiguous, each kept one the shape of its source."""
+    _copy(flat(kept_hist), flat(hist))
+    _copy(flat(kept_wall_hist), flat(wall_hist))
+    _copy(flat(kept_wall_vel), flat(wall_vel))
+    _copy(flat(kept_vel), flat(vel))
+    _copy(flat(kept_angvel), flat(angvel))
 
 
 # Called, not inlined: with the whole booking inlined into the parallel loop, Numba took 42 s to
@@ -164,10 +185,11 @@ def accumulate_budget(
     dt,
     scratch,
     booked,
+    no_spring,
 ):
-    """Add one step's work and dissipation to each particle's share (see the module docstring)."""
+    """Add one step's work and dissipation to each particle's share (see the module docstring).
+    no_spring (3,) zeros: the spring of every contact when none has friction (read only)."""
     cap = nbr.shape[1]
-    no_spring = np.zeros(3)  # the spring of every contact when none has friction (read only)
     pair_springs = hist.shape[0] > 0
     wall_springs = wall_hist.shape[0] > 0
     for i in prange(pos.shape[0]):
@@ -351,3 +373,8 @@ def budget_totals(booked, totals):
     for i in range(booked.shape[0]):
         for t in range(TERMS):
             totals[t] += booked[i, t]
+
+
+# one thread: the booking without a parallel region (kernels/serial.py); it writes only its
+# scratch and the shares, which no other argument shares
+accumulate_budget_serial = serial_twin(accumulate_budget, distinct=True)

@@ -21,8 +21,11 @@ from ...kernels.observe.energy_budget import (
     TERMS,
     WALLS,
     accumulate_budget,
+    accumulate_budget_serial,
     budget_totals,
+    keep_half_step,
 )
+from ...kernels.serial import use_serial
 from ...state import State
 from ..module import Module
 
@@ -59,6 +62,7 @@ class EnergyBudget(Module):
         # kinetic + elastic energy when accounting began [J]
         self.reference = np.zeros(1)
         self.scratch = np.zeros((n, 2, 3))
+        self.no_spring = np.zeros(3)  # the spring of every contact when none has friction
         self.vel_half = np.zeros((n, 3))
         self.angvel_half = np.zeros((n, 3))
         self.hist = np.zeros_like(state.neighbors.hist)
@@ -100,21 +104,30 @@ class EnergyBudget(Module):
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         if spring_dt == 0.0:
             return  # the initial forces: no time passes
-        p, nl = state.particles, state.neighbors
-        if self.hist.shape != nl.hist.shape:  # the neighbour list grew
-            self.hist = np.zeros_like(nl.hist)
-        self.hist[...] = nl.hist
-        if state.walls is not None:
-            self.wall_hist[...] = state.walls.hist
-            self.wall_vel_half[...] = wall_velocity(state.walls, self.still)
-        self.vel_half[...] = p.vel
-        self.angvel_half[...] = p.angvel
+        keep_half_step(*self.keep_arguments(state))
         self.pending = True
 
     def finish_step(self, state: State) -> None:
         if not self.pending:
             return
         self.pending = False
+        (accumulate_budget_serial if use_serial() else accumulate_budget)(*self.book_arguments(state))
+
+    def keep_arguments(self, state: State) -> tuple:
+        """The arguments of keep_half_step, what `forces` keeps before the contacts; valid until
+        the next list build (the springs' array may grow there: made again here)."""
+        p, nl, w = state.particles, state.neighbors, state.walls
+        if self.hist.shape != nl.hist.shape:  # the neighbour list grew
+            self.hist = np.zeros_like(nl.hist)
+        if w is None:  # nothing of the walls' to keep
+            walls = (self.wall_hist, self.wall_hist, self.still, self.still)
+        else:
+            walls = (w.hist, self.wall_hist, wall_velocity(w, self.still), self.wall_vel_half)
+        return (nl.hist, self.hist, *walls, p.vel, self.vel_half, p.angvel, self.angvel_half)
+
+    def book_arguments(self, state: State) -> tuple:
+        """The arguments of accumulate_budget, what `finish_step` books after the kick; valid
+        until the next list build."""
         p, box, nl, w = state.particles, state.box, state.neighbors, state.walls
         contact = self.scene.contact
         if w is None:
@@ -131,36 +144,12 @@ class EnergyBudget(Module):
                 full,
                 w.table,
             )
-        accumulate_budget(
-            p.pos,
-            self.vel_half,
-            self.angvel_half,
-            p.vel_pred,
-            p.angvel_pred,
-            p.vel,
-            p.angvel,
-            p.radius,
-            p.mass,
-            p.inertia,
-            p.inv_mass,
-            p.inv_inertia,
-            p.material,
-            nl.nbr,
-            nl.nbr_count,
-            nl.start,
-            self.hist,
-            contact.table,
-            contact.law_code,
-            contact.rolling,
-            box.body_acc,
-            box.length,
-            box.periodic,
-            *walls,
-            self.wall_hist,
-            state.clock.dt,
-            self.scratch,
-            self.booked,
-        )
+        return (
+            p.pos, self.vel_half, self.angvel_half, p.vel_pred, p.angvel_pred, p.vel, p.angvel, p.radius,
+            p.mass, p.inertia, p.inv_mass, p.inv_inertia, p.material, nl.nbr, nl.nbr_count, nl.start,
+            self.hist, contact.table, contact.law_code, contact.rolling, box.body_acc, box.length,
+            box.periodic, *walls, self.wall_hist, state.clock.dt, self.scratch, self.booked, self.no_spring,
+        )  # fmt: skip
 
     def observables(self, state: State) -> dict[str, tuple[float, str]]:
         budget_totals(self.booked, self.totals)
