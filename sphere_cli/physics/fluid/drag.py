@@ -227,7 +227,7 @@ class FluidParticleDrag:
         )  # fmt: skip
         by_cell = [
             (sort.count_in_cells, n, (self.cell_of, count)),
-            (sort.cell_starts, 1, (count, start, following)),
+            (sort.cell_starts, cells, (count, start, following)),
             (sort.fill_cells, n, (self.cell_of, following, order)),
         ]
         kick = []

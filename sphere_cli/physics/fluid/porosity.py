@@ -119,7 +119,7 @@ class Porosity:
         binned = (p.pos, *grid, self.cell_of, self.wrapped)
         return [
             (k.bin_in_fluid_cells, n, (*binned, count, clamped)),
-            (k.cell_starts, 1, (count, start, following)),
+            (k.cell_starts, cells, (count, start, following)),
             (k.fill_cells, n, (self.cell_of, following, order)),
             (k.sort_cells, cells, (start, order, count)),
             (k.sample_cells, cells, sample),
