@@ -126,9 +126,9 @@ class CompiledSteps:
         budget, finish = None, list(step.finish_step)
         if forces and is_hook_of(forces[0], EnergyBudget, "forces"):  # it runs first of the forces
             budget = forces.pop(0).__self__
-            if finish and getattr(finish[0], "__self__", None) is budget:
-                if is_hook_of(finish[0], EnergyBudget, "finish_step"):
-                    finish.pop(0)
+            if finish != [budget.finish_step] or not is_hook_of(finish[0], EnergyBudget, "finish_step"):
+                return None
+            finish = []
         if not (
             len(kick_drift) == 1
             and is_hook_of(kick_drift[0], Motion, "kick_drift")
@@ -138,7 +138,6 @@ class CompiledSteps:
             and is_hook_of(forces[0], PairContactForces, "forces")
             and len(kick) == 1
             and not finish
-            and (budget is None or len(step.finish_step) == 1)
         ):
             return None
         contact, walls, extra = forces.pop(0).__self__, None, None
