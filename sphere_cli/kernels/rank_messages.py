@@ -11,7 +11,7 @@ rank of every run. The kernels, the arguments and their order are the Python loo
 share of a rank's step.
 
 A 1D VANS fluid's force on the particles (`fluid`: kernels/fluid/profile_forces.py
-profile_forces's arguments, as its compiled one-rank loop vans1d_steps takes them) comes after
+profile_forces's arguments, as the one-rank loop kernels/steps.py dem_steps takes them) comes after
 the contacts, where the forces hooks put it; it reads only the particle's own arrays and the
 fluid's profiles, the same on every rank, so its ghosts' forces need nothing more than the
 contacts' (their owners' sums overwrite them). None: no fluid.

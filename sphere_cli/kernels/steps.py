@@ -8,7 +8,10 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
-chunk), chunk_pair_forces, wall_forces (None without walls) and kick; motion, None where no wall
+chunk), chunk_pair_forces, wall_forces (None without walls) and kick; fluid, None, or those of
+a fluid's force on the particles that is the one kernel kernels/fluid/profile_forces.py
+profile_forces (the 1D VANS's: FluidModule.force_in_compiled_loops), after the contacts where
+the forces hooks put it; motion, None where no wall
 moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_totals (the
 near-wall list first) and of wall_kick but its time and dt, the wall positions the list of
 particles near walls was made at, half the skin [m], the clock's step at the call, dt [s]): the
@@ -18,13 +21,15 @@ of keep_half_step and accumulate_budget (kernels/observe/energy_budget.py), call
 contacts and after the kick as its hooks are. Returns (the complete steps taken, the last
 squared displacement, whether a drift ended the loop: a particle beyond half the skin, or a wall
 as far from where the near-wall list was made, which the wall hook then makes again).
-A fluid whose force on the particles is one kernel has its own loop calling `contacts` and that
-kernel (kernels/fluid/profile_forces.py vans1d_steps): a kernel passed as an argument would key
-Numba's cache by an object that differs in every process, so it would compile on every run."""
+A fluid whose step between its own needs more (the Navier-Stokes drag's exact kick and its
+sums over cells) has its own loop calling `contacts` and its kernels (kernels/fluid/drag.py
+drag_steps): a kernel passed as an argument would key Numba's cache by an object that differs
+in every process, so it would compile on every run."""
 
 from numba import njit
 
 from .contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
+from .fluid.profile_forces import profile_forces, profile_forces_serial
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
@@ -52,7 +57,7 @@ def walls_moved(coord, listed_at, reach):
 
 
 @njit(cache=True)
-def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion, budget):
+def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget):
     moved2 = 0.0
     for done in range(steps):
         if motion is not None:
@@ -65,6 +70,8 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, kicks, motion, budg
         if budget is not None:
             keep_half_step(*budget[0])
         contacts(cross, pairs, walls)
+        if fluid is not None:
+            profile_forces(*fluid)
         if motion is not None:
             wall_areas(*motion[1])
             listed_wall_totals(*motion[2])
@@ -85,5 +92,6 @@ dem_steps_serial = serial_twin(
     kick_drift=kick_drift_serial,
     kick=kick_serial,
     contacts=contacts_serial,
+    profile_forces=profile_forces_serial,
     accumulate_budget=accumulate_budget_serial,
 )

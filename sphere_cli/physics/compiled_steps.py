@@ -2,16 +2,18 @@
 the hooks one step at a time, without the interpreter's ~18 us a step.
 
 It applies when the step is exactly: the particles' kick-drift, the neighbour search, the pair
-contacts, optionally the plane-wall contacts and one more force from a module that has a
-compiled loop with that force in it (`steps_kernel`, and `force_arguments` for its kernel: the
-1D VANS fluid's force on the particles, the Navier-Stokes drag), the particles' kick or that
-module's own where it takes the kick over (`kick_arguments` for it: the Navier-Stokes drag's
-exact kick), and nothing after the kick (physics/module.py); the module's `steps_taken` then
-reports what its loop found (the Navier-Stokes drag's porosity floor); with the plane walls and
-no such force, the walls' motion (moving or stress-controlled walls, their kick-drift and kick
-around the particles') and the energy budget (its forces hook first of the forces, its
-finish_step the only one) may be in it too. Anything else in the step (a fluid with another
-force, a fluid with the budget, a hook replaced by a wrapper) keeps the step-by-step loop.
+contacts, optionally the plane-wall contacts, optionally one more force: a fluid's that is one
+kernel (`force_in_compiled_loops`, and `force_arguments` for it: the 1D VANS fluid's, which
+kernels/steps.py dem_steps calls), or that of a module with a compiled loop of its own
+(`steps_kernel`: the Navier-Stokes drag's), then the particles' kick or that module's own where
+it takes the kick over (`kick_arguments` for it: the Navier-Stokes drag's exact kick), and
+nothing after the kick (physics/module.py) but the energy budget's booking; the module's
+`steps_taken` then reports what its loop found (the Navier-Stokes drag's porosity floor). With
+dem_steps (no module loop of its own), the walls' motion (moving or stress-controlled walls,
+their kick-drift and kick around the particles') and the energy budget (its forces hook first
+of the forces, its finish_step the only one) may be in it too. Anything else in the step
+(another force, a module loop with moving walls or the budget, a hook replaced by a wrapper)
+keeps the step-by-step loop.
 simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
 coupling, a step where a stage may end), so those run in Python.
 """
@@ -40,15 +42,16 @@ def is_hook_of(hook, cls, name: str) -> bool:
     return type(getattr(hook, "__self__", None)) is cls and _own(hook, name)
 
 
-def _has_steps_kernel(hook) -> bool:
-    """True if `hook` is the forces method of the class that gives the compiled loop with that
-    force (`steps_kernel`): a subclass with forces of its own does not inherit the loop."""
+def _declared_with_forces(hook, attribute: str) -> bool:
+    """True if `hook` is the forces method of the class that sets `attribute` (truthy) beside
+    it (`steps_kernel`, `force_in_compiled_loops`): a subclass with forces of its own does not
+    inherit what the attribute says of them."""
     if not _own(hook, "forces"):
         return False
     cls = type(hook.__self__)
     for base in cls.__mro__:
-        if "steps_kernel" in vars(base):
-            return vars(base).get("forces") is cls.forces
+        if attribute in vars(base):
+            return bool(vars(base)[attribute]) and vars(base).get("forces") is cls.forces
     return False
 
 
@@ -105,11 +108,12 @@ class CompiledSteps:
 
     def __init__(
         self, search: NeighborSearch, contact: PairContactForces, walls, extra, moving: bool = False,
-        budget: EnergyBudget | None = None,
+        budget: EnergyBudget | None = None, fluid=None,
     ):  # fmt: skip
         self.search, self.contact, self.walls, self.extra = search, contact, walls, extra
         self.moving = moving  # the walls' motion in the loop
         self.budget = budget  # the energy budget's hooks in the loop
+        self.fluid = fluid  # a fluid whose force dem_steps calls (force_in_compiled_loops)
 
     @classmethod
     def of(cls, step: Step) -> CompiledSteps | None:
@@ -143,8 +147,11 @@ class CompiledSteps:
         contact, walls, extra = forces.pop(0).__self__, None, None
         if forces and is_hook_of(forces[0], PlaneWallForces, "forces"):
             walls = forces.pop(0).__self__
-        if forces and _has_steps_kernel(forces[0]):
+        fluid = None
+        if forces and _declared_with_forces(forces[0], "steps_kernel"):
             extra = forces.pop(0).__self__
+        elif forces and _declared_with_forces(forces[0], "force_in_compiled_loops"):
+            fluid = forces.pop(0).__self__
         if forces or (moving and (walls is None or extra is not None)) or (budget and extra is not None):
             return None
         # the kick: the particles' own, or that of the module whose loop kicks them itself
@@ -154,7 +161,7 @@ class CompiledSteps:
             kicks_own = is_hook_of(kick[0], Motion, "kick")
         if not kicks_own:
             return None
-        return cls(step.prepare[0].__self__, contact, walls, extra, moving, budget)
+        return cls(step.prepare[0].__self__, contact, walls, extra, moving, budget, fluid)
 
     @staticmethod
     def to_host(state: State) -> None:
@@ -186,8 +193,11 @@ class CompiledSteps:
             budget = None
             if self.budget is not None:  # the arguments of its two hooks
                 budget = (self.budget.keep_arguments(state), self.budget.book_arguments(state))
+            fluid = None if self.fluid is None else self.fluid.force_arguments(state)
             loop = dem_steps_serial if serial else dem_steps
-            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, kicks, motion, budget)
+            done, moved2, drifted = loop(
+                steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget
+            )
         else:
             extra = self.extra.force_arguments(state)
             if "kick" in self.extra.takes_over:

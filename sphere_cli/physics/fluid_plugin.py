@@ -119,9 +119,9 @@ class FluidModule(Module):
     # GPU then brings back for it
     stability_reads_particles = False
     # its forces hook is kernels/fluid/profile_forces.py profile_forces(*force_arguments(state))
-    # and nothing else, so the compiled rank loop (kernels/rank_messages.py) calls that kernel in
-    # its place on MPI ranks; a part with any other fluid steps from Python there
-    force_in_rank_loop = False
+    # and nothing else, so the compiled loops (kernels/steps.py dem_steps, and on MPI ranks
+    # kernels/rank_messages.py) call that kernel in its place
+    force_in_compiled_loops = False
 
     def gpu_steps(self, state) -> GpuSteps | None:
         """What runs on a GPU each step, for a model that is on_gpu, with its arguments as they are

@@ -38,9 +38,9 @@ like a GPU's physics/device_steps.py): `to_host` gathers the owners' particles a
 before frames, observables and checkpoints, so files are those of one rank and a checkpoint
 resumes on any rank count. A part's steps up to a list build run in one compiled call with
 their messages inside (kernels/rank_messages.py, through physics/rank_calls.py), moving walls,
-the energy budget or a 1D VANS fluid's force included (RankSteps.in_compiled_loop); other
-fluids', one at a time in Python with mpi4py's messages (an exchange of ghost forces and one
-reduction a step).
+the energy budget and a 1D VANS fluid's force included (RankSteps.in_compiled_loop); with
+another fluid, one at a time in Python with mpi4py's messages (an exchange of ghost forces and
+one reduction a step).
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed
 exactly (kernels/exact_sum.py): each rank adds its own particles' share into the sums' words
@@ -367,9 +367,8 @@ class RankSteps:
         how = (
             "each rank's steps up to a list build in one compiled call"
             if self.in_compiled_loop()
-            else "each rank's steps one at a time from Python (a fluid other than the 1D VANS, or "
-            "with moving walls or the energy budget; or an MPI whose functions mpi4py's library "
-            "does not give)"
+            else "each rank's steps one at a time from Python (a fluid other than the 1D VANS, or an "
+            "MPI whose functions mpi4py's library does not give)"
         )
         return (
             f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
@@ -574,9 +573,9 @@ class RankSteps:
         PairContactForces.forces, PlaneWallForces.forces and Motion.kick call, as
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
         step (120 beads on 2 ranks: 64 -> 55 us a step); and, where in_compiled_loop, the loop
-        of those steps with their messages (kernels/rank_messages.py), moving walls and a 1D
-        VANS fluid's force included (its arguments valid until the fluid's next step, which
-        ends the call). Valid until the next build while no wall moves, and for the loop
+        of those steps with their messages (kernels/rank_messages.py), moving walls, the energy
+        budget and a 1D VANS fluid's force included (its arguments valid until the fluid's next
+        step, which ends the call). Valid until the next build while no wall moves, and for the loop
         until the next build or a wall's move beyond the reach of the near-wall list (the loop
         stops there)."""
         part = self.part
@@ -611,15 +610,14 @@ class RankSteps:
 
     def in_compiled_loop(self) -> bool:
         """True if a part of this scene takes its steps in the compiled rank loop: no fluid, or
-        one whose force the loop calls (FluidModule.force_in_rank_loop: the 1D VANS) with no wall
-        moving and no energy budget (as the one-rank loop, physics/compiled_steps.py); and the
-        MPI functions found (physics/rank_calls.py compiled_calls)."""
+        one whose force the loop calls (FluidModule.force_in_compiled_loops: the 1D VANS), as the
+        one-rank loop (physics/compiled_steps.py); and the MPI functions found
+        (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
-        plain = fluid is None or (fluid.force_in_rank_loop and not self.t.moving and not self.t.budget)
-        return plain and bool(self.calls)
+        return (fluid is None or fluid.force_in_compiled_loops) and bool(self.calls)
 
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py

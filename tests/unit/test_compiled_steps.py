@@ -24,7 +24,6 @@ from sphere_cli.kernels.fluid import drag as kernels_drag
 from sphere_cli.kernels.fluid import porosity as kernels_porosity
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.drag import drag_steps, drag_steps_serial
-from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.observe import energy_budget as kernels_budget
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import contact as contact_module
@@ -136,8 +135,28 @@ def _walls_driven():
     return parse_case(text)
 
 
+def _sheared_in_a_fluid():
+    """The 400 spheres of _case("periodic") (periodic in x and y, thrown sideways over a floor)
+    under a 1D VANS flow (its force on them every step, the column solved every 10 steps), a
+    lid keeping 500 Pa and sliding at 5 cm/s along x above them, and the energy budget. 2 500
+    steps."""
+    text = canonical_case(400, spacing=1.05)
+    for face in ("x-", "x+", "y-", "y+"):
+        text = text.replace(f'[[walls]]\nface = "{face}"\n', "")
+    text = text.replace("[domain]\n", "[domain]\nperiodic = [true, true, false]\n")
+    text = text.replace("[particles]\n", "[particles]\nvelocity = [0.5, 0.3, 0.0]\n")
+    lid = 'face = "z+"\nmode = "stress"\nstress = 500.0\nshear_axis = "x"\nshear_velocity = 0.05\n'
+    text = text.replace('face = "z+"\n', lid)
+    text += (
+        '[fluid]\nmodel = "vans1d"\nsurface = 0.03\ncells = 30\ncoupling = { steps = 10 }\nflow = { kind = '
+        '"solved", mixing_length = "prandtl", pressure_gradient = -2000.0, initial = "rest" }\n'
+        '[output.observables]\nquantities = ["energy_budget"]\n'
+    )
+    return parse_case(text)
+
+
 @pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("name", ["direct-shear", "walls-driven", "direct-shear-budget"])
+@pytest.mark.parametrize("name", ["direct-shear", "walls-driven", "direct-shear-budget", "lid-over-a-fluid"])
 def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_bitwise(name, threads):
     """The walls' motion runs inside the compiled loop (their kick-drift before the particles',
     their kick before the particles', at the step's time), which ends where a stage may end
@@ -148,12 +167,16 @@ def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_
         "direct-shear": _direct_shear,
         "walls-driven": _walls_driven,
         "direct-shear-budget": lambda: _direct_shear(budget=True),
+        "lid-over-a-fluid": _sheared_in_a_fluid,
     }[name]
     numba.set_num_threads(threads)
     try:
         compiled, stepwise = build_scene(make()), build_scene(make())
         assert compiled.step.compiled is not None and compiled.step.compiled.moving
-        assert (compiled.step.compiled.budget is not None) == name.endswith("budget")
+        assert (compiled.step.compiled.budget is not None) == (
+            name in ("direct-shear-budget", "lid-over-a-fluid")
+        )
+        assert (compiled.step.compiled.fluid is not None) == (name == "lid-over-a-fluid")
         stepwise.step.compiled = None
         for scene in (compiled, stepwise):
             if name.startswith("direct-shear"):
@@ -167,11 +190,13 @@ def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_
         w, v = compiled.state.walls, stepwise.state.walls
         for wall in "coord", "vel", "acc", "shift", "force", "area":
             a[f"wall {wall}"], b[f"wall {wall}"] = getattr(w, wall), getattr(v, wall)
-        if name.endswith("budget"):
+        if compiled.budget is not None:
             a["booked"], b["booked"] = compiled.budget.booked, stepwise.budget.booked
             assert np.count_nonzero(a["booked"]) > 0
         if name.startswith("direct-shear"):
             assert abs(w.shift[1, 0]) > 1e-4  # the top wall has sheared the bed
+        elif name == "lid-over-a-fluid":
+            assert np.count_nonzero(a["fluid velocity"]) > 0 and w.shift[1, 0] > 0.0  # the flow, the lid
         else:  # both walls have reached the spheres
             assert np.count_nonzero(np.abs(w.force[[1, 5]]).max(axis=1)) == 2, w.force
         for key in a:
@@ -288,7 +313,7 @@ def test_a_subclass_with_forces_of_its_own_keeps_the_step_by_step_loop():
     """A module whose forces hook is overridden does not inherit the compiled loop of its base
     (the loop would skip whatever the override adds)."""
     scene = build_scene(load_case(CONFIGS / "bedload.toml"))
-    assert scene.step.compiled is not None and scene.step.compiled.extra is scene.fluid
+    assert scene.step.compiled is not None and scene.step.compiled.fluid is scene.fluid
     base = type(scene.fluid)
     scene.fluid.__class__ = type("Wrapped", (base,), {"forces": lambda self, s, spring_dt=None: None})
     scene.order_modules()
@@ -300,11 +325,11 @@ def test_the_compiled_loops_take_no_function_arguments():
     process: that loop would compile on every run and add a cache file each time."""
     for case in (load_case(CONFIGS / "bedload.toml"), _fluidized("particle")):
         advance(build_scene(case), 50)
-    loops = (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial, drag_steps, drag_steps_serial)
+    loops = (dem_steps, dem_steps_serial, drag_steps, drag_steps_serial)
     for loop in loops:
         for signature in loop.signatures:
             assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
-    assert vans1d_steps.signatures or vans1d_steps_serial.signatures
+    assert dem_steps.signatures or dem_steps_serial.signatures
     assert drag_steps.signatures or drag_steps_serial.signatures
 
 
@@ -330,7 +355,6 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
     """kernels/serial.py: on one thread the hooks and the compiled loops run the kernels' serial
     twins (compiled without reference counting, the leaf kernels with their arrays declared
     distinct); on two threads the parallel kernels. The runs are bitwise the same."""
-    loop = vans1d_steps_serial if name == "bedload" else dem_steps_serial
     runs = {}
     try:
         for threads in (2, 1):
@@ -349,7 +373,7 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
             # the list builds end their steps through the hooks: the twins there on one thread
             assert set(calls) == ({"kick_serial", "chunk_pair_forces_serial"} if threads == 1 else set())
             if threads == 1:
-                assert loop.overloads  # the compiled loop's twin, called from Python (compiled or loaded)
+                assert dem_steps_serial.overloads  # the loop's twin, called from Python (compiled or loaded)
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for key in runs[1]:
@@ -469,7 +493,7 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
         kernels_walls: ("wall_forces",),
         kernels_steps: ("contacts", "dem_steps"),
         kernels_contact: ("chunk_pair_forces",),
-        kernels_profile: ("profile_forces", "vans1d_steps"),
+        kernels_profile: ("profile_forces",),
         kernels_drag: ("particle_drag", "drag_kick", "drag_steps"),
         kernels_porosity: ("bin_particles",),
         kernels_budget: ("accumulate_budget",),

@@ -26,9 +26,7 @@ import math
 
 from numba import njit, prange
 
-from ..motion import kick, kick_drift, kick_drift_serial, kick_serial
 from ..serial import serial_twin
-from ..steps import contacts, contacts_serial
 from .layer_averaging import slice_volume
 
 
@@ -215,27 +213,5 @@ def drag_coefficients(
         drag_x[i] = k * ur
 
 
-@njit(cache=True)
-def vans1d_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks):
-    """kernels/steps.py dem_steps with the fluid's force on the particles after the contacts
-    (profile_forces with the argument tuple `fluid`), where the forces hooks put it."""
-    moved2 = 0.0
-    for done in range(steps):
-        moved2 = kick_drift(*drift)
-        if moved2 > threshold2:
-            return done, moved2, True
-        contacts(cross, pairs, walls)
-        profile_forces(*fluid)
-        kick(*kicks)
-    return steps, moved2, False
-
-
-# one thread: the same kernels without parallel regions (kernels/serial.py)
+# one thread: the same kernel without a parallel region (kernels/serial.py)
 profile_forces_serial = serial_twin(profile_forces, distinct=True)  # arrays of their own
-vans1d_steps_serial = serial_twin(
-    vans1d_steps,
-    kick_drift=kick_drift_serial,
-    kick=kick_serial,
-    contacts=contacts_serial,
-    profile_forces=profile_forces_serial,
-)

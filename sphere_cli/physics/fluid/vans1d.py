@@ -18,13 +18,7 @@ import numpy as np
 
 from ...config.consistency import particle_materials
 from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
-from ...kernels.fluid.profile_forces import (
-    drag_coefficients,
-    profile_forces,
-    profile_forces_serial,
-    vans1d_steps,
-    vans1d_steps_serial,
-)
+from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces, profile_forces_serial
 from ...kernels.fluid.turbulent_fluctuations import turbulent_fluctuations
 from ...kernels.fluid.vans1d import (
     MIXING_KINDS,
@@ -331,12 +325,8 @@ class Vans1d(FluidModule):
 
     # ---------------------------------------------------------------- every step
 
-    # the compiled steps with this module's force in the loop (physics/compiled_steps.py)
-    steps_kernel = staticmethod(vans1d_steps)
-    serial_steps_kernel = staticmethod(vans1d_steps_serial)  # on one thread (kernels/serial.py)
-
     on_gpu = True
-    force_in_rank_loop = True  # (forces below)
+    force_in_compiled_loops = True  # (forces below; physics/compiled_steps.py)
 
     def gpu_steps(self, state) -> GpuSteps:
         from ...kernels.fluid.cuda_profile_forces import profile_forces
