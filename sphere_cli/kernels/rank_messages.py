@@ -11,7 +11,8 @@ rank of every run. The kernels, the arguments and their order are the Python loo
 share of a rank's step.
 
 A 1D VANS fluid's force on the particles (`fluid`: kernels/fluid/profile_forces.py
-profile_forces's arguments, as the one-rank loop kernels/steps.py dem_steps takes them) comes after
+profile_forces's arguments, as the one-rank loop kernels/steps.py dem_steps takes them, called
+as `fluid_force` by the fluid's variant of this loop, rank_vans1d_steps there) comes after
 the contacts, where the forces hooks put it; it reads only the particle's own arrays and the
 fluid's profiles, the same on every rank, so its ghosts' forces need nothing more than the
 contacts' (their owners' sums overwrite them). None: no fluid.
@@ -32,12 +33,11 @@ messages; clock (2,) int64 scratch.
 import numpy as np
 from numba import njit
 
-from .fluid.profile_forces import profile_forces, profile_forces_serial
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .neighbors import rows_in, rows_out
 from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
-from .steps import contacts, contacts_serial, walls_moved
+from .steps import contacts, contacts_serial, fluid_force, walls_moved
 from .walls import (
     add_glued,
     add_pushes,
@@ -162,7 +162,7 @@ def rank_dem_steps(
         started = seconds(mpi, clock)
         contacts(cross, pairs, walls)
         if fluid is not None:
-            profile_forces(*fluid)
+            fluid_force(*fluid)
         busy += seconds(mpi, clock) - started
         code = send_ghost_forces(force, torque, mpi, mail)
         if code != 0:
@@ -185,6 +185,5 @@ rank_dem_steps_serial = serial_twin(
     kick_drift=kick_drift_serial,
     kick=kick_serial,
     contacts=contacts_serial,
-    profile_forces=profile_forces_serial,
     accumulate_budget=accumulate_budget_serial,
 )

@@ -42,16 +42,32 @@ class _DistinctArrays(CompilerBase):
         return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
 
 
-def serial_twin(kernel, distinct: bool = False, **callees):
-    if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT: a plain function, threads or none
-        return kernel
-    func = kernel.py_func
+def _copy(func, suffix: str, callees: dict):
+    """The Python function `func` under its qualified name + suffix, calling `callees` (by
+    name) in place of the functions of those names."""
     scope = dict(func.__globals__)
     scope.update(callees)
     twin = types.FunctionType(func.__code__, scope, func.__name__, func.__defaults__, func.__closure__)
-    twin.__qualname__ = f"{func.__qualname__}_serial"
+    twin.__qualname__ = f"{func.__qualname__}_{suffix}"
     twin.__module__ = func.__module__
     twin.__doc__ = func.__doc__
+    return twin
+
+
+def variant(kernel, suffix: str, **callees):
+    """`kernel` compiled again, with its own options, calling `callees` in place of the
+    functions of those names: a compiled loop with a model's kernel in a place its own module
+    leaves for it (kernels/steps.py fluid_force), so that the loop's module imports nothing of
+    that model. Cached under its own qualified name, as a twin is."""
+    if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT: the plain function, its callees set
+        return _copy(kernel, suffix, callees)
+    return numba.jit(**kernel.targetoptions, cache=True)(_copy(kernel.py_func, suffix, callees))
+
+
+def serial_twin(kernel, distinct: bool = False, **callees):
+    if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT: a plain function, threads or none
+        return kernel
+    twin = _copy(kernel.py_func, "serial", callees)
     options = {**kernel.targetoptions, "parallel": False}
     if kernel.targetoptions.get("parallel"):
         options["error_model"] = "numpy"  # as Numba compiles a parallel loop's body

@@ -8,10 +8,11 @@ makes the neighbour list stale: the caller rebuilds the list and ends that step 
 
 Arguments: steps, the most to take; threshold2 [m^2], the squared half skin; drift, cross,
 pairs, walls and kick, the argument tuples of kick_drift, cross_chunk_pairs (None with one
-chunk), chunk_pair_forces, wall_forces (None without walls) and kick; fluid, None, or those of
-a fluid's force on the particles that is the one kernel kernels/fluid/profile_forces.py
-profile_forces (the 1D VANS's: FluidModule.force_in_compiled_loops), after the contacts where
-the forces hooks put it; motion, None where no wall
+chunk), chunk_pair_forces, wall_forces (None without walls) and kick; fluid, None, or the
+arguments of a fluid's force on the particles that is one kernel, called after the contacts
+where the forces hooks put it: `fluid_force` below, which the fluid's variant of the loop
+replaces by its kernel (kernels/serial.py variant; the 1D VANS's, kernels/fluid/profile_forces.py
+vans1d_steps), so that this module imports nothing of a fluid; motion, None where no wall
 moves, else (the argument tuples of wall_kick_drift, wall_areas, listed_wall_totals (the
 near-wall list first) and of wall_kick but its time and dt, the wall positions the list of
 particles near walls was made at, half the skin [m], the clock's step at the call, dt [s]): the
@@ -29,7 +30,6 @@ in every process, so it would compile on every run."""
 from numba import njit
 
 from .contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
-from .fluid.profile_forces import profile_forces, profile_forces_serial
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
@@ -57,6 +57,12 @@ def walls_moved(coord, listed_at, reach):
 
 
 @njit(cache=True)
+def fluid_force(*arguments):
+    """The place of a fluid's force in the loops (module docstring): never called here, where
+    `fluid` is None and Numba leaves the call out."""
+
+
+@njit(cache=True)
 def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget):
     moved2 = 0.0
     for done in range(steps):
@@ -71,7 +77,7 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motio
             keep_half_step(*budget[0])
         contacts(cross, pairs, walls)
         if fluid is not None:
-            profile_forces(*fluid)
+            fluid_force(*fluid)
         if motion is not None:
             wall_areas(*motion[1])
             listed_wall_totals(*motion[2])
@@ -92,6 +98,5 @@ dem_steps_serial = serial_twin(
     kick_drift=kick_drift_serial,
     kick=kick_serial,
     contacts=contacts_serial,
-    profile_forces=profile_forces_serial,
     accumulate_budget=accumulate_budget_serial,
 )

@@ -3,8 +3,8 @@ the hooks one step at a time, without the interpreter's ~18 us a step.
 
 It applies when the step is exactly: the particles' kick-drift, the neighbour search, the pair
 contacts, optionally the plane-wall contacts, optionally one more force: a fluid's that is one
-kernel (`force_in_compiled_loops`, and `force_arguments` for it: the 1D VANS fluid's, which
-kernels/steps.py dem_steps calls), or that of a module with a compiled loop of its own
+kernel (`force_loops`, and `force_arguments` for it: the 1D VANS fluid's, in its variant of
+kernels/steps.py dem_steps), or that of a module with a compiled loop of its own
 (`steps_kernel`: the Navier-Stokes drag's), then the particles' kick or that module's own where
 it takes the kick over (`kick_arguments` for it: the Navier-Stokes drag's exact kick), and
 nothing after the kick (physics/module.py) but the energy budget's booking; the module's
@@ -43,15 +43,15 @@ def is_hook_of(hook, cls, name: str) -> bool:
 
 
 def _declared_with_forces(hook, attribute: str) -> bool:
-    """True if `hook` is the forces method of the class that sets `attribute` (truthy) beside
-    it (`steps_kernel`, `force_in_compiled_loops`): a subclass with forces of its own does not
+    """True if `hook` is the forces method of the class that sets `attribute` (not None)
+    beside it (`steps_kernel`, `force_loops`): a subclass with forces of its own does not
     inherit what the attribute says of them."""
     if not _own(hook, "forces"):
         return False
     cls = type(hook.__self__)
     for base in cls.__mro__:
         if attribute in vars(base):
-            return bool(vars(base)[attribute]) and vars(base).get("forces") is cls.forces
+            return vars(base)[attribute] is not None and vars(base).get("forces") is cls.forces
     return False
 
 
@@ -113,7 +113,7 @@ class CompiledSteps:
         self.search, self.contact, self.walls, self.extra = search, contact, walls, extra
         self.moving = moving  # the walls' motion in the loop
         self.budget = budget  # the energy budget's hooks in the loop
-        self.fluid = fluid  # a fluid whose force dem_steps calls (force_in_compiled_loops)
+        self.fluid = fluid  # a fluid whose force is in its variant of dem_steps (force_loops)
 
     @classmethod
     def of(cls, step: Step) -> CompiledSteps | None:
@@ -150,7 +150,7 @@ class CompiledSteps:
         fluid = None
         if forces and _declared_with_forces(forces[0], "steps_kernel"):
             extra = forces.pop(0).__self__
-        elif forces and _declared_with_forces(forces[0], "force_in_compiled_loops"):
+        elif forces and _declared_with_forces(forces[0], "force_loops"):
             fluid = forces.pop(0).__self__
         if forces or (moving and (walls is None or extra is not None)) or (budget and extra is not None):
             return None
@@ -193,8 +193,9 @@ class CompiledSteps:
             budget = None
             if self.budget is not None:  # the arguments of its two hooks
                 budget = (self.budget.keep_arguments(state), self.budget.book_arguments(state))
-            fluid = None if self.fluid is None else self.fluid.force_arguments(state)
-            loop = dem_steps_serial if serial else dem_steps
+            fluid, loop = None, dem_steps_serial if serial else dem_steps
+            if self.fluid is not None:  # its variant of the loop, with its force in it
+                fluid, loop = self.fluid.force_arguments(state), self.fluid.force_loops[1 if serial else 0]
             done, moved2, drifted = loop(
                 steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget
             )

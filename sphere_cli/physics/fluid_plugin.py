@@ -118,10 +118,11 @@ class FluidModule(Module):
     # its stability test (first_unstable) reads the particles' positions and velocities, which a
     # GPU then brings back for it
     stability_reads_particles = False
-    # its forces hook is kernels/fluid/profile_forces.py profile_forces(*force_arguments(state))
-    # and nothing else, so the compiled loops (kernels/steps.py dem_steps, and on MPI ranks
-    # kernels/rank_messages.py) call that kernel in its place
-    force_in_compiled_loops = False
+    # where its forces hook is one kernel called with force_arguments(state) and nothing else:
+    # the compiled loops with that kernel in the place they leave for it (kernels/serial.py
+    # variant of kernels/steps.py dem_steps and kernels/rank_messages.py rank_dem_steps), as
+    # (steps, their one-thread twin, the ranks' steps, their twin); None: not so
+    force_loops = None
 
     def gpu_steps(self, state) -> GpuSteps | None:
         """What runs on a GPU each step, for a model that is on_gpu, with its arguments as they are

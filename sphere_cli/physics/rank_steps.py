@@ -591,7 +591,9 @@ class RankSteps:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
-            fluid = None if part.fluid is None else part.fluid.force_arguments(state)
+            fluid, loop = None, rank_dem_steps_serial if serial else rank_dem_steps
+            if part.fluid is not None:  # its variant of the loop, with its force in it
+                fluid, loop = part.fluid.force_arguments(state), part.fluid.force_loops[3 if serial else 2]
             motion = None if part.wall_motion is None else self._motion(state)
             budget = None
             if part.budget is not None:
@@ -600,7 +602,7 @@ class RankSteps:
                 self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail,
                 scratch,
             )  # fmt: skip
-            loop = (rank_dem_steps_serial if serial else rank_dem_steps, arguments)
+            loop = (loop, arguments)
         return StepCalls(
             (kick_drift_serial if serial else kick_drift, drift),
             (contacts_serial if serial else contacts, (cross, pairs, walls)),
@@ -610,14 +612,14 @@ class RankSteps:
 
     def in_compiled_loop(self) -> bool:
         """True if a part of this scene takes its steps in the compiled rank loop: no fluid, or
-        one whose force the loop calls (FluidModule.force_in_compiled_loops: the 1D VANS), as the
+        one whose force the loop can take (FluidModule.force_loops: the 1D VANS), as the
         one-rank loop (physics/compiled_steps.py); and the MPI functions found
         (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
-        return (fluid is None or fluid.force_in_compiled_loops) and bool(self.calls)
+        return (fluid is None or fluid.force_loops is not None) and bool(self.calls)
 
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py

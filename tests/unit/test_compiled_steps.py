@@ -24,6 +24,7 @@ from sphere_cli.kernels.fluid import drag as kernels_drag
 from sphere_cli.kernels.fluid import porosity as kernels_porosity
 from sphere_cli.kernels.fluid import profile_forces as kernels_profile
 from sphere_cli.kernels.fluid.drag import drag_steps, drag_steps_serial
+from sphere_cli.kernels.fluid.profile_forces import vans1d_steps, vans1d_steps_serial
 from sphere_cli.kernels.observe import energy_budget as kernels_budget
 from sphere_cli.kernels.steps import dem_steps, dem_steps_serial
 from sphere_cli.physics import contact as contact_module
@@ -325,11 +326,11 @@ def test_the_compiled_loops_take_no_function_arguments():
     process: that loop would compile on every run and add a cache file each time."""
     for case in (load_case(CONFIGS / "bedload.toml"), _fluidized("particle")):
         advance(build_scene(case), 50)
-    loops = (dem_steps, dem_steps_serial, drag_steps, drag_steps_serial)
+    loops = (dem_steps, vans1d_steps, dem_steps_serial, vans1d_steps_serial, drag_steps, drag_steps_serial)
     for loop in loops:
         for signature in loop.signatures:
             assert not any(isinstance(t, (types.Dispatcher, types.Function)) for t in signature)
-    assert dem_steps.signatures or dem_steps_serial.signatures
+    assert vans1d_steps.signatures or vans1d_steps_serial.signatures
     assert drag_steps.signatures or drag_steps_serial.signatures
 
 
@@ -355,6 +356,8 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
     """kernels/serial.py: on one thread the hooks and the compiled loops run the kernels' serial
     twins (compiled without reference counting, the leaf kernels with their arrays declared
     distinct); on two threads the parallel kernels. The runs are bitwise the same."""
+    loop = vans1d_steps_serial if name == "bedload" else dem_steps_serial
+    loop = vans1d_steps_serial if name == "bedload" else dem_steps_serial
     runs = {}
     try:
         for threads in (2, 1):
@@ -373,7 +376,7 @@ def test_one_thread_runs_the_serial_twins_bitwise_as_two_threads_run_the_paralle
             # the list builds end their steps through the hooks: the twins there on one thread
             assert set(calls) == ({"kick_serial", "chunk_pair_forces_serial"} if threads == 1 else set())
             if threads == 1:
-                assert dem_steps_serial.overloads  # the loop's twin, called from Python (compiled or loaded)
+                assert loop.overloads  # the compiled loop's twin, called from Python (compiled or loaded)
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for key in runs[1]:
@@ -493,7 +496,7 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
         kernels_walls: ("wall_forces",),
         kernels_steps: ("contacts", "dem_steps"),
         kernels_contact: ("chunk_pair_forces",),
-        kernels_profile: ("profile_forces",),
+        kernels_profile: ("profile_forces", "vans1d_steps"),
         kernels_drag: ("particle_drag", "drag_kick", "drag_steps"),
         kernels_porosity: ("bin_particles",),
         kernels_budget: ("accumulate_budget",),
@@ -503,3 +506,6 @@ def test_the_serial_twins_are_cached_apart_from_their_kernels():
             twin, kernel = getattr(module, f"{name}_serial"), getattr(module, name)
             assert twin._cache._cache_path == kernel._cache._cache_path
             assert twin._cache._cache_file._index_path != kernel._cache._cache_file._index_path
+    # the loops' variants with the VANS force (kernels/serial.py variant): each its own entry
+    loops = (dem_steps, dem_steps_serial, vans1d_steps, vans1d_steps_serial)
+    assert len({loop._cache._cache_file._index_path for loop in loops}) == len(loops)

@@ -26,7 +26,9 @@ import math
 
 from numba import njit, prange
 
-from ..serial import serial_twin
+from ..rank_messages import rank_dem_steps, rank_dem_steps_serial
+from ..serial import serial_twin, variant
+from ..steps import dem_steps, dem_steps_serial
 from .layer_averaging import slice_volume
 
 
@@ -215,3 +217,10 @@ def drag_coefficients(
 
 # one thread: the same kernel without a parallel region (kernels/serial.py)
 profile_forces_serial = serial_twin(profile_forces, distinct=True)  # arrays of their own
+
+# the compiled loops with this force in the place they leave for a fluid's (kernels/steps.py
+# fluid_force), on one rank and on MPI ranks, and their twins for one thread
+vans1d_steps = variant(dem_steps, "vans1d", fluid_force=profile_forces)
+vans1d_steps_serial = variant(dem_steps_serial, "vans1d", fluid_force=profile_forces_serial)
+rank_vans1d_steps = variant(rank_dem_steps, "vans1d", fluid_force=profile_forces)
+rank_vans1d_steps_serial = variant(rank_dem_steps_serial, "vans1d", fluid_force=profile_forces_serial)

@@ -18,7 +18,15 @@ import numpy as np
 
 from ...config.consistency import particle_materials
 from ...config.fluid_vans1d import LogLawFlow, ProfileFlow, SolvedFlow
-from ...kernels.fluid.profile_forces import drag_coefficients, profile_forces, profile_forces_serial
+from ...kernels.fluid.profile_forces import (
+    drag_coefficients,
+    profile_forces,
+    profile_forces_serial,
+    rank_vans1d_steps,
+    rank_vans1d_steps_serial,
+    vans1d_steps,
+    vans1d_steps_serial,
+)
 from ...kernels.fluid.turbulent_fluctuations import turbulent_fluctuations
 from ...kernels.fluid.vans1d import (
     MIXING_KINDS,
@@ -326,7 +334,8 @@ class Vans1d(FluidModule):
     # ---------------------------------------------------------------- every step
 
     on_gpu = True
-    force_in_compiled_loops = True  # (forces below; physics/compiled_steps.py)
+    # the compiled loops with profile_forces in them (forces below; physics/compiled_steps.py)
+    force_loops = (vans1d_steps, vans1d_steps_serial, rank_vans1d_steps, rank_vans1d_steps_serial)
 
     def gpu_steps(self, state) -> GpuSteps:
         from ...kernels.fluid.cuda_profile_forces import profile_forces
