@@ -283,15 +283,15 @@ def test_stages_run_on_the_gpu_as_on_the_cpu(tmp_path, grid):
 
 @pytest.mark.parametrize(
     "scene, launch",
-    [("stages-navier-stokes", (2, 3)), ("moving-walls", (2, 32))],
-    ids=["6-threads-navier-stokes", "64-threads-moving-walls"],
+    [("stages-navier-stokes", (2, 3)), ("moving-walls", (2, 24))],
+    ids=["6-threads-navier-stokes", "48-threads-moving-walls"],
 )
 def test_the_steps_do_not_depend_on_the_launch(tmp_path, monkeypatch, scene, launch):
     """Every kernel strides over its particles or cells (kernels/cuda_dem.py): launches of 2
     blocks of 3 threads (each taking 6 or 7 of the 40 particles and 2 of the 12 fluid cells:
     the neighbour search, the contacts, the stages' walls, the porosity, the drag and its
-    kick) and of 2 blocks of 32 (idle threads) step as the CPU does. On a GPU, blocks of that
-    many threads, a thread an item."""
+    kick) and of 2 blocks of 24 (8 threads without a particle) step as the CPU does. On a GPU,
+    blocks of that many threads, a thread an item."""
     if SIMULATED:
         monkeypatch.setattr(device_steps, "SIMULATOR_LAUNCH", launch)
     else:
