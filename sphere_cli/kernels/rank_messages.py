@@ -23,6 +23,9 @@ each rank adds its own particles' pushes and its own glued spheres' forces into 
 sums, and MPI_Allreduce adds those words over the ranks (rank_wall_totals): one rank's total,
 bitwise, from a message of a fixed size (W x 3 x WORDS int64) whatever the particles' number.
 
+The Navier-Stokes drag's loop, its kick in place of the particles' (kernels/fluid/drag.py
+rank_drag_steps), sends each ghost's other forces with its force and torque.
+
 mpi: (allreduce, irecv, isend, waitall, clock_gettime, the communicator, MPI_DOUBLE, MPI_MAX,
 the monotonic clock's id, MPI_INT64_T, MPI_SUM); mail (rank_calls.ghost_mail): the
 ranks sent to and their rows (a rank m's are local[start[m]:start[m + 1]], its box the same rows
@@ -65,15 +68,24 @@ def largest_everywhere(mpi, mine, largest):
 
 
 @njit(cache=True)
+def drift_everywhere(drift, mpi, mine, largest):
+    """The step's kick-drift of this rank's particles, and the largest squared displacement over
+    every rank into largest (1,) (mine (1,) scratch); returns MPI's error code."""
+    mine[0] = kick_drift(*drift)
+    return largest_everywhere(mpi, mine, largest)
+
+
+@njit(cache=True)
 def _post(call, box, rank, mpi, request):
     """MPI_Irecv or MPI_Isend (call) of the doubles of box from or to rank, into request[0]."""
     return call(box.ctypes.data, np.int32(box.size), mpi[6], rank, np.int32(TAG), mpi[5], request.ctypes.data)
 
 
 @njit(cache=True)
-def send_ghost_forces(force, torque, mpi, mail):
-    """Each rank's rows of force and torque (3 + 3 doubles) to it, and those of the ghosts this
-    rank holds from their owners; returns MPI's first error code (0: none)."""
+def send_ghost_forces(force, torque, other, mpi, mail):
+    """Each rank's rows of force, torque and other (3 + 3 + k doubles; other (n, k) a fluid's
+    ghost array, k = 0 without one) to it, and those of the ghosts this rank holds from their
+    owners; returns MPI's first error code (0: none)."""
     to, to_start, to_local, out, come, come_start, come_local, into, requests, statuses = mail
     messages = 0
     for m in range(come.shape[0]):
@@ -87,6 +99,7 @@ def send_ghost_forces(force, torque, mpi, mail):
         box = out[to_start[m] : to_start[m + 1]]
         rows_out(force, local, box, 0)
         rows_out(torque, local, box, 3)
+        rows_out(other, local, box, 6)
         code = _post(mpi[2], box, to[m], mpi, requests[messages:])
         if code != 0:
             return code
@@ -99,6 +112,7 @@ def send_ghost_forces(force, torque, mpi, mail):
         box = into[come_start[m] : come_start[m + 1]]
         rows_in(box, local, force, 0)
         rows_in(box, local, torque, 3)
+        rows_in(box, local, other, 6)
     return 0
 
 
@@ -149,8 +163,7 @@ def rank_dem_steps(
     for done in range(steps):
         if motion is not None:
             wall_kick_drift(*motion[0])
-        mine[0] = kick_drift(*drift)
-        code = largest_everywhere(mpi, mine, largest)
+        code = drift_everywhere(drift, mpi, mine, largest)
         if code != 0:
             return done, largest[0], False, busy, code
         if largest[0] > threshold2:
@@ -164,7 +177,7 @@ def rank_dem_steps(
         if fluid is not None:
             fluid_force(*fluid)
         busy += seconds(mpi, clock) - started
-        code = send_ghost_forces(force, torque, mpi, mail)
+        code = send_ghost_forces(force, torque, force[:, :0], mpi, mail)
         if code != 0:
             return done, largest[0], False, busy, code
         if motion is not None:
@@ -180,9 +193,10 @@ def rank_dem_steps(
 
 
 # one thread: the loop without parallel regions (kernels/serial.py)
+drift_everywhere_serial = serial_twin(drift_everywhere, kick_drift=kick_drift_serial)
 rank_dem_steps_serial = serial_twin(
     rank_dem_steps,
-    kick_drift=kick_drift_serial,
+    drift_everywhere=drift_everywhere_serial,
     kick=kick_serial,
     contacts=contacts_serial,
     accumulate_budget=accumulate_budget_serial,

@@ -123,6 +123,11 @@ class FluidModule(Module):
     # variant of kernels/steps.py dem_steps and kernels/rank_messages.py rank_dem_steps), as
     # (steps, their one-thread twin, the ranks' steps, their twin); None: not so
     force_loops = None
+    # a model with a compiled loop of its own (steps_kernel) that also runs on MPI ranks: that
+    # loop's rank version and its one-thread twin (the Navier-Stokes drag's where the
+    # self-induced velocity is kept, kernels/fluid/drag.py rank_drag_steps); None: its part's
+    # steps on a rank are taken one at a time from Python
+    rank_steps_kernels = None
 
     def gpu_steps(self, state) -> GpuSteps | None:
         """What runs on a GPU each step, for a model that is on_gpu, with its arguments as they are

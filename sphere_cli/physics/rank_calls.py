@@ -87,16 +87,17 @@ def compiled_calls(world) -> tuple | None:
     ), np.dtype(np.int32 if request == types.int32 else np.intp)
 
 
-def ghost_mail(world, send: dict, receive: dict, request_type: np.dtype) -> tuple:
+def ghost_mail(world, send: dict, receive: dict, request_type: np.dtype, width: int = 6) -> tuple:
     """The `mail` argument of kernels/rank_messages.py from a part's send and receive (rank ->
-    local indices): flat, each rank's rows after the last's, in the dicts' order."""
+    local indices): flat, each rank's rows after the last's, in the dicts' order; `width`
+    doubles a row (force and torque, and a fluid's ghost array)."""
 
     def flat(by_rank: dict) -> tuple:
         ranks = np.array(list(by_rank), dtype=np.int32)
         sizes = [local.size for local in by_rank.values()]
         start = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         local = np.concatenate([np.zeros(0, np.int64), *by_rank.values()]).astype(np.int64)
-        return ranks, start, local, np.empty((local.size, 6))
+        return ranks, start, local, np.empty((local.size, width))
 
     messages = len(send) + len(receive)
     statuses = np.empty(max(messages, 1) * world.mpi._sizeof(world.mpi.Status), dtype=np.uint8)

@@ -367,7 +367,8 @@ class RankSteps:
         how = (
             "each rank's steps up to a list build in one compiled call"
             if self.in_compiled_loop()
-            else "each rank's steps one at a time from Python (a fluid other than the 1D VANS, or an "
+            else "each rank's steps one at a time from Python (a Darcy fluid, a Navier-Stokes drag whose "
+            "self-induced velocity is subtracted or under moving walls or with the energy budget, or an "
             "MPI whose functions mpi4py's library does not give)"
         )
         return (
@@ -492,12 +493,17 @@ class RankSteps:
                 taken, moved2, stale, busy, code = calls.loop[0](left, step, *calls.loop[1])
                 if code != 0:
                     raise RuntimeError(f"MPI error {code} in the ranks' compiled steps")
+                if self.part.fluid is not None:  # what its loop found (the drag's porosity floor)
+                    self.part.fluid.steps_taken(self.part.state, taken)
                 self.part.state.clock.step += taken
                 self.part.state.neighbors.moved2 = moved2
                 self.busy += busy
-                left -= taken
                 if not stale:
+                    if taken < left:  # the fluid's loop stopped to report (its arguments made again)
+                        calls = self._kernels()
+                    left -= taken
                     continue
+                left -= taken
                 # the drift of the next step is taken: the list built (or the near-wall list
                 # made again for walls that have moved), then the step ended here
                 if moved2 > self.t.threshold2:
@@ -587,22 +593,30 @@ class RankSteps:
         loop = None
         if self.in_compiled_loop():
             mpi, request_type = self.calls
-            if part.compiled_mail is None:
-                part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type)
+            own_loop = part.fluid is not None and part.fluid.rank_steps_kernels is not None
+            if part.compiled_mail is None:  # force and torque a ghost, and the drag loop's f_other
+                width = 9 if own_loop else 6
+                part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type, width)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
-            fluid, loop = None, rank_dem_steps_serial if serial else rank_dem_steps
-            if part.fluid is not None:  # its variant of the loop, with its force in it
-                fluid, loop = part.fluid.force_arguments(state), part.fluid.force_loops[3 if serial else 2]
-            motion = None if part.wall_motion is None else self._motion(state)
-            budget = None
-            if part.budget is not None:
-                budget = (part.budget.keep_arguments(state), part.budget.book_arguments(state))
-            arguments = (
-                self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail,
-                scratch,
-            )  # fmt: skip
-            loop = (loop, arguments)
+            if own_loop:  # the fluid's loop, its kick in place of the particles'
+                drag, fluid_kicks = part.fluid.force_arguments(state), part.fluid.kick_arguments(state)
+                arguments = (self.t.threshold2, drift, cross, pairs, walls, drag, fluid_kicks)
+                loop = (part.fluid.rank_steps_kernels[1 if serial else 0], (*arguments, mpi, mail, scratch))
+            else:
+                fluid, loop = None, rank_dem_steps_serial if serial else rank_dem_steps
+                if part.fluid is not None:  # its variant of the loop, with its force in it
+                    fluid = part.fluid.force_arguments(state)
+                    loop = part.fluid.force_loops[3 if serial else 2]
+                motion = None if part.wall_motion is None else self._motion(state)
+                budget = None
+                if part.budget is not None:
+                    budget = (part.budget.keep_arguments(state), part.budget.book_arguments(state))
+                arguments = (
+                    self.t.threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail,
+                    scratch,
+                )  # fmt: skip
+                loop = (loop, arguments)
         return StepCalls(
             (kick_drift_serial if serial else kick_drift, drift),
             (contacts_serial if serial else contacts, (cross, pairs, walls)),
@@ -611,15 +625,20 @@ class RankSteps:
         )
 
     def in_compiled_loop(self) -> bool:
-        """True if a part of this scene takes its steps in the compiled rank loop: no fluid, or
+        """True if a part of this scene takes its steps in a compiled rank loop: no fluid, or
         one whose force the loop can take (FluidModule.force_loops: the 1D VANS), as the
-        one-rank loop (physics/compiled_steps.py); and the MPI functions found
+        one-rank loop (physics/compiled_steps.py), or one with a rank loop of its own
+        (FluidModule.rank_steps_kernels: the Navier-Stokes drag with the self-induced velocity
+        kept) where no wall moves and no energy budget is kept; and the MPI functions found
         (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
-        return (fluid is None or fluid.force_loops is not None) and bool(self.calls)
+        if fluid is not None and fluid.force_loops is None:
+            if fluid.rank_steps_kernels is None or self.t.moving or self.t.budget:
+                return False
+        return bool(self.calls)
 
     def _motion(self, state: State) -> tuple:
         """The `motion` argument of kernels/rank_messages.py rank_dem_steps: kernels/steps.py

@@ -47,11 +47,13 @@ mine, largest = np.array([10.0 + rank]), np.zeros(1)
 code = largest_everywhere(mpi, mine, largest)
 
 # 4 particles a rank: rows 1 and 3 are owned and ghosts on the other rank, where they are
-# rows 0 and 2; each rank's forces are 100 * rank + row, torques their negatives
+# rows 0 and 2; each rank's forces are 100 * rank + row, torques their negatives, and a fluid's
+# ghost array of one column ten times the force
 force = np.array([[100.0 * rank + i] * 3 for i in range(4)])
 torque = -force
-mail = ghost_mail(world, {other: np.array([1, 3])}, {other: np.array([0, 2])}, request_type)
-sent = send_ghost_forces(force, torque, mpi, mail)
+extra = 10.0 * force[:, :1]
+mail = ghost_mail(world, {other: np.array([1, 3])}, {other: np.array([0, 2])}, request_type, width=7)
+sent = send_ghost_forces(force, torque, extra, mpi, mail)
 
 # the monotonic clock the loop times its forces by (rank_balance = "time"), over a 50 ms sleep
 clock = np.zeros(2, dtype=np.int64)
@@ -98,7 +100,8 @@ else:
 KERNELS = (largest_everywhere, send_ghost_forces, seconds, rank_wall_totals)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
-    "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "slept": slept, "elapsed": elapsed,
+    "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "extra": extra[:, 0].tolist(),
+    "slept": slept, "elapsed": elapsed,
     "totals": int(totals), "one": one.tolist(), "split": split.tolist(), "fluid": fluid_force.tolist(),
     "mixed": mixed.tolist(),
     "compiled": sum(sum(f.stats.cache_misses.values()) for f in KERNELS),
@@ -132,6 +135,7 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
         # rows 0 and 2 now hold the owner's rows 1 and 3; rows 1 and 3 are untouched
         assert r["force"] == [theirs + 1, mine + 1, theirs + 3, mine + 3]
         assert r["torque"] == [-(theirs + 1), -(mine + 1), -(theirs + 3), -(mine + 3)]
+        assert r["extra"] == [10 * (theirs + 1), 10 * (mine + 1), 10 * (theirs + 3), 10 * (mine + 3)]
         # each kernel compiled by one rank or both (the other may find it in the shared cache)
         assert r["compiled"] + r["loaded"] == len(KERNEL_NAMES)
         assert 0.05 <= r["slept"] <= r["elapsed"] + 1e-3  # the clocks agree to a millisecond

@@ -58,6 +58,7 @@ import math
 from numba import njit, prange
 
 from ..motion import kick_drift, kick_drift_serial
+from ..rank_messages import drift_everywhere, drift_everywhere_serial, seconds, send_ghost_forces
 from ..serial import serial_twin
 from ..steps import contacts, contacts_serial
 from .porosity import bin_particles, bin_particles_serial
@@ -473,15 +474,54 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
     return steps, moved2, False
 
 
-# one thread: the loop and its drag kernels without parallel regions (kernels/serial.py); the
+@njit(cache=True)
+def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, kicks, mpi, mail, scratch):
+    """drag_steps on an MPI rank's part (kernels/rank_messages.py rank_dem_steps, whose returns
+    and arguments it shares but for the fluid's and the walls' motion): after the drag, each
+    owner sends its ghosts' force and torque and their other forces (f_other, drag_kick's 9th
+    argument), which their drag kick reads, so every ghost is kicked as its owner. Only where the
+    self-induced velocity is kept (`coefficients` None): subtracted, it needs each cell's drag
+    coefficients summed over every rank's particles at every step (physics/fluid/drag.py
+    _cell_coefficients), which the ranks take from Python."""
+    binning, forces, _, below, stop = drag
+    moved, clock = scratch
+    mine, largest = moved[:1], moved[1:]
+    busy = 0.0
+    force, torque, others = kicks[10], kicks[2], kicks[8]
+    for done in range(steps):
+        code = drift_everywhere(drift, mpi, mine, largest)
+        if code != 0:
+            return done, largest[0], False, busy, code
+        if largest[0] > threshold2:
+            return done, largest[0], True, busy, 0
+        started = seconds(mpi, clock)
+        contacts(cross, pairs, walls)
+        bin_particles(*binning)
+        count = particle_drag(*forces)
+        busy += seconds(mpi, clock) - started
+        code = send_ghost_forces(force, torque, others, mpi, mail)
+        if code != 0:
+            return done, largest[0], False, busy, code
+        drag_kick(*kicks)
+        if count:
+            below[0] = count
+            if stop:
+                return done + 1, largest[0], False, busy, 0
+    return steps, largest[0], False, busy, 0
+
+
+# one thread: the loops and their drag kernels without parallel regions (kernels/serial.py); the
 # kernels' arrays are the particles', the drag's and the fluid's own fields, none a view of another
 particle_drag_serial = serial_twin(particle_drag, distinct=True)
 drag_kick_serial = serial_twin(drag_kick, distinct=True)
-drag_steps_serial = serial_twin(
-    drag_steps,
-    kick_drift=kick_drift_serial,
-    contacts=contacts_serial,
-    bin_particles=bin_particles_serial,
-    particle_drag=particle_drag_serial,
-    drag_kick=drag_kick_serial,
+SERIAL_KERNELS = {
+    "kick_drift": kick_drift_serial,
+    "contacts": contacts_serial,
+    "bin_particles": bin_particles_serial,
+    "particle_drag": particle_drag_serial,
+    "drag_kick": drag_kick_serial,
+}
+drag_steps_serial = serial_twin(drag_steps, **SERIAL_KERNELS)
+rank_drag_steps_serial = serial_twin(
+    rank_drag_steps, drift_everywhere=drift_everywhere_serial, **SERIAL_KERNELS
 )

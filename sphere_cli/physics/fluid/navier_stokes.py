@@ -24,7 +24,7 @@ import numpy as np
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
 from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
 from ...errors import NumericalError
-from ...kernels.fluid.drag import drag_steps, drag_steps_serial
+from ...kernels.fluid.drag import drag_steps, drag_steps_serial, rank_drag_steps, rank_drag_steps_serial
 from ...kernels.fluid.navier_stokes import (
     add_grid_motion,
     add_grid_source,
@@ -601,6 +601,12 @@ class NavierStokes(FluidModule):
     # the compiled steps with the drag and its kick in the loop (physics/compiled_steps.py)
     steps_kernel = staticmethod(drag_steps)
     serial_steps_kernel = staticmethod(drag_steps_serial)  # on one thread (kernels/serial.py)
+
+    @property
+    def rank_steps_kernels(self):
+        """On MPI ranks, where the self-induced velocity is kept: the drag's kick needs no sum
+        over every rank's particles (FluidModule.rank_steps_kernels)."""
+        return None if self.drag.corrected else (rank_drag_steps, rank_drag_steps_serial)
 
     def force_arguments(self, state) -> tuple:
         return self.drag.loop_arguments(state, self.fs)
