@@ -476,13 +476,13 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
 
 @njit(cache=True)
 def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, kicks, mpi, mail, scratch):
-    """drag_steps on an MPI rank's part (kernels/rank_messages.py rank_dem_steps, whose returns
-    and arguments it shares but for the fluid's and the walls' motion): after the drag, each
-    owner sends its ghosts' force and torque and their other forces (f_other, drag_kick's 9th
-    argument), which their drag kick reads, so every ghost is kicked as its owner. Only where the
-    self-induced velocity is kept (`coefficients` None): subtracted, it needs each cell's drag
-    coefficients summed over every rank's particles at every step (physics/fluid/drag.py
-    _cell_coefficients), which the ranks take from Python."""
+    """drag_steps on an MPI rank's part, with the returns and the messages of
+    kernels/rank_messages.py rank_dem_steps (`drag` and `kicks` are drag_steps's; no moving walls,
+    no energy budget): after the drag, each owner sends its ghosts' force and torque and their
+    other forces (f_other, drag_kick's 9th argument), which their drag kick reads, so every
+    ghost is kicked as its owner. Only where the self-induced velocity is kept (`coefficients`
+    None): subtracted, it needs each cell's drag coefficients summed over every rank's particles
+    at every step (physics/fluid/drag.py _cell_coefficients), which the ranks take from Python."""
     binning, forces, _, below, stop = drag
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
