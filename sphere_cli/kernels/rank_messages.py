@@ -177,7 +177,7 @@ def rank_dem_steps(
         if fluid is not None:
             fluid_force(*fluid)
         busy += seconds(mpi, clock) - started
-        code = send_ghost_forces(force, torque, force[:, :0], mpi, mail)
+        code = send_ghost_forces(force, torque, force[:, :0], mpi, mail)  # (n, 0): no fluid array
         if code != 0:
             return done, largest[0], False, busy, code
         if motion is not None:
