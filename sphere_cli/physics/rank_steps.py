@@ -594,8 +594,8 @@ class RankSteps:
         if self.in_compiled_loop():
             mpi, request_type = self.calls
             own_loop = part.fluid is not None and part.fluid.rank_steps_kernels is not None
-            if part.compiled_mail is None:  # force and torque a ghost, and the drag loop's f_other
-                width = 9 if own_loop else 6
+            if part.compiled_mail is None:  # the rows of _ghost_forces's message, which the loops send
+                width = sum(c.shape[1] for c in _ghost_rows(part))
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type, width)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
@@ -669,13 +669,7 @@ class RankSteps:
         the fluid's ghost_arrays of them: one message to each rank, packed and unpacked by
         compiled loops in boxes made once a part."""
         part = self.part
-        p = part.state.particles
-        sent = [p.force, p.torque]
-        if part.fluid is not None:
-            arrays = part.fluid.particle_arrays(part.state)
-            for name in part.fluid.ghost_arrays():
-                holder, attribute = arrays[name]
-                sent.append(getattr(holder, attribute))
+        sent = _ghost_rows(part)
         width = sum(c.shape[1] for c in sent)  # each (n, k)
         if part.mail is None:  # the boxes, `width` doubles a particle, made once a part
             part.mail = tuple(
@@ -1008,6 +1002,21 @@ class RankSteps:
                 part.send[rank] = send
             if receive.size:
                 part.receive[rank] = receive
+
+
+def _ghost_rows(part: Part) -> list[np.ndarray]:
+    """What an owner sends of each of its particles that is a ghost elsewhere, after the step's
+    forces: force, torque and the fluid's ghost_arrays, each (n, k). The compiled loops send the
+    same rows (kernels/rank_messages.py send_ghost_forces), so that a rank stepping from Python
+    and one stepping in a compiled call exchange messages of one size."""
+    p = part.state.particles
+    sent = [p.force, p.torque]
+    if part.fluid is not None:
+        arrays = part.fluid.particle_arrays(part.state)
+        for name in part.fluid.ghost_arrays():
+            holder, attribute = arrays[name]
+            sent.append(getattr(holder, attribute))
+    return sent
 
 
 def _slabs(total: np.ndarray, size: int, periodic: bool) -> tuple[np.ndarray, float]:
