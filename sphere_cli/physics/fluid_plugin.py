@@ -124,9 +124,9 @@ class FluidModule(Module):
     # (steps, their one-thread twin, the ranks' steps, their twin); None: not so
     force_loops = None
     # a model with a compiled loop of its own (steps_kernel) that also runs on MPI ranks: that
-    # loop's rank version and its one-thread twin (the Navier-Stokes drag's where the
-    # self-induced velocity is kept, kernels/fluid/drag.py rank_drag_steps); None: its part's
-    # steps on a rank are taken one at a time from Python
+    # loop's rank version and its one-thread twin (the Navier-Stokes drag's,
+    # kernels/fluid/drag.py rank_drag_steps); None: its part's steps on a rank are taken one at
+    # a time from Python
     rank_steps_kernels = None
 
     def gpu_steps(self, state) -> GpuSteps | None:
@@ -158,6 +158,11 @@ class FluidModule(Module):
         Navier-Stokes) splits its PoissonSolver, and its porosity sampling (and the
         Navier-Stokes momentum exchange and prediction) takes the solver's slabs; the 1D VANS
         column shares its layers out among the ranks of comm at each of its steps."""
+
+    def plan_rank_steps(self, state) -> None:
+        """Collective, on every MPI rank's part before its steps and after each list build
+        (physics/rank_steps.py): what the module's messages of a step need until the next build
+        (the Navier-Stokes drag's sums over each cell's particles); nothing here."""
 
     def ghost_arrays(self) -> tuple[str, ...]:
         """The names of particle_arrays, each (n, k), that its forces write from more than the

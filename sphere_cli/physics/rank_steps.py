@@ -53,7 +53,9 @@ its force writes from the other forces on a particle (`ghost_arrays`: the Navier
 f_other) go to the ghosts with the force, and a sum over particles inside its kick (the
 Navier-Stokes self-induced velocity's drag coefficients per cell) is taken, for the cells
 this rank's particles can visit, over every rank's own particles in them in global order
-(`_near`). Its own step (its `step_on_rank`: the VANS column, the Darcy pore pressure, the
+(the rows of each rank's own particles that can be in them, planned at each list build:
+`FluidModule.plan_rank_steps`, and sent at each step from the compiled loop or `_swap`).
+Its own step (its `step_on_rank`: the VANS column, the Darcy pore pressure, the
 Navier-Stokes grid) runs on every rank alike from the particles its cells (the grid's slabs of
 x planes) or layers (the VANS column's, shared out) reach and their fluid arrays, taken from
 every rank's owners in global order (`_near`), nothing gathered at the lead nor sent back: the
@@ -92,7 +94,7 @@ from ..kernels.neighbors import (
     rows_in,
     rows_out,
 )
-from ..kernels.rank_messages import own_wall_sums, rank_dem_steps, rank_dem_steps_serial
+from ..kernels.rank_messages import TAG, own_wall_sums, rank_dem_steps, rank_dem_steps_serial
 from ..kernels.serial import use_serial
 from ..kernels.steps import contacts, contacts_serial
 from ..kernels.walls import finish_wall_totals, wall_areas, wall_kick
@@ -234,10 +236,38 @@ class EveryRank:
     scene (collectives): near(needed, *arrays), called with arrays of this rank's particles,
     those of every rank's own particles that needed(own) ((ranks, n) bool of own, the local
     indices of an owner's own particles) marks for this rank, in global order (RankSteps._near);
-    own() this rank's own particles; every_mask(mask) every rank's mask."""
+    own() this rank's own particles; every_mask(mask) every rank's mask; alltoall(objects) an
+    object from every rank; swap(columns, send, receive, boxes) the rows of a message to and from
+    each rank, as the compiled loops send them (boxes(send, receive, width) its boxes,
+    mail(send, receive, width) the compiled loops' form of them)."""
 
     def __init__(self, steps: RankSteps):
         self.steps = steps
+
+    @property
+    def rank(self) -> int:
+        return self.steps.world.rank
+
+    def gid(self) -> np.ndarray:
+        """The global index of each particle this rank holds (ascending)."""
+        return self.steps.part.gid
+
+    def alltoall(self, objects: list) -> list:
+        """objects[r] to rank r; returns what each rank sent this one (pickled: set-up only)."""
+        return self.steps.world.comm.alltoall(objects)
+
+    @staticmethod
+    def boxes(send: dict, receive: dict, width: int) -> tuple[dict, dict]:
+        """The boxes of swap's messages, `width` doubles a row: (received, sent) by rank."""
+        return tuple({r: np.empty((rows.size, width)) for r, rows in by.items()} for by in (receive, send))
+
+    def swap(self, columns: list, send: dict, receive: dict, boxes: tuple) -> None:
+        self.steps._swap(columns, send, receive, boxes)
+
+    def mail(self, send: dict, receive: dict, width: int) -> tuple:
+        """swap's message as the compiled loops send it (kernels/rank_messages.py
+        send_ghost_forces, with its columns the first array's)."""
+        return ghost_mail(self.steps.world, send, receive, self.steps.calls[1], width)
 
     def near(self, needed, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
         return self.steps._near(needed, *arrays)
@@ -367,9 +397,9 @@ class RankSteps:
         how = (
             "each rank's steps up to a list build in one compiled call"
             if self.in_compiled_loop()
-            else "each rank's steps one at a time from Python (a Darcy fluid, a Navier-Stokes drag whose "
-            "self-induced velocity is subtracted or under moving walls or with the energy budget, or an "
-            "MPI whose functions mpi4py's library does not give)"
+            else "each rank's steps one at a time from Python (a Darcy fluid, a Navier-Stokes drag under "
+            "moving walls or with the energy budget, or an MPI whose functions mpi4py's library does not "
+            "give)"
         )
         return (
             f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
@@ -485,6 +515,7 @@ class RankSteps:
         list's reach, and that step ends here; its fluid's step, if due, then follows here."""
         moved, largest = np.zeros(1), np.zeros(1)
         fluid_kicks = self.t.fluid is not None and "kick" in self.t.fluid.takes_over
+        self._plan_fluid()
         calls = self._kernels()
         left = steps
         while left > 0:
@@ -628,8 +659,8 @@ class RankSteps:
         """True if a part of this scene takes its steps in a compiled rank loop: no fluid, or
         one whose force the loop can take (FluidModule.force_loops: the 1D VANS), as the
         one-rank loop (physics/compiled_steps.py), or one with a rank loop of its own
-        (FluidModule.rank_steps_kernels: the Navier-Stokes drag with the self-induced velocity
-        kept) where no wall moves and no energy budget is kept; and the MPI functions found
+        (FluidModule.rank_steps_kernels: the Navier-Stokes drag's) where no wall moves and no
+        energy budget is kept; and the MPI functions found
         (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
@@ -670,25 +701,28 @@ class RankSteps:
         compiled loops in boxes made once a part."""
         part = self.part
         sent = _ghost_rows(part)
-        width = sum(c.shape[1] for c in sent)  # each (n, k)
-        if part.mail is None:  # the boxes, `width` doubles a particle, made once a part
-            part.mail = tuple(
-                {rank: np.empty((local.size, width)) for rank, local in ghosts.items()}
-                for ghosts in (part.receive, part.send)
-            )
-        inbox, outbox = part.mail
+        if part.mail is None:  # the boxes, made once a part
+            part.mail = EveryRank.boxes(part.send, part.receive, sum(c.shape[1] for c in sent))
+        self._swap(sent, part.send, part.receive, part.mail)
+
+    def _swap(self, columns: list, send: dict, receive: dict, boxes: tuple) -> None:
+        """The rows `send[rank]` of the arrays `columns` (each (n, k)), side by side, to each
+        rank, and the rows `receive[rank]` of them from each, with the messages of the compiled
+        loops (kernels/rank_messages.py send_ghost_forces), so that a rank stepping from Python
+        and one stepping in a compiled call meet; boxes: EveryRank.boxes's."""
+        inbox, outbox = boxes
         comm = self.world.comm
-        requests = [comm.Irecv(box, source=rank, tag=1) for rank, box in inbox.items()]
-        for rank, local in part.send.items():
+        requests = [comm.Irecv(box, source=rank, tag=TAG) for rank, box in inbox.items()]
+        for rank, local in send.items():
             first = 0
-            for c in sent:
+            for c in columns:
                 rows_out(c, local, outbox[rank], first)
                 first += c.shape[1]
-            requests.append(comm.Isend(outbox[rank], dest=rank, tag=1))
+            requests.append(comm.Isend(outbox[rank], dest=rank, tag=TAG))
         self.world.mpi.Request.Waitall(requests)
-        for rank, local in part.receive.items():
+        for rank, local in receive.items():
             first = 0
-            for c in sent:
+            for c in columns:
                 rows_in(inbox[rank], local, c, first)
                 first += c.shape[1]
 
@@ -799,6 +833,13 @@ class RankSteps:
         nl = part.state.neighbors
         drop_ghost_pairs(part.owned, nl.nbr, nl.nbr_count, nl.start, nl.hist, self.t.springs)
         NeighborSearch._reverse(nl)
+        self._plan_fluid()
+
+    def _plan_fluid(self) -> None:
+        """Collective, on every rank before its steps and after each list build: what the
+        fluid's messages of a step need until the next build (FluidModule.plan_rank_steps)."""
+        if self.part.fluid is not None:
+            self.part.fluid.plan_rank_steps(self.part.state)
 
     def _share(self, packs: list, moved2: float = 0.0) -> None:
         """Collective: the particles in `packs` (this rank's own, or the whole scene at the

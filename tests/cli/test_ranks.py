@@ -334,8 +334,9 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     every rank from every rank's particles and their drag arrays; the drag and the implicit kick
     run on every rank for its particles. A ghost's drag needs its owner's other forces (its
     contacts beyond the ghosts) and each particle's self-induced velocity the drag coefficients
-    of its whole fluid cell, summed over every rank in one rank's order. Run on 2 ranks to t = 1
-    ms, then resumed on 4 with the slabs cut by measured work: one rank's run-then-resume, bit
+    of its whole fluid cell, summed over every rank in one rank's order (sent from inside the
+    compiled rank loop; it fails if the rows received are left out of the sums). Run on 2 ranks
+    to t = 1 ms, then resumed on 4 with the slabs cut by measured work: one rank's run-then-resume, bit
     for bit, with the pressure solve split across the ranks (rank_split_cells = 1: the grid's 5
     planes in 2 slabs; on resume 50, which a resume accepts changed: 4 slabs). The bed's cells
     are below a porosity floor of 0.5 (a touching cubic lattice leaves 0.48): the fluid step's
@@ -376,7 +377,8 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     log = (tmp_path / "split" / "run.log").read_text()
     assert "split across 2 MPI ranks" in log and "split across 4 MPI ranks" in log
     assert "cut by measured work" in log
-    assert "steps one at a time from Python" in log  # the drag's kick sums over every rank
+    # the drag's kick sums over every rank's particles in a cell from inside the compiled loop
+    assert "steps up to a list build in one compiled call" in log
     assert_runs_bitwise(tmp_path / "one", tmp_path / "split")
     state = datasets(list_checkpoints(tmp_path / "one" / "checkpoints")[-1])
     assert np.count_nonzero(state["sphere/state/neighbors/hist"]) > 1000  # a bed in contact
@@ -472,9 +474,9 @@ keep = 2
 
 # beads of the same size in two touching layers (a lattice, jittered: pairs in contact across
 # the cuts) in water under a Navier-Stokes grid of the same cells, with the drag of each particle
-# (its self-induced velocity kept: the steps in the compiled rank loop, where each ghost's kick
-# needs its owner's other forces; subtracted in the bed of
-# test_a_navier_stokes_bed_is_one_ranks_on_two_then_four) or the cell-averaged drag
+# (its self-induced velocity kept here, subtracted in the bed of
+# test_a_navier_stokes_bed_is_one_ranks_on_two_then_four; both in the compiled rank loop, where
+# each ghost's kick needs its owner's other forces) or the cell-averaged drag
 NAVIER_STOKES_SLABS = (
     DARCY_SLABS[: DARCY_SLABS.index("[fluid]")]
     .replace(

@@ -1,7 +1,8 @@
 """The cells a rank's particles can visit until the next list build (physics/fluid/drag.py
-FluidParticleDrag._cells_visited): on MPI ranks each rank sums the drag coefficients of those
+FluidParticleDrag._reachable_cells): on MPI ranks each rank sums the drag coefficients of those
 cells only, for its particles' self-induced velocities, so a cell left out would give a kick
-other than one rank's; and when the mask is learnt again (_cell_coefficients)."""
+other than one rank's; when the plan of those sums is made again (plan_exchange), which rows it
+sends to another rank and the order in which it sums its own and those it receives."""
 
 from __future__ import annotations
 
@@ -22,7 +23,11 @@ def visited(ref: np.ndarray, skin: float) -> np.ndarray:
     grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
     drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, len(ref), False)
     neighbors = types.SimpleNamespace(ref_pos=np.asarray(ref, dtype=np.float64), skin=skin)
-    return drag._cells_visited(types.SimpleNamespace(neighbors=neighbors))
+    cells = drag._reachable_cells(types.SimpleNamespace(neighbors=neighbors))
+    assert cells.shape[1] == len(ref)
+    mask = np.zeros(int(np.prod(SHAPE)), dtype=bool)
+    mask[cells.reshape(-1)] = True
+    return mask
 
 
 def cells_of_box(centre, half: float) -> set:
@@ -64,39 +69,84 @@ def test_no_particles_visit_no_cells():
 
 
 class Ranks:
-    """The few calls of physics/rank_steps.py EveryRank that the drag's sums make, for one rank
-    alone: every rank's mask is its own; near() hands back its own particles' arrays."""
+    """The calls of physics/rank_steps.py EveryRank that the drag's sums make, for rank 0 of two:
+    rank 1's particles visit cell `theirs` alone, and it sends the rows `arriving` (global
+    index, cell, coefficient) of its own particles that can be in this rank's cells."""
 
-    def __init__(self):
+    rank = 0
+
+    def __init__(self, gid, theirs: int, arriving):
+        self.held = np.asarray(gid)
+        self.theirs = theirs
+        self.arriving = arriving
         self.masks = 0
+        self.sent = None
 
     def every_mask(self, mask):
         self.masks += 1
-        return mask[None, :]
+        other = np.zeros_like(mask)
+        other[self.theirs] = True
+        return np.stack([mask, other])
 
-    def near(self, needed, *arrays):
-        assert needed(np.arange(arrays[0].shape[0])).shape == (1, arrays[0].shape[0])
-        return arrays
+    def own(self):
+        return np.arange(self.held.size)
+
+    def gid(self):
+        return self.held
+
+    def alltoall(self, objects):
+        assert objects[0] is None  # nothing to itself
+        self.sent = objects[1]
+        return [None, np.array([g for g, _, _ in self.arriving])]
+
+    @staticmethod
+    def boxes(send, receive, width):
+        return {}, {}
+
+    def swap(self, columns, send, receive, boxes):
+        (table,) = columns
+        assert list(send) == [1] and list(receive) == [1]
+        for row, (_, cell, coef) in zip(receive[1], self.arriving, strict=True):
+            table[row] = cell, coef
 
 
-def test_the_cells_visited_are_found_again_at_a_list_build_or_when_the_cells_change():
-    """The mask of visited cells is learnt once a list build: again after a build, and again
-    when the grid's spacing changes (a grid following the top wall stretches its cells, which
-    moves particles between cells without a build)."""
+def test_the_plan_is_made_again_at_a_list_build_or_when_the_cells_change():
+    """The plan is made once a list build: again after a build, and again when the grid's
+    spacing changes (a grid following the top wall stretches its cells, which moves particles
+    between cells without a build)."""
     grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
     drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, 3, False)
-    drag.whole = ranks = Ranks()
+    drag.whole = ranks = Ranks([0, 2, 4], theirs=5, arriving=[(3, 5, 0.5)])
     drag.cell_of[:] = [0, 5, 5]
     drag.coef[:] = [1.0, 2.0, 3.0]
-    neighbors = types.SimpleNamespace(ref_pos=np.full((3, 3), 0.2e-3), skin=1e-5, builds=4)
+    ref = [[0.2e-3, 0.2e-3, 0.2e-3], [0.2e-3, 0.2e-3, 2.7e-3], [0.2e-3, 0.2e-3, 2.8e-3]]
+    neighbors = types.SimpleNamespace(ref_pos=np.array(ref), skin=1e-5, builds=4)
     state = types.SimpleNamespace(neighbors=neighbors)
     drag._cell_coefficients(state)
     drag._cell_coefficients(state)
     assert ranks.masks == 1
-    assert drag.cell_coef[0] == 1.0 and drag.cell_coef[5] == 5.0
+    assert drag.cell_coef[0] == 1.0 and drag.cell_coef[5] == 5.5
     drag.spacing[2] *= 1.01  # the grid's own array, stretched in place
     drag._cell_coefficients(state)
     assert ranks.masks == 2
     neighbors.builds += 1
     drag._cell_coefficients(state)
     assert ranks.masks == 3
+
+
+def test_rows_go_to_the_ranks_whose_cells_they_can_reach_and_are_summed_in_global_order():
+    """Rank 1's particles visit cell 5 only: this rank sends it its two particles there (global
+    2 and 4), not the one in cell 0, and sums cell 5 over its own and rank 1's particle (global
+    3) in global order. The sum 2^53 + 1 - 2^53 is 0 in that order (2^53 + 1 rounds to 2^53);
+    its own rows first would give 1."""
+    grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
+    drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, 3, False)
+    drag.whole = ranks = Ranks([0, 2, 4], theirs=5, arriving=[(3, 5, 1.0)])
+    drag.cell_of[:] = [0, 5, 5]
+    drag.coef[:] = [1.0, 2.0**53, -(2.0**53)]
+    ref = [[0.2e-3, 0.2e-3, 0.2e-3], [0.2e-3, 0.2e-3, 2.7e-3], [0.2e-3, 0.2e-3, 2.8e-3]]
+    neighbors = types.SimpleNamespace(ref_pos=np.array(ref), skin=1e-5, builds=0)
+    drag._cell_coefficients(types.SimpleNamespace(neighbors=neighbors))
+    assert list(ranks.sent) == [2, 4]
+    assert drag.cell_coef[0] == 1.0
+    assert drag.cell_coef[5] == 0.0

@@ -55,6 +55,7 @@ since the last fluid step.
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from ..motion import kick_drift, kick_drift_serial
@@ -295,6 +296,35 @@ def cell_coefficients(cell_of, coef, out):
         out[cell_of[i]] += coef[i]
 
 
+@njit(cache=True)
+def rank_cell_coefficients(cell_of, coef, out, own, table, merge, merged_cell, merged_coef, mail, mpi):
+    """cell_coefficients on an MPI rank, as one rank sums them (physics/fluid/drag.py
+    plan_exchange): each rank's own particles' (cell, coefficient) go to the ranks whose
+    particles can visit their cells until the next list build (mail, kernels/rank_messages.py
+    send_ghost_forces's, two doubles a particle); each rank sums its own and those received in
+    global order (merge: the rows of table, (held + received, 2), in ascending global index).
+    Every cell the rank's particles can be in gets the sum over every rank's particles in it.
+    Returns MPI's first error code (0: none)."""
+    for i in own:
+        table[i, 0] = cell_of[i]  # a cell's index as a double: exact below 2^53
+        table[i, 1] = coef[i]
+    code = send_ghost_forces(table, table[:, :0], table[:, :0], mpi, mail)
+    if code != 0:
+        return code
+    merged_rows(table, merge, merged_cell, merged_coef)
+    cell_coefficients(merged_cell, merged_coef, out)
+    return 0
+
+
+@njit(cache=True)
+def merged_rows(table, merge, merged_cell, merged_coef):
+    """The (cell, coefficient) rows merge of table, in that order (rank_cell_coefficients)."""
+    for m in range(merge.shape[0]):
+        r = merge[m]
+        merged_cell[m] = np.int64(table[r, 0])
+        merged_coef[m] = table[r, 1]
+
+
 @njit(cache=True, inline="always")
 def _seen(u, c, disturbance, i, a, corrected):
     """Component a of the fluid velocity particle i feels in its cell c: the cell's, less the
@@ -447,6 +477,15 @@ def coefficients_if_any(coefficients):
 
 
 @njit(cache=True)
+def rank_coefficients_if_any(coefficients, mpi):
+    """rank_cell_coefficients with the argument tuple `coefficients` and mpi, or 0 (no error)
+    for None, as coefficients_if_any."""
+    if coefficients is not None:
+        return rank_cell_coefficients(*coefficients, mpi)
+    return 0
+
+
+@njit(cache=True)
 def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
     """kernels/steps.py dem_steps with the Navier-Stokes drag, in the order of its hooks
     (physics/fluid/drag.py): after the contacts the particles are binned into the fluid's cells
@@ -480,10 +519,11 @@ def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, k
     kernels/rank_messages.py rank_dem_steps (`drag` and `kicks` are drag_steps's; no moving walls,
     no energy budget): after the drag, each owner sends its ghosts' force and torque and their
     other forces (f_other, drag_kick's 9th argument), which their drag kick reads, so every
-    ghost is kicked as its owner. Only where the self-induced velocity is kept (`coefficients`
-    None): subtracted, it needs each cell's drag coefficients summed over every rank's particles
-    at every step (physics/fluid/drag.py _cell_coefficients), which the ranks take from Python."""
-    binning, forces, _, below, stop = drag
+    ghost is kicked as its owner. Where the self-induced velocity is subtracted, `coefficients`
+    are rank_cell_coefficients's arguments but mpi (physics/fluid/drag.py rank_coefficients):
+    each cell's drag coefficients summed over every rank's particles, as one rank sums them,
+    before the kick (None where it is kept)."""
+    binning, forces, coefficients, below, stop = drag
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
     busy = 0.0
@@ -500,6 +540,9 @@ def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, k
         count = particle_drag(*forces)
         busy += seconds(mpi, clock) - started
         code = send_ghost_forces(force, torque, others, mpi, mail)
+        if code != 0:
+            return done, largest[0], False, busy, code
+        code = rank_coefficients_if_any(coefficients, mpi)
         if code != 0:
             return done, largest[0], False, busy, code
         drag_kick(*kicks)

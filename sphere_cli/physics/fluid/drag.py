@@ -37,6 +37,7 @@ from ...kernels.fluid.drag import (
     drag_kick_serial,
     drag_rate,
     exchange,
+    merged_rows,
     particle_drag,
     particle_drag_serial,
 )
@@ -118,10 +119,15 @@ class FluidParticleDrag:
         # on MPI ranks: what it takes of every rank's particles (physics/rank_steps.py
         # EveryRank); None on one rank, which holds them all
         self.whole = None
-        # on MPI ranks: (ranks, C) bool, the cells each rank's particles can visit until the
-        # next list build, and the (list builds, spacing) they are for (_cell_coefficients)
-        self.visited = None
-        self.visited_for = None
+        # on MPI ranks with the self-induced velocity subtracted (plan_exchange): the (list
+        # builds, spacing) the plan is for, and the plan: (own particles, table, merge,
+        # merged cells, merged coefficients) of kernels/fluid/drag.py rank_cell_coefficients,
+        # the rows sent to and received from each rank, and their boxes (Python's, compiled)
+        self.plan_for = None
+        self.plan = None
+        self.plan_rows = None
+        self.plan_boxes = None
+        self.plan_mail = None
 
     @property
     def inv_cell_volume(self) -> float:
@@ -157,14 +163,19 @@ class FluidParticleDrag:
         )  # fmt: skip
 
     def loop_arguments(self, state: State, fs) -> tuple:
-        """The drag's argument of the compiled steps (kernels/fluid/drag.py drag_steps), valid
-        until the next fluid step: the grid's response bands follow its cells here, as the kick
-        would make them (they change only at fluid steps). One rank only: the sums of the cells'
-        drag coefficients are this rank's."""
+        """The drag's argument of the compiled steps (kernels/fluid/drag.py drag_steps, and
+        rank_drag_steps on an MPI rank, whose sums of the cells' drag coefficients are
+        rank_cell_coefficients's), valid until the next fluid step (and on a rank the next list
+        build): the grid's response bands follow its cells here, as the kick would make them
+        (they change only at fluid steps)."""
         coefficients = None
         if self.corrected:
             self._follow_grid(state.clock.dt)
             coefficients = (self.cell_of, self.coef, self.cell_coef)
+            if self.whole is not None:
+                if self.plan_mail is None:
+                    self.plan_mail = self.whole.mail(*self.plan_rows, width=2)
+                coefficients = (*coefficients, *self.plan, self.plan_mail)
         self.found_below[0] = 0
         drag = self._drag_arguments(state, fs, False)
         return self._binning(state), drag, coefficients, self.found_below, not self.warned
@@ -273,37 +284,69 @@ class FluidParticleDrag:
     def _cell_coefficients(self, state: State) -> None:
         """cell_coef, the sum of the drag coefficients of each cell's particles in particle
         order. On an MPI rank (self.whole), of the cells its particles can visit until the next
-        list build (the others are left unread), from the particles every rank's owners have in
-        them, in global order (whole.near): as one rank sums them."""
+        list build (the others are left unread), from every rank's own particles that can be in
+        them, in global order (plan_exchange): as one rank sums them, with the messages of the
+        compiled loop (kernels/fluid/drag.py rank_cell_coefficients)."""
         if self.whole is None:
             cell_coefficients(self.cell_of, self.coef, self.cell_coef)
             return
-        visited_for = (state.neighbors.builds, *self.spacing)  # (a grid following a wall: its cells)
-        if self.visited_for != visited_for:
-            self.visited = self.whole.every_mask(self._cells_visited(state))
-            self.visited_for = visited_for
-        cell_of, coef = self.whole.near(self._visited_by, self.cell_of, self.coef)
-        cell_coefficients(cell_of, coef, self.cell_coef)
+        self.plan_exchange(state)
+        own, table, merge, merged_cell, merged_coef = self.plan
+        table[own, 0] = self.cell_of[own]
+        table[own, 1] = self.coef[own]
+        self.whole.swap([table], *self.plan_rows, self.plan_boxes)
+        merged_rows(table, merge, merged_cell, merged_coef)
+        cell_coefficients(merged_cell, merged_coef, self.cell_coef)
 
-    def _cells_visited(self, state: State) -> np.ndarray:
-        """(C,) bool, the cells this rank's particles can be in until the next list build: each
-        moves at most half the skin from where it was at the last (NeighborSearch's threshold),
-        so the cells of the points of a lattice over the box of that half width around it, at
-        most a cell apart along each axis."""
+    def plan_exchange(self, state: State) -> None:
+        """Collective, on an MPI rank with the self-induced velocity subtracted, once a list
+        build (and grid spacing): which of this rank's own particles each other rank takes for
+        its cells' sums of the drag coefficients (those that can be in a cell the other's
+        particles can visit until the next build: _reachable_cells), and the global order in
+        which this rank sums its own and those it receives (kernels/fluid/drag.py
+        rank_cell_coefficients)."""
+        key = (state.neighbors.builds, *self.spacing)
+        if self.whole is None or not self.corrected or self.plan_for == key:
+            return
+        whole = self.whole
+        reachable = self._reachable_cells(state)  # (points, n)
+        visited = np.zeros(self.start.size - 1, dtype=bool)
+        visited[reachable.reshape(-1)] = True
+        every = whole.every_mask(visited)  # (ranks, C)
+        own = whole.own()
+        gid = whole.gid()
+        needed = every[:, reachable[:, own]].any(axis=1)  # (ranks, own)
+        send = {r: own[needed[r]] for r in range(needed.shape[0]) if r != whole.rank and needed[r].any()}
+        arrived = whole.alltoall([gid[send[r]] if r in send else None for r in range(needed.shape[0])])
+        receive, first = {}, gid.size  # received rows follow the held particles' in the table
+        for r, gids in enumerate(arrived):
+            if gids is not None:
+                receive[r] = np.arange(first, first + gids.size)
+                first += gids.size
+        rows = np.concatenate([own, *receive.values()]).astype(np.int64)
+        order = np.concatenate([gid[own], *(g for g in arrived if g is not None)])
+        merge = rows[np.argsort(order, kind="stable")]
+        merged = (np.empty(merge.size, dtype=np.int64), np.empty(merge.size))
+        self.plan = (own, np.zeros((first, 2)), merge, *merged)
+        self.plan_rows = (send, receive)
+        self.plan_boxes = whole.boxes(send, receive, 2)
+        self.plan_mail = None  # the compiled loop's, made by loop_arguments
+        self.plan_for = key
+
+    def _reachable_cells(self, state: State) -> np.ndarray:
+        """(points, n) int64: cells each particle this rank holds can be in until the next list
+        build: each moves at most half the skin from where it was at the last
+        (NeighborSearch's threshold), so the cells of the points of a lattice over the box of
+        that half width around it, at most a cell apart along each axis, hold it."""
         reach = 0.5 * state.neighbors.skin
         ref = state.neighbors.ref_pos
-        visited = np.zeros(self.start.size - 1, dtype=bool)
-        bins, shifted = np.empty(ref.shape[0], dtype=np.int64), np.empty_like(ref)
         points = [np.linspace(-reach, reach, int(np.ceil(2.0 * reach / h)) + 1) for h in self.spacing]
-        for offset in itertools.product(*points):
-            bin_particles(ref + offset, self.origin, self.spacing, self.cells, self.periodic, bins, shifted)
-            visited[bins] = True
-        return visited
-
-    def _visited_by(self, own: np.ndarray) -> np.ndarray:
-        """(ranks, n) bool: which ranks' particles can visit the cells of the particles own
-        (local indices) are in (binned by this step's forces)."""
-        return self.visited[:, self.cell_of[own]]
+        offsets = list(itertools.product(*points))
+        cells = np.empty((len(offsets), ref.shape[0]), dtype=np.int64)
+        shifted = np.empty_like(ref)
+        for row, offset in zip(cells, offsets, strict=True):
+            bin_particles(ref + offset, self.origin, self.spacing, self.cells, self.periodic, row, shifted)
+        return cells
 
     def _follow_grid(self, dt: float) -> None:
         """The grid's response bands for its cells now and their decay over dt [s]. The cells

@@ -602,11 +602,10 @@ class NavierStokes(FluidModule):
     steps_kernel = staticmethod(drag_steps)
     serial_steps_kernel = staticmethod(drag_steps_serial)  # on one thread (kernels/serial.py)
 
-    @property
-    def rank_steps_kernels(self):
-        """On MPI ranks, where the self-induced velocity is kept: the drag's kick needs no sum
-        over every rank's particles (FluidModule.rank_steps_kernels)."""
-        return None if self.drag.corrected else (rank_drag_steps, rank_drag_steps_serial)
+    # on MPI ranks (FluidModule.rank_steps_kernels); with the self-induced velocity subtracted,
+    # each step's sums of the drag coefficients of a cell's particles over every rank are
+    # messages from inside the loop (plan_rank_steps)
+    rank_steps_kernels = (rank_drag_steps, rank_drag_steps_serial)
 
     def force_arguments(self, state) -> tuple:
         return self.drag.loop_arguments(state, self.fs)
@@ -653,6 +652,9 @@ class NavierStokes(FluidModule):
         the fluid's own fields are kept whole on every MPI rank."""
         names = self.drag.PER_PARTICLE + (("disturbance",) if self.drag.corrected else ())
         return {f"drag_{name}": (self.drag, name) for name in names}
+
+    def plan_rank_steps(self, state) -> None:
+        self.drag.plan_exchange(state)
 
     def ghost_arrays(self) -> tuple[str, ...]:
         return ("drag_f_other",)  # every force on the particle but the drag (its contacts)
