@@ -8,12 +8,12 @@ kernels/steps.py dem_steps), or that of a module with a compiled loop of its own
 (`steps_kernel`: the Navier-Stokes drag's), then the particles' kick or that module's own where
 it takes the kick over (`kick_arguments` for it: the Navier-Stokes drag's exact kick), and
 nothing after the kick (physics/module.py) but the energy budget's booking; the module's
-`steps_taken` then reports what its loop found (the Navier-Stokes drag's porosity floor). With
-dem_steps (no module loop of its own), the walls' motion (moving or stress-controlled walls,
-their kick-drift and kick around the particles') and the energy budget (its forces hook first
-of the forces, its finish_step the only one) may be in it too. Anything else in the step
-(another force, a module loop with moving walls or the budget, a hook replaced by a wrapper)
-keeps the step-by-step loop.
+`steps_taken` then reports what its loop found (the Navier-Stokes drag's porosity floor). The
+walls' motion (moving or stress-controlled walls, their kick-drift and kick around the
+particles') may be in either loop, and with dem_steps (no module loop of its own) the energy
+budget (its forces hook first of the forces, its finish_step the only one). Anything else in
+the step (another force, a module loop with the budget, a hook replaced by a wrapper) keeps
+the step-by-step loop.
 simulation.advance bounds each call by the next step where an after_step hook runs (a fluid's
 coupling, a step where a stage may end), so those run in Python.
 """
@@ -152,7 +152,7 @@ class CompiledSteps:
             extra = forces.pop(0).__self__
         elif forces and _declared_with_forces(forces[0], "force_loops"):
             fluid = forces.pop(0).__self__
-        if forces or (moving and (walls is None or extra is not None)) or (budget and extra is not None):
+        if forces or (moving and walls is None) or (budget and extra is not None):
             return None
         # the kick: the particles' own, or that of the module whose loop kicks them itself
         if extra is not None and "kick" in extra.takes_over:
@@ -181,15 +181,15 @@ class CompiledSteps:
         drift, cross, pairs, walls, kicks = step_arguments(state, self.contact, self.walls)
         threshold2 = self.search.threshold2
         serial = use_serial()  # without parallel regions (kernels/serial.py)
+        motion = None
+        if self.moving:
+            clock = state.clock
+            # walls.kernel_arguments above made the near-wall list at the walls' positions now
+            listed_at, reach = self.walls.near_list_made_at(state)
+            drift_walls, areas, totals, wall_kick = WallMotion.kernel_arguments(state)
+            totals = (state.walls.listed, *totals)  # listed_wall_totals's
+            motion = (drift_walls, areas, totals, wall_kick, listed_at, reach, clock.step, clock.dt)
         if self.extra is None:
-            motion = None
-            if self.moving:
-                clock = state.clock
-                # walls.kernel_arguments above made the near-wall list at the walls' positions now
-                listed_at, reach = self.walls.near_list_made_at(state)
-                drift_walls, areas, totals, wall_kick = WallMotion.kernel_arguments(state)
-                totals = (state.walls.listed, *totals)  # listed_wall_totals's
-                motion = (drift_walls, areas, totals, wall_kick, listed_at, reach, clock.step, clock.dt)
             budget = None
             if self.budget is not None:  # the arguments of its two hooks
                 budget = (self.budget.keep_arguments(state), self.budget.book_arguments(state))
@@ -205,7 +205,7 @@ class CompiledSteps:
                 kicks = self.extra.kick_arguments(state)
             twin = getattr(self.extra, "serial_steps_kernel", None)
             loop = twin if serial and twin is not None else self.extra.steps_kernel
-            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks)
+            done, moved2, drifted = loop(steps, threshold2, drift, cross, pairs, walls, extra, kicks, motion)
             self.extra.steps_taken(state, int(done))
         state.neighbors.moved2 = moved2
         return int(done), bool(drifted)

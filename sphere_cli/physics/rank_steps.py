@@ -397,9 +397,8 @@ class RankSteps:
         how = (
             "each rank's steps up to a list build in one compiled call"
             if self.in_compiled_loop()
-            else "each rank's steps one at a time from Python (a Darcy fluid, a Navier-Stokes drag under "
-            "moving walls or with the energy budget, or an MPI whose functions mpi4py's library does not "
-            "give)"
+            else "each rank's steps one at a time from Python (a Darcy fluid, a Navier-Stokes drag with "
+            "the energy budget, or an MPI whose functions mpi4py's library does not give)"
         )
         return (
             f"split across {self.world.size} MPI ranks, slabs or pencils of search cells cut by {by} "
@@ -630,16 +629,16 @@ class RankSteps:
                 part.compiled_mail = ghost_mail(self.world, part.send, part.receive, request_type, width)
             scratch = (np.zeros(2), np.zeros(2, dtype=np.int64))
             mail = part.compiled_mail
+            motion = None if part.wall_motion is None else self._motion(state)
             if own_loop:  # the fluid's loop, its kick in place of the particles'
                 drag, fluid_kicks = part.fluid.force_arguments(state), part.fluid.kick_arguments(state)
-                arguments = (self.t.threshold2, drift, cross, pairs, walls, drag, fluid_kicks)
+                arguments = (self.t.threshold2, drift, cross, pairs, walls, drag, fluid_kicks, motion)
                 loop = (part.fluid.rank_steps_kernels[1 if serial else 0], (*arguments, mpi, mail, scratch))
             else:
                 fluid, loop = None, rank_dem_steps_serial if serial else rank_dem_steps
                 if part.fluid is not None:  # its variant of the loop, with its force in it
                     fluid = part.fluid.force_arguments(state)
                     loop = part.fluid.force_loops[3 if serial else 2]
-                motion = None if part.wall_motion is None else self._motion(state)
                 budget = None
                 if part.budget is not None:
                     budget = (part.budget.keep_arguments(state), part.budget.book_arguments(state))
@@ -659,15 +658,15 @@ class RankSteps:
         """True if a part of this scene takes its steps in a compiled rank loop: no fluid, or
         one whose force the loop can take (FluidModule.force_loops: the 1D VANS), as the
         one-rank loop (physics/compiled_steps.py), or one with a rank loop of its own
-        (FluidModule.rank_steps_kernels: the Navier-Stokes drag's) where no wall moves and no
-        energy budget is kept; and the MPI functions found
+        (FluidModule.rank_steps_kernels: the Navier-Stokes drag's) where no energy budget is
+        kept; and the MPI functions found
         (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
             self.calls = compiled_calls(self.world) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
         if fluid is not None and fluid.force_loops is None:
-            if fluid.rank_steps_kernels is None or self.t.moving or self.t.budget:
+            if fluid.rank_steps_kernels is None or self.t.budget:
                 return False
         return bool(self.calls)
 

@@ -52,17 +52,27 @@ def _state(scene) -> dict:
     return arrays
 
 
-def _fluidized(averaging: str, floor: float | None = None):
+def _fluidized(averaging: str, floor: float | None = None, lid: bool = False):
     """configs/fluidized-bed.toml (192 beads, 4 of its 12 layers fixed, water forced up through
     a 1 x 1 x 8 Navier-Stokes grid, a fluid step every 5 DEM steps), the free beads thrown
     sideways at 0.2 m/s across the periodic faces, so that the list goes stale every ~150
-    steps; the drag per particle less its self-induced velocity, or cell-averaged."""
+    steps; the drag per particle less its self-induced velocity, or cell-averaged. `lid`: under
+    a top wall pressed down by 2 kPa, which the grid follows (its cells stretched at every
+    fluid step), and which reaches the free beads in ~1 000 steps."""
     text = (CONFIGS / "fluidized-bed.toml").read_text()
     text = text.replace('law = "gidaspow"\n', f'law = "gidaspow"\naveraging = "{averaging}"\n')
     if floor is not None:
         text = text.replace('law = "gidaspow"\n', f'law = "gidaspow"\nporosity_floor = {floor}\n')
     text = text.replace("[particles]\n", "[particles]\nvelocity = [0.2, 0.1, 0.0]\n")
     assert text.count("averaging") == 1 and "0.2, 0.1" in text
+    if lid:
+        for old, new in (
+            ("[fluid]\n", '[[walls]]\nface = "z+"\nmode = "stress"\nstress = 2000.0\n\n[fluid]\n'),
+            ("grid = { cells = [1, 1, 8] }", "grid = { cells = [1, 1, 4], follow_top_wall = true }"),
+            ("upper = [0.004, 0.004, 0.032]", "upper = [0.004, 0.004, 0.016]"),
+        ):
+            text = text.replace(old, new)
+        assert "follow_top_wall" in text and 'mode = "stress"' in text and "0.016]" in text
     return parse_case(text)
 
 
@@ -236,27 +246,44 @@ def test_the_walls_totals_from_the_near_wall_list_are_the_dense_sums_bitwise():
     assert np.count_nonzero(dense[[0, 2, 3]] != rest[3][[0, 2, 3]]) == 9
 
 
-@pytest.mark.parametrize(("averaging", "threads"), [("particle", 1), ("particle", 2), ("cell", 1)])
-def test_the_navier_stokes_drag_in_the_compiled_loop_is_the_step_by_step_loop_bitwise(averaging, threads):
+@pytest.mark.parametrize(
+    ("averaging", "threads", "lid"),
+    [("particle", 1, False), ("particle", 2, False), ("cell", 1, False), ("particle", 1, True)],
+    ids=["particle-1", "particle-2", "cell-1", "particle-1-lid"],
+)
+def test_the_navier_stokes_drag_in_the_compiled_loop_is_the_step_by_step_loop_bitwise(
+    averaging, threads, lid
+):
     """The Navier-Stokes drag's loop (kernels/fluid/drag.py drag_steps): the particles binned
     into the fluid's cells, their drag, the sums of the cells' drag coefficients (for the
     self-induced velocity, with the drag per particle) and the drag's exact kick in place of
-    the particles' kick; the fluid's steps between the calls."""
+    the particles' kick; the fluid's steps between the calls. Under a stress-controlled lid,
+    which the grid follows, the lid's motion too, kicked from the beads' pushes once it reaches
+    them."""
     numba.set_num_threads(threads)
     try:
-        compiled, stepwise = build_scene(_fluidized(averaging)), build_scene(_fluidized(averaging))
+        case = _fluidized(averaging, lid=lid)
+        compiled, stepwise = build_scene(case), build_scene(case)
         assert compiled.step.compiled is not None and compiled.step.compiled.extra is compiled.fluid
+        assert compiled.step.compiled.moving == lid
         assert compiled.fluid.drag.corrected == (averaging == "particle")
         stepwise.step.compiled = None
+        steps = 2203 if lid else 1003  # not coupling steps (every 5th): the calls end between them
         for scene in (compiled, stepwise):
-            advance(scene, 1003)  # not coupling steps (every 5th): the calls end between them
+            advance(scene, steps)
             advance(scene, 8)
         assert compiled.state.neighbors.builds == stepwise.state.neighbors.builds >= 4
-        assert compiled.state.clock.step == stepwise.state.clock.step == 1011
+        assert compiled.state.clock.step == stepwise.state.clock.step == steps + 8
         a, b = _state(compiled), _state(stepwise)
         assert np.count_nonzero(a["impulse"]) > 0 and np.count_nonzero(a["self-induced"]) == (
             a["self-induced"].size if averaging == "particle" else 0
         )
+        if lid:
+            walls = (compiled.state.walls, stepwise.state.walls)
+            assert walls[0].force[0, 2] > 0.0  # the lid on the beads
+            for name in ("coord", "vel", "force"):
+                assert np.array_equal(getattr(walls[0], name), getattr(walls[1], name)), name
+            assert compiled.fluid.fs.height == stepwise.fluid.fs.height < 0.0125
         for key in a:
             assert np.array_equal(a[key], b[key]), key
     finally:

@@ -59,9 +59,16 @@ import numpy as np
 from numba import njit, prange
 
 from ..motion import kick_drift, kick_drift_serial
-from ..rank_messages import drift_everywhere, drift_everywhere_serial, seconds, send_ghost_forces
+from ..rank_messages import (
+    drift_everywhere,
+    drift_everywhere_serial,
+    rank_wall_totals,
+    seconds,
+    send_ghost_forces,
+)
 from ..serial import serial_twin
-from ..steps import contacts, contacts_serial
+from ..steps import contacts, contacts_serial, walls_moved
+from ..walls import listed_wall_totals, wall_areas, wall_kick, wall_kick_drift
 from .porosity import bin_particles, bin_particles_serial
 
 GIDASPOW = 0
@@ -486,7 +493,7 @@ def rank_coefficients_if_any(coefficients, mpi):
 
 
 @njit(cache=True)
-def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
+def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks, motion):
     """kernels/steps.py dem_steps with the Navier-Stokes drag, in the order of its hooks
     (physics/fluid/drag.py): after the contacts the particles are binned into the fluid's cells
     and given the drag (bin_particles, particle_drag), and drag_kick takes the kick's place
@@ -494,16 +501,27 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
     self-induced velocity is subtracted. drag = (the arguments of bin_particles, of
     particle_drag, of cell_coefficients or None, below (1,) int64, stop): the particles found
     under the porosity floor by the last step that found any are written to below[0], and with
-    `stop` the loop returns after that step (the caller warns of it at its step)."""
+    `stop` the loop returns after that step (the caller warns of it at its step). motion: None
+    where no wall moves, else dem_steps's: the walls move before the particles drift and are
+    kicked after the drag (whose force on a glued sphere their totals read), before the
+    particles."""
     binning, forces, coefficients, below, stop = drag
     moved2 = 0.0
     for done in range(steps):
+        if motion is not None:
+            wall_kick_drift(*motion[0])
         moved2 = kick_drift(*drift)
         if moved2 > threshold2:
+            return done, moved2, True
+        if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
             return done, moved2, True
         contacts(cross, pairs, walls)
         bin_particles(*binning)
         count = particle_drag(*forces)
+        if motion is not None:
+            wall_areas(*motion[1])
+            listed_wall_totals(*motion[2])
+            wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
         coefficients_if_any(coefficients)
         drag_kick(*kicks)
         if count:
@@ -514,25 +532,32 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks):
 
 
 @njit(cache=True)
-def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, kicks, mpi, mail, scratch):
-    """drag_steps on an MPI rank's part, with the returns and the messages of
-    kernels/rank_messages.py rank_dem_steps (`drag` and `kicks` are drag_steps's; no moving walls,
-    no energy budget): after the drag, each owner sends its ghosts' force and torque and their
-    other forces (f_other, drag_kick's 9th argument), which their drag kick reads, so every
-    ghost is kicked as its owner. Where the self-induced velocity is subtracted, `coefficients`
-    are rank_cell_coefficients's arguments but mpi (physics/fluid/drag.py rank_coefficients):
-    each cell's drag coefficients summed over every rank's particles, as one rank sums them,
-    before the kick (None where it is kept)."""
+def rank_drag_steps(
+    steps, step, threshold2, drift, cross, pairs, walls, drag, kicks, motion, mpi, mail, scratch
+):
+    """drag_steps on an MPI rank's part, with the returns, the messages and the walls' motion of
+    kernels/rank_messages.py rank_dem_steps (`drag` and `kicks` are drag_steps's, `motion`
+    rank_dem_steps's; no energy budget): after the drag, each owner sends its ghosts' force and
+    torque and their other forces (f_other, drag_kick's 9th argument), which their drag kick
+    reads, so every ghost is kicked as its owner; the walls are kicked from their totals over
+    every rank. Where the self-induced velocity is subtracted, `coefficients` are
+    rank_cell_coefficients's arguments but mpi (physics/fluid/drag.py loop_arguments): each
+    cell's drag coefficients summed over every rank's particles, as one rank sums them, before
+    the particles' kick (None where it is kept)."""
     binning, forces, coefficients, below, stop = drag
     moved, clock = scratch
     mine, largest = moved[:1], moved[1:]
     busy = 0.0
     force, torque, others = kicks[10], kicks[2], kicks[8]
     for done in range(steps):
+        if motion is not None:
+            wall_kick_drift(*motion[0])
         code = drift_everywhere(drift, mpi, mine, largest)
         if code != 0:
             return done, largest[0], False, busy, code
         if largest[0] > threshold2:
+            return done, largest[0], True, busy, 0
+        if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
             return done, largest[0], True, busy, 0
         started = seconds(mpi, clock)
         contacts(cross, pairs, walls)
@@ -542,6 +567,12 @@ def rank_drag_steps(steps, step, threshold2, drift, cross, pairs, walls, drag, k
         code = send_ghost_forces(force, torque, others, mpi, mail)
         if code != 0:
             return done, largest[0], False, busy, code
+        if motion is not None:
+            wall_areas(*motion[1])
+            code = rank_wall_totals(mpi, *motion[2])
+            if code != 0:
+                return done, largest[0], False, busy, code
+            wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
         code = rank_coefficients_if_any(coefficients, mpi)
         if code != 0:
             return done, largest[0], False, busy, code
