@@ -143,6 +143,21 @@ def rank_wall_totals(
 
 
 @njit(cache=True)
+def rank_walls_kick(motion, mpi, step, done):
+    """The walls' kick at the end of step `done` of a rank's loop from the clock's `step`
+    (motion: rank_dem_steps's, or None where no wall moves): their areas, the particles' totals
+    on them over every rank (rank_wall_totals), and their kick. Returns MPI's error code."""
+    if motion is None:
+        return 0
+    wall_areas(*motion[1])
+    code = rank_wall_totals(mpi, *motion[2])
+    if code != 0:
+        return code
+    wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
+    return 0
+
+
+@njit(cache=True)
 def rank_dem_steps(
     steps, step, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, mpi, mail, scratch
 ):
@@ -180,12 +195,9 @@ def rank_dem_steps(
         code = send_ghost_forces(force, torque, force[:, :0], mpi, mail)  # (n, 0): no fluid array
         if code != 0:
             return done, largest[0], False, busy, code
-        if motion is not None:
-            wall_areas(*motion[1])
-            code = rank_wall_totals(mpi, *motion[2])
-            if code != 0:
-                return done, largest[0], False, busy, code
-            wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
+        code = rank_walls_kick(motion, mpi, step, done)
+        if code != 0:
+            return done, largest[0], False, busy, code
         kick(*kicks)
         if budget is not None:
             accumulate_budget(*budget[1])

@@ -57,6 +57,16 @@ def walls_moved(coord, listed_at, reach):
 
 
 @njit(cache=True)
+def walls_kick(motion, done):
+    """The walls' kick at the end of the loop's step `done` (motion: dem_steps's, or None where
+    no wall moves): their areas, the particles' totals on them, and their kick."""
+    if motion is not None:
+        wall_areas(*motion[1])
+        listed_wall_totals(*motion[2])
+        wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
+
+
+@njit(cache=True)
 def fluid_force(*arguments):
     """The place of a fluid's force in the loops (module docstring): never called here, where
     `fluid` is None and Numba leaves the call out."""
@@ -78,10 +88,7 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motio
         contacts(cross, pairs, walls)
         if fluid is not None:
             fluid_force(*fluid)
-        if motion is not None:
-            wall_areas(*motion[1])
-            listed_wall_totals(*motion[2])
-            wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
+        walls_kick(motion, done)
         kick(*kicks)
         if budget is not None:
             accumulate_budget(*budget[1])

@@ -62,13 +62,13 @@ from ..motion import kick_drift, kick_drift_serial
 from ..rank_messages import (
     drift_everywhere,
     drift_everywhere_serial,
-    rank_wall_totals,
+    rank_walls_kick,
     seconds,
     send_ghost_forces,
 )
 from ..serial import serial_twin
-from ..steps import contacts, contacts_serial, walls_moved
-from ..walls import listed_wall_totals, wall_areas, wall_kick, wall_kick_drift
+from ..steps import contacts, contacts_serial, walls_kick, walls_moved
+from ..walls import wall_kick_drift
 from .porosity import bin_particles, bin_particles_serial
 
 GIDASPOW = 0
@@ -518,10 +518,7 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks, motio
         contacts(cross, pairs, walls)
         bin_particles(*binning)
         count = particle_drag(*forces)
-        if motion is not None:
-            wall_areas(*motion[1])
-            listed_wall_totals(*motion[2])
-            wall_kick(*motion[3], (motion[6] + done + 1) * motion[7], motion[7])
+        walls_kick(motion, done)
         coefficients_if_any(coefficients)
         drag_kick(*kicks)
         if count:
@@ -567,12 +564,9 @@ def rank_drag_steps(
         code = send_ghost_forces(force, torque, others, mpi, mail)
         if code != 0:
             return done, largest[0], False, busy, code
-        if motion is not None:
-            wall_areas(*motion[1])
-            code = rank_wall_totals(mpi, *motion[2])
-            if code != 0:
-                return done, largest[0], False, busy, code
-            wall_kick(*motion[3], (step + done + 1) * motion[6], motion[6])
+        code = rank_walls_kick(motion, mpi, step, done)
+        if code != 0:
+            return done, largest[0], False, busy, code
         code = rank_coefficients_if_any(coefficients, mpi)
         if code != 0:
             return done, largest[0], False, busy, code
