@@ -315,9 +315,15 @@ class FluidParticleDrag:
         every = whole.every_mask(visited)  # (ranks, C)
         own = whole.own()
         gid = whole.gid()
-        needed = every[:, reachable[:, own]].any(axis=1)  # (ranks, own)
-        send = {r: own[needed[r]] for r in range(needed.shape[0]) if r != whole.rank and needed[r].any()}
-        arrived = whole.alltoall([gid[send[r]] if r in send else None for r in range(needed.shape[0])])
+        cells = reachable[:, own]  # (points, own)
+        ranks = every.shape[0]
+        # the ranks whose particles can visit a cell this rank's own can be in (its neighbours),
+        # each sent those of its own that can be in one of that rank's cells
+        near = np.flatnonzero(every[:, np.unique(cells)].any(axis=1))
+        send = {}
+        for r in near[near != whole.rank]:
+            send[int(r)] = own[every[r][cells].any(axis=0)]
+        arrived = whole.alltoall([gid[send[r]] if r in send else None for r in range(ranks)])
         receive, first = {}, gid.size  # received rows follow the held particles' in the table
         for r, gids in enumerate(arrived):
             if gids is not None:
