@@ -24,7 +24,9 @@ sums, and MPI_Allreduce adds those words over the ranks (rank_wall_totals): one 
 bitwise, from a message of a fixed size (W x 3 x WORDS int64) whatever the particles' number.
 
 The Navier-Stokes drag's loop, its kick in place of the particles' (kernels/fluid/drag.py
-rank_drag_steps), sends each ghost's other forces with its force and torque.
+rank_drag_steps), sends each ghost's other forces with its force and torque, and, with the
+self-induced velocity subtracted, the (cell, drag coefficient) rows its cells' sums take from
+other ranks, with send_ghost_forces below (rank_cell_coefficients there).
 
 mpi: (allreduce, irecv, isend, waitall, clock_gettime, the communicator, MPI_DOUBLE, MPI_MAX,
 the monotonic clock's id, MPI_INT64_T, MPI_SUM); mail (rank_calls.ghost_mail): the
