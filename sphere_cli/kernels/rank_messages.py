@@ -53,7 +53,10 @@ from .walls import (
     wall_kick_drift,
 )
 
-TAG = 1  # the ghosts' forces (the Python exchange's tag: the same messages)
+# the tag of send_ghost_forces's messages and of the Python exchange's (the same messages): the
+# ghosts' forces, and the Navier-Stokes drag's coefficient rows after them in a step (each
+# exchange ends in MPI_Waitall before the next begins, so MPI's order per sender matches them)
+TAG = 1
 
 
 @njit(cache=True)
@@ -87,7 +90,10 @@ def _post(call, box, rank, mpi, request):
 def send_ghost_forces(force, torque, other, mpi, mail):
     """Each rank's rows of force, torque and other (3 + 3 + k doubles; other (n, k) a fluid's
     ghost array, k = 0 without one) to it, and those of the ghosts this rank holds from their
-    owners; returns MPI's first error code (0: none)."""
+    owners; returns MPI's first error code (0: none). Any three arrays of n rows whose widths
+    sum to the boxes' (force (n, 2) and two empty ones: kernels/fluid/drag.py
+    rank_cell_coefficients's rows; each array's columns go at its offset 0, 3 and 6, so an
+    empty array's offset may lie beyond the box)."""
     to, to_start, to_local, out, come, come_start, come_local, into, requests, statuses = mail
     messages = 0
     for m in range(come.shape[0]):

@@ -38,9 +38,11 @@ like a GPU's physics/device_steps.py): `to_host` gathers the owners' particles a
 before frames, observables and checkpoints, so files are those of one rank and a checkpoint
 resumes on any rank count. A part's steps up to a list build run in one compiled call with
 their messages inside (kernels/rank_messages.py, through physics/rank_calls.py), moving walls,
-the energy budget and a 1D VANS fluid's force included (RankSteps.in_compiled_loop); with
-another fluid, one at a time in Python with mpi4py's messages (an exchange of ghost forces and
-one reduction a step).
+the energy budget and a 1D VANS fluid's force included, and the Navier-Stokes drag's own loop
+(kernels/fluid/drag.py rank_drag_steps) without the budget (RankSteps.in_compiled_loop); with
+the Darcy fluid, or the budget beside the Navier-Stokes drag, one at a time in Python with
+mpi4py's messages (an exchange of ghost forces and one reduction a step), as on a rank
+holding no particle.
 
 **Moving walls** are stepped on every rank alike; the particles' force on them is summed
 exactly (kernels/exact_sum.py): each rank adds its own particles' share into the sums' words
@@ -253,7 +255,8 @@ class EveryRank:
         return self.steps.part.gid
 
     def alltoall(self, objects: list) -> list:
-        """objects[r] to rank r; returns what each rank sent this one (pickled: set-up only)."""
+        """objects[r] to rank r; returns what each rank sent this one (pickled: for plans made
+        at list builds or fluid steps, not every step)."""
         return self.steps.world.comm.alltoall(objects)
 
     @staticmethod
@@ -610,10 +613,11 @@ class RankSteps:
         kernels/steps.py does for one rank: the arguments made once a list build, not once a
         step (120 beads on 2 ranks: 64 -> 55 us a step); and, where in_compiled_loop, the loop
         of those steps with their messages (kernels/rank_messages.py), moving walls, the energy
-        budget and a 1D VANS fluid's force included (its arguments valid until the fluid's next
-        step, which ends the call). Valid until the next build while no wall moves, and for the loop
-        until the next build or a wall's move beyond the reach of the near-wall list (the loop
-        stops there)."""
+        budget and a 1D VANS fluid's force included, or the Navier-Stokes drag's own loop (its
+        arguments valid until the fluid's next step, which ends the call; the drag's plan of
+        its cells' sums made before, _plan_fluid). Valid until the next build while no wall
+        moves, and for the loop until the next build or a wall's move beyond the reach of the
+        near-wall list (the loop stops there)."""
         part = self.part
         state = part.state
         if not state.particles.count:

@@ -300,7 +300,8 @@ class FluidParticleDrag:
 
     def plan_exchange(self, state: State) -> None:
         """Collective, on an MPI rank with the self-induced velocity subtracted, once a list
-        build (and grid spacing): which of this rank's own particles each other rank takes for
+        build (and, on a grid following the top wall, once a fluid step: its cells change):
+        which of this rank's own particles each other rank takes for
         its cells' sums of the drag coefficients (those that can be in a cell the other's
         particles can visit until the next build: _reachable_cells), and the global order in
         which this rank sums its own and those it receives (kernels/fluid/drag.py
