@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 import time
 import types
 import warnings
@@ -762,7 +763,8 @@ class RankSteps:
         own = self._own()
         part, comm, size = self.part, self.world.comm, self.world.size
         marks = needed(own)
-        columns = [part.gid.reshape(-1, 1)] + [a.reshape(a.shape[0], -1) for a in arrays]
+        # each array as (n, k) doubles (k given: numpy cannot infer it for a rank holding none)
+        columns = [part.gid.reshape(-1, 1)] + [a.reshape(a.shape[0], math.prod(a.shape[1:])) for a in arrays]
         widths = [c.shape[1] for c in columns]
         rows = [own[marks[rank]] for rank in range(size)]  # each rank's, in ascending global index
         send_counts = np.array([r.size for r in rows], dtype=np.int64)

@@ -385,6 +385,31 @@ def test_a_navier_stokes_bed_is_one_ranks_on_two_then_four(tmp_path):
     assert np.count_nonzero(state["sphere/state/fluid/drag_self_induced"]) > 0
 
 
+def test_ranks_without_particles_step_from_python_beside_ranks_in_the_compiled_loop(tmp_path):
+    """One bead settling in water (configs/fluid-settling.toml, the default drag) on 4 ranks: a
+    rank holding no particle steps one step at a time from Python while the rank owning the
+    bead takes its steps in the drag's compiled loop, with the same messages (the ghosts'
+    forces and the drag's coefficient rows: RankSteps._swap against kernels/rank_messages.py
+    send_ghost_forces) and the same collectives, those of the fluid's steps included, which a
+    rank whose slab's cells reach no particle takes as the others do (before, such a rank
+    skipped the porosity's messages and the others waited for it: a hang). One rank's run,
+    bit for bit."""
+    text = (REPO / "configs" / "fluid-settling.toml").read_text()
+    for old, new in (
+        ("count = 200\n", "count = 1\n"),
+        ("duration = 0.1", "duration = 0.001"),
+        ("every_time = 0.01", "every_time = 0.0005"),
+        ("every_time = 0.05\nkeep = 2", "every_time = 0.001\nkeep = 2"),
+    ):
+        assert old in text, old
+        text = text.replace(old, new)
+    (tmp_path / "case.toml").write_text(text)
+    run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
+    run_ok(sphere("run", "case.toml", "-o", "split", "-q", ranks=4, cwd=tmp_path, timeout=120))
+    assert "steps up to a list build in one compiled call" in (tmp_path / "split" / "run.log").read_text()
+    assert_runs_bitwise(tmp_path / "one", tmp_path / "split")
+
+
 def oedometer() -> str:
     """tests/physics/test_darcy_coupled.py's undrained oedometer, 1.5 ms of it: 128 spheres in 8
     touching layers between a floor and a top wall held at 2 kPa, the Darcy grid following the

@@ -469,6 +469,10 @@ class NavierStokes(FluidModule):
         if cfg.grid.follow_top_wall:
             self.top_wall = _top_wall(loaded, state)
         self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
+        # a scene without particles (a fluid alone): never split across MPI ranks, where a rank's
+        # step may take none of them and must still meet the others in the porosity's and the
+        # exchange's messages
+        self.alone = state.particles.count == 0
         self.solver = NavierStokesSolver(cfg, self._grid, box.body_acc)
         # the smallest cell side of the case's grid [m] (before a grid following the top wall is
         # fitted to it, so that dt = "auto" is the same on a resume)
@@ -714,7 +718,7 @@ class NavierStokes(FluidModule):
         fs = self.fs
         if self.top_wall is not None:
             self._follow_wall(state)
-        if state.particles.count:  # without particles the porosity stays 1 and nothing is exchanged
+        if not self.alone:  # without particles the porosity stays 1 and nothing is exchanged
             self.drag.report_below(state, fs)
             # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
             np.copyto(fs.porosity_rate, fs.porosity)
