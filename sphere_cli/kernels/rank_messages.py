@@ -81,6 +81,24 @@ def drift_everywhere(drift, mpi, mine, largest):
 
 
 @njit(cache=True)
+def rank_drift(motion, drift, mpi, mine, largest, threshold2):
+    """The start of a rank loop's step: the walls' kick-drift (motion: rank_dem_steps's, None
+    where no wall moves), the particles' (drift_everywhere), and whether the step must end in
+    Python: a particle on any rank beyond half the skin, or a wall beyond the reach of its
+    near-wall list. Returns (MPI's error code, that)."""
+    if motion is not None:
+        wall_kick_drift(*motion[0])
+    code = drift_everywhere(drift, mpi, mine, largest)
+    if code != 0:
+        return code, False
+    if largest[0] > threshold2:
+        return 0, True
+    if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
+        return 0, True
+    return 0, False
+
+
+@njit(cache=True)
 def _post(call, box, rank, mpi, request):
     """MPI_Irecv or MPI_Isend (call) of the doubles of box from or to rank, into request[0]."""
     return call(box.ctypes.data, np.int32(box.size), mpi[6], rank, np.int32(TAG), mpi[5], request.ctypes.data)
@@ -184,15 +202,9 @@ def rank_dem_steps(
     busy = 0.0
     force, torque = kicks[2], kicks[3]
     for done in range(steps):
-        if motion is not None:
-            wall_kick_drift(*motion[0])
-        code = drift_everywhere(drift, mpi, mine, largest)
-        if code != 0:
-            return done, largest[0], False, busy, code
-        if largest[0] > threshold2:
-            return done, largest[0], True, busy, 0
-        if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
-            return done, largest[0], True, busy, 0
+        code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2)
+        if code != 0 or stale:
+            return done, largest[0], stale, busy, code
         if budget is not None:
             keep_half_step(*budget[0])
         started = seconds(mpi, clock)
@@ -214,9 +226,10 @@ def rank_dem_steps(
 
 # one thread: the loop without parallel regions (kernels/serial.py)
 drift_everywhere_serial = serial_twin(drift_everywhere, kick_drift=kick_drift_serial)
+rank_drift_serial = serial_twin(rank_drift, drift_everywhere=drift_everywhere_serial)
 rank_dem_steps_serial = serial_twin(
     rank_dem_steps,
-    drift_everywhere=drift_everywhere_serial,
+    rank_drift=rank_drift_serial,
     kick=kick_serial,
     contacts=contacts_serial,
     accumulate_budget=accumulate_budget_serial,

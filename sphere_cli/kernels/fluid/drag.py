@@ -60,8 +60,8 @@ from numba import njit, prange
 
 from ..motion import kick_drift, kick_drift_serial
 from ..rank_messages import (
-    drift_everywhere,
-    drift_everywhere_serial,
+    rank_drift,
+    rank_drift_serial,
     rank_walls_kick,
     seconds,
     send_ghost_forces,
@@ -547,15 +547,9 @@ def rank_drag_steps(
     busy = 0.0
     force, torque, others = kicks[10], kicks[2], kicks[8]
     for done in range(steps):
-        if motion is not None:
-            wall_kick_drift(*motion[0])
-        code = drift_everywhere(drift, mpi, mine, largest)
-        if code != 0:
-            return done, largest[0], False, busy, code
-        if largest[0] > threshold2:
-            return done, largest[0], True, busy, 0
-        if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
-            return done, largest[0], True, busy, 0
+        code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2)
+        if code != 0 or stale:
+            return done, largest[0], stale, busy, code
         started = seconds(mpi, clock)
         contacts(cross, pairs, walls)
         bin_particles(*binning)
@@ -590,6 +584,4 @@ SERIAL_KERNELS = {
     "drag_kick": drag_kick_serial,
 }
 drag_steps_serial = serial_twin(drag_steps, **SERIAL_KERNELS)
-rank_drag_steps_serial = serial_twin(
-    rank_drag_steps, drift_everywhere=drift_everywhere_serial, **SERIAL_KERNELS
-)
+rank_drag_steps_serial = serial_twin(rank_drag_steps, rank_drift=rank_drift_serial, **SERIAL_KERNELS)
