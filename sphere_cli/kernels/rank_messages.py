@@ -106,13 +106,14 @@ def _post(call, box, rank, mpi, request):
 
 @njit(cache=True)
 def send_ghost_forces(force, torque, other, mpi, mail):
-    """Each rank's rows of force, torque and other (3 + 3 + k doubles; other (n, k) a fluid's
-    ghost array, k = 0 without one) to it, and those of the ghosts this rank holds from their
-    owners; returns MPI's first error code (0: none). Any three arrays of n rows whose widths
-    sum to the boxes' (force (n, 2) and two empty ones: kernels/fluid/drag.py
-    rank_cell_coefficients's rows; each array's columns go at its offset 0, 3 and 6, so an
-    empty array's offset may lie beyond the box)."""
+    """Each rank's rows of force, torque and other side by side (3 + 3 + k doubles; other (n, k)
+    a fluid's ghost array, k = 0 without one) to it, and those of the ghosts this rank holds from
+    their owners, as RankSteps._swap sends them; returns MPI's first error code (0: none). Any
+    three arrays of n rows whose widths sum to the boxes' serve (kernels/fluid/drag.py
+    rank_cell_coefficients: its (n, 2) rows and two empty arrays)."""
     to, to_start, to_local, out, come, come_start, come_local, into, requests, statuses = mail
+    second = force.shape[1]  # where torque's columns begin in a row, and other's
+    third = second + torque.shape[1]
     messages = 0
     for m in range(come.shape[0]):
         box = into[come_start[m] : come_start[m + 1]]
@@ -124,8 +125,8 @@ def send_ghost_forces(force, torque, other, mpi, mail):
         local = to_local[to_start[m] : to_start[m + 1]]
         box = out[to_start[m] : to_start[m + 1]]
         rows_out(force, local, box, 0)
-        rows_out(torque, local, box, 3)
-        rows_out(other, local, box, 6)
+        rows_out(torque, local, box, second)
+        rows_out(other, local, box, third)
         code = _post(mpi[2], box, to[m], mpi, requests[messages:])
         if code != 0:
             return code
@@ -137,8 +138,8 @@ def send_ghost_forces(force, torque, other, mpi, mail):
         local = come_local[come_start[m] : come_start[m + 1]]
         box = into[come_start[m] : come_start[m + 1]]
         rows_in(box, local, force, 0)
-        rows_in(box, local, torque, 3)
-        rows_in(box, local, other, 6)
+        rows_in(box, local, torque, second)
+        rows_in(box, local, other, third)
     return 0
 
 
