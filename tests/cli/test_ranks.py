@@ -547,7 +547,7 @@ NAVIER_STOKES_LID = (
     .replace('self_induced = "keep"', 'averaging = "cell"')
 )
 # the same with the drag of each particle less its self-induced velocity: its cells' sums over
-# every rank planned again at every fluid step (the grid's cells change with the lid)
+# every rank planned by columns once a list build (the grid's cells change with the lid)
 NAVIER_STOKES_LID_SUBTRACTED = NAVIER_STOKES_LID.replace('averaging = "cell"', 'self_induced = "subtract"')
 
 

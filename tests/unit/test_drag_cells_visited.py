@@ -110,10 +110,8 @@ class Ranks:
             table[row] = cell, coef
 
 
-def test_the_plan_is_made_again_at_a_list_build_or_when_the_cells_change():
-    """The plan is made once a list build: again after a build, and again when the grid's
-    spacing changes (a grid following the top wall stretches its cells, which moves particles
-    between cells without a build)."""
+def test_the_plan_is_made_again_at_a_list_build():
+    """The plan is made once a list build, not once a step."""
     grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
     drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, 3, False)
     drag.whole = ranks = Ranks([0, 2, 4], theirs=5, arriving=[(3, 5, 0.5)])
@@ -126,12 +124,35 @@ def test_the_plan_is_made_again_at_a_list_build_or_when_the_cells_change():
     drag._cell_coefficients(state)
     assert ranks.masks == 1
     assert drag.cell_coef[0] == 1.0 and drag.cell_coef[5] == 5.5
-    drag.spacing[2] *= 1.01  # the grid's own array, stretched in place
-    drag._cell_coefficients(state)
-    assert ranks.masks == 2
     neighbors.builds += 1
     drag._cell_coefficients(state)
-    assert ranks.masks == 3
+    assert ranks.masks == 2
+
+
+def test_a_grid_that_stretches_plans_by_columns_once_a_list_build():
+    """A grid following the top wall stretches its cells along z at each fluid step, moving
+    particles between cells without a build: the plan takes whole columns. Rank 1's particles
+    visit column (0, 0) alone: this rank sends it both of its particles in that column, low and
+    high (global 0 and 2), whichever cells the stretch puts them in, not the one in column
+    (2, 0) (global 4); a stretch does not make the plan again, a build does."""
+    grid = FluidGrid(origin=[0.0] * 3, spacing=SPACING, shape=SHAPE, periodic=[True, True, False])
+    drag = FluidParticleDrag(DragConfig(), 1000.0, 1e-3, grid, 3, False)
+    drag.stretches = True
+    drag.whole = ranks = Ranks([0, 2, 4], theirs=0, arriving=[(3, 5, 0.5)])
+    drag.cell_of[:] = [0, 5, (2 * 5 + 0) * 6 + 3]
+    drag.coef[:] = [1.0, 2.0, 3.0]
+    ref = [[0.2e-3, 0.2e-3, 0.2e-3], [0.2e-3, 0.2e-3, 2.7e-3], [2.5e-3, 0.2e-3, 1.7e-3]]
+    neighbors = types.SimpleNamespace(ref_pos=np.array(ref), skin=1e-5, builds=4)
+    state = types.SimpleNamespace(neighbors=neighbors)
+    drag._cell_coefficients(state)
+    assert list(ranks.sent) == [0, 2]
+    assert drag.cell_coef[0] == 1.0 and drag.cell_coef[5] == 2.5 and drag.cell_coef[63] == 3.0
+    drag.spacing[2] *= 1.01  # the grid's own array, stretched in place
+    drag._cell_coefficients(state)
+    assert ranks.masks == 1
+    neighbors.builds += 1
+    drag._cell_coefficients(state)
+    assert ranks.masks == 2
 
 
 def test_rows_go_to_the_ranks_whose_cells_they_can_reach_and_are_summed_in_global_order():

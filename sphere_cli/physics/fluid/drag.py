@@ -124,6 +124,9 @@ class FluidParticleDrag:
         # merged cells, merged coefficients) of kernels/fluid/drag.py rank_cell_coefficients,
         # the rows sent to and received from each rank, and their boxes (Python's, compiled)
         self.plan_for = None
+        # a grid following the top wall stretches its cells along z at every fluid step: its plan
+        # is made by columns of cells (x and y, which keep their cells), once a list build
+        self.stretches = False
         self.plan = None
         self.plan_rows = None
         self.plan_boxes = None
@@ -300,20 +303,26 @@ class FluidParticleDrag:
 
     def plan_exchange(self, state: State) -> None:
         """Collective, on an MPI rank with the self-induced velocity subtracted, once a list
-        build (and, on a grid following the top wall, once a fluid step: its cells change):
-        which of this rank's own particles each other rank takes for
-        its cells' sums of the drag coefficients (those that can be in a cell the other's
-        particles can visit until the next build: _reachable_cells), and the global order in
-        which this rank sums its own and those it receives (kernels/fluid/drag.py
-        rank_cell_coefficients)."""
-        key = (state.neighbors.builds, *self.spacing)
+        build: which of this rank's own particles each other rank takes for its cells' sums of
+        the drag coefficients (those that can be in a cell the other's particles can visit
+        until the next build: _reachable_cells), and the global order in which this rank sums
+        its own and those it receives (kernels/fluid/drag.py rank_cell_coefficients). On a grid
+        that stretches (`stretches`: it follows the top wall) the cells move along z at each
+        fluid step, so cells are taken by whole columns, which keep theirs: a rank takes
+        another's particles that can be in the columns its own can visit, at any height (a
+        superset of those in its cells, whatever the stretch), and the plan holds until the
+        next build."""
+        spacing = self.spacing[:2] if self.stretches else self.spacing
+        key = (state.neighbors.builds, *spacing)
         if self.whole is None or not self.corrected or self.plan_for == key:
             return
         whole = self.whole
         reachable = self._reachable_cells(state)  # (points, n)
-        visited = np.zeros(self.start.size - 1, dtype=bool)
+        if self.stretches:
+            reachable //= self.shape[2]  # the cells' columns: (i, j) of the C-ordered (i, j, k)
+        visited = np.zeros((self.start.size - 1) // (self.shape[2] if self.stretches else 1), dtype=bool)
         visited[reachable.reshape(-1)] = True
-        every = whole.every_mask(visited)  # (ranks, C)
+        every = whole.every_mask(visited)  # (ranks, cells or columns)
         own = whole.own()
         gid = whole.gid()
         cells = reachable[:, own]  # (points, own)
@@ -344,10 +353,14 @@ class FluidParticleDrag:
         """(points, n) int64: cells each particle this rank holds can be in until the next list
         build: each moves at most half the skin from where it was at the last
         (NeighborSearch's threshold), so the cells of the points of a lattice over the box of
-        that half width around it, at most a cell apart along each axis, hold it."""
+        that half width around it, at most a cell apart along each axis, hold it. On a grid that
+        stretches, the points of the particle's own height only (plan_exchange takes their
+        columns)."""
         reach = 0.5 * state.neighbors.skin
         ref = state.neighbors.ref_pos
         points = [np.linspace(-reach, reach, int(np.ceil(2.0 * reach / h)) + 1) for h in self.spacing]
+        if self.stretches:  # the columns alone are wanted: the points of one height
+            points[2] = np.zeros(1)
         offsets = list(itertools.product(*points))
         cells = np.empty((len(offsets), ref.shape[0]), dtype=np.int64)
         shifted = np.empty_like(ref)

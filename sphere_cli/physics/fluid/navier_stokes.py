@@ -483,6 +483,7 @@ class NavierStokes(FluidModule):
         self.drag = FluidParticleDrag(
             cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
         )
+        self.drag.stretches = self.top_wall is not None
         self.fs = self.solver.allocate()
         state.fluid = self.fs
         self.loaded = loaded
