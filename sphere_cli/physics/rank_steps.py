@@ -239,7 +239,7 @@ class EveryRank:
     scene (collectives): near(needed, *arrays), called with arrays of this rank's particles,
     those of every rank's own particles that needed(own) ((ranks, n) bool of own, the local
     indices of an owner's own particles) marks for this rank, in global order (RankSteps._near);
-    own() this rank's own particles; every_mask(mask) every rank's mask; alltoall(objects) an
+    own() this rank's own particles; every_mask(mask) every rank's mask, packed; alltoall(objects) an
     object from every rank; swap(columns, send, receive, boxes) the rows of a message to and from
     each rank, as the compiled loops send them (boxes(send, receive, width) its boxes,
     mail(send, receive, width) the compiled loops' form of them)."""
@@ -281,11 +281,13 @@ class EveryRank:
         return self.steps._own()
 
     def every_mask(self, mask: np.ndarray) -> np.ndarray:
-        """(ranks, m) bool: every rank's mask (m,) bool (one Allgather of its bits)."""
+        """(ranks, ceil(m / 8)) uint8: every rank's mask (m,) bool as np.packbits packs it (one
+        Allgather of its bits), left packed: unpacked, the masks of many ranks over a large grid
+        would take eight times the memory."""
         packed = np.packbits(mask)
         every = np.empty((self.steps.world.size, packed.size), dtype=np.uint8)
         self.steps.world.comm.Allgather(packed, every)
-        return np.unpackbits(every, axis=1, count=mask.size).astype(bool)
+        return every
 
 
 def summed_over_ranks(world, sums: np.ndarray) -> np.ndarray:

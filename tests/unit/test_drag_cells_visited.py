@@ -86,7 +86,7 @@ class Ranks:
         self.masks += 1
         other = np.zeros_like(mask)
         other[self.theirs] = True
-        return np.stack([mask, other])
+        return np.packbits(np.stack([mask, other]), axis=1)
 
     def own(self):
         return np.arange(self.held.size)
@@ -171,3 +171,14 @@ def test_rows_go_to_the_ranks_whose_cells_they_can_reach_and_are_summed_in_globa
     assert list(ranks.sent) == [2, 4]
     assert drag.cell_coef[0] == 1.0
     assert drag.cell_coef[5] == 0.0
+
+
+def test_packed_masks_are_read_at_any_entry_as_unpacked():
+    """Every rank's mask stays packed (EveryRank.every_mask): its entries read from the bits are
+    those of the mask, for masks of a length no multiple of 8 and entries in any order."""
+    rng = np.random.default_rng(3)
+    masks = rng.random((3, 37)) < 0.4
+    packed = np.packbits(masks, axis=1)
+    index = rng.integers(0, 37, size=(4, 9))
+    assert np.array_equal(FluidParticleDrag._marked(packed, index), masks[:, index])
+    assert np.array_equal(FluidParticleDrag._marked(packed[1], index), masks[1][index])

@@ -322,17 +322,17 @@ class FluidParticleDrag:
             reachable //= self.shape[2]  # the cells' columns: (i, j) of the C-ordered (i, j, k)
         visited = np.zeros((self.start.size - 1) // (self.shape[2] if self.stretches else 1), dtype=bool)
         visited[reachable.reshape(-1)] = True
-        every = whole.every_mask(visited)  # (ranks, cells or columns)
+        every = whole.every_mask(visited)  # (ranks, cells or columns), packed bits
         own = whole.own()
         gid = whole.gid()
         cells = reachable[:, own]  # (points, own)
         ranks = every.shape[0]
         # the ranks whose particles can visit a cell this rank's own can be in (its neighbours),
         # each sent those of its own that can be in one of that rank's cells
-        near = np.flatnonzero(every[:, np.unique(cells)].any(axis=1))
+        near = np.flatnonzero(self._marked(every, np.unique(cells)).any(axis=1))
         send = {}
         for r in near[near != whole.rank]:
-            send[int(r)] = own[every[r][cells].any(axis=0)]
+            send[int(r)] = own[self._marked(every[r], cells).any(axis=0)]
         arrived = whole.alltoall([gid[send[r]] if r in send else None for r in range(ranks)])
         receive, first = {}, gid.size  # received rows follow the held particles' in the table
         for r, gids in enumerate(arrived):
@@ -348,6 +348,13 @@ class FluidParticleDrag:
         self.plan_boxes = whole.boxes(send, receive, 2)
         self.plan_mail = None  # the compiled loop's, made by loop_arguments
         self.plan_for = key
+
+    @staticmethod
+    def _marked(packed: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """The entries `index` of masks packed by np.packbits along their last axis (EveryRank.
+        every_mask; big-endian: entry i is bit 7 - i % 8 of byte i // 8), as bool (...,
+        index.shape)."""
+        return ((packed[..., index >> 3] >> (7 - (index & 7)).astype(np.uint8)) & 1).astype(bool)
 
     def _reachable_cells(self, state: State) -> np.ndarray:
         """(points, n) int64: cells each particle this rank holds can be in until the next list
