@@ -316,7 +316,9 @@ def taylor_green_rate_error(cells: float, method: str = "pcg") -> Outcome:
     seconds = timed_steps(solver, fs, steps, dt)
     shape = np.broadcast_to(u0, fs.v_face[..., :-1, 0].shape)
     measured = float((fs.v_face[..., :-1, 0] * shape).sum() / (shape * shape).sum())
-    if np.abs(fs.v_face[..., 2]).max() != 0.0:
+    # 2D to the pressure solve's tolerance (1e-10 relative), not bit for bit: the red-black
+    # smoothing of its multigrid (from 64 cells) updates the two layers in turn (2e-19 m/s at 64)
+    if np.abs(fs.v_face[..., 2]).max() > 1e-9 * amplitude:
         raise RuntimeError("the 2D vortex grew a vertical velocity")
     error = -math.log(measured) / duration / (2 * nu * k * k) - 1.0
     return Outcome(

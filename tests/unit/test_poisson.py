@@ -22,7 +22,13 @@ import numba
 import numpy as np
 import pytest
 
-from sphere_cli.kernels.fluid.poisson import apply_operator, face_means, prepare_system
+from sphere_cli.kernels.fluid.poisson import (
+    apply_operator,
+    face_means,
+    prepare_system,
+    red_black_sweep,
+    red_black_sweep_whole,
+)
 from sphere_cli.physics.fluid import poisson as poisson_module
 from sphere_cli.physics.fluid.grid import FluidGrid
 from sphere_cli.physics.fluid.poisson import PoissonSolver
@@ -290,6 +296,51 @@ def test_multigrid_preconditioner_is_symmetric_positive_definite(shape, periodic
         unit.flat[m] = 0.0
     assert np.abs(matrix - matrix.T).max() <= 1e-12 * np.abs(matrix).max()
     assert np.linalg.eigvalsh(0.5 * (matrix + matrix.T)).min() > 0.0
+
+
+def test_levels_smooth_red_black_where_no_two_neighbours_share_a_colour():
+    """Red-black Gauss-Seidel needs an even cell count along each periodic axis (else a cell and
+    its periodic neighbour have one colour and the order of the updates would matter): 12 x 6
+    periodic in x and y coarsens to 6 x 3 (3 along periodic y: damped Jacobi there) and 3 x 3;
+    an odd count along an axis that is not periodic does not matter."""
+    grid = make_grid((12, 6, 16), periodic=(True, True, False))
+    multigrid = PoissonSolver(grid, "dirichlet", "no-flux", preconditioner="multigrid").multigrid
+    assert [level.shape for level in multigrid.levels] == [(6, 3, 8), (3, 3, 4)]
+    assert multigrid.fine_red_black
+    assert [level.red_black for level in multigrid.levels] == [False, False]
+    grid = make_grid((12, 6, 16), periodic=(False, True, False))
+    multigrid = PoissonSolver(grid, "dirichlet", "no-flux", preconditioner="multigrid").multigrid
+    assert [level.red_black for level in multigrid.levels] == [False, False]
+    grid = make_grid((12, 8, 16), periodic=(False, True, False))
+    multigrid = PoissonSolver(grid, "dirichlet", "no-flux", preconditioner="multigrid").multigrid
+    assert [(level.shape, level.red_black) for level in multigrid.levels] == [
+        ((6, 4, 8), True),
+        ((3, 2, 4), True),
+    ]
+
+
+@pytest.mark.parametrize("shape, periodic", [((7, 4, 5), (False, True)), ((6, 4, 6), (True, True))])
+def test_a_red_black_sweep_in_one_pass_is_its_two_colours_one_after_the_other(shape, periodic):
+    """The whole grid's sweep (red_black_sweep_whole: each run of planes takes the second colour
+    of a plane behind the first, the runs' end planes after every run) gives the values of
+    the two colours' sweeps one after the other, bit for bit, in any number of runs (one a
+    thread): more runs than planes, one plane a run, and uneven runs."""
+    rng = np.random.default_rng(4)
+    nx, ny, nz = shape
+    rhs, x0 = rng.standard_normal(shape), rng.standard_normal(shape)
+    inv_diag = rng.uniform(0.1, 0.2, shape)
+    ax, ay, az = (rng.uniform(0.5, 2.0, s) for s in ((nx + 1, ny, nz), (nx, ny + 1, nz), (nx, ny, nz + 1)))
+    ih2 = np.array([1.0, 2.0, 3.0])
+    px, py = np.uint8(periodic[0]), np.uint8(periodic[1])
+    for first in (0, 1):
+        two = x0.copy()
+        red_black_sweep(rhs, two, inv_diag, ax, ay, az, px, py, ih2, first, 0, nx)
+        red_black_sweep(rhs, two, inv_diag, ax, ay, az, px, py, ih2, 1 - first, 0, nx)
+        assert not np.array_equal(two, x0)
+        for runs in (1, 2, 3, nx, nx + 3):
+            one = x0.copy()
+            red_black_sweep_whole(rhs, one, inv_diag, ax, ay, az, px, py, ih2, first, runs)
+            assert np.array_equal(one, two), (first, runs)
 
 
 @pytest.mark.parametrize("method", ["pcg", "jacobi"])

@@ -492,6 +492,57 @@ def jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic
         jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, x, 0, nx)
 
 
+@njit(cache=True, inline="always")
+def _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, i):
+    """Gauss-Seidel in place of the cells of one colour, (i + j + k) % 2 == color, of plane i:
+    x_i = (b_i + sum of a_f x_neighbour / h^2) / A_ii. Each reads cells of the other colour
+    only (a periodic axis needs an even cell count for that), so the order of the updates of a
+    colour, and the threads or ranks sharing them, change nothing."""
+    nx, ny, nz = x.shape
+    for j in range(ny):
+        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+        for k in range((i + j + color) % 2, nz, 2):
+            x[i, j, k] = inv_diag[i, j, k] * (rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k))
+
+
+@njit(cache=True, parallel=True)
+def red_black_sweep(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, lo, hi):
+    """One colour of a red-black Gauss-Seidel sweep of the planes [lo, hi) (_red_black_plane)."""
+    for t in prange(hi - lo):
+        _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, lo + t)
+
+
+@njit(cache=True, parallel=True)
+def red_black_sweep_whole(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, first, blocks):
+    """A whole red-black sweep of the grid, colour `first` then the other, in one pass over the
+    memory instead of two: each of `blocks` runs of planes takes the first colour of plane i
+    and then the second of plane i - 1, whose neighbours of the first colour are all done; the
+    second colour of each run's first and last planes, whose neighbours lie in the runs beside
+    it, follows when every run is through. The same values as the two colours one after the
+    other (red_black_sweep), whatever `blocks`."""
+    nx = x.shape[0]
+    second = 1 - first
+    for b in prange(blocks):
+        start, end = b * nx // blocks, (b + 1) * nx // blocks
+        for i in range(start, end):
+            _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, first, i)
+            if start < i - 1:
+                _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, i - 1)
+    for b in prange(blocks):
+        start, end = b * nx // blocks, (b + 1) * nx // blocks
+        if start < end:
+            _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, start)
+        if start < end - 1:
+            _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, end - 1)
+
+
+@njit(cache=True)
+def red_black_smooth(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, first, sweeps, blocks):
+    """`sweeps` red-black sweeps of the whole grid (red_black_sweep_whole) in one call."""
+    for _ in range(sweeps):
+        red_black_sweep_whole(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, first, blocks)
+
+
 @njit(cache=True, parallel=True)
 def column_dots(r, z, partial_rz, partial_z, lo, hi):
     """partial_rz = column sums of r z, partial_z of z."""

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from ...kernels.exact_sum import WORDS, exact_value
@@ -56,6 +57,8 @@ from ...kernels.fluid.poisson import (
     precondition,
     prepare_system,
     prolong_add,
+    red_black_smooth,
+    red_black_sweep,
     residual,
     restrict,
     shift,
@@ -65,10 +68,16 @@ from .grid import FluidGrid
 
 METHODS = ("pcg", "jacobi")
 PRECONDITIONERS = ("multigrid", "jacobi")
-# multigrid V-cycle: damped Jacobi smoothing (weight 6/7, the best smoothing factor of the 3D
-# 7-point stencil), two sweeps before and after the coarse correction, 40 on the coarsest level;
-# coarsening stops at 64 cells, and a grid whose coarsest level would keep more than 4096 cells
-# (cell counts with few factors of 2) uses the diagonal preconditioner instead
+# multigrid V-cycle: two red-black Gauss-Seidel sweeps before the coarse correction (red then
+# black) and two after (black then red, the adjoint: the cycle stays symmetric, as CG needs); a
+# level that cannot be coloured (an odd cell count along a periodic axis) and the coarsest (40
+# sweeps) smooth by damped Jacobi sweeps (weight 6/7, the best smoothing factor of the 3D
+# 7-point stencil). Red-black against Jacobi, from zero to 1e-8, one thread (docs/performance.md,
+# 2026-12-06): 8 against 14 iterations and 0.058-0.063 against 0.094 s at 64^3, 8 against 12-13
+# and 9 against 11-12 ms at 32^3, 7 against 11-12 at 16^3 (the same time); three sweeps took
+# 6-7 iterations and as long. Coarsening stops at 64 cells, and a grid whose coarsest level would
+# keep more than 4096 cells (cell counts with few factors of 2) uses the diagonal
+# preconditioner instead
 SMOOTHING_WEIGHT = 6.0 / 7.0
 SWEEPS = 2
 COARSEST_SWEEPS = 40
@@ -194,10 +203,11 @@ class _Level:
     """One coarse level: its shape, the coarsening factors from the level above, coefficients,
     diagonal and work arrays."""
 
-    def __init__(self, shape, factors, ih2):
+    def __init__(self, shape, factors, ih2, flags):
         self.shape = shape
         self.factors = factors
         self.ih2 = ih2
+        self.red_black = colourable(shape, flags)
         nx, ny, nz = shape
         self.c, self.diag, self.inv_diag, self.x, self.b, self.r, self.tmp = (
             np.zeros(shape) for _ in range(7)
@@ -215,8 +225,9 @@ class Multigrid:
     """Geometric multigrid V-cycle z = M^-1 r for the preconditioned conjugate gradient: cells
     merged in pairs along every axis with an even count of at least 4, coefficients re-discretised
     (means of the fine ones), restriction by averaging and prolongation by injection (a multiple
-    of its transpose), the same damped Jacobi sweeps before and after the coarse correction:
-    M is symmetric positive definite, as CG needs."""
+    of its transpose), red-black Gauss-Seidel sweeps before the coarse correction and their
+    adjoint (the colours in the other order) after, or the same damped Jacobi sweeps before and
+    after on a level that cannot be coloured: M is symmetric positive definite, as CG needs."""
 
     def __init__(self, grid: FluidGrid, flags):
         self.flags = flags  # periodic_x, periodic_y, dirichlet_bottom, dirichlet_top (uint8)
@@ -229,13 +240,14 @@ class Multigrid:
                 break
             shape = tuple(n // f for n, f in zip(shape, factors, strict=True))
             ih2 = ih2 / np.asarray(factors, dtype=np.float64) ** 2
-            self.levels.append(_Level(shape, factors, ih2))
+            self.levels.append(_Level(shape, factors, ih2, flags))
         self.usable = int(np.prod(shape)) <= COARSEST_LIMIT and bool(self.levels)
         self.grid = grid
         fine = grid.shape
         self.fine_x, self.fine_tmp, self.fine_r = (np.zeros(fine) for _ in range(3))
         self.fine_partial = np.zeros(fine[0] * fine[1])
         self.fine_slabs = Slabs(fine)
+        self.fine_red_black = colourable(fine, flags)
 
     def update_spacing(self) -> None:
         """Take the grid's current spacing (a grid following the top wall changes it)."""
@@ -265,11 +277,23 @@ class Multigrid:
         """z = M^-1 r; fine = (diag, inv_diag, ax, ay, az, ih2) of the fine operator."""
         self._cycle(-1, r, z, fine)
 
-    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs, zero=False):
-        """`sweeps` damped Jacobi sweeps of x (zero: x is 0 everywhere, its planes beside the
-        slab too, so the first sweep needs no messages)."""
+    def _smooth(self, rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, sweeps, slabs, zero=False, first=None):
+        """`sweeps` sweeps of x: red-black Gauss-Seidel, colour `first` first, or damped Jacobi
+        where `first` is None (zero: x is 0 everywhere, its planes beside the slab too, so the
+        first sweep needs no messages)."""
         px, py = self.flags[0], self.flags[1]
         lo, hi = slabs.lo, slabs.hi
+        if first is not None and not slabs.split:  # a run of planes a thread
+            runs = numba.get_num_threads()
+            red_black_smooth(rhs, x, inv_diag, ax, ay, az, px, py, ih2, first, sweeps, runs)
+            return
+        if first is not None:  # each colour reads the other's planes beside the slab
+            for half in range(2 * sweeps):
+                if half or not zero:
+                    slabs.halo(x)
+                colour = first if half % 2 == 0 else 1 - first
+                red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, colour, lo, hi)
+            return
         if not slabs.split:
             pairs = sweeps // 2
             jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs)
@@ -286,6 +310,7 @@ class Multigrid:
             diag, inv_diag, ax, ay, az, ih2 = fine
             tmp, res, partial = self.fine_tmp, self.fine_r, self.fine_partial
             slabs = self.fine_slabs
+            red_black = self.fine_red_black
         else:
             level = self.levels[index]
             diag, inv_diag, ax, ay, az, ih2 = (
@@ -298,11 +323,13 @@ class Multigrid:
             )
             tmp, res, partial = level.tmp, level.r, level.partial
             slabs = level.slabs
+            red_black = level.red_black
         x[...] = 0.0
         if index == len(self.levels) - 1:
             self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs, zero=True)
             return
-        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, zero=True)
+        pre, post = (0, 1) if red_black else (None, None)
+        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, zero=True, first=pre)
         px, py = self.flags[0], self.flags[1]
         slabs.halo(x)
         residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial, slabs.lo, slabs.hi)
@@ -314,7 +341,13 @@ class Multigrid:
             restrict(res, *coarse.factors, coarse.b, 0, coarse.shape[0])
         self._cycle(index + 1, coarse.b, coarse.x, fine)
         prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
-        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs)
+        self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, first=post)
+
+
+def colourable(shape, flags) -> bool:
+    """Whether red-black colouring of a level leaves no two neighbours of one colour: an even
+    cell count along each periodic axis (flags: periodic_x, periodic_y, ...)."""
+    return (not flags[0] or shape[0] % 2 == 0) and (not flags[1] or shape[1] % 2 == 0)
 
 
 def preconditioner_for(grid: FluidGrid) -> str:
