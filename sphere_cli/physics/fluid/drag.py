@@ -318,9 +318,11 @@ class FluidParticleDrag:
             return
         whole = self.whole
         reachable = self._reachable_cells(state)  # (points, n)
+        places = self.start.size - 1  # the cells, or their columns
         if self.stretches:
             reachable //= self.shape[2]  # the cells' columns: (i, j) of the C-ordered (i, j, k)
-        visited = np.zeros((self.start.size - 1) // (self.shape[2] if self.stretches else 1), dtype=bool)
+            places = self.shape[0] * self.shape[1]
+        visited = np.zeros(places, dtype=bool)
         visited[reachable.reshape(-1)] = True
         every = whole.every_mask(visited)  # (ranks, cells or columns), packed bits
         own = whole.own()

@@ -73,7 +73,7 @@ PRECONDITIONERS = ("multigrid", "jacobi")
 # level that cannot be coloured (an odd cell count along a periodic axis) and the coarsest (40
 # sweeps) smooth by damped Jacobi sweeps (weight 6/7, the best smoothing factor of the 3D
 # 7-point stencil). Red-black against Jacobi, from zero to 1e-8, one thread (docs/performance.md,
-# 2026-12-06): 8 against 14 iterations and 0.058-0.063 against 0.094 s at 64^3, 8 against 12-13
+# 2026-12-06): 8 against 14 iterations and 0.055-0.063 against 0.094 s at 64^3, 8 against 12-13
 # and 9 against 11-12 ms at 32^3, 7 against 11-12 at 16^3 (the same time); three sweeps took
 # 6-7 iterations and as long. Coarsening stops at 64 cells, and a grid whose coarsest level would
 # keep more than 4096 cells (cell counts with few factors of 2) uses the diagonal
