@@ -813,13 +813,30 @@ class RankSteps:
         return self.world.comm.allreduce(first, op=self.world.mpi.MIN) == np.iinfo(np.int64).max
 
     def _gather(self) -> list | None:
-        """The owned particles of every rank, at the lead (None elsewhere)."""
-        part = self.part
+        """The owned particles of every rank, at the lead, as one pack in rank order (None
+        elsewhere): each array's rows of every rank received straight into one array, an
+        MPI_Gatherv of its bytes a name (a pickled gather of the packs copied every array three
+        times more: 39 of 72 ms at 100 000 spheres on 2 ranks)."""
+        part, world = self.part, self.world
         own = np.flatnonzero(part.owned)
         packed = _pack(
             part.state, part.gid, own, self.t.springs, part.state.neighbors.ref_pos, part.fluid, part.budget
         )
-        return self.world.comm.gather(packed, root=0)
+        names = sorted(packed)  # the same on every rank
+        rows = np.array([packed[name].shape[0] for name in names], dtype=np.int64)
+        every = np.empty((world.size, rows.size), dtype=np.int64) if world.leads else None
+        world.comm.Gather(rows, every, root=0)
+        out = {}
+        for column, name in enumerate(names):
+            mine = np.ascontiguousarray(packed[name])
+            row_bytes = int(np.prod(mine.shape[1:])) * mine.itemsize
+            received = None
+            if world.leads:
+                out[name] = np.empty((int(every[:, column].sum()), *mine.shape[1:]), dtype=mine.dtype)
+                counts = every[:, column] * row_bytes
+                received = [out[name], counts, np.cumsum(counts) - counts, world.mpi.BYTE]
+            world.comm.Gatherv([mine, world.mpi.BYTE], received, root=0)
+        return [out] if world.leads else None
 
     def _rebuild(self) -> None:
         """A list build: ownership from the positions now, particles sent to their new owners
