@@ -528,12 +528,13 @@ def red_black_sweep_whole(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, 
             _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, first, i)
             if start < i - 1:
                 _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, i - 1)
+    # (one inlined copy of the plane's loops here, not two: each took about a second to compile)
     for b in prange(blocks):
         start, end = b * nx // blocks, (b + 1) * nx // blocks
-        if start < end:
-            _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, start)
-        if start < end - 1:
-            _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, end - 1)
+        for last in range(2):  # the run's first plane, then its last if another
+            if start < end - last:
+                plane = end - 1 if last else start
+                _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, second, plane)
 
 
 @njit(cache=True)
