@@ -21,6 +21,14 @@ the results in the block's order, which is the sweep's. Each contact gets the sa
 in the same order as a contact-by-contact evaluation, so the forces are bitwise the same; the
 pairs across chunks go through the same blocks and law.
 
+Finding the touching pairs of a row: about half of the listed pairs touch (1.55 of 3.44 a row in
+the settled bed), in no pattern a branch predictor can learn, so a sweep that branches on each
+pair's test loses a mispredicted branch every other pair. The sweep therefore measures every
+listed pair of the row in one loop of loads and arithmetic (row_separations), then lists the
+touching ones and clears the springs of the others without a branch per pair (pick_touching),
+and copies only those into the block (the pair sweep of the settled 10 000 bed, one thread:
+61-63 -> 51-55 ns a particle; docs/performance.md).
+
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, inv_mass,
 inv_inertia (N,) [m, 1/kg, 1/(kg m^2)] (0 for a prescribed particle: the reduced mass of its
 contacts is the other's mass, `reduced`); mass (N,) [kg] for m g; material (N,) int32 index
@@ -33,9 +41,10 @@ kernels/laws.py; law: the law code (kernels/laws.py), rolling: the rolling-resis
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
 limit); slots (>= P, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at start[i] + k,
-used for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T, 3*BLOCK)
-uint64 (i, j and the spring's index of each contact of a block), block_rows (T, 2*BLOCK) int64 (rows waiting
-for their slots): scratch per chunk; out force, torque (N,3) [N, N m]. The (N,3) arrays and hist
+used for the pairs across chunks only; blocks (T, FIELDS*BLOCK + SEPARATIONS*C) float64,
+block_ids (T, 3*BLOCK + C) uint64 (i, j and the spring's index of each contact of a block, then a
+row's touching slots), block_rows (T, 2*BLOCK) int64 (rows waiting for their slots): scratch per
+chunk (`scratch`); out force, torque (N,3) [N, N m]. The (N,3) arrays and hist
 must be C-contiguous: the kernels read them through flat views (kernels/layout.py).
 """
 
@@ -79,8 +88,15 @@ B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 # outputs: force on i, n x F_t, rolling torque on i
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
 FIELDS = 43
-# per contact, in a companion uint64 array: the row i, the partner j and its spring's index
+# after the block, one row per quantity as long as the list's rows: the separations of the row
+# being swept, by slot (row_separations): d, |d|^2 and (r_i + r_j)^2; R_WARM: a sum of the
+# partner's velocities, kept only so that their loads are made there
+R_X0, R_X1, R_X2, R_XD2, R_REACH2, R_WARM = 0, 1, 2, 3, 4, 5
+SEPARATIONS = 6
+# per contact, in a companion uint64 array: the row i, the partner j and its spring's index;
+# after them, the touching slots of the row being swept (pick_touching)
 ID_I, ID_J, ID_S = 0, 1, 2
+ID_K = 3 * BLOCK
 # a block's fill count starts from this (an int64, not the literal 0, which would make Numba
 # compile the flush functions a second time for a literal count)
 ZERO = np.int64(0)
@@ -94,6 +110,27 @@ def to_block(buf, field, c, value):
 @njit(cache=True, inline="always")
 def from_block(buf, field, c):
     return buf[np.uint64(field * BLOCK) + c]
+
+
+@njit(cache=True, inline="always")
+def to_row(buf, wide, field, k, value):
+    """Slot k of row `field` of the row scratch after the block (rows `wide` long)."""
+    buf[np.uint64(FIELDS * BLOCK) + np.uint64(field) * wide + k] = value
+
+
+@njit(cache=True, inline="always")
+def from_row(buf, wide, field, k):
+    return buf[np.uint64(FIELDS * BLOCK) + np.uint64(field) * wide + k]
+
+
+def scratch(chunks: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(blocks, block_ids, block_rows) of the sweeps for `chunks` chunks and a list whose rows
+    hold `width` partners (module docstring)."""
+    return (
+        np.zeros((chunks, FIELDS * BLOCK + SEPARATIONS * width)),
+        np.zeros((chunks, 3 * BLOCK + width), dtype=np.uint64),
+        np.zeros((chunks, 2 * BLOCK), dtype=np.int64),
+    )
 
 
 @njit(cache=True, inline="always")
@@ -284,6 +321,54 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
             hist[s3 + U2] = 0.0
         return False, d0, d1, d2, dist2
     return True, d0, d1, d2, dist2
+
+
+@njit(cache=True, inline="always")
+def row_separations(pos, radius, nbr, i, count, x0, x1, x2, ri, box, buf, wide, partner):
+    """separation's d = x_i - x_j, |d|^2 and (r_i + r_j)^2 of the pairs (i at x, nbr[i, k]),
+    k < count, into the row scratch after the block, at k: loads and arithmetic only, so that
+    the loop vectorises. `partner`: the velocity arrays and inverse masses that gather reads of
+    a partner, each loaded here for every pair: on a bed larger than the caches their misses
+    then overlap, as a sweep that branches on each pair's test gets them by speculation (without
+    these loads the settled 100 000 bed stepped about 6 % slower)."""
+    vel, angvel, vel_pred, angvel_pred, inv_mass = partner
+    for slot in range(count):
+        k = np.uint64(slot)
+        j = np.uint64(nbr[i, k])
+        j3 = U3 * j
+        d0 = minimum_image(x0 - pos[j3], box[0], box[3])
+        d1 = minimum_image(x1 - pos[j3 + U1], box[1], box[4])
+        d2 = minimum_image(x2 - pos[j3 + U2], box[2], box[5])
+        reach = ri + radius[j]
+        to_row(buf, wide, R_X0, k, d0)
+        to_row(buf, wide, R_X1, k, d1)
+        to_row(buf, wide, R_X2, k, d2)
+        to_row(buf, wide, R_XD2, k, d0 * d0 + d1 * d1 + d2 * d2)
+        to_row(buf, wide, R_REACH2, k, reach * reach)
+        to_row(buf, wide, R_WARM, k, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
+
+
+@njit(cache=True, inline="always")
+def pick_touching(buf, wide, ids, hist, bits, base, count):
+    """The slots k < count of the row whose springs start at `base` and whose pairs touch by
+    row_separations, in order into ids from ID_K; returns their number. The spring of a pair
+    that does not touch is cleared where it is set (as separation does), through `bits`, the
+    springs' bits, ANDed with a mask of ones or zeros rather than stored under a branch, which
+    would be mispredicted as often as the pairs' test."""
+    touching = np.uint64(0)
+    for slot in range(count):
+        k = np.uint64(slot)
+        apart = from_row(buf, wide, R_XD2, k) >= from_row(buf, wide, R_REACH2, k)
+        if hist.shape[0] > 0:
+            s3 = U3 * np.uint64(base + slot)
+            stale = apart & ((hist[s3] != 0.0) | (hist[s3 + U1] != 0.0) | (hist[s3 + U2] != 0.0))
+            keep = np.uint64(0) - np.uint64(not stale)  # all ones, or zeros (+0.0) to clear
+            bits[s3] &= keep
+            bits[s3 + U1] &= keep
+            bits[s3 + U2] &= keep
+        ids[np.uint64(ID_K) + touching] = k
+        touching += np.uint64(not apart)
+    return touching
 
 
 @njit(cache=True, inline="always")
@@ -577,12 +662,15 @@ def chunk_pair_forces(
     (cross_chunk_pairs must have run). Each particle's terms come in ascending partner index
     (module docstring)."""
     pos, vel, angvel, hist = flat(pos), flat(vel), flat(angvel), flat(hist)
+    bits = hist.view(np.uint64)
     vel_pred, angvel_pred = flat(vel_pred), flat(angvel_pred)
     # the first pass sets each row through the (N,3) arrays: flat there too, the sweep's
     # registers come out worse (callgrind, settled 10 000: 555 -> 533 instructions per particle)
     force_rows, torque_rows = force, torque
     force, torque = flat(force), flat(torque)
     cap = nbr.shape[1]
+    wide = np.uint64(cap)  # the row scratch's rows (scratch)
+    partner = (vel, angvel, vel_pred, angvel_pred, inv_mass)
     rcap = rev.shape[1]
     single = table.shape[0] == 1
     box = box_axes(length, periodic)
@@ -637,14 +725,11 @@ def chunk_pair_forces(
             x2 = pos[i3 + U2]
             count = min(nbr_count[i], cap)
             inner = cross_start(nbr, i, count, end)
-            for slot in range(inner):
-                k = np.uint64(slot)
+            base = start[i]
+            row_separations(pos, radius, nbr, i, inner, x0, x1, x2, ri, box, buf, wide, partner)
+            for q in range(pick_touching(buf, wide, ids, hist, bits, base, inner)):
+                k = ids[np.uint64(ID_K) + np.uint64(q)]
                 j = np.uint64(nbr[i, k])
-                rj = radius[j]
-                s = np.uint64(start[i] + slot)
-                touching, d0, d1, d2, dist2 = separation(pos, hist, s, j, x0, x1, x2, ri, rj, box)
-                if not touching:
-                    continue
                 if filled == BLOCK:
                     _flush_to_forces(
                         buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
@@ -653,9 +738,10 @@ def chunk_pair_forces(
                     filled = ZERO
                     waiting = ZERO
                 gather(
-                    buf, ids, np.uint64(filled), i, j, s, d0, d1, d2, dist2, ri, rj,
-                    vel, angvel, vel_pred, angvel_pred, inv_mass, inv_inertia, material, hist, table, single,
-                    rolling,
+                    buf, ids, np.uint64(filled), i, j, np.uint64(base) + k,
+                    from_row(buf, wide, R_X0, k), from_row(buf, wide, R_X1, k), from_row(buf, wide, R_X2, k),
+                    from_row(buf, wide, R_XD2, k), ri, radius[j], vel, angvel, vel_pred, angvel_pred,
+                    inv_mass, inv_inertia, material, hist, table, single, rolling,
                 )  # fmt: skip
                 filled += 1
             if inner < count:

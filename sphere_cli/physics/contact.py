@@ -28,7 +28,7 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import BLOCK, FIELDS, chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
+from ..kernels.contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs, scratch
 from ..kernels.laws import K_T
 from ..kernels.observe.energy import pair_elastic_energy
 from ..kernels.serial import use_serial
@@ -70,10 +70,10 @@ class PairContactForces(Module):
         self.width = 9 if self.rolling else 6
         self.slots = np.zeros((0, self.width))
         # per chunk, the block of touching pairs whose law is evaluated in one vectorised loop
-        # (kernels/contact.py): inputs and results, each pair's (i, j, spring index), rows waiting for slots
-        self.blocks = np.zeros((0, FIELDS * BLOCK))
-        self.block_ids = np.zeros((0, 3 * BLOCK), dtype=np.uint64)
-        self.block_rows = np.zeros((0, 2 * BLOCK), dtype=np.int64)
+        # (kernels/contact.py): inputs and results, each pair's (i, j, spring index), rows waiting
+        # for slots; and the separations of the row being swept, as wide as the list's rows
+        self.blocks, self.block_ids, self.block_rows = scratch(0, 0)
+        self.scratch_width = 0
         self.bounds = np.zeros(2, dtype=np.int64)
         self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
         # rows with pairs across chunks: (row, end of its chunk), shared evenly between threads
@@ -102,10 +102,9 @@ class PairContactForces(Module):
             rows = 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
-        if self.blocks.shape[0] != chunks:
-            self.blocks = np.zeros((chunks, FIELDS * BLOCK))
-            self.block_ids = np.zeros((chunks, 3 * BLOCK), dtype=np.uint64)
-            self.block_rows = np.zeros((chunks, 2 * BLOCK), dtype=np.int64)
+        if self.blocks.shape[0] != chunks or self.scratch_width != nl.nbr.shape[1]:
+            self.scratch_width = nl.nbr.shape[1]
+            self.blocks, self.block_ids, self.block_rows = scratch(chunks, self.scratch_width)
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over

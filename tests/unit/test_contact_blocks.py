@@ -26,7 +26,7 @@ from sphere_cli.kernels import contact as sweep
 from sphere_cli.kernels import laws as law
 from sphere_cli.kernels.neighbors import minimum_image
 from sphere_cli.physics.contact import rows_across_chunks
-from sphere_cli.physics.neighbors import spring_rows
+from sphere_cli.physics.neighbors import listed_slots, spring_rows
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
@@ -206,9 +206,7 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
     force = np.zeros_like(p.force)
     torque = np.zeros_like(p.torque)
     slots = np.zeros((hist.shape[0], contact.width))
-    blocks = np.zeros((chunks, sweep.FIELDS * sweep.BLOCK))
-    block_ids = np.zeros((chunks, 3 * sweep.BLOCK), dtype=np.uint64)
-    block_rows = np.zeros((chunks, 2 * sweep.BLOCK), dtype=np.int64)
+    blocks, block_ids, block_rows = sweep.scratch(chunks, nl.nbr.shape[1])
     common = (
         p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.inv_mass, p.inv_inertia, p.material,
         nl.nbr, nl.nbr_count, nl.start, hist, contact.table, contact.law_code, contact.rolling, box.length,
@@ -263,6 +261,35 @@ def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
         got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt)
         for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
             assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
+
+
+def test_the_springs_of_listed_pairs_come_apart_are_cleared(scene):
+    """A pair the list still holds but that no longer touches loses its spring (a new contact
+    starts from none): the sweep clears it without a branch per pair, so every other spring,
+    and the forces, must come out as the reference's."""
+    state, contact = scene.state, scene.contact
+    nl = state.neighbors
+    kept = nl.hist.copy()
+    p, box = state.particles, state.box
+    n = p.count
+    rows = np.repeat(np.arange(n), np.minimum(nl.nbr_count, nl.nbr.shape[1]))
+    partners = nl.nbr[listed_slots(nl.nbr, nl.nbr_count)]
+    d = p.pos[rows] - p.pos[partners]
+    d -= box.length * np.round(d / box.length) * box.periodic
+    apart = np.einsum("ij,ij->i", d, d) >= (p.radius[rows] + p.radius[partners]) ** 2
+    assert 100 < np.count_nonzero(apart) < apart.size - 100
+    stale = np.random.default_rng(3).normal(0.0, 1.0e-6, (np.count_nonzero(apart), 3))
+    stale[::7, 1:] = 0.0  # one component set is enough
+    nl.hist[: nl.start[-1]][apart] = stale
+    try:
+        expected = _reference(state, contact.table, contact.law_code, contact.rolling, 0.0, state.clock.dt)
+        for bounds in ([0, n], [0, 1, 300, 301, 700, n]):
+            got = _kernels(scene, np.array(bounds, dtype=np.int64), 0.0)
+            for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
+                assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
+            assert not np.any(got[2][listed_slots(nl.nbr, nl.nbr_count)][apart])
+    finally:
+        nl.hist[...] = kept
 
 
 def _walled_case(folder) -> str:
