@@ -24,10 +24,10 @@ pairs across chunks go through the same blocks and law.
 Finding the touching pairs of a row: about half of the listed pairs touch (1.55 of 3.44 a row in
 the settled bed), in no pattern a branch predictor can learn, so a sweep that branches on each
 pair's test loses a mispredicted branch every other pair. The sweep therefore measures every
-listed pair of the row in one loop of loads and arithmetic (row_separations), then lists the
-touching ones and clears the springs of the others without a branch per pair (pick_touching),
-and copies only those into the block (the pair sweep of the settled 10 000 bed, one thread:
-61-63 -> 51-55 ns a particle; docs/performance.md).
+listed pair of the row in one loop without a branch per pair that lists the touching ones and
+clears the springs of the others (touching_slots), then copies only those into the block (the
+pair sweep of the settled 10 000 bed, one thread: 61-63 -> 51-54 ns a particle;
+docs/performance.md).
 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, inv_mass,
 inv_inertia (N,) [m, 1/kg, 1/(kg m^2)] (0 for a prescribed particle: the reduced mass of its
@@ -89,12 +89,12 @@ B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
 FIELDS = 43
 # after the block, one row per quantity as long as the list's rows: the separations of the row
-# being swept, by slot (row_separations): d, |d|^2 and (r_i + r_j)^2; R_WARM: a sum of the
-# partner's velocities, kept only so that their loads are made there
-R_X0, R_X1, R_X2, R_XD2, R_REACH2, R_WARM = 0, 1, 2, 3, 4, 5
-SEPARATIONS = 6
+# being swept, by slot (touching_slots): d and |d|^2; R_WARM: a sum of the partner's velocities,
+# kept only so that their loads are made there
+R_X0, R_X1, R_X2, R_XD2, R_WARM = 0, 1, 2, 3, 4
+SEPARATIONS = 5
 # per contact, in a companion uint64 array: the row i, the partner j and its spring's index;
-# after them, the touching slots of the row being swept (pick_touching)
+# after them, the touching slots of the row being swept (touching_slots)
 ID_I, ID_J, ID_S = 0, 1, 2
 ID_K = 3 * BLOCK
 # a block's fill count starts from this (an int64, not the literal 0, which would make Numba
@@ -324,14 +324,21 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
 
 
 @njit(cache=True, inline="always")
-def row_separations(pos, radius, nbr, i, count, x0, x1, x2, ri, box, buf, wide, partner):
-    """separation's d = x_i - x_j, |d|^2 and (r_i + r_j)^2 of the pairs (i at x, nbr[i, k]),
-    k < count, into the row scratch after the block, at k: loads and arithmetic only, so that
-    the loop vectorises. `partner`: the velocity arrays and inverse masses that gather reads of
-    a partner, each loaded here for every pair: on a bed larger than the caches their misses
-    then overlap, as a sweep that branches on each pair's test gets them by speculation (without
-    these loads the settled 100 000 bed stepped about 6 % slower)."""
+def touching_slots(
+    pos, radius, nbr, i, count, x0, x1, x2, ri, box, partner, hist, bits, base, buf, wide, ids
+):
+    """The slots k < count of row i (at x) whose pairs touch, in order into ids from ID_K; returns
+    their number. Each pair's separation's d = x_i - x_j and |d|^2 go into the row scratch
+    after the block, at k, and its spring (the row's springs start at `base`) is cleared where
+    the pair does not touch and the spring is set, as separation does: through `bits`, the
+    springs' bits, ANDed with a mask of ones or zeros rather than stored under a branch, which
+    would be mispredicted as often as the pairs' test. `partner`: the velocity arrays and
+    inverse masses that gather reads of a partner, each loaded here for every pair: on a bed
+    larger than the caches their misses then overlap, as a sweep that branches on each pair's
+    test gets them by speculation (without these loads the settled 100 000 bed stepped about
+    6 % slower)."""
     vel, angvel, vel_pred, angvel_pred, inv_mass = partner
+    touching = np.uint64(0)
     for slot in range(count):
         k = np.uint64(slot)
         j = np.uint64(nbr[i, k])
@@ -339,26 +346,14 @@ def row_separations(pos, radius, nbr, i, count, x0, x1, x2, ri, box, buf, wide, 
         d0 = minimum_image(x0 - pos[j3], box[0], box[3])
         d1 = minimum_image(x1 - pos[j3 + U1], box[1], box[4])
         d2 = minimum_image(x2 - pos[j3 + U2], box[2], box[5])
+        dist2 = d0 * d0 + d1 * d1 + d2 * d2
         reach = ri + radius[j]
         to_row(buf, wide, R_X0, k, d0)
         to_row(buf, wide, R_X1, k, d1)
         to_row(buf, wide, R_X2, k, d2)
-        to_row(buf, wide, R_XD2, k, d0 * d0 + d1 * d1 + d2 * d2)
-        to_row(buf, wide, R_REACH2, k, reach * reach)
+        to_row(buf, wide, R_XD2, k, dist2)
         to_row(buf, wide, R_WARM, k, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
-
-
-@njit(cache=True, inline="always")
-def pick_touching(buf, wide, ids, hist, bits, base, count):
-    """The slots k < count of the row whose springs start at `base` and whose pairs touch by
-    row_separations, in order into ids from ID_K; returns their number. The spring of a pair
-    that does not touch is cleared where it is set (as separation does), through `bits`, the
-    springs' bits, ANDed with a mask of ones or zeros rather than stored under a branch, which
-    would be mispredicted as often as the pairs' test."""
-    touching = np.uint64(0)
-    for slot in range(count):
-        k = np.uint64(slot)
-        apart = from_row(buf, wide, R_XD2, k) >= from_row(buf, wide, R_REACH2, k)
+        apart = dist2 >= reach * reach
         if hist.shape[0] > 0:
             s3 = U3 * np.uint64(base + slot)
             stale = apart & ((hist[s3] != 0.0) | (hist[s3 + U1] != 0.0) | (hist[s3 + U2] != 0.0))
@@ -726,8 +721,10 @@ def chunk_pair_forces(
             count = min(nbr_count[i], cap)
             inner = cross_start(nbr, i, count, end)
             base = start[i]
-            row_separations(pos, radius, nbr, i, inner, x0, x1, x2, ri, box, buf, wide, partner)
-            for q in range(pick_touching(buf, wide, ids, hist, bits, base, inner)):
+            touching = touching_slots(
+                pos, radius, nbr, i, inner, x0, x1, x2, ri, box, partner, hist, bits, base, buf, wide, ids
+            )
+            for q in range(touching):
                 k = ids[np.uint64(ID_K) + np.uint64(q)]
                 j = np.uint64(nbr[i, k])
                 if filled == BLOCK:
