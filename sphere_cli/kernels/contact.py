@@ -21,13 +21,14 @@ the results in the block's order, which is the sweep's. Each contact gets the sa
 in the same order as a contact-by-contact evaluation, so the forces are bitwise the same; the
 pairs across chunks go through the same blocks and law.
 
-Finding the touching pairs of a row: about half of the listed pairs touch (1.55 of 3.44 a row in
-the settled bed), in no pattern a branch predictor can learn, so a sweep that branches on each
-pair's test loses a mispredicted branch every other pair. The sweep therefore measures every
-listed pair of the row in one loop without a branch per pair that lists the touching ones and
-clears the springs of the others (touching_slots), then copies only those into the block (the
-pair sweep of the settled 10 000 bed, one thread: 61-63 -> 51-54 ns a particle;
-docs/performance.md).
+Finding the touching pairs: about half of the listed pairs touch (1.55 of 3.44 a row in the
+settled bed), in no pattern a branch predictor can learn, so a sweep that branches on each
+pair's test loses a mispredicted branch every other pair, and a loop over each row's few pairs
+another at each row's end. The sweep therefore takes the chunk's listed pairs in their packed
+order (the springs'), BLOCK at a time whatever their rows (pair_row, pair_partner: pack_pairs),
+measures them in one loop without a branch per pair that lists the touching ones and clears the
+springs of the others (touching_pairs), then copies only those into the block. The pair sweep of
+the settled bed, one thread (docs/performance.md): 63 -> 50 ns a particle at 10 000.
 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, inv_mass,
 inv_inertia (N,) [m, 1/kg, 1/(kg m^2)] (0 for a prescribed particle: the reduced mass of its
@@ -35,16 +36,17 @@ contacts is the other's mass, `reduced`); mass (N,) [kg] for m g; material (N,) 
 into the table; nbr (N,C) int32 half rows,
 nbr_count (N,); start (N+1,) int64 row starts and hist (>= P,3) [m] the packed springs (pair
 (i, nbr[i, k]) at start[i] + k); rev (N,R) int32 reverse slots, rev_count (N,)
-(kernels/neighbors.py); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
+(kernels/neighbors.py); pair_row, pair_partner (>= P,) int32 the listed pairs in that order
+(pack_pairs); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
 bounds[c+1]); table (M,M,6) per pair of materials, the columns K_N, K_T, D_N, D_T, MU, MU_R of
 kernels/laws.py; law: the law code (kernels/laws.py), rolling: the rolling-resistance flag;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
 tangential spring's growth, 0 for the forces of the initial state), step_dt [s] (the rolling
 limit); slots (>= P, 6 or 9 with rolling) [N, N, N m], pair (i, nbr[i, k]) at start[i] + k,
-used for the pairs across chunks only; blocks (T, FIELDS*BLOCK + SEPARATIONS*C) float64,
-block_ids (T, 3*BLOCK + C) uint64 (i, j and the spring's index of each contact of a block, then a
-row's touching slots), block_rows (T, 2*BLOCK) int64 (rows waiting for their slots): scratch per
-chunk (`scratch`); out force, torque (N,3) [N, N m]. The (N,3) arrays and hist
+used for the pairs across chunks only; blocks (T, FIELDS*BLOCK) float64, block_ids (T,
+ID_ROWS*BLOCK) uint64 (i, j and the spring's index of each contact of a block, then the touching
+pairs of the piece being swept), block_rows (T, 2*BLOCK) int64 (rows waiting for their slots):
+scratch per chunk; out force, torque (N,3) [N, N m]. The (N,3) arrays and hist
 must be C-contiguous: the kernels read them through flat views (kernels/layout.py).
 """
 
@@ -69,7 +71,7 @@ from .layout import U1, U2, U3, flat
 from .neighbors import minimum_image
 from .serial import serial_twin
 
-# Rows of a block (module docstring). 64 contacts: the block's 43 rows (22 KB) stay in L1.
+# Rows of a block (module docstring). 64 contacts: the block's 48 rows (24 KB) stay in L1.
 BLOCK = 64
 # inputs: separation d = x_i - x_j and |d|^2; v_i - v_j, r_i w_i + r_j w_j at the half step (A, S)
 # and predicted (P, Q); masses, radii; the spring (replaced by the new one)
@@ -87,16 +89,15 @@ B_W0, B_W1, B_W2, B_II = 23, 24, 25, 26
 B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 # outputs: force on i, n x F_t, rolling torque on i
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
-FIELDS = 43
-# after the block, one row per quantity as long as the list's rows: the separations of the row
-# being swept, by slot (touching_slots): d and |d|^2; R_WARM: a sum of the partner's velocities,
-# kept only so that their loads are made there
-R_X0, R_X1, R_X2, R_XD2, R_WARM = 0, 1, 2, 3, 4
-SEPARATIONS = 5
+# the separations of a piece of BLOCK listed pairs being swept, by their place in the piece
+# (touching_pairs): d and |d|^2; B_WARM: a sum of the partner's velocities, kept only so that
+# their loads are made there
+B_X0, B_X1, B_X2, B_XD2, B_WARM = 43, 44, 45, 46, 47
+FIELDS = 48
 # per contact, in a companion uint64 array: the row i, the partner j and its spring's index;
-# after them, the touching slots of the row being swept (touching_slots)
-ID_I, ID_J, ID_S = 0, 1, 2
-ID_K = 3 * BLOCK
+# then the places of the touching pairs of the piece being swept (touching_pairs)
+ID_I, ID_J, ID_S, ID_K = 0, 1, 2, 3
+ID_ROWS = 4
 # a block's fill count starts from this (an int64, not the literal 0, which would make Numba
 # compile the flush functions a second time for a literal count)
 ZERO = np.int64(0)
@@ -112,25 +113,15 @@ def from_block(buf, field, c):
     return buf[np.uint64(field * BLOCK) + c]
 
 
-@njit(cache=True, inline="always")
-def to_row(buf, wide, field, k, value):
-    """Slot k of row `field` of the row scratch after the block (rows `wide` long)."""
-    buf[np.uint64(FIELDS * BLOCK) + np.uint64(field) * wide + k] = value
-
-
-@njit(cache=True, inline="always")
-def from_row(buf, wide, field, k):
-    return buf[np.uint64(FIELDS * BLOCK) + np.uint64(field) * wide + k]
-
-
-def scratch(chunks: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(blocks, block_ids, block_rows) of the sweeps for `chunks` chunks and a list whose rows
-    hold `width` partners (module docstring)."""
-    return (
-        np.zeros((chunks, FIELDS * BLOCK + SEPARATIONS * width)),
-        np.zeros((chunks, 3 * BLOCK + width), dtype=np.uint64),
-        np.zeros((chunks, 2 * BLOCK), dtype=np.int64),
-    )
+@njit(cache=True)
+def pack_pairs(nbr, nbr_count, start, pair_row, pair_partner):
+    """The listed pairs in the springs' order: pair s = start[i] + k is (i, nbr[i, k]), its row
+    into pair_row[s] and its partner into pair_partner[s] (int32, at least start[-1] long)."""
+    cap = nbr.shape[1]
+    for i in range(nbr.shape[0]):
+        for k in range(min(nbr_count[i], cap)):
+            pair_row[start[i] + k] = i
+            pair_partner[start[i] + k] = nbr[i, k]
 
 
 @njit(cache=True, inline="always")
@@ -324,45 +315,47 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
 
 
 @njit(cache=True, inline="always")
-def touching_slots(
-    pos, radius, nbr, i, count, x0, x1, x2, ri, box, partner, hist, bits, base, buf, wide, ids
-):
-    """The slots k < count of row i (at x) whose pairs touch, in order into ids from ID_K; returns
-    their number. Each pair's separation's d = x_i - x_j and |d|^2 go into the row scratch
-    after the block, at k, and its spring (the row's springs start at `base`) is cleared where
-    the pair does not touch and the spring is set, as separation does: through `bits`, the
-    springs' bits, ANDed with a mask of ones or zeros rather than stored under a branch, which
-    would be mispredicted as often as the pairs' test. `partner`: the velocity arrays and
-    inverse masses that gather reads of a partner, each loaded here for every pair: on a bed
-    larger than the caches their misses then overlap, as a sweep that branches on each pair's
-    test gets them by speculation (without these loads the settled 100 000 bed stepped about
-    6 % slower)."""
+def touching_pairs(pos, radius, pair_row, pair_partner, first, last, end, box, partner, hist, bits, buf, ids):
+    """The places p (pair first + p, first <= pair < last, at most BLOCK of them) of the listed
+    pairs that touch and whose partner lies before `end` (the chunk's: the others are computed
+    apart, cross_chunk_pairs), in order into row ID_K of ids; returns their number. Each pair's
+    separation's d = x_i - x_j and |d|^2 go into the block's rows B_X0 ... B_XD2 at p, and the
+    spring of a pair of the chunk that does not touch is cleared where it is set (as separation
+    does): through `bits`, the springs' bits, ANDed with a mask of ones or zeros rather than
+    stored under a branch, which would be mispredicted as often as the pairs' test. `partner`:
+    the velocity arrays and inverse masses that gather reads of a partner, each loaded here for
+    every pair: on a bed larger than the caches their misses then overlap, as a sweep that
+    branches on each pair's test gets them by speculation (without these loads the settled
+    100 000 bed stepped about 6 % slower)."""
     vel, angvel, vel_pred, angvel_pred, inv_mass = partner
     touching = np.uint64(0)
-    for slot in range(count):
-        k = np.uint64(slot)
-        j = np.uint64(nbr[i, k])
+    for pair in range(first, last):
+        p = np.uint64(pair - first)
+        i = np.uint64(pair_row[pair])
+        j = np.uint64(pair_partner[pair])
+        i3 = U3 * i
         j3 = U3 * j
-        d0 = minimum_image(x0 - pos[j3], box[0], box[3])
-        d1 = minimum_image(x1 - pos[j3 + U1], box[1], box[4])
-        d2 = minimum_image(x2 - pos[j3 + U2], box[2], box[5])
+        d0 = minimum_image(pos[i3] - pos[j3], box[0], box[3])
+        d1 = minimum_image(pos[i3 + U1] - pos[j3 + U1], box[1], box[4])
+        d2 = minimum_image(pos[i3 + U2] - pos[j3 + U2], box[2], box[5])
         dist2 = d0 * d0 + d1 * d1 + d2 * d2
-        reach = ri + radius[j]
-        to_row(buf, wide, R_X0, k, d0)
-        to_row(buf, wide, R_X1, k, d1)
-        to_row(buf, wide, R_X2, k, d2)
-        to_row(buf, wide, R_XD2, k, dist2)
-        to_row(buf, wide, R_WARM, k, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
+        reach = radius[i] + radius[j]
+        to_block(buf, B_X0, p, d0)
+        to_block(buf, B_X1, p, d1)
+        to_block(buf, B_X2, p, d2)
+        to_block(buf, B_XD2, p, dist2)
+        to_block(buf, B_WARM, p, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
         apart = dist2 >= reach * reach
+        inside = j < np.uint64(end)
         if hist.shape[0] > 0:
-            s3 = U3 * np.uint64(base + slot)
-            stale = apart & ((hist[s3] != 0.0) | (hist[s3 + U1] != 0.0) | (hist[s3 + U2] != 0.0))
+            s3 = U3 * np.uint64(pair)
+            stale = apart & inside & ((hist[s3] != 0.0) | (hist[s3 + U1] != 0.0) | (hist[s3 + U2] != 0.0))
             keep = np.uint64(0) - np.uint64(not stale)  # all ones, or zeros (+0.0) to clear
             bits[s3] &= keep
             bits[s3 + U1] &= keep
             bits[s3 + U2] &= keep
-        ids[np.uint64(ID_K) + touching] = k
-        touching += np.uint64(not apart)
+        ids[np.uint64(ID_K * BLOCK) + touching] = p
+        touching += np.uint64((not apart) & inside)
     return touching
 
 
@@ -539,7 +532,8 @@ def _flush_to_forces(
 ):  # fmt: skip
     """The law for the block's contacts, then apply them in order (the force on j is the
     negative, its torque from r_j); then add to each of the `waiting` rows listed (rows whose
-    pairs are all in, or before, this block) its pairs across chunks from their slots."""
+    pairs are all in, or before, this block) its pairs across chunks from their slots. Returns
+    the emptied block's counts (contacts, waiting rows)."""
     contact_law(buf, count, law, rolling, single, table, spring_dt, step_dt)
     b = np.uint64(0)
     end = np.uint64(count)
@@ -614,6 +608,7 @@ def _flush_to_forces(
                 torque[i3] += slots[s, 6]
                 torque[i3 + U1] += slots[s, 7]
                 torque[i3 + U2] += slots[s, 8]
+    return ZERO, ZERO
 
 
 @njit(cache=True, parallel=True)
@@ -640,6 +635,8 @@ def chunk_pair_forces(
     step_dt,
     rev,
     rev_count,
+    pair_row,
+    pair_partner,
     body_acc,
     mass,
     bounds,
@@ -664,7 +661,6 @@ def chunk_pair_forces(
     force_rows, torque_rows = force, torque
     force, torque = flat(force), flat(torque)
     cap = nbr.shape[1]
-    wide = np.uint64(cap)  # the row scratch's rows (scratch)
     partner = (vel, angvel, vel_pred, angvel_pred, inv_mass)
     rcap = rev.shape[1]
     single = table.shape[0] == 1
@@ -711,47 +707,45 @@ def chunk_pair_forces(
             torque_rows[i, 2] = t2
         filled = ZERO
         waiting = ZERO
-        for row in range(begin, end):
-            i = np.uint64(row)
-            i3 = U3 * i
-            ri = radius[i]
-            x0 = pos[i3]
-            x1 = pos[i3 + U1]
-            x2 = pos[i3 + U2]
-            count = min(nbr_count[i], cap)
-            inner = cross_start(nbr, i, count, end)
-            base = start[i]
-            touching = touching_slots(
-                pos, radius, nbr, i, inner, x0, x1, x2, ri, box, partner, hist, bits, base, buf, wide, ids
+        row = begin  # the next row that may wait for its pairs beyond the chunk
+        for first in range(start[begin], start[end], BLOCK):  # the chunk's pairs, a piece at a time
+            last = min(first + BLOCK, start[end])
+            touching = touching_pairs(
+                pos, radius, pair_row, pair_partner, first, last, end, box, partner, hist, bits, buf, ids
             )
             for q in range(touching):
-                k = ids[np.uint64(ID_K) + np.uint64(q)]
-                j = np.uint64(nbr[i, k])
+                p = ids[np.uint64(ID_K * BLOCK) + np.uint64(q)]
+                s = np.uint64(first) + p
+                i = np.uint64(pair_row[s])
+                j = np.uint64(pair_partner[s])
                 if filled == BLOCK:
-                    _flush_to_forces(
+                    filled, waiting = _flush_to_forces(
                         buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
                         radius, nbr_count, start, hist, cap, slots, force, torque,
                     )  # fmt: skip
-                    filled = ZERO
-                    waiting = ZERO
                 gather(
-                    buf, ids, np.uint64(filled), i, j, np.uint64(base) + k,
-                    from_row(buf, wide, R_X0, k), from_row(buf, wide, R_X1, k), from_row(buf, wide, R_X2, k),
-                    from_row(buf, wide, R_XD2, k), ri, radius[j], vel, angvel, vel_pred, angvel_pred,
+                    buf, ids, np.uint64(filled), i, j, s,
+                    from_block(buf, B_X0, p), from_block(buf, B_X1, p), from_block(buf, B_X2, p),
+                    from_block(buf, B_XD2, p), radius[i], radius[j], vel, angvel, vel_pred, angvel_pred,
                     inv_mass, inv_inertia, material, hist, table, single, rolling,
                 )  # fmt: skip
                 filled += 1
-            if inner < count:
-                if waiting == BLOCK:
-                    _flush_to_forces(
-                        buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
-                        radius, nbr_count, start, hist, cap, slots, force, torque,
-                    )  # fmt: skip
-                    filled = ZERO
-                    waiting = ZERO
-                rows[waiting] = row
-                rows[BLOCK + waiting] = inner
-                waiting += 1
+            # the rows whose pairs are all swept now: those with pairs beyond the chunk wait for
+            # their slots (none in the last chunk)
+            while end < nbr.shape[0] and row < end and start[row + 1] <= last:
+                i = np.uint64(row)
+                count = min(nbr_count[i], cap)
+                inner = cross_start(nbr, i, count, end)
+                if inner < count:
+                    if waiting == BLOCK:
+                        filled, waiting = _flush_to_forces(
+                            buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
+                            radius, nbr_count, start, hist, cap, slots, force, torque,
+                        )  # fmt: skip
+                    rows[waiting] = row
+                    rows[BLOCK + waiting] = inner
+                    waiting += 1
+                row += 1
         _flush_to_forces(
             buf, ids, filled, waiting, rows, law, rolling, single, table, spring_dt, step_dt,
             radius, nbr_count, start, hist, cap, slots, force, torque,

@@ -28,7 +28,15 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs, scratch
+from ..kernels.contact import (
+    BLOCK,
+    FIELDS,
+    ID_ROWS,
+    chunk_pair_forces,
+    chunk_pair_forces_serial,
+    cross_chunk_pairs,
+    pack_pairs,
+)
 from ..kernels.laws import K_T
 from ..kernels.observe.energy import pair_elastic_energy
 from ..kernels.serial import use_serial
@@ -71,9 +79,16 @@ class PairContactForces(Module):
         self.slots = np.zeros((0, self.width))
         # per chunk, the block of touching pairs whose law is evaluated in one vectorised loop
         # (kernels/contact.py): inputs and results, each pair's (i, j, spring index), rows waiting
-        # for slots; and the separations of the row being swept, as wide as the list's rows
-        self.blocks, self.block_ids, self.block_rows = scratch(0, 0)
-        self.scratch_width = 0
+        # for slots
+        self.blocks = np.zeros((0, FIELDS * BLOCK))
+        self.block_ids = np.zeros((0, ID_ROWS * BLOCK), dtype=np.uint64)
+        self.block_rows = np.zeros((0, 2 * BLOCK), dtype=np.int64)
+        # the listed pairs in the springs' order, each one's row and partner (pack_pairs), and
+        # the list they were made from: its build, rows' arrays and row starts
+        self.pair_row = np.zeros(0, dtype=np.int32)
+        self.pair_partner = np.zeros(0, dtype=np.int32)
+        self.pairs_of = None
+        self.pairs_start = np.zeros(0, dtype=np.int64)
         self.bounds = np.zeros(2, dtype=np.int64)
         self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
         # rows with pairs across chunks: (row, end of its chunk), shared evenly between threads
@@ -102,9 +117,26 @@ class PairContactForces(Module):
             rows = 0
         if self.slots.shape[0] != rows:
             self.slots = np.zeros((rows, self.width))
-        if self.blocks.shape[0] != chunks or self.scratch_width != nl.nbr.shape[1]:
-            self.scratch_width = nl.nbr.shape[1]
-            self.blocks, self.block_ids, self.block_rows = scratch(chunks, self.scratch_width)
+        if self.blocks.shape[0] != chunks:
+            self.blocks = np.zeros((chunks, FIELDS * BLOCK))
+            self.block_ids = np.zeros((chunks, ID_ROWS * BLOCK), dtype=np.uint64)
+            self.block_rows = np.zeros((chunks, 2 * BLOCK), dtype=np.int64)
+        self._pairs(nl)
+
+    def _pairs(self, nl) -> None:
+        """The listed pairs' rows and partners in the springs' order, made again whenever the
+        list is not the one they were made from: another build, other row arrays, or other row
+        starts (a rank drops its ghosts' pairs from a build in place, moving the starts)."""
+        made_of = (nl.builds, id(nl.nbr), id(nl.nbr_count), nl.nbr.shape)
+        if made_of == self.pairs_of and np.array_equal(nl.start, self.pairs_start):
+            return
+        pairs = int(nl.start[-1])
+        if self.pair_row.shape[0] < pairs:
+            self.pair_row = np.zeros(int(SPRING_ROOM * pairs) + 64, dtype=np.int32)
+            self.pair_partner = np.zeros_like(self.pair_row)
+        pack_pairs(nl.nbr, nl.nbr_count, nl.start, self.pair_row, self.pair_partner)
+        self.pairs_of = made_of
+        self.pairs_start = nl.start.copy()
 
     def forces(self, state: State, spring_dt: float | None = None) -> None:
         """Pair forces at the current positions; the tangential springs grow by the slip over
@@ -151,6 +183,8 @@ class PairContactForces(Module):
             *common,
             nl.rev,
             nl.rev_count,
+            self.pair_row,
+            self.pair_partner,
             box.body_acc,
             p.mass,
             self.bounds,

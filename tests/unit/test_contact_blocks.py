@@ -24,7 +24,7 @@ import pytest
 from sphere_cli.config.load import parse_case
 from sphere_cli.kernels import contact as sweep
 from sphere_cli.kernels import laws as law
-from sphere_cli.kernels.neighbors import minimum_image
+from sphere_cli.kernels.neighbors import drop_ghost_pairs, minimum_image
 from sphere_cli.physics.contact import rows_across_chunks
 from sphere_cli.physics.neighbors import listed_slots, spring_rows
 from sphere_cli.scene.builder import build_scene
@@ -206,7 +206,12 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
     force = np.zeros_like(p.force)
     torque = np.zeros_like(p.torque)
     slots = np.zeros((hist.shape[0], contact.width))
-    blocks, block_ids, block_rows = sweep.scratch(chunks, nl.nbr.shape[1])
+    blocks = np.zeros((chunks, sweep.FIELDS * sweep.BLOCK))
+    block_ids = np.zeros((chunks, sweep.ID_ROWS * sweep.BLOCK), dtype=np.uint64)
+    block_rows = np.zeros((chunks, 2 * sweep.BLOCK), dtype=np.int64)
+    pair_row = np.zeros(nl.start[-1], dtype=np.int32)
+    pair_partner = np.zeros_like(pair_row)
+    sweep.pack_pairs(nl.nbr, nl.nbr_count, nl.start, pair_row, pair_partner)
     common = (
         p.pos, p.vel, p.angvel, p.vel_pred, p.angvel_pred, p.radius, p.inv_mass, p.inv_inertia, p.material,
         nl.nbr, nl.nbr_count, nl.start, hist, contact.table, contact.law_code, contact.rolling, box.length,
@@ -219,6 +224,8 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
         *common,
         nl.rev,
         nl.rev_count,
+        pair_row,
+        pair_partner,
         box.body_acc,
         p.mass,
         bounds,
@@ -290,6 +297,38 @@ def test_the_springs_of_listed_pairs_come_apart_are_cleared(scene):
             assert not np.any(got[2][listed_slots(nl.nbr, nl.nbr_count)][apart])
     finally:
         nl.hist[...] = kept
+
+
+def test_the_packed_pairs_follow_every_change_of_the_list(scene):
+    """The sweep takes each listed pair's row and partner from arrays in the springs' order
+    (physics/contact.py `_pairs`): they must be those of the list as it is at every call, after
+    a build and after a rank drops its ghosts' pairs in place (kernels/neighbors.py
+    drop_ghost_pairs: the same arrays, the same build, other row starts)."""
+    contact, nl = scene.contact, scene.state.neighbors
+    kept = {name: getattr(nl, name).copy() for name in ("nbr", "nbr_count", "start", "hist")}
+
+    def packed_now():
+        args = contact.kernel_arguments(scene.state)[1]
+        listed = nl.nbr[listed_slots(nl.nbr, nl.nbr_count)]
+        rows = np.repeat(np.arange(nl.nbr.shape[0]), np.minimum(nl.nbr_count, nl.nbr.shape[1]))
+        pairs = int(nl.start[-1])
+        assert args[22] is contact.pair_row and args[23] is contact.pair_partner
+        return np.array_equal(contact.pair_row[:pairs], rows) and np.array_equal(
+            contact.pair_partner[:pairs], listed
+        )
+
+    try:
+        assert packed_now()
+        owned = np.zeros(nl.nbr.shape[0], dtype=np.bool_)
+        owned[::3] = True  # the pairs of two particles of the other two thirds go
+        drop_ghost_pairs(owned, nl.nbr, nl.nbr_count, nl.start, nl.hist, True)
+        assert packed_now()
+        scene.neighbors.rebuild(scene.state)
+        assert packed_now()
+    finally:
+        for name, array in kept.items():
+            setattr(nl, name, array)
+        scene.neighbors.rebuild(scene.state)
 
 
 def _walled_case(folder) -> str:
