@@ -270,6 +270,12 @@ def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
             assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
 
 
+def _listed_pairs(nl) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, partners) of the listed pairs in the springs' packed order, by NumPy."""
+    rows = np.repeat(np.arange(nl.nbr.shape[0]), np.minimum(nl.nbr_count, nl.nbr.shape[1]))
+    return rows, nl.nbr[listed_slots(nl.nbr, nl.nbr_count)]
+
+
 def test_the_springs_of_listed_pairs_come_apart_are_cleared(scene):
     """A pair the list still holds but that no longer touches loses its spring (a new contact
     starts from none): the sweep clears it without a branch per pair, so every other spring,
@@ -279,8 +285,7 @@ def test_the_springs_of_listed_pairs_come_apart_are_cleared(scene):
     kept = nl.hist.copy()
     p, box = state.particles, state.box
     n = p.count
-    rows = np.repeat(np.arange(n), np.minimum(nl.nbr_count, nl.nbr.shape[1]))
-    partners = nl.nbr[listed_slots(nl.nbr, nl.nbr_count)]
+    rows, partners = _listed_pairs(nl)
     d = p.pos[rows] - p.pos[partners]
     d -= box.length * np.round(d / box.length) * box.periodic
     apart = np.einsum("ij,ij->i", d, d) >= (p.radius[rows] + p.radius[partners]) ** 2
@@ -309,8 +314,7 @@ def test_the_packed_pairs_follow_every_change_of_the_list(scene):
 
     def packed_now():
         args = contact.kernel_arguments(scene.state)[1]
-        listed = nl.nbr[listed_slots(nl.nbr, nl.nbr_count)]
-        rows = np.repeat(np.arange(nl.nbr.shape[0]), np.minimum(nl.nbr_count, nl.nbr.shape[1]))
+        rows, listed = _listed_pairs(nl)
         pairs = int(nl.start[-1])
         assert args[22] is contact.pair_row and args[23] is contact.pair_partner
         return np.array_equal(contact.pair_row[:pairs], rows) and np.array_equal(
