@@ -49,6 +49,7 @@ class RunResult:
     wall_seconds: float
     particle_steps_per_second: float
     steps_per_second: float = 0.0  # the rate of a scene without particles
+    compiling_seconds: float = 0.0  # of wall_seconds, those spent compiling kernels (compile_lock.py)
 
 
 def validate(path: str | Path) -> dict:
@@ -145,11 +146,13 @@ def _drive(
                 message=f"stopped early ({outcome}) at t = {clock.time:.6g} s (step {clock.step}); a "
                 f"checkpoint was written: continue with `sphere resume {rundir.path}`",
             )
+        compiling = progress.compiling_seconds()
         log.info(
-            "done at step %d (t = %.6g s), %.3g steps/s, %.3g particle-steps/s",
-            clock.step, clock.time, steps_rate, rate,
+            "done at step %d (t = %.6g s) in %.1f s, %.1f s of it compiling kernels; %.3g steps/s, "
+            "%.3g particle-steps/s (compiling left out)",
+            clock.step, clock.time, wall, compiling, steps_rate, rate,
         )  # fmt: skip
-        return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate)
+        return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate, compiling)
     except NumericalError as exc:
         log.error("%s", exc)
         rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})

@@ -665,8 +665,11 @@ def _report(result: api.RunResult) -> None:
         rate = f"{result.steps_per_second:.3g} steps/s"
     sidecar = result.run_dir / "trajectory.xmf"  # none for a run with nothing to show in ParaView
     shown = f" (open {sidecar} in ParaView)" if sidecar.is_file() else ""
+    # a first run of a case compiles its kernels: say so, or the run looks that slow
+    compiling = result.compiling_seconds
+    spent = f" ({compiling:.1f} s of it compiling kernels, cached for later runs)" if compiling >= 1.0 else ""
     typer.echo(
-        f"done: t = {result.time:.6g} s (step {result.step}) in {result.wall_seconds:.1f} s, {rate}\n"
+        f"done: t = {result.time:.6g} s (step {result.step}) in {result.wall_seconds:.1f} s{spent}, {rate}\n"
         f"output: {result.run_dir}/trajectory.h5{shown}, checkpoints in {result.run_dir}/checkpoints/"
     )
 

@@ -10,18 +10,32 @@ compiling a cached kernel holds an advisory lock on a file beside the kernel's c
 kernel waits, asleep, and then finds it in the cache and loads it. Kernels that are not the same
 function still compile side by side. A lock that cannot be taken (a file system without flock)
 leaves the compile as it was.
+
+The time a process spends here (compiling, loading from the cache, waiting for another's
+compile) is summed in `seconds_compiling`: the run's rate and ETA leave it out (io/progress.py),
+and its report says how much of the run it was.
 """
 
 from __future__ import annotations
 
 import fcntl
 import os
+import time
 
 from numba.core import sigutils
 from numba.core.dispatcher import Dispatcher
 
 _compile = Dispatcher.compile
 _held: set[str] = set()  # the locks this process holds: a kernel's compile nests its callees'
+_depth = 0  # compiles under way in this process (a kernel's nests its callees')
+_seconds = 0.0  # wall seconds spent in the outermost compiles so far
+_since = 0.0  # when the outermost compile under way began (the run compiles from one thread)
+
+
+def seconds_compiling() -> float:
+    """Wall seconds this process has spent compiling kernels (or loading them from the cache, or
+    waiting for another process to compile them) so far, that in progress included."""
+    return _seconds + (time.monotonic() - _since if _depth else 0.0)
 
 
 def _lock_path(dispatcher) -> str | None:
@@ -35,7 +49,20 @@ def _lock_path(dispatcher) -> str | None:
 
 
 def compile_alone(self, sig):
-    """Dispatcher.compile, holding the kernel's lock while it compiles or loads."""
+    """Dispatcher.compile, holding the kernel's lock while it compiles or loads, timed."""
+    global _depth, _seconds, _since
+    if _depth == 0:
+        _since = time.monotonic()
+    _depth += 1
+    try:
+        return _compile_locked(self, sig)
+    finally:
+        _depth -= 1
+        if _depth == 0:
+            _seconds += time.monotonic() - _since
+
+
+def _compile_locked(self, sig):
     args, _ = sigutils.normalize_signature(sig)
     path = _lock_path(self)
     if path is None or path in _held or tuple(args) in self.overloads:

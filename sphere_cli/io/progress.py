@@ -8,6 +8,8 @@ import time
 
 from tqdm import tqdm
 
+from ..compile_lock import seconds_compiling
+
 
 class Progress:
     def __init__(
@@ -20,6 +22,7 @@ class Progress:
         status_every: float,
         stream=None,
         enabled: bool = True,
+        compiling=seconds_compiling,
     ):
         self.rundir = rundir
         self.end_step = end_step
@@ -30,7 +33,12 @@ class Progress:
         self.enabled = enabled
         self.status_every = status_every
         self.last_status = float("-inf")
-        self.rate_start: tuple[int, float] | None = None  # (step, monotonic time [s]) after the first step
+        # (step, monotonic time [s], seconds compiling then) after the first step
+        self.rate_start: tuple[int, float, float] | None = None
+        # the process's seconds spent compiling kernels so far (compile_lock.py), which the rate
+        # leaves out: a fluid's kernels compile at its first step, hundreds of steps in
+        self.compiling = compiling
+        self.compiled_before = compiling()
         if enabled and self.stream.isatty():
             self.bar = tqdm(
                 total=end_step,
@@ -44,13 +52,16 @@ class Progress:
     def first_step_done(self, step: int) -> None:
         """The rate counts from here: the first step compiles the step's kernels (seconds to
         minutes on a machine's first run), which would make the first ETAs days long."""
-        self.rate_start = (step, time.monotonic())
+        self.rate_start = (step, time.monotonic(), self.compiling())
 
     def rate(self, step: int) -> float:
-        """Steps per second [1/s] from the end of the first step to now."""
+        """Steps per second [1/s] from the end of the first step to now, the seconds spent
+        compiling kernels since then left out."""
         if self.rate_start is None:
             return 0.0
-        steps, seconds = step - self.rate_start[0], time.monotonic() - self.rate_start[1]
+        first, then, compiled = self.rate_start
+        steps = step - first
+        seconds = time.monotonic() - then - (self.compiling() - compiled)
         return steps / seconds if steps > 0 and seconds > 0 else 0.0
 
     def info(self, scene, elapsed: float, state: str = "running") -> dict:
@@ -70,8 +81,13 @@ class Progress:
             "steps_per_second": rate,
             "particle_steps_per_second": rate * self.n,
             "elapsed_seconds": elapsed,
+            "compiling_seconds": self.compiling_seconds(),
             "eta_seconds": remaining / rate if rate > 0 else None,
         }
+
+    def compiling_seconds(self) -> float:
+        """Seconds spent compiling kernels since this run's loop was set up."""
+        return self.compiling() - self.compiled_before
 
     @property
     def interval(self) -> float:

@@ -401,12 +401,73 @@ def test_the_rate_leaves_out_the_first_step():
 
     from sphere_cli.io.progress import Progress
 
-    progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, enabled=False)
+    progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, enabled=False, compiling=lambda: 0.0)
     scene = SimpleNamespace(state=SimpleNamespace(clock=SimpleNamespace(step=1, time=1e-5)))
     assert progress.info(scene, 30.0)["eta_seconds"] is None  # no rate before the first step ends
     progress.first_step_done(1)
-    progress.rate_start = (1, progress.rate_start[1] - 2.0)  # as if 2 s had passed since
+    progress.rate_start = (1, progress.rate_start[1] - 2.0, 0.0)  # as if 2 s had passed since
     scene.state.clock.step = 201
     info = progress.info(scene, 32.0)
     assert info["steps_per_second"] == pytest.approx(100.0, rel=0.05)  # 200 steps in 2 s, not 201 in 32
     assert info["eta_seconds"] == pytest.approx(8.0, rel=0.05)
+
+
+def test_the_rate_leaves_out_kernels_compiled_after_the_first_step():
+    """A fluid's kernels compile at its first fluid step, hundreds of steps in: the seconds spent
+    compiling (compile_lock.seconds_compiling) are left out of the rate and the ETA."""
+    from types import SimpleNamespace
+
+    from sphere_cli.io.progress import Progress
+
+    compiled = [5.0]  # the scene's build compiled for 5 s before the loop
+    progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, enabled=False, compiling=lambda: compiled[0])
+    scene = SimpleNamespace(state=SimpleNamespace(clock=SimpleNamespace(step=1, time=1e-5)))
+    progress.first_step_done(1)
+    first, then, _ = progress.rate_start
+    progress.rate_start = (first, then - 32.0, compiled[0])  # 32 s since the first step ...
+    compiled[0] += 30.0  # ... 30 of them compiling a fluid's kernels
+    scene.state.clock.step = 201
+    info = progress.info(scene, 33.0)
+    assert info["steps_per_second"] == pytest.approx(100.0, rel=0.05)  # 200 steps in 2 s of stepping
+    assert info["eta_seconds"] == pytest.approx(8.0, rel=0.05)
+    assert info["compiling_seconds"] == pytest.approx(30.0)  # the loop's own, not the build's
+
+
+def test_the_closing_line_says_how_much_of_a_run_was_compiling(tmp_path, capsys):
+    """A first run's closing line says how long it compiled, so that it does not look that slow;
+    a run from the cache says nothing of it."""
+    from sphere_cli.cli import _report
+
+    first = api.RunResult(tmp_path, "done", 3474, 0.002, 32.2, 2.0e4, 34.0, compiling_seconds=31.5)
+    _report(first)
+    assert "in 32.2 s (31.5 s of it compiling kernels, cached for later runs)" in capsys.readouterr().out
+    _report(api.RunResult(tmp_path, "done", 3474, 0.002, 0.4, 2.0e6, 8685.0, compiling_seconds=0.01))
+    assert "compiling" not in capsys.readouterr().out
+
+
+def test_the_time_spent_compiling_is_counted_once_and_in_full():
+    """compile_lock.seconds_compiling: a kernel's compile, its callees' nested in it, counted once;
+    a kernel already compiled adds nothing."""
+    import time
+
+    from numba import njit
+
+    from sphere_cli.compile_lock import seconds_compiling
+
+    @njit
+    def callee(x):
+        return x + 1.0
+
+    @njit
+    def caller(x):
+        return callee(x) * 2.0
+
+    before = seconds_compiling()
+    started = time.monotonic()
+    caller(1.0)
+    took = time.monotonic() - started
+    spent = seconds_compiling() - before
+    assert 0.5 * took < spent <= took  # nearly all of the first call is compiling, counted once
+    again = seconds_compiling()
+    caller(2.0)
+    assert seconds_compiling() == again
