@@ -12,6 +12,7 @@ passive one before its threads start; a chosen policy is kept, with a warning.""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import signal
@@ -30,6 +31,9 @@ MPI_SIZE_VARIABLES = ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MV2_COMM_WORLD_SIZE")
 SAMPLE_SECONDS = 0.1
 # a busy process sharing our cores holds most of one; half of one is the margin for noise
 MARGIN_CORES = 0.5
+# the largest cache assumed where the system does not describe it [bytes]: that of the machines
+# this project is timed on (docs/performance.md)
+DEFAULT_CACHE_BYTES = 32 * 1024**2
 
 
 def busy_cores(stat_before: str, stat_after: str) -> float:
@@ -52,6 +56,27 @@ def usable_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
         return os.cpu_count() or 1
+
+
+@functools.lru_cache(maxsize=4)  # read once: the pair forces ask at every step
+def last_level_cache_bytes(cpu: str = "/sys/devices/system/cpu/cpu0/cache") -> int:
+    """Bytes of the processor's largest cache, from Linux's description of its caches (`cpu`:
+    one index folder per cache, each with a `level` and a `size` such as "32768K"), or
+    DEFAULT_CACHE_BYTES where that cannot be read (another system, a container without it)."""
+    found = {}
+    try:
+        for folder in os.scandir(cpu):
+            if folder.name.startswith("index"):
+                with open(os.path.join(folder.path, "level")) as level:
+                    with open(os.path.join(folder.path, "size")) as size:
+                        found[int(level.read())] = size.read().strip()
+    except (OSError, ValueError):
+        return DEFAULT_CACHE_BYTES
+    text = found[max(found)] if found else ""
+    size = re.fullmatch(r"(\d+)([KMG]?)", text)
+    if size is None:
+        return DEFAULT_CACHE_BYTES
+    return int(size[1]) * 1024 ** " KMG".index(size[2] or " ")
 
 
 def measure_busy_cores(seconds: float = SAMPLE_SECONDS, stat: str = "/proc/stat") -> float | None:

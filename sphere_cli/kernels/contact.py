@@ -33,11 +33,11 @@ the settled bed, one thread (docs/performance.md): 63 -> 50 ns a particle at 10 
 Arguments: pos, vel, angvel, vel_pred, angvel_pred (N,3) [m, m/s, rad/s]; radius, inv_mass,
 inv_inertia (N,) [m, 1/kg, 1/(kg m^2)] (0 for a prescribed particle: the reduced mass of its
 contacts is the other's mass, `reduced`); mass (N,) [kg] for m g; material (N,) int32 index
-into the table; nbr (N,C) int32 half rows,
-nbr_count (N,); start (N+1,) int64 row starts and hist (>= P,3) [m] the packed springs (pair
-(i, nbr[i, k]) at start[i] + k); rev (N,R) int32 reverse slots, rev_count (N,)
-(kernels/neighbors.py); pair_row, pair_partner (>= P,) int32 the listed pairs in that order
-(pack_pairs); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
+into the table; nbr (N,C) int32 half rows, nbr_count (N,); start (N+1,) int64 row starts and
+hist (>= P,3) [m] the packed springs (pair (i, nbr[i, k]) at start[i] + k); rev (N,R) int32
+reverse slots, rev_count (N,) (kernels/neighbors.py); pair_row, pair_partner (>= P,) int32 the
+listed pairs in that order (pack_pairs); warm: whether to load each listed pair's partner ahead
+(touching_pairs); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
 bounds[c+1]); table (M,M,6) per pair of materials, the columns K_N, K_T, D_N, D_T, MU, MU_R of
 kernels/laws.py; law: the law code (kernels/laws.py), rolling: the rolling-resistance flag;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
@@ -315,7 +315,9 @@ def separation(pos, hist, s, j, x0, x1, x2, ri, rj, box):
 
 
 @njit(cache=True, inline="always")
-def touching_pairs(pos, radius, pair_row, pair_partner, first, last, end, box, partner, hist, bits, buf, ids):
+def touching_pairs(
+    pos, radius, pair_row, pair_partner, first, last, end, box, partner, warm, hist, bits, buf, ids
+):  # fmt: skip
     """The places p (pair first + p, first <= pair < last, at most BLOCK of them) of the listed
     pairs that touch and whose partner lies before `end` (the chunk's: the others are computed
     apart, cross_chunk_pairs), in order into row ID_K of ids; returns their number. Each pair's
@@ -324,9 +326,10 @@ def touching_pairs(pos, radius, pair_row, pair_partner, first, last, end, box, p
     does): through `bits`, the springs' bits, ANDed with a mask of ones or zeros rather than
     stored under a branch, which would be mispredicted as often as the pairs' test. `partner`:
     the velocity arrays and inverse masses that gather reads of a partner, each loaded here for
-    every pair: on a bed larger than the caches their misses then overlap, as a sweep that
-    branches on each pair's test gets them by speculation (without these loads the settled
-    100 000 bed stepped about 6 % slower)."""
+    every pair where `warm`: on a bed larger than the caches their misses then overlap, as a
+    sweep that branches on each pair's test gets them by speculation (without these loads the
+    settled 100 000 bed stepped about 10 % slower); on a bed inside the caches they only cost
+    (the 10 000 bed stepped about 4 % faster without them): physics/contact.py chooses."""
     vel, angvel, vel_pred, angvel_pred, inv_mass = partner
     touching = np.uint64(0)
     for pair in range(first, last):
@@ -344,7 +347,8 @@ def touching_pairs(pos, radius, pair_row, pair_partner, first, last, end, box, p
         to_block(buf, B_X1, p, d1)
         to_block(buf, B_X2, p, d2)
         to_block(buf, B_XD2, p, dist2)
-        to_block(buf, B_WARM, p, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
+        if warm:
+            to_block(buf, B_WARM, p, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
         apart = dist2 >= reach * reach
         inside = j < np.uint64(end)
         if hist.shape[0] > 0:
@@ -637,6 +641,7 @@ def chunk_pair_forces(
     rev_count,
     pair_row,
     pair_partner,
+    warm,
     body_acc,
     mass,
     bounds,
@@ -711,8 +716,9 @@ def chunk_pair_forces(
         for first in range(start[begin], start[end], BLOCK):  # the chunk's pairs, a piece at a time
             last = min(first + BLOCK, start[end])
             touching = touching_pairs(
-                pos, radius, pair_row, pair_partner, first, last, end, box, partner, hist, bits, buf, ids
-            )
+                pos, radius, pair_row, pair_partner, first, last, end, box, partner, warm, hist, bits, buf,
+                ids,
+            )  # fmt: skip
             for q in range(touching):
                 p = ids[np.uint64(ID_K * BLOCK) + np.uint64(q)]
                 s = np.uint64(first) + p

@@ -40,6 +40,7 @@ from ..kernels.contact import (
 from ..kernels.laws import K_T
 from ..kernels.observe.energy import pair_elastic_energy
 from ..kernels.serial import use_serial
+from ..runtime import last_level_cache_bytes
 from ..state import State
 from .laws import ContactLaw
 from .materials import ContactTables
@@ -62,6 +63,19 @@ def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray,
     total = work[-1] if work.size else 0
     cuts = np.searchsorted(work, np.arange(1, pieces) * (total / pieces))
     return rows, np.concatenate(([0], cuts, [crossing.size])).astype(np.int64)
+
+
+def beyond_cache(state: State) -> bool:
+    """True if the arrays a step goes through (the particles', the neighbour list's and its
+    springs) outgrow the processor's largest cache, so that each step reads them from memory:
+    the pair sweep then loads each listed pair's partner ahead (kernels/contact.py
+    touching_pairs), which only costs where they stay in the cache. The state of every
+    particle this process holds is counted, not its share of the cache with other processes
+    (ranks on one node)."""
+    p, nl = state.particles, state.neighbors
+    arrays = [getattr(p, name) for name in p.PROGNOSTIC] + [p.vel_pred, p.angvel_pred]
+    arrays += [nl.nbr, nl.nbr_count, nl.start, nl.hist, nl.ref_pos]
+    return sum(a.nbytes for a in arrays) > last_level_cache_bytes()
 
 
 class PairContactForces(Module):
@@ -185,6 +199,7 @@ class PairContactForces(Module):
             nl.rev_count,
             self.pair_row,
             self.pair_partner,
+            beyond_cache(state),
             box.body_acc,
             p.mass,
             self.bounds,

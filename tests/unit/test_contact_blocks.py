@@ -197,8 +197,9 @@ def _reference(state, table, code: int, rolling: bool, spring_dt: float, step_dt
     return force, torque, hist
 
 
-def _kernels(scene, bounds: np.ndarray, spring_dt: float):
-    """(force, torque, springs) of the block kernels with the particles cut at `bounds`."""
+def _kernels(scene, bounds: np.ndarray, spring_dt: float, warm: bool = False):
+    """(force, torque, springs) of the block kernels with the particles cut at `bounds`, the
+    partners loaded ahead or not (`warm`)."""
     state, contact = scene.state, scene.contact
     p, box, nl = state.particles, state.box, state.neighbors
     chunks = bounds.size - 1
@@ -226,6 +227,7 @@ def _kernels(scene, bounds: np.ndarray, spring_dt: float):
         nl.rev_count,
         pair_row,
         pair_partner,
+        warm,
         box.body_acc,
         p.mass,
         bounds,
@@ -265,9 +267,10 @@ def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
     n = state.particles.count
     # one chunk; cuts inside the shell, where the rows wait for pairs across chunks, and many
     for bounds in ([0, n], [0, 120, n], [0, 1, 300, 301, 700, n], list(np.linspace(0, n, 12).astype(int))):
-        got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt)
-        for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
-            assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}"
+        for warm in (False, True):  # the partners loaded ahead or not: the same operations
+            got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt, warm)
+            for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
+                assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}, warm {warm}"
 
 
 def _listed_pairs(nl) -> tuple[np.ndarray, np.ndarray]:
@@ -333,6 +336,41 @@ def test_the_packed_pairs_follow_every_change_of_the_list(scene):
         for name, array in kept.items():
             setattr(nl, name, array)
         scene.neighbors.rebuild(scene.state)
+
+
+def test_the_partners_are_loaded_ahead_only_on_a_state_larger_than_the_cache(scene, monkeypatch):
+    """physics/contact.py beyond_cache: the sweep loads each listed pair's partner ahead only
+    where the state a step goes through outgrows the processor's largest cache (measured: 10 %
+    faster steps at 100 000 spheres with, 4 % faster at 10 000 without)."""
+    from sphere_cli.physics import contact as module
+
+    state = scene.state
+    p, nl = state.particles, state.neighbors
+    held = sum(getattr(p, name).nbytes for name in p.PROGNOSTIC) + p.vel_pred.nbytes + p.angvel_pred.nbytes
+    held += sum(a.nbytes for a in (nl.nbr, nl.nbr_count, nl.start, nl.hist, nl.ref_pos))
+    for cache, beyond in ((held - 1, True), (held, False)):
+        monkeypatch.setattr(module, "last_level_cache_bytes", lambda cache=cache: cache)
+        assert module.beyond_cache(state) is beyond
+        assert scene.contact.kernel_arguments(state)[1][24] is beyond
+
+
+def test_the_largest_cache_is_read_from_the_systems_description(tmp_path):
+    """runtime.last_level_cache_bytes: the highest level's size (Linux's sysfs layout), or the
+    default where there is none to read."""
+    from sphere_cli.runtime import DEFAULT_CACHE_BYTES, last_level_cache_bytes
+
+    for index, (level, size) in enumerate([("1", "32K"), ("1", "32K"), ("2", "1024K"), ("3", "32768K")]):
+        folder = tmp_path / "cache" / f"index{index}"
+        folder.mkdir(parents=True)
+        (folder / "level").write_text(f"{level}\n")
+        (folder / "size").write_text(f"{size}\n")
+    assert last_level_cache_bytes(str(tmp_path / "cache")) == 32 * 1024**2
+    (tmp_path / "cache" / "index3" / "size").write_text("2M\n")
+    assert last_level_cache_bytes(str(tmp_path / "cache")) == 32 * 1024**2  # read once
+    last_level_cache_bytes.cache_clear()
+    assert last_level_cache_bytes(str(tmp_path / "cache")) == 2 * 1024**2
+    assert last_level_cache_bytes(str(tmp_path / "none")) == DEFAULT_CACHE_BYTES
+    last_level_cache_bytes.cache_clear()
 
 
 def _walled_case(folder) -> str:
