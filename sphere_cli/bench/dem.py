@@ -36,7 +36,7 @@ from ..io.checkpoint import FORMAT, newest_valid_checkpoint
 from ..runtime import shared_cores_note
 from ..scene.builder import build_scene
 from ..simulation import advance
-from . import machine
+from . import Stopwatch, machine
 
 RADIUS = 1e-3
 SPACING = 1.2
@@ -175,6 +175,32 @@ def time_steps(scene, steps: int, repeats: int) -> list[float]:
     return times
 
 
+# the hooks of a step whose calls time_parts times, in the step's order
+PART_HOOKS = ("kick_drift", "prepare", "forces", "kick", "finish_step", "after_step")
+
+
+def time_parts(scene, steps: int) -> dict[str, float]:
+    """Nanoseconds a particle-step in each hook of `steps` steps ("Motion.kick_drift",
+    "NeighborSearch.prepare" with its list builds, "PairContactForces.forces", ...), and in the
+    whole step so taken ("step"). Each hook is timed where the step calls it, so the steps run
+    through the hooks one at a time: the same kernels as the compiled loop
+    (physics/compiled_steps.py) with the interpreter between them, which the whole step counts
+    and the parts do not."""
+    hooks = [(bound.__self__, name) for name in PART_HOOKS for bound in getattr(scene.step, name)]
+    watches = {f"{type(module).__name__}.{name}": Stopwatch(module, name) for module, name in hooks}
+    scene.order_modules()
+    try:
+        start = time.perf_counter()
+        advance(scene, steps)
+        whole = time.perf_counter() - start
+    finally:
+        for watch in watches.values():
+            watch.restore()
+        scene.order_modules()
+    per = 1e9 / (steps * scene.state.particles.count)
+    return {**{key: sum(watch.seconds) * per for key, watch in watches.items()}, "step": whole * per}
+
+
 def bytes_per_particle(scene) -> float:
     """Every array the time loop keeps per particle, scratch included, divided by N."""
     state = scene.state
@@ -243,6 +269,7 @@ def run_benchmark(
                     "contacts_per_particle": contacts,
                     "neighbor_rebuilds": scene.state.neighbors.builds,
                     "bytes_per_particle": bytes_per_particle(scene),
+                    "parts_ns_per_particle_step": time_parts(scene, steps),
                 }
                 results["rows"].append(row)
                 log(
@@ -252,6 +279,14 @@ def run_benchmark(
                     f"best {row['best_particle_steps_per_second'] / 1e6:.2f} M; "
                     f"{contacts:.2f} contacts/particle, "
                     f"{row['bytes_per_particle']:.0f} B/particle)"
+                )
+                parts = dict(row["parts_ns_per_particle_step"])
+                whole = parts.pop("step")
+                compiled = 1e9 / row["particle_steps_per_second"]
+                log(
+                    "    ns a particle-step through the hooks: "
+                    + ", ".join(f"{name} {ns:.1f}" for name, ns in parts.items())
+                    + f"; the step {whole:.1f} (in the compiled loop {compiled:.1f})"
                 )
             numba.set_num_threads(max_threads)
     _speedups(results, log)

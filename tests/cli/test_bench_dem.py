@@ -34,10 +34,18 @@ def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
         # the loose lattice (spacing 1.2 d) has no contacts, and every array costs memory
         assert row["contacts_per_particle"] == 0.0
         assert row["bytes_per_particle"] > 200
+        # each hook of the step timed where the step calls it; the step so taken counts them all
+        parts = dict(row["parts_ns_per_particle_step"])
+        whole = parts.pop("step")
+        hooks = {"Motion.kick_drift", "NeighborSearch.prepare", "PairContactForces.forces", "Motion.kick"}
+        assert set(parts) >= hooks and "PlaneWallForces.forces" in parts  # the canonical box's walls
+        assert all(ns > 0.0 for ns in parts.values())
+        assert sum(parts.values()) <= whole
     if len(rows) == 2:
         one, two = rows
         assert two["speedup"] == two["particle_steps_per_second"] / one["particle_steps_per_second"]
     assert f"N = {216:>7}" in result.stdout
+    assert "ns a particle-step through the hooks: Motion.kick_drift" in result.stdout
     # the fixed cost: a straight line through the step times of the two sizes
     fixed = report["fixed_cost"]
     assert fixed["sizes"] == [10, 40] and len(fixed["step_seconds"]) == 2
