@@ -72,12 +72,15 @@ def helper_jobs(scene) -> list[tuple]:
 
 
 def own_jobs(scene) -> list[tuple]:
-    """(kernel, arguments) of the pair sweep, which this process compiles meanwhile."""
-    from .kernels.contact import chunk_pair_forces, cross_chunk_pairs
+    """(kernel, arguments) of the pair sweep, which this process compiles meanwhile: the one the
+    step calls (on one thread its serial twin; the parallel sweep, 11 s of compiling, would
+    never run)."""
+    from .kernels.contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
+    from .kernels.serial import use_serial
 
     cross, pairs = scene.contact.kernel_arguments(scene.state)
     jobs = [] if cross is None else [(cross_chunk_pairs, cross)]
-    return [*jobs, (chunk_pair_forces, pairs)]
+    return [*jobs, (chunk_pair_forces_serial if use_serial() else chunk_pair_forces, pairs)]
 
 
 def spare_core(busy: float | None, cores: int) -> bool:
@@ -91,13 +94,15 @@ def start(scene, busy: float | None = None) -> subprocess.Popen | None:
     docstring); None where the cache already has the pair sweep, no core is spare (`busy`: the
     busy cores, measured when not given), or the steps are not the one-rank CPU steps (those of
     physics/compiled_steps.py, or the hooks)."""
-    from .kernels.contact import chunk_pair_forces
     from .physics.compiled_steps import CompiledSteps
 
     compiled = scene.step.compiled
     if compiled is not None and type(compiled) is not CompiledSteps:
         return None  # on ranks or a GPU
-    if scene.contact is None or not _cold(chunk_pair_forces):
+    if scene.contact is None:
+        return None
+    own = own_jobs(scene)
+    if not _cold(own[-1][0]):
         return None
     if not spare_core(runtime.measure_busy_cores() if busy is None else busy, runtime.usable_cores()):
         return None
@@ -118,7 +123,7 @@ def start(scene, busy: float | None = None) -> subprocess.Popen | None:
     except OSError:
         return None
     try:
-        for kernel, arguments in own_jobs(scene):
+        for kernel, arguments in own:
             kernel.compile(_signature(kernel, arguments))
     except BaseException:
         stop(helper)

@@ -360,7 +360,7 @@ class PlaneWallForces(Module):
         springs = every_wall.copy()  # check every spring
         everyone = np.arange(p.count, dtype=np.int64)
         pieces = self._cut(everyone, hist)
-        wall_forces(
+        (wall_forces_serial if use_serial() else wall_forces)(
             *self._arguments(
                 state,
                 0.0,

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 
+import numba
 import pytest
 
 from sphere_cli import compile_ahead
@@ -29,6 +30,30 @@ def test_the_jobs_are_the_kernels_the_run_compiles(n):
     assert len(jobs) >= 5  # the build, the kick-drift, the kick, the walls, the pair sweep
     for kernel, arguments in jobs:
         assert compile_ahead._signature(kernel, arguments) in kernel.signatures, kernel
+
+
+def test_on_one_thread_the_serial_twins_are_compiled_not_the_parallel_kernels(monkeypatch):
+    """A run on one thread calls the serial twins (kernels/serial.py): the pair sweep compiled
+    ahead, and the walls' forces measured for the observables, are those, not the parallel
+    kernels (the parallel sweep alone took 11 s of a cold run's compiling and never ran)."""
+    from sphere_cli.kernels.contact import chunk_pair_forces, chunk_pair_forces_serial
+    from sphere_cli.physics import walls as wall_module
+    from sphere_cli.runtime import threads_set_to
+
+    scene = build_scene(parse_case(canonical_case(64)))
+
+    def parallel_walls(*arguments):
+        raise AssertionError("the parallel wall kernel was called")
+
+    monkeypatch.setattr(wall_module, "wall_forces", parallel_walls)
+    with threads_set_to(1):
+        assert compile_ahead.own_jobs(scene)[-1][0] is chunk_pair_forces_serial
+        scene.walls.measure(scene.state)
+    if numba.config.NUMBA_NUM_THREADS > 1:
+        with threads_set_to(2):
+            assert compile_ahead.own_jobs(scene)[-1][0] is chunk_pair_forces
+            with pytest.raises(AssertionError, match="parallel wall kernel"):
+                scene.walls.measure(scene.state)
 
 
 def test_nothing_starts_on_a_filled_cache():
