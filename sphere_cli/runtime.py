@@ -58,22 +58,38 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+def cache_sizes(cpu: str = "/sys/devices/system/cpu/cpu0/cache") -> dict[str, str]:
+    """The first core's data caches by level as Linux describes them ({"L1": "48K", "L2":
+    "1024K", "L3": "32768K"}: `cpu` holds one index folder per cache, with its type, level and
+    size); empty elsewhere."""
+    sizes = {}
+    try:
+        folders = sorted(os.scandir(cpu), key=lambda folder: folder.name)
+    except OSError:
+        return sizes
+    for folder in folders:
+        if not folder.name.startswith("index"):
+            continue
+        try:
+            with open(os.path.join(folder.path, "type")) as kind:
+                if kind.read().strip() == "Instruction":
+                    continue
+            with open(os.path.join(folder.path, "level")) as level:
+                with open(os.path.join(folder.path, "size")) as size:
+                    sizes[f"L{level.read().strip()}"] = size.read().strip()
+        except OSError:
+            continue
+    return sizes
+
+
 @functools.lru_cache(maxsize=4)  # read once: the pair forces ask at every step
 def last_level_cache_bytes(cpu: str = "/sys/devices/system/cpu/cpu0/cache") -> int:
-    """Bytes of the processor's largest cache, from Linux's description of its caches (`cpu`:
-    one index folder per cache, each with a `level` and a `size` such as "32768K"), or
+    """Bytes of the processor's largest cache (cache_sizes: its highest level), or
     DEFAULT_CACHE_BYTES where that cannot be read (another system, a container without it)."""
-    found = {}
-    try:
-        for folder in os.scandir(cpu):
-            if folder.name.startswith("index"):
-                with open(os.path.join(folder.path, "level")) as level:
-                    with open(os.path.join(folder.path, "size")) as size:
-                        found[int(level.read())] = size.read().strip()
-    except (OSError, ValueError):
+    sizes = cache_sizes(cpu)
+    if not sizes:
         return DEFAULT_CACHE_BYTES
-    text = found[max(found)] if found else ""
-    size = re.fullmatch(r"(\d+)([KMG]?)", text)
+    size = re.fullmatch(r"(\d+)([KMG]?)", sizes[max(sizes, key=lambda name: int(name[1:]))])
     if size is None:
         return DEFAULT_CACHE_BYTES
     return int(size[1]) * 1024 ** " KMG".index(size[2] or " ")

@@ -19,6 +19,7 @@ import time
 import numba
 import numpy as np
 
+from ..runtime import cache_sizes
 from ..simulation import advance
 
 
@@ -60,21 +61,6 @@ def timed_steps(scene, steps: int) -> tuple[list[float], list[float]]:
     return wall, cpu
 
 
-def _caches() -> dict:
-    """The first core's data caches by level, as Linux gives them ({"L1": "48K", ...}); empty
-    elsewhere."""
-    from pathlib import Path
-
-    sizes = {}
-    for index in sorted(Path("/sys/devices/system/cpu/cpu0/cache").glob("index*")):
-        try:
-            if (index / "type").read_text().strip() != "Instruction":
-                sizes[f"L{(index / 'level').read_text().strip()}"] = (index / "size").read_text().strip()
-        except OSError:
-            continue
-    return sizes
-
-
 def machine() -> dict:
     """What ran a benchmark: the processor by name and the one Numba compiles for (the same
     figures on another processor do not compare), the cores, the versions."""
@@ -88,7 +74,7 @@ def machine() -> dict:
     return {
         "processor": _cpu_model(),
         "compiled_for": llvmlite.binding.get_host_cpu_name(),
-        "caches": _caches(),
+        "caches": cache_sizes(),
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
         "numba": numba.__version__,

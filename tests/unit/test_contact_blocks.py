@@ -355,15 +355,19 @@ def test_the_partners_are_loaded_ahead_only_on_a_state_larger_than_the_cache(sce
 
 
 def test_the_largest_cache_is_read_from_the_systems_description(tmp_path):
-    """runtime.last_level_cache_bytes: the highest level's size (Linux's sysfs layout), or the
-    default where there is none to read."""
-    from sphere_cli.runtime import DEFAULT_CACHE_BYTES, last_level_cache_bytes
+    """runtime.cache_sizes and last_level_cache_bytes: the data caches by level, the highest
+    level's size (Linux's sysfs layout), or the default where there is none to read."""
+    from sphere_cli.runtime import DEFAULT_CACHE_BYTES, cache_sizes, last_level_cache_bytes
 
-    for index, (level, size) in enumerate([("1", "32K"), ("1", "32K"), ("2", "1024K"), ("3", "32768K")]):
+    caches = [("Data", "1", "32K"), ("Instruction", "1", "64K"), ("Unified", "2", "1024K")]
+    caches.append(("Unified", "3", "32768K"))
+    for index, (kind, level, size) in enumerate(caches):
         folder = tmp_path / "cache" / f"index{index}"
         folder.mkdir(parents=True)
+        (folder / "type").write_text(f"{kind}\n")
         (folder / "level").write_text(f"{level}\n")
         (folder / "size").write_text(f"{size}\n")
+    assert cache_sizes(str(tmp_path / "cache")) == {"L1": "32K", "L2": "1024K", "L3": "32768K"}  # data only
     assert last_level_cache_bytes(str(tmp_path / "cache")) == 32 * 1024**2
     (tmp_path / "cache" / "index3" / "size").write_text("2M\n")
     assert last_level_cache_bytes(str(tmp_path / "cache")) == 32 * 1024**2  # read once
