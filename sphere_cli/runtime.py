@@ -1,6 +1,7 @@
 """What a run needs of the process it runs in: its threads, the signals that ask it to stop, the
-wall-time budget, and a warning when its OpenMP threads would share their cores with other
-busy processes.
+wall-time budget, a warning when its OpenMP threads would share their cores with other busy
+processes, and the sizes of the processor's caches (the pair sweep's choice, the benchmarks'
+record).
 
 Numba's OpenMP threads spin while they wait for each other. On cores of their own that is the
 fastest way to wait; when another busy process holds one of those cores, every parallel region
