@@ -13,7 +13,8 @@ leaves the compile as it was.
 
 The time a process spends here (compiling, loading from the cache, waiting for another's
 compile) is summed in `seconds_compiling`: the run's rate and ETA leave it out (io/progress.py),
-and its report says how much of the run it was.
+and its report says how much of the run it was. The watchers in `watchers` are told when each
+outermost compile begins and ends (the progress line says so when one takes long).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ _held: set[str] = set()  # the locks this process holds: a kernel's compile nest
 _depth = 0  # compiles under way in this process (a kernel's nests its callees')
 _seconds = 0.0  # wall seconds spent in the outermost compiles so far
 _since = 0.0  # when the outermost compile under way began (the run compiles from one thread)
+# called with True when an outermost compile begins and False when it ends
+watchers: list = []
 
 
 def seconds_compiling() -> float:
@@ -53,6 +56,8 @@ def compile_alone(self, sig):
     global _depth, _seconds, _since
     if _depth == 0:
         _since = time.monotonic()
+        for watcher in tuple(watchers):
+            watcher(True)
     _depth += 1
     try:
         return _compile_locked(self, sig)
@@ -60,6 +65,8 @@ def compile_alone(self, sig):
         _depth -= 1
         if _depth == 0:
             _seconds += time.monotonic() - _since
+            for watcher in tuple(watchers):
+                watcher(False)
 
 
 def _compile_locked(self, sig):

@@ -4,11 +4,17 @@
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 from tqdm import tqdm
 
+from .. import compile_lock
 from ..compile_lock import seconds_compiling
+
+# a compile inside the loop that lasts longer than this is announced [s] (a fluid's kernels
+# compile at its first fluid step, half a minute on a first run, with nothing printed else)
+COMPILE_NOTICE_SECONDS = 2.0
 
 
 class Progress:
@@ -39,6 +45,11 @@ class Progress:
         # leaves out: a fluid's kernels compile at its first step, hundreds of steps in
         self.compiling = compiling
         self.compiled_before = compiling()
+        self.notice_seconds = COMPILE_NOTICE_SECONDS
+        self._notice: threading.Timer | None = None
+        self._noticed = False  # once a run
+        if enabled:
+            compile_lock.watchers.append(self._compile_watch)
         if enabled and self.stream.isatty():
             self.bar = tqdm(
                 total=end_step,
@@ -85,6 +96,29 @@ class Progress:
             "eta_seconds": remaining / rate if rate > 0 else None,
         }
 
+    def _compile_watch(self, began: bool) -> None:
+        """compile_lock's watcher: a compile in the loop (after the first step: the build's have
+        their own line) that lasts notice_seconds gets a line, once a run."""
+        if not began:
+            if self._notice is not None:
+                self._notice.cancel()
+                self._notice = None
+            return
+        if self.rate_start is None or self._noticed:
+            return
+        self._notice = threading.Timer(self.notice_seconds, self._announce_compile)
+        self._notice.daemon = True
+        self._notice.start()
+
+    def _announce_compile(self) -> None:
+        self._noticed = True
+        text = "compiling kernels (a first run of this kind of case; cached for later runs) ..."
+        if self.bar is not None:
+            self.bar.set_postfix_str(text)
+            self.bar.refresh()
+        else:
+            print(f"[sphere] {text}", file=self.stream, flush=True)
+
     def compiling_seconds(self) -> float:
         """Seconds spent compiling kernels since this run's loop was set up."""
         return self.compiling() - self.compiled_before
@@ -126,5 +160,8 @@ class Progress:
         return f"{info['particle_steps_per_second'] / 1e6:.2f} M particle-steps/s"
 
     def close(self) -> None:
+        if self._compile_watch in compile_lock.watchers:
+            compile_lock.watchers.remove(self._compile_watch)
+        self._compile_watch(False)
         if self.bar is not None:
             self.bar.close()

@@ -433,6 +433,42 @@ def test_the_rate_leaves_out_kernels_compiled_after_the_first_step():
     assert info["compiling_seconds"] == pytest.approx(30.0)  # the loop's own, not the build's
 
 
+def test_a_long_compile_inside_the_loop_gets_a_line_once():
+    """A fluid's kernels compile at its first fluid step (half a minute on a first run) with the
+    progress line silent: a compile in the loop lasting notice_seconds says so, once a run; one
+    before the first step (the build's, announced already) or after close says nothing."""
+    import io
+
+    from numba import njit
+
+    from sphere_cli import compile_lock
+    from sphere_cli.io.progress import Progress
+
+    def compile_one():
+        @njit
+        def kernel(x):
+            return x * 3.0
+
+        kernel(1.0)
+
+    stream = io.StringIO()
+    stream.isatty = lambda: False  # the batch log's line, not the terminal's bar
+    progress = Progress(None, 1000, 0, 1e-5, 10, 60.0, stream=stream, compiling=lambda: 0.0)
+    progress.notice_seconds = 0.0
+    try:
+        compile_one()  # before the first step
+        assert stream.getvalue() == ""
+        progress.first_step_done(1)
+        for _ in range(3):  # each compile lasts well over the notice's 0 s
+            compile_one()
+    finally:
+        progress.close()
+    assert stream.getvalue().count("[sphere] compiling kernels") == 1
+    assert progress._compile_watch not in compile_lock.watchers
+    compile_one()
+    assert stream.getvalue().count("compiling kernels") == 1
+
+
 def test_the_closing_line_says_how_much_of_a_run_was_compiling(tmp_path, capsys):
     """A first run's closing line says how long it compiled, so that it does not look that slow;
     a run from the cache says nothing of it."""
