@@ -10,7 +10,6 @@ import time
 from tqdm import tqdm
 
 from .. import compile_lock
-from ..compile_lock import seconds_compiling
 
 # a compile inside the loop that lasts longer than this is announced [s] (a fluid's kernels
 # compile at its first fluid step, half a minute on a first run, with nothing printed else)
@@ -28,7 +27,7 @@ class Progress:
         status_every: float,
         stream=None,
         enabled: bool = True,
-        compiling=seconds_compiling,
+        compiling=compile_lock.seconds_compiling,
     ):
         self.rundir = rundir
         self.end_step = end_step
