@@ -103,6 +103,9 @@ class PairContactForces(Module):
         self.pair_partner = np.zeros(0, dtype=np.int32)
         self.pairs_of = None
         self.pairs_start = np.zeros(0, dtype=np.int64)
+        # whether the sweep loads its partners ahead (beyond_cache), and the list it was asked for
+        self.warm = False
+        self.warm_of = None
         self.bounds = np.zeros(2, dtype=np.int64)
         self.bounds_build = -1  # the neighbour-list build the chunk cuts were made for
         # rows with pairs across chunks: (row, end of its chunk), shared evenly between threads
@@ -168,6 +171,8 @@ class PairContactForces(Module):
         dt = state.clock.dt
         spring = dt if spring_dt is None else spring_dt
         self._chunks(nl)
+        if self.warm_of is not self.pairs_of:  # the arrays' sizes change with the list only
+            self.warm, self.warm_of = beyond_cache(state), self.pairs_of
         common = (
             p.pos,
             p.vel,
@@ -199,7 +204,7 @@ class PairContactForces(Module):
             nl.rev_count,
             self.pair_row,
             self.pair_partner,
-            beyond_cache(state),
+            self.warm,
             box.body_acc,
             p.mass,
             self.bounds,

@@ -345,10 +345,14 @@ def test_the_partners_are_loaded_ahead_only_on_a_state_larger_than_the_cache(sce
     from sphere_cli.physics import contact as module
 
     state = scene.state
-    p, nl = state.particles, state.neighbors
-    held = sum(getattr(p, name).nbytes for name in p.PROGNOSTIC) + p.vel_pred.nbytes + p.angvel_pred.nbytes
-    held += sum(a.nbytes for a in (nl.nbr, nl.nbr_count, nl.start, nl.hist, nl.ref_pos))
-    for cache, beyond in ((held - 1, True), (held, False)):
+    p = state.particles
+    for below in (1, 0):
+        scene.neighbors.rebuild(state)  # asked once a list (the arrays' sizes change with it only)
+        nl = state.neighbors
+        arrays = [getattr(p, name) for name in p.PROGNOSTIC] + [p.vel_pred, p.angvel_pred]
+        arrays += [nl.nbr, nl.nbr_count, nl.start, nl.hist, nl.ref_pos]
+        held = sum(a.nbytes for a in arrays)
+        cache, beyond = held - below, below == 1
         monkeypatch.setattr(module, "last_level_cache_bytes", lambda cache=cache: cache)
         assert module.beyond_cache(state) is beyond
         assert scene.contact.kernel_arguments(state)[1][24] is beyond
