@@ -5,26 +5,36 @@ Numba compiles one at a time in a process. Where the cache does not hold the pai
 a core is spare, `start` hands the neighbour build (first: the run needs it next), the
 kick-drift, the kick and the plane walls' contacts to `python -m sphere_cli.compile_ahead`,
 which compiles them into the same cache, while this process compiles the pair sweep; `finish`
-waits for the helper before the first forces, and the run loads its kernels from the cache.
-The helper compiles the code the run would, so results do not change; a helper that fails
-leaves the compiles to the run, as before. Only a new run (not a resumed one) on the CPU and
-one rank does this, whether its steps run in the compiled loop or through the hooks (a
-Navier-Stokes or Darcy fluid): docs/performance.md, "Compiled in two processes".
+waits for the helper's line saying those are done before the first forces, and the run loads
+its kernels from the cache. A fluid's own grid step compiles at its first fluid step (about
+25 s of a cold Navier-Stokes run, 10 s of a Darcy run): where those kernels are not cached
+either, the helper then takes one step of a copy of the grid alone (FluidModule.
+grid_step_rehearsal) while the run compiles the porosity, the drag and its compiled steps, and
+goes on after `finish`; the run waits for a kernel the helper is compiling (compile_lock.py)
+and loads it. The helper compiles the code the run would, so results do not change; a helper
+that fails leaves the compiles to the run, as before, and one still compiling when the run's
+process ends is stopped. Only a new run (not a resumed one) on the CPU and one rank does this,
+whether its steps run in the compiled loop or through the hooks: docs/performance.md,
+"Compiled in two processes".
 """
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import os
 import pickle
+import select
 import subprocess
 import sys
 from pathlib import Path
 
 from . import runtime
 
-# the most a run waits for its helper [s] (it compiles in about 10 s on this project's machine)
+# the most a run waits for its helper's DEM kernels [s] (about 10 s on this project's machine)
 WAIT_SECONDS = 300.0
+# what the helper writes on its standard output once the DEM kernels are in the cache
+DONE = b"."
 
 
 def _cold(dispatcher) -> bool:
@@ -89,38 +99,41 @@ def spare_core(busy: float | None, cores: int) -> bool:
     return busy is not None and cores - busy >= 2 - runtime.MARGIN_CORES
 
 
+def fluid_rehearsal(scene) -> tuple | None:
+    """(one of its kernels, function, arguments, threads) of the fluid grid's rehearsal
+    (FluidModule.grid_step_rehearsal) on the threads of its own step; None without one."""
+    import numba
+
+    fluid = scene.fluid
+    rehearsal = None if fluid is None else fluid.grid_step_rehearsal()
+    if rehearsal is None:
+        return None
+    return (*rehearsal, fluid.step_threads or numba.get_num_threads())
+
+
 def start(scene, busy: float | None = None) -> subprocess.Popen | None:
     """Start the helper for this scene's kernels and compile the pair sweep here (module
-    docstring); None where the cache already has the pair sweep, no core is spare (`busy`: the
-    busy cores, measured when not given), or the steps are not the one-rank CPU steps (those of
-    physics/compiled_steps.py, or the hooks)."""
+    docstring); None where the cache already has the pair sweep and the fluid grid's step, no
+    core is spare (`busy`: the busy cores, measured when not given), or the steps are not the
+    one-rank CPU steps (those of physics/compiled_steps.py, or the hooks)."""
     from .physics.compiled_steps import CompiledSteps
 
     compiled = scene.step.compiled
     if compiled is not None and type(compiled) is not CompiledSteps:
         return None  # on ranks or a GPU
-    if scene.contact is None:
-        return None
-    own = own_jobs(scene)
-    if not _cold(own[-1][0]):
+    own = [] if scene.contact is None else own_jobs(scene)
+    if own and not _cold(own[-1][0]):
+        own = []
+    fluid = fluid_rehearsal(scene)
+    if fluid is not None and not _cold(fluid[0]):
+        fluid = None
+    if not own and fluid is None:
         return None
     if not spare_core(runtime.measure_busy_cores() if busy is None else busy, runtime.usable_cores()):
         return None
-    jobs = [(*_named(kernel), _signature(kernel, arguments)) for kernel, arguments in helper_jobs(scene)]
-    try:
-        # the helper imports this very package, wherever this process found it
-        found = str(Path(__file__).resolve().parents[1])
-        path = os.pathsep.join(filter(None, (found, os.environ.get("PYTHONPATH"))))
-        helper = subprocess.Popen(
-            [sys.executable, "-m", "sphere_cli.compile_ahead"],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            env={**os.environ, "PYTHONPATH": path},
-        )
-        helper.stdin.write(pickle.dumps(jobs))
-        helper.stdin.close()
-    except OSError:
+    jobs = [(*_named(k), _signature(k, arguments)) for k, arguments in helper_jobs(scene)] if own else []
+    helper = launch(jobs, None if fluid is None else fluid[1:])
+    if helper is None:
         return None
     try:
         for kernel, arguments in own:
@@ -131,14 +144,39 @@ def start(scene, busy: float | None = None) -> subprocess.Popen | None:
     return helper
 
 
+def launch(jobs: list[tuple], fluid: tuple | None) -> subprocess.Popen | None:
+    """The helper process, given the (module, attribute, signature) of its DEM kernels and the
+    (function, arguments, threads) of a fluid rehearsal; stopped when this process ends. None
+    where it cannot start."""
+    try:
+        # the helper imports this very package, wherever this process found it
+        found = str(Path(__file__).resolve().parents[1])
+        path = os.pathsep.join(filter(None, (found, os.environ.get("PYTHONPATH"))))
+        helper = subprocess.Popen(
+            [sys.executable, "-m", "sphere_cli.compile_ahead"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            env={**os.environ, "PYTHONPATH": path},
+        )
+        atexit.register(stop, helper)
+        helper.stdin.write(pickle.dumps((jobs, fluid)))
+        helper.stdin.close()
+    except OSError:
+        return None
+    return helper
+
+
 def finish(helper: subprocess.Popen | None) -> None:
-    """Wait for the helper (or stop it after WAIT_SECONDS: the run then compiles the rest)."""
+    """Wait until the helper has compiled the DEM kernels (its line on stdout, or its end), or
+    stop it after WAIT_SECONDS (the run then compiles the rest). A fluid rehearsal goes on."""
     if helper is None:
         return
-    try:
-        helper.wait(timeout=WAIT_SECONDS)
-    except subprocess.TimeoutExpired:
+    ready, _, _ = select.select([helper.stdout], [], [], WAIT_SECONDS)
+    if not ready:
         stop(helper)
+        return
+    helper.stdout.read(len(DONE))  # the line, or nothing where the helper has ended
 
 
 def stop(helper: subprocess.Popen | None) -> None:
@@ -147,13 +185,24 @@ def stop(helper: subprocess.Popen | None) -> None:
     if helper is not None:
         helper.kill()
         helper.wait()
+        if helper.stdout is not None:
+            helper.stdout.close()
 
 
 def main() -> int:
-    """The helper: compile each (module, attribute, signature) read from stdin (pickled)."""
-    jobs = pickle.load(sys.stdin.buffer)
+    """The helper: compile each (module, attribute, signature) read from stdin (pickled), say
+    so on stdout, then take the fluid grid's rehearsal, if any, on its threads."""
+    jobs, fluid = pickle.load(sys.stdin.buffer)
     for module, name, signature in jobs:
         getattr(importlib.import_module(module), name).compile(signature)
+    sys.stdout.buffer.write(DONE)
+    sys.stdout.buffer.flush()
+    if fluid is not None:
+        import numba
+
+        function, arguments, threads = fluid
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        function(*arguments)
     return 0
 
 

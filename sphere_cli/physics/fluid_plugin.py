@@ -104,6 +104,14 @@ class FluidModule(Module):
         """A context in which its parallel kernels run on its own step's threads."""
         return threads_set_to(self.step_threads)
 
+    def grid_step_rehearsal(self) -> tuple | None:
+        """(one kernel of its grid's own step, a module-level function, its arguments): the call
+        takes one step of a copy of the grid alone, without the particles, so that the compile
+        helper (sphere_cli/compile_ahead.py) compiles the grid step's kernels into the cache while
+        the run compiles the rest; the kernel tells whether the cache holds them already. None:
+        nothing to rehearse."""
+        return None
+
     def start(self, state) -> None:
         """Called once state.clock.dt is known, for a new run and a resumed one alike: sets
         coupling_steps, the DEM steps between two fluid steps (start_coupling)."""

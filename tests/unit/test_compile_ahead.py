@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numba
 import pytest
@@ -19,6 +20,8 @@ from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.errors import SphereError
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
 @pytest.mark.parametrize("n", [64, 256])  # the serial twins below 200 particles on one thread
@@ -85,6 +88,7 @@ compile_ahead.start = lambda scene: started.append(start(scene)) or started[-1]
 scene = build_scene(parse_case(canonical_case(256)))
 advance(scene, 5)
 helper = started[0]
+helper is None or helper.wait(timeout=60)  # a dry scene's helper ends with its DEM kernels
 def counts(jobs, what):
     return {k.py_func.__name__: sum(getattr(k.stats, what).values()) for k, _ in jobs}
 print(json.dumps({
@@ -102,7 +106,7 @@ def test_a_cold_run_loads_what_its_helper_compiled(tmp_path):
     done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads(done.stdout.strip().splitlines()[-1])
-    assert report["started"] and report["helper_exit"] == 0
+    assert report["started"] and report["helper_exit"] == 0, report
     # each of the helper's kernels came from the cache here, the pair sweep was compiled here
     assert set(report["loaded"]) == {"build_lists", "kick_drift", "kick", "wall_forces"}
     assert all(hits == 1 for hits in report["loaded"].values()), report
@@ -135,3 +139,116 @@ model = "linear"
 normal_stiffness = 1.0e5
 restitution = 0.5
 """
+
+
+# a fluid's grid step rehearsed in this process (FluidModule.grid_step_rehearsal, as the helper
+# takes it), then the run's own first fluid steps: which kernels of the grid's step they call
+# with a signature the rehearsal did not compile (the cache is warm here, so each process loads
+# rather than compiles; the signatures are what matters)
+REHEARSED = """
+import json, sys
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+from sphere_cli import compile_ahead
+from sphere_cli.config.load import parse_case
+from sphere_cli.runtime import threads_set_to
+from sphere_cli.scene.builder import build_scene
+from sphere_cli.simulation import advance
+
+GRID_STEP = ("navier_stokes", "poisson", "pore_pressure")
+compile_ahead.start = lambda scene: None
+
+def signatures():
+    found = set()
+    for name, module in list(sys.modules.items()):
+        if name.startswith("sphere_cli.kernels.fluid.") and name.rsplit(".", 1)[1] in GRID_STEP:
+            for attribute, value in vars(module).items():
+                if isinstance(value, Dispatcher):
+                    found |= {(name, attribute, str(s)) for s in value.signatures}
+    return found
+
+report = []
+for text in json.loads(sys.stdin.read()):
+    scene = build_scene(parse_case(text))
+    kernel, function, arguments, threads = compile_ahead.fluid_rehearsal(scene)
+    spacing = scene.fluid.grid().spacing.copy()
+    before = signatures()
+    with threads_set_to(threads):
+        function(*arguments)
+    rehearsed = signatures()
+    unchanged = bool(np.array_equal(spacing, scene.fluid.grid().spacing))
+    advance(scene, 2 * scene.fluid.coupling_steps + 1)
+    missed = sorted(map(list, signatures() - rehearsed))
+    report.append({"compiled": len(rehearsed - before), "missed": missed, "grid_unchanged": unchanged,
+                   "kernel": kernel.py_func.__name__})
+print(json.dumps(report))
+"""
+
+
+def _with_top_wall(text: str, cells: str) -> str:
+    """The case with a top wall coming down slowly and the fluid grid following it."""
+    wall = '[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = 0.01\n'
+    assert text.count("[fluid]\n") == 1 and text.count(cells) == 1
+    grid = cells.replace("] }", "], follow_top_wall = true }")
+    return text.replace("[fluid]\n", wall + "[fluid]\n").replace(cells, grid)
+
+
+@pytest.mark.parametrize(
+    ("config", "cells"),
+    [
+        ("fluid-settling.toml", "grid = { cells = [5, 5, 10] }"),
+        ("seepage-pulses-darcy.toml", "grid = { cells = [4, 4, 12] }"),
+    ],
+)
+def test_the_fluid_grid_rehearsal_compiles_what_its_step_calls(config, cells):
+    """What the helper compiles for a fluid (its grid's step alone, without the particles) is every
+    kernel of the grid's step the run then calls, with the same signatures: on a fixed grid, then
+    (kernels of its own) on one following the top wall; and it leaves the run's grid alone."""
+    text = (CONFIGS / config).read_text()
+    cases = [text, _with_top_wall(text, cells)]
+    done = subprocess.run(
+        [sys.executable, "-c", REHEARSED],
+        input=json.dumps(cases),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    fixed, moving = json.loads(done.stdout.strip().splitlines()[-1])
+    assert fixed["compiled"] >= 5, fixed  # beyond the pressure gradient that the initial state takes
+    for report in (fixed, moving):
+        assert report["missed"] == [] and report["grid_unchanged"], report
+
+
+def test_the_run_goes_on_once_the_helper_has_its_dem_kernels():
+    """finish() returns at the helper's line, while a fluid's rehearsal goes on; a helper that
+    ends without one is not waited for either."""
+    line = "import sys, time; sys.stdout.buffer.write(b'.'); sys.stdout.flush(); time.sleep(120)"
+    for script in (line, "pass"):
+        helper = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE)
+        started = time.perf_counter()
+        compile_ahead.finish(helper)
+        assert time.perf_counter() - started < 30
+        if script == line:
+            assert helper.poll() is None
+        compile_ahead.stop(helper)
+        assert helper.poll() is not None
+
+
+# a helper launched with a fluid rehearsal that outlasts this process (a minute's sleep)
+OUTLIVED = """
+import time
+from sphere_cli import compile_ahead
+helper = compile_ahead.launch([], (time.sleep, (60.0,), 1))
+compile_ahead.finish(helper)
+print(helper.pid, helper.poll() is None)
+"""
+
+
+def test_a_helper_still_compiling_is_stopped_when_the_run_ends():
+    done = subprocess.run([sys.executable, "-c", OUTLIVED], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    pid, running = done.stdout.split()
+    assert running == "True"  # still rehearsing when the run's process ended
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(pid), 0)

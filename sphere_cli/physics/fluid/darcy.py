@@ -12,6 +12,7 @@ top) is pushed by the pore pressure under it (walls.fluid_force).
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import types
@@ -21,6 +22,7 @@ import numpy as np
 from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces, push_wall
+from ...kernels.fluid.pore_pressure import backward_euler_system
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .pore_pressure import PorePressure, fixed_pressure_cells
@@ -32,6 +34,18 @@ DENSEST_POROSITY = 0.26
 # fraction of the seepage force's relaxation time rho_s k (1 - phi) / mu a fluid step may take
 # (Darcy.fluid_step_limit)
 COUPLING_FRACTION = 0.2
+
+
+def rehearse_grid_step(
+    config: DarcyFluid, grid: FluidGrid, kozeny_carman: float | None, dt: float, moving: bool
+) -> None:
+    """One step of the pore pressure on a copy of `grid` alone (Darcy.grid_step_rehearsal), the
+    porosity changing a little so that the solve iterates; `moving`: with the mean source of a
+    grid following the top wall."""
+    pore = PorePressure(config, copy.deepcopy(grid), kozeny_carman)
+    s = pore.state
+    s.porosity_rate[...] = np.random.default_rng(0).uniform(-1e-9, 1e-9, s.porosity_rate.shape)
+    pore.advance(dt, dt, 0.0 if moving else None)
 
 
 class Darcy(FluidModule):
@@ -274,6 +288,10 @@ class Darcy(FluidModule):
         self.pore.update_gradient(state.clock.time)
         if self.pushes_wall:
             self.wall_stiffness = self._undrained_stiffness()
+
+    def grid_step_rehearsal(self) -> tuple:
+        arguments = (self.pore.config, self.pore.grid, self.pore.kc, self.fluid_dt, self.top_wall is not None)
+        return backward_euler_system, rehearse_grid_step, arguments
 
     def after_step(self, state) -> None:
         if self.stepped_on_ranks == state.clock.step:

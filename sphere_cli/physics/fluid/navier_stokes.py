@@ -437,6 +437,21 @@ class NavierStokesSolver:
         }
 
 
+def rehearse_grid_step(config: NavierStokesFluid, grid: FluidGrid, gravity, dt: float) -> None:
+    """One step of a copy of `grid` alone (NavierStokes.grid_step_rehearsal): the fluid at rest
+    under its hydrostatic pressure, stirred a little so that the pressure solve iterates, and
+    on a grid following the top wall stretched so that the moving grid's terms are taken."""
+    grid = copy.deepcopy(grid)
+    solver = NavierStokesSolver(config, grid, gravity)
+    fs = solver.allocate()
+    solver.initial_pressure(fs, 0.0)
+    fs.v_face += np.random.default_rng(0).uniform(-1e-9, 1e-9, fs.v_face.shape)
+    if solver.follows:
+        solver.resize(1.001 * solver.height)
+    solver.step(fs, 0.0, dt)
+    solver.first_unstable(fs, dt)
+
+
 class NavierStokes(FluidModule):
     """The porous Navier-Stokes fluid in the DEM loop: x/y periodic box, the grid of
     [fluid.grid], porosity from the particles, drag both ways (physics/fluid/drag.py).
@@ -704,6 +719,9 @@ class NavierStokes(FluidModule):
         """Which ranks' cells can reach each of the particles at pos (whole.near): their porosity
         sampling spheres, and the momentum exchange of the cell the particle is in."""
         return self.porosity.needed_by(pos, 0.5 * self.diameter)
+
+    def grid_step_rehearsal(self) -> tuple:
+        return predict, rehearse_grid_step, (self.config, self._grid, self.solver.gravity, self.fluid_dt)
 
     def after_step(self, state) -> None:
         if self.stepped_on_ranks == state.clock.step:
