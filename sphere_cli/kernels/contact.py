@@ -36,8 +36,8 @@ contacts is the other's mass, `reduced`); mass (N,) [kg] for m g; material (N,) 
 into the table; nbr (N,C) int32 half rows, nbr_count (N,); start (N+1,) int64 row starts and
 hist (>= P,3) [m] the packed springs (pair (i, nbr[i, k]) at start[i] + k); rev (N,R) int32
 reverse slots, rev_count (N,) (kernels/neighbors.py); pair_row, pair_partner (>= P,) int32 the
-listed pairs in that order (pack_pairs); warm: whether to load each listed pair's partner ahead
-(touching_pairs); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
+listed pairs in that order (pack_pairs); warm: whether to prefetch the listed pairs' partners
+ahead (touching_pairs); bounds (T+1,) int64 chunk boundaries (chunk c: bounds[c] <= i <
 bounds[c+1]); table (M,M,6) per pair of materials, the columns K_N, K_T, D_N, D_T, MU, MU_R of
 kernels/laws.py; law: the law code (kernels/laws.py), rolling: the rolling-resistance flag;
 body_acc (3,) [m/s^2] (gravity); length (3,) [m], periodic (3,) uint8; spring_dt [s] (the
@@ -67,7 +67,7 @@ from .laws import (
     contact_response,
     reduced,
 )
-from .layout import U1, U2, U3, flat
+from .layout import U1, U2, U3, flat, prefetch
 from .neighbors import minimum_image
 from .serial import serial_twin
 
@@ -90,10 +90,14 @@ B_ROW = 28  # B_ROW + column (K_N ... MU_R)
 # outputs: force on i, n x F_t, rolling torque on i
 B_E0, B_E1, B_E2, B_C0, B_C1, B_C2, B_M0, B_M1, B_M2 = 34, 35, 36, 37, 38, 39, 40, 41, 42
 # the separations of a piece of BLOCK listed pairs being swept, by their place in the piece
-# (touching_pairs): d and |d|^2; B_WARM: a sum of the partner's velocities, kept only so that
-# their loads are made there
-B_X0, B_X1, B_X2, B_XD2, B_WARM = 43, 44, 45, 46, 47
-FIELDS = 48
+# (touching_pairs): d and |d|^2
+B_X0, B_X1, B_X2, B_XD2 = 43, 44, 45, 46
+FIELDS = 47
+# how many listed pairs ahead of the one being measured the sweep prefetches a partner's lines
+# where asked (touching_pairs): about 46 rows of the settled bed, a few microseconds of the sweep
+# against the hundred nanoseconds of a miss to memory (64 ahead saved less in the measurements
+# of docs/performance.md, 320 and 640 as much)
+PREFETCH_AHEAD = 160
 # per contact, in a companion uint64 array: the row i, the partner j and its spring's index;
 # then the places of the touching pairs of the piece being swept (touching_pairs)
 ID_I, ID_J, ID_S, ID_K = 0, 1, 2, 3
@@ -325,12 +329,22 @@ def touching_pairs(
     spring of a pair of the chunk that does not touch is cleared where it is set (as separation
     does): through `bits`, the springs' bits, ANDed with a mask of ones or zeros rather than
     stored under a branch, which would be mispredicted as often as the pairs' test. `partner`:
-    the velocity arrays and inverse masses that gather reads of a partner, each loaded here for
-    every pair where `warm`: on a bed larger than the caches their misses then overlap, as a
-    sweep that branches on each pair's test gets them by speculation (without these loads the
-    settled 100 000 bed stepped about 10 % slower); on a bed inside the caches they only cost
-    (the 10 000 bed stepped about 4 % faster without them): physics/contact.py chooses."""
-    vel, angvel, vel_pred, angvel_pred, inv_mass = partner
+    the velocity arrays, inverse masses, forces and torques that gather and the flush read of a
+    partner (with pos and radius, read here). Where `warm`, the lines of the partners of the
+    piece PREFETCH_AHEAD listed pairs on are prefetched first: on a bed larger than the caches a
+    row's partners one layer of the bed ahead come from memory, and the hints overlap those
+    misses (the settled 100 000 bed on one thread stepped 1.13-1.22 x faster than with the
+    partners' velocities loaded in the loop below, as before); on a bed inside the caches they
+    only cost: physics/contact.py chooses."""
+    vel, angvel, vel_pred, angvel_pred, inv_mass, force, torque = partner
+    if warm:
+        for pair in range(first + PREFETCH_AHEAD, min(last + PREFETCH_AHEAD, pair_partner.shape[0])):
+            k = np.uint64(pair_partner[pair])
+            k3 = U3 * k
+            for array in (pos, vel, angvel, vel_pred, angvel_pred, force, torque):
+                prefetch(array, k3)
+            prefetch(inv_mass, k)
+            prefetch(radius, k)
     touching = np.uint64(0)
     for pair in range(first, last):
         p = np.uint64(pair - first)
@@ -347,8 +361,6 @@ def touching_pairs(
         to_block(buf, B_X1, p, d1)
         to_block(buf, B_X2, p, d2)
         to_block(buf, B_XD2, p, dist2)
-        if warm:
-            to_block(buf, B_WARM, p, vel[j3] + angvel[j3] + vel_pred[j3] + angvel_pred[j3] + inv_mass[j])
         apart = dist2 >= reach * reach
         inside = j < np.uint64(end)
         if hist.shape[0] > 0:
@@ -666,7 +678,7 @@ def chunk_pair_forces(
     force_rows, torque_rows = force, torque
     force, torque = flat(force), flat(torque)
     cap = nbr.shape[1]
-    partner = (vel, angvel, vel_pred, angvel_pred, inv_mass)
+    partner = (vel, angvel, vel_pred, angvel_pred, inv_mass, force, torque)
     rcap = rev.shape[1]
     single = table.shape[0] == 1
     box = box_axes(length, periodic)

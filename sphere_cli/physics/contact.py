@@ -68,8 +68,8 @@ def rows_across_chunks(nbr, nbr_count, bounds, pieces: int) -> tuple[np.ndarray,
 def beyond_cache(state: State) -> bool:
     """True if the arrays a step goes through (the particles', the neighbour list's and its
     springs) outgrow the processor's largest cache, so that each step reads them from memory:
-    the pair sweep then loads each listed pair's partner ahead (kernels/contact.py
-    touching_pairs), which only costs where they stay in the cache. The state of every
+    the pair sweep then prefetches the lines of the listed pairs' partners ahead (kernels/
+    contact.py touching_pairs), which only costs where they stay in the cache. The state of every
     particle this process holds is counted, not its share of the cache with other processes
     (ranks on one node)."""
     p, nl = state.particles, state.neighbors
@@ -103,7 +103,7 @@ class PairContactForces(Module):
         self.pair_partner = np.zeros(0, dtype=np.int32)
         self.pairs_of = None
         self.pairs_start = np.zeros(0, dtype=np.int64)
-        # whether the sweep loads its partners ahead (beyond_cache), and the list it was asked for
+        # whether the sweep prefetches its partners (beyond_cache), and the list it was asked for
         self.warm = False
         self.warm_of = None
         self.bounds = np.zeros(2, dtype=np.int64)

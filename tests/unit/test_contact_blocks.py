@@ -199,7 +199,7 @@ def _reference(state, table, code: int, rolling: bool, spring_dt: float, step_dt
 
 def _kernels(scene, bounds: np.ndarray, spring_dt: float, warm: bool = False):
     """(force, torque, springs) of the block kernels with the particles cut at `bounds`, the
-    partners loaded ahead or not (`warm`)."""
+    partners prefetched or not (`warm`)."""
     state, contact = scene.state, scene.contact
     p, box, nl = state.particles, state.box, state.neighbors
     chunks = bounds.size - 1
@@ -267,7 +267,7 @@ def test_blocks_reproduce_a_contact_by_contact_sweep_bitwise(scene, spring_dt):
     n = state.particles.count
     # one chunk; cuts inside the shell, where the rows wait for pairs across chunks, and many
     for bounds in ([0, n], [0, 120, n], [0, 1, 300, 301, 700, n], list(np.linspace(0, n, 12).astype(int))):
-        for warm in (False, True):  # the partners loaded ahead or not: the same operations
+        for warm in (False, True):  # the partners prefetched or not: the same operations
             got = _kernels(scene, np.array(bounds, dtype=np.int64), spring_dt, warm)
             for name, a, b in zip(("force", "torque", "springs"), got, expected, strict=True):
                 assert np.array_equal(a, b), f"{name} differs with chunks cut at {bounds}, warm {warm}"
