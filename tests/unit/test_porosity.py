@@ -234,6 +234,30 @@ def test_results_do_not_depend_on_the_thread_count_and_no_solid_is_counted_twice
     assert 0.0 < sampled <= np.sum(sphere_volume(p.radius))
 
 
+def test_one_thread_bins_the_particles_without_a_parallel_region(monkeypatch):
+    """physics/fluid/porosity.py bin_in_cells: on one thread the serial twin of bin_particles
+    (kernels/serial.py) bins the particles, the parallel kernel on more; the same cells."""
+    from sphere_cli.physics.fluid import porosity as module
+
+    grid, p = random_bed(np.random.default_rng(3))
+    cells = {}
+    for threads in (1, 2):
+        numba.set_num_threads(threads)
+        cells[threads] = particle_cells(grid, p.pos, np.zeros(p.pos.shape[0], dtype=np.int64))
+
+    def parallel(*arguments):
+        raise AssertionError("the parallel kernel was called")
+
+    monkeypatch.setattr(module, "bin_particles", parallel)
+    numba.set_num_threads(1)
+    Porosity(grid, p.pos.shape[0]).measure(p, np.zeros(grid.shape))
+    assert np.array_equal(cells[1], cells[2])
+    if numba.config.NUMBA_NUM_THREADS > 1:
+        numba.set_num_threads(2)
+        with pytest.raises(AssertionError, match="parallel kernel"):
+            particle_cells(grid, p.pos, np.zeros(p.pos.shape[0], dtype=np.int64))
+
+
 def test_overlapping_particles_clamp_at_zero_and_are_counted(caplog):
     grid = make_grid((2, 2, 2), 0.004)
     centre = [0.002, 0.002, 0.002]

@@ -41,12 +41,12 @@ from ...kernels.fluid.drag import (
     particle_drag,
     particle_drag_serial,
 )
-from ...kernels.fluid.porosity import bin_particles, bin_particles_serial
 from ...kernels.neighbors import counting_sort
 from ...kernels.serial import use_serial
 from ...state import State
 from ..fluid_plugin import GpuSteps
 from .poisson import Slabs
+from .porosity import bin_in_cells
 from .self_induced import MODES, lattice_modes
 
 LAWS = {"gidaspow": GIDASPOW, "di-felice": DI_FELICE}
@@ -142,7 +142,7 @@ class FluidParticleDrag:
         """Add the fluid forces to state.particles.force (spring_dt = 0: the initial state's). On
         one thread the kernels' serial twins (kernels/serial.py), as in the compiled steps."""
         serial = use_serial()
-        (bin_particles_serial if serial else bin_particles)(*self._binning(state))
+        bin_in_cells(*self._binning(state))
         drag = particle_drag_serial if serial else particle_drag
         below = drag(*self._drag_arguments(state, fs, spring_dt == 0.0))
         if below:
@@ -374,7 +374,7 @@ class FluidParticleDrag:
         cells = np.empty((len(offsets), ref.shape[0]), dtype=np.int64)
         shifted = np.empty_like(ref)
         for row, offset in zip(cells, offsets, strict=True):
-            bin_particles(ref + offset, self.origin, self.spacing, self.cells, self.periodic, row, shifted)
+            bin_in_cells(ref + offset, self.origin, self.spacing, self.cells, self.periodic, row, shifted)
         return cells
 
     def _follow_grid(self, dt: float) -> None:
@@ -447,7 +447,7 @@ class FluidParticleDrag:
         """The volume of the particles centred in each cell, and the shares, before the first
         fluid step (fluid_forcing keeps them afterwards)."""
         p = state.particles
-        bin_particles(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
+        bin_in_cells(p.pos, self.origin, self.spacing, self.cells, self.periodic, self.cell_of, self.wrapped)
         volume = math.pi / 6.0 * (2.0 * p.radius) ** 3
         self.solid[:] = np.bincount(self.cell_of, weights=volume, minlength=self.solid.size)
         self._share(phi.reshape(-1))

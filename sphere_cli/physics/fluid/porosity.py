@@ -23,8 +23,9 @@ import logging
 
 import numpy as np
 
-from ...kernels.fluid.porosity import bin_particles, sample_cells
+from ...kernels.fluid.porosity import bin_particles, bin_particles_serial, sample_cells
 from ...kernels.neighbors import counting_sort
+from ...kernels.serial import use_serial
 from .grid import FluidGrid
 from .poisson import Slabs
 
@@ -68,7 +69,7 @@ class Porosity:
         # (a rank of a split run may pass fewer particles than the scene's: those its cells reach)
         n = pos.shape[0]
         cell_of, wrapped, order = self.cell_of[:n], self.wrapped[:n], self.order[:n]
-        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, cell_of, wrapped)
+        bin_in_cells(pos, self.origin, self.spacing, self.shape, self.periodic, cell_of, wrapped)
         counting_sort(cell_of, self.cell_start.size - 1, self.cell_start, order)
         want, vbar, dbar, largest = self._sampled(radius, mean_velocity, mean_diameter, largest)
         plane = int(self.shape[1] * self.shape[2])
@@ -144,7 +145,7 @@ class Porosity:
         a grid following the top wall changes), holds the particle's bin. Whole bins are taken,
         so a rank gets every particle of each bin its cells visit."""
         bins = np.empty(pos.shape[0], dtype=np.int64)
-        bin_particles(pos, self.origin, self.spacing, self.shape, self.periodic, bins, np.empty_like(pos))
+        bin_in_cells(pos, self.origin, self.spacing, self.shape, self.periodic, bins, np.empty_like(pos))
         nx = int(self.shape[0])
         x = bins // int(self.shape[1] * self.shape[2])
         reach = int(np.floor(0.5 + (0.5 * min(self.spacing[0], self.spacing[1]) + largest) / self.spacing[0]))
@@ -183,10 +184,17 @@ class Porosity:
         return array
 
 
+def bin_in_cells(pos, origin, spacing, shape, periodic, cell_of, wrapped) -> None:
+    """kernels/fluid/porosity.py bin_particles, or on one thread its serial twin
+    (kernels/serial.py): the same cells, without a parallel region."""
+    kernel = bin_particles_serial if use_serial() else bin_particles
+    kernel(pos, origin, spacing, shape, periodic, cell_of, wrapped)
+
+
 def particle_cells(grid: FluidGrid, pos: np.ndarray, out: np.ndarray) -> np.ndarray:
     """out (N,) int64: the flat cell index (i*ny + j)*nz + k of each particle centre (periodic
     axes wrapped, others clamped to the grid); the same cells Porosity.cell_of holds."""
-    bin_particles(
+    bin_in_cells(
         pos,
         np.asarray(grid.origin, dtype=np.float64),
         np.asarray(grid.spacing, dtype=np.float64),
