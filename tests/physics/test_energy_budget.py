@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sphere_cli.api import run_in_memory
@@ -140,3 +141,62 @@ def test_the_terms_are_the_particles_shares_summed_in_order():
     older.budget.restore(older.state, {"totals": totals, "reference": reference})
     assert not older.budget.booked.any()
     assert [_budget(older)[name] for name in terms] == list(totals)
+
+
+# one sphere sliding on a rough floor (x+ wall for a second wall out of reach), launched upwards
+JUMP = """
+[simulation]
+duration = 1.0
+
+[domain]
+upper = [0.01, 0.01, 0.01]
+
+[particles]
+density = 2500.0
+radius = { distribution = "fixed", value = 0.001 }
+placement = { method = "file", path = "one.csv" }
+velocity = [0.05, 0.0, 0.0]
+
+[contact]
+model = "linear"
+normal_stiffness = 1.0e4
+restitution = 0.5
+friction = 0.5
+
+[[walls]]
+face = "z-"
+[[walls]]
+face = "x+"
+
+[output.observables]
+quantities = ["energy_budget"]
+"""
+
+
+def test_a_spring_parting_by_a_jump_beyond_reach_is_booked(tmp_path, monkeypatch):
+    """The budget books each particle's walls from the near-wall list's mask (physics/walls.py
+    walls_to_book), skipping walls that neither touch it nor hold its spring. A particle that
+    leaves a wall's reach in one step (more than the neighbour skin) has its spring cleared when
+    the list is made, after the budget kept the last step's springs: its parting spring must
+    still be booked, bitwise as booking every wall does."""
+    from sphere_cli.config.load import load_case
+    from sphere_cli.physics.walls import PlaneWallForces
+    from sphere_cli.scene.builder import build_scene
+
+    (tmp_path / "one.csv").write_text("x,y,z\n0.005,0.005,0.00099999\n")  # at rest: m g / k_n = 1e-8 m
+    (tmp_path / "case.toml").write_text(JUMP)
+
+    def jump():
+        scene = build_scene(load_case(tmp_path / "case.toml"))
+        advance(scene, 50)  # sliding: the floor holds a spring
+        assert np.any(scene.state.walls.hist[0, 0] != 0.0)
+        scene.state.particles.vel[0, 2] = 0.3 * 0.001 / scene.state.clock.dt  # 0.3 R a step up
+        advance(scene, 3)
+        assert not scene.state.walls.hist[0].any()  # out of reach: its springs cleared
+        return scene.budget.booked.copy(), scene.walls.walls_to_book().copy()
+
+    masked, mask = jump()
+    assert mask.tolist() == [0]  # the walls are skipped for the particle now
+    monkeypatch.setattr(PlaneWallForces, "walls_to_book", lambda self: np.zeros(0, dtype=np.uint64))
+    every, _ = jump()  # no mask: every wall booked for every particle
+    assert np.array_equal(masked.view(np.uint64), every.view(np.uint64))

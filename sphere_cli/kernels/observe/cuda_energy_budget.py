@@ -7,15 +7,18 @@ order: bitwise under Numba's CUDA simulator, to the GPU's FMA round-off on a dev
 
 Arrays as in energy_budget.py; nbr, count (N,F), (N,) the full rows; hist (N,F,3) the springs
 of the last step [m] (read when pair_springs); wall_hist (N,W,3) the wall springs of the last
-step [m] (read when wall_springs); no_spring (3,) zeros.
+step [m] (read when wall_springs); no_spring (3,) zeros. Every wall is booked for every
+particle (the device keeps no near-wall list).
 """
 
+import numpy as np
 from numba import cuda
 
 from ..cuda_dem import for_gpu
 from . import energy_budget as on_processor
 
 book_particle = for_gpu(on_processor.book_particle)
+EVERY_WALL = np.uint64(0xFFFFFFFFFFFFFFFF)  # book_particle's mask of the walls to book
 
 
 @cuda.jit
@@ -38,5 +41,5 @@ def book(
         springs = hist[i] if pair_springs else hist[0]  # (a (1,1,3) placeholder without friction)
         book_particle(
             i, i, nbr[i], count[i], springs, pair_springs, particles, wall_arrays, table, law, rolling,
-            body_acc, length, periodic, dt, scratch, booked, no_spring,
+            body_acc, length, periodic, dt, scratch, booked, no_spring, EVERY_WALL,
         )  # fmt: skip

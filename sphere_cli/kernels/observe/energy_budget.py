@@ -45,6 +45,7 @@ booked them (each particle's share is booked where it is owned, its row as one r
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from ..contact_probe import pair_normal, pair_slip, wall_normal, wall_slip
@@ -186,9 +187,13 @@ def accumulate_budget(
     scratch,
     booked,
     no_spring,
+    walls_to_book,
 ):
     """Add one step's work and dissipation to each particle's share (see the module docstring).
-    no_spring (3,) zeros: the spring of every contact when none has friction (read only)."""
+    no_spring (3,) zeros: the spring of every contact when none has friction (read only);
+    walls_to_book (N,) uint64: the bit mask of the walls to book for each particle (physics/
+    walls.py walls_to_book); the others neither touch it nor hold a spring of it, now or at the
+    last step, so they would add zeros."""
     cap = nbr.shape[1]
     pair_springs = hist.shape[0] > 0
     wall_springs = wall_hist.shape[0] > 0
@@ -203,21 +208,21 @@ def accumulate_budget(
         )  # fmt: skip
         book_particle(
             i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, wall_arrays,
-            table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring,
+            table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring, walls_to_book[i],
         )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
 def book_particle(
     i, lowest, partners, count, row_springs, pair_springs, particles, wall_arrays, table, law, rolling,
-    body_acc, length, periodic, dt, scratch, booked, no_spring,
+    body_acc, length, periodic, dt, scratch, booked, no_spring, to_book,
 ):  # fmt: skip
     """Particle i's share of one step: partners[:count] its listed partners (those below `lowest`
     left out: the GPU's full rows), row_springs[k] the spring of partner k at the last step
     (read when pair_springs); `particles` and `wall_arrays` the arrays of accumulate_budget (the
     arguments of one call stay under the 30 that CPython passes one by one, which Numba's
     inlining needs), wall_hist[i, w] a wall spring (read when wall_springs); no_spring a (3,)
-    zero."""
+    zero; to_book: the bit mask of the walls to book (all ones: every wall)."""
     pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel = particles[:7]
     radius, mass, inertia, inv_mass, inv_inertia, material = particles[7:]
     wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel = wall_arrays[:6]
@@ -317,6 +322,8 @@ def book_particle(
     for w in range(wall_axis.shape[0]):
         if driven:
             break  # walls neither touch nor push driven particles
+        if not (to_book >> np.uint64(w)) & np.uint64(1):
+            continue  # neither touching nor holding a spring, now or at the last step: zeros
         row = wall_table[w, 0] if wall_single else wall_table[w, material[i]]
         touching, n0, n1, n2, delta = wall_normal(pos, radius, i, w, wall_axis, wall_sign, wall_coord)
         if not touching:

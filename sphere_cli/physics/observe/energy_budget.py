@@ -63,6 +63,7 @@ class EnergyBudget(Module):
         self.reference = np.zeros(1)
         self.scratch = np.zeros((n, 2, 3))
         self.no_spring = np.zeros(3)  # the spring of every contact when none has friction
+        self.every_wall = np.zeros(0, dtype=np.uint64)  # every wall to book, for each particle
         self.vel_half = np.zeros((n, 3))
         self.angvel_half = np.zeros((n, 3))
         self.hist = np.zeros_like(state.neighbors.hist)
@@ -149,7 +150,19 @@ class EnergyBudget(Module):
             p.mass, p.inertia, p.inv_mass, p.inv_inertia, p.material, nl.nbr, nl.nbr_count, nl.start,
             self.hist, contact.table, contact.law_code, contact.rolling, box.body_acc, box.length,
             box.periodic, *walls, self.wall_hist, state.clock.dt, self.scratch, self.booked, self.no_spring,
+            self._walls_to_book(p.count),
         )  # fmt: skip
+
+    def _walls_to_book(self, n: int) -> np.ndarray:
+        """The walls to book for each particle (physics/walls.py walls_to_book, made with the
+        near-wall list of this step's forces), or every wall where there is none yet."""
+        walls = self.scene.walls
+        mask = None if walls is None else walls.walls_to_book()
+        if mask is None or mask.shape[0] != n:
+            if self.every_wall.shape[0] != n:
+                self.every_wall = np.full(n, np.iinfo(np.uint64).max, dtype=np.uint64)
+            return self.every_wall
+        return mask
 
     def observables(self, state: State) -> dict[str, tuple[float, str]]:
         budget_totals(self.booked, self.totals)
