@@ -298,13 +298,13 @@ def wall_forces(
 
 @njit(cache=True)
 def near_walls(
-    pos, radius, inv_mass, wall_axis, wall_sign, wall_coord, margin, springs, wall_hist, near, reach, booked
+    pos, radius, inv_mass, wall_axis, wall_sign, wall_coord, margin, springs, wall_hist, near, reach, to_book
 ):
     """List in `near` the particles that move by forces and lie within their radius + margin
     of some wall, and in `reach` (uint64) the bit mask of those walls; return how many. A wall
     left out cannot touch the particle until it, or the wall, has moved margin/2 (the caller
     rebuilds the list before that); its spring is cleared here (a particle that jumped away
-    within one step keeps none). booked (N,) uint64: for every particle, the walls in reach and
+    within one step keeps none). to_book (N,) uint64: for every particle, the walls in reach and
     those whose spring was cleared here (the energy budget books a parting spring from its copy
     of the last step's, physics/observe/energy_budget.py)."""
     count = 0
@@ -320,7 +320,7 @@ def near_walls(
             reach[count] = close
             count += 1
         far = springs[i] & ~close
-        booked[i] = close | far
+        to_book[i] = close | far
         if far != 0:
             springs[i] &= close
             # the springs of the walls out of reach are gone (none without friction)

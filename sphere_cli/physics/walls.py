@@ -174,7 +174,7 @@ class PlaneWallForces(Module):
         self._near = np.zeros(0, dtype=np.int64)
         self._reach = np.zeros(0, dtype=np.uint64)  # per listed particle, the walls it can touch
         # per particle, those and the walls whose springs the list's making cleared
-        self._booked = np.zeros(0, dtype=np.uint64)
+        self._to_book = np.zeros(0, dtype=np.uint64)
         self._near_count = 0
         self._near_build = -1
         self._near_coord = None
@@ -188,7 +188,7 @@ class PlaneWallForces(Module):
         """The arrays this module keeps besides the state (memory accounting)."""
         return [
             a
-            for a in (self._near, self._reach, self._booked, self._springs, self._blocks, self._block_ids)
+            for a in (self._near, self._reach, self._to_book, self._springs, self._blocks, self._block_ids)
             if a is not None
         ]
 
@@ -220,7 +220,7 @@ class PlaneWallForces(Module):
             if self._near.shape[0] != p.count:
                 self._near = np.zeros(p.count, dtype=np.int64)
                 self._reach = np.zeros(p.count, dtype=np.uint64)
-                self._booked = np.zeros(p.count, dtype=np.uint64)
+                self._to_book = np.zeros(p.count, dtype=np.uint64)
             self._near_count = near_walls(
                 p.pos,
                 p.radius,
@@ -233,7 +233,7 @@ class PlaneWallForces(Module):
                 w.hist,
                 self._near,
                 self._reach,
-                self._booked,
+                self._to_book,
             )
             self._near_build = nl.builds
             self._near_coord = w.coord.copy()
@@ -250,7 +250,7 @@ class PlaneWallForces(Module):
         it until the near-wall list is made again (kernels/walls.py near_walls: those it can
         touch, and those whose spring the list's making cleared); empty before the first forces.
         Any other wall neither touches it nor holds a spring of it, then or at the last step."""
-        return self._booked
+        return self._to_book
 
     def near_list_made_at(self, state: State) -> tuple[np.ndarray, float]:
         """The wall positions the near-wall list was made at, and how far [m] a wall may move
