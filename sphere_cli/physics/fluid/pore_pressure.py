@@ -196,7 +196,7 @@ class PorePressure:
         if self.explicit:
             self.solver.explicit_step(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
             s.iterations, s.residual = 0, 0.0
-            self.update_gradient(time)
+            self.update_gradient(time, faces_cut=self.has_fixed)
             return PoissonResult(0, 0.0, True)
         result = self.solver.solve(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
         s.iterations, s.residual = result.iterations, result.residual
@@ -206,15 +206,16 @@ class PorePressure:
                 f"{result.iterations} iterations (fluid.solver.tolerance = {c.solver.tolerance:g}, "
                 f"max_iterations = {c.solver.max_iterations})"
             )
-        self.update_gradient(time)
+        self.update_gradient(time, faces_cut=self.has_fixed)
         return result
 
     def boundary_values(self, time: float) -> tuple[float, float]:
         return boundary_pressure(self.config.bottom, time), boundary_pressure(self.config.top, time)
 
-    def update_gradient(self, time: float) -> None:
+    def update_gradient(self, time: float, faces_cut: bool = True) -> None:
         """grad p and the Darcy velocity from the current pressure and permeability (boundary
-        values at `time`)."""
+        values at `time`). faces_cut: False where the face arrays already hold the means of the
+        current permeability (`advance` without fixed cells: nothing has written them since)."""
         s = self.state
         bottom, top = self.boundary_values(time)
         pressure_gradient(
@@ -222,8 +223,8 @@ class PorePressure:
             bottom, top, s.gradient,
         )  # fmt: skip
         ax, ay, az = s.faces
-        # the faces again, uncut: a fixed cell exchanges fluid with its neighbours
-        face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        if faces_cut:  # the faces again, uncut: a fixed cell exchanges fluid with its neighbours
+            face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
         darcy_velocity(
             s.pressure, ax, ay, az, self.ih, self.periodic, np.uint8(self.bottom_dirichlet),
             np.uint8(self.top_dirichlet), bottom, top, s.porosity_used, self.config.viscosity, s.velocity,
