@@ -28,8 +28,9 @@ rank_drag_steps), sends each ghost's other forces with its force and torque, and
 self-induced velocity subtracted, the (cell, drag coefficient) rows its cells' sums take from
 other ranks, with send_ghost_forces below (rank_cell_coefficients there).
 
-mpi: (allreduce, irecv, isend, waitall, clock_gettime, the communicator, MPI_DOUBLE, MPI_MAX,
-the monotonic clock's id, MPI_INT64_T, MPI_SUM); mail (rank_calls.ghost_mail): the
+mpi: (the addresses of MPI_Allreduce, MPI_Irecv, MPI_Isend, MPI_Waitall and clock_gettime, called
+by kernels/c_calls.py call_c; the communicator, MPI_DOUBLE, MPI_MAX, the monotonic clock's id,
+MPI_INT64_T, MPI_SUM); mail (rank_calls.ghost_mail): the
 ranks sent to and their rows (a rank m's are local[start[m]:start[m + 1]], its box the same rows
 of `out`), the same for the ranks received from, the requests and statuses of one step's
 messages; clock (2,) int64 scratch.
@@ -38,6 +39,7 @@ messages; clock (2,) int64 scratch.
 import numpy as np
 from numba import njit
 
+from .c_calls import call_c
 from .motion import kick, kick_drift, kick_drift_serial, kick_serial
 from .neighbors import rows_in, rows_out
 from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
@@ -62,14 +64,14 @@ TAG = 1
 @njit(cache=True)
 def seconds(mpi, clock):
     """The monotonic clock [s] (for the measured work of rank_balance = "time")."""
-    mpi[4](mpi[8], clock.ctypes.data)
+    call_c(mpi[4], (mpi[8], clock.ctypes.data))
     return clock[0] + 1e-9 * clock[1]
 
 
 @njit(cache=True)
 def largest_everywhere(mpi, mine, largest):
     """Allreduce MAX of mine (1,) into largest (1,); returns MPI's error code."""
-    return mpi[0](mine.ctypes.data, largest.ctypes.data, np.int32(1), mpi[6], mpi[7], mpi[5])
+    return call_c(mpi[0], (mine.ctypes.data, largest.ctypes.data, np.int32(1), mpi[6], mpi[7], mpi[5]))
 
 
 @njit(cache=True)
@@ -101,7 +103,9 @@ def rank_drift(motion, drift, mpi, mine, largest, threshold2):
 @njit(cache=True)
 def _post(call, box, rank, mpi, request):
     """MPI_Irecv or MPI_Isend (call) of the doubles of box from or to rank, into request[0]."""
-    return call(box.ctypes.data, np.int32(box.size), mpi[6], rank, np.int32(TAG), mpi[5], request.ctypes.data)
+    return call_c(
+        call, (box.ctypes.data, np.int32(box.size), mpi[6], rank, np.int32(TAG), mpi[5], request.ctypes.data)
+    )
 
 
 @njit(cache=True)
@@ -131,7 +135,7 @@ def send_ghost_forces(force, torque, other, mpi, mail):
         if code != 0:
             return code
         messages += 1
-    code = mpi[3](np.int32(messages), requests.ctypes.data, statuses.ctypes.data)
+    code = call_c(mpi[3], (np.int32(messages), requests.ctypes.data, statuses.ctypes.data))
     if code != 0:
         return code
     for m in range(come.shape[0]):
@@ -162,7 +166,9 @@ def rank_wall_totals(
     the exact sums (own_wall_sums) added over the ranks (MPI_Allreduce, MPI_SUM of int64: exact,
     so in any order) into summed, then rounded. Returns MPI's error code."""
     own_wall_sums(own, pforce, record, glued, glued_wall, force, mass, body_acc, sums)
-    code = mpi[0](sums.ctypes.data, summed.ctypes.data, np.int32(sums.size), mpi[9], mpi[10], mpi[5])
+    code = call_c(
+        mpi[0], (sums.ctypes.data, summed.ctypes.data, np.int32(sums.size), mpi[9], mpi[10], mpi[5])
+    )
     if code != 0:
         return code
     finish_wall_totals(summed, record, fluid_force, wall_force)

@@ -1,9 +1,8 @@
 """The MPI functions a compiled rank loop calls (kernels/rank_messages.py), as addresses.
 
-Numba calls a C function through an object that gives its address and signature
-(numba.types.WrapperAddressProtocol): typed by its signature alone, the loop that takes it as an
-argument is cached like any kernel. The functions are the MPI library's that mpi4py loaded (the
-library mpiexec's ranks use: the mpich wheel, or a cluster's MPI); a handle (communicator,
+The functions are the MPI library's that mpi4py loaded (the library mpiexec's ranks use: the
+mpich wheel, or a cluster's MPI), passed to the compiled loop as integers and called there by
+kernels/c_calls.py call_c, so the loop is cached like any kernel. A handle (communicator,
 datatype, operation, request) is an int in MPICH's ABI and a pointer in Open MPI's, so its type
 is read from mpi4py. The buffers are passed as addresses (uintp)."""
 
@@ -11,80 +10,76 @@ from __future__ import annotations
 
 import ctypes
 import time
-import warnings
 
-import numba
-import numba.experimental.function_type  # noqa: F401 - registers how such an object is passed and called
 import numpy as np
 from numba import types
+from numba.core.typing.typeof import Purpose, typeof
 from numba.extending import typeof_impl
-
-# a C function typed by its address is what Numba calls its first-class function type, which it
-# warns of as experimental when a loop taking one is compiled (typed and called as documented)
-warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
-
 
 FUNCTIONS = ("MPI_Allreduce", "MPI_Irecv", "MPI_Isend", "MPI_Waitall")
 
 
-class _CFunction(numba.types.WrapperAddressProtocol):
-    """A C function of a loaded library, by name, with its Numba signature."""
+class Calls(tuple):
+    """compiled_calls's tuple, typed once: Numba types a plain tuple element by element at every
+    call of a compiled function taking it from Python."""
 
-    def __init__(self, library, name: str, signature):
-        self._address = ctypes.cast(getattr(library, name), ctypes.c_void_p).value
-        self._signature = signature
-        self.numba_type = types.FunctionType(signature)
-
-    def __wrapper_address__(self) -> int:
-        return self._address
-
-    def signature(self):
-        return self._signature
+    def __new__(cls, values):
+        calls = super().__new__(cls, values)
+        calls.numba_type = types.Tuple([typeof(value, Purpose.argument) for value in calls])
+        return calls
 
 
-@typeof_impl.register(_CFunction)
-def _typeof_c_function(value: _CFunction, context) -> types.FunctionType:
-    """Its type made once: Numba's own typing of such an object makes it again at every call of
-    a compiled function taking it from Python (the rank loop's mpi tuple: 80 -> 42 us a call)."""
+@typeof_impl.register(Calls)
+def _typeof_calls(value: Calls, context) -> types.Tuple:
     return value.numba_type
 
 
+def _address(library, name: str) -> np.uintp:
+    return np.uintp(ctypes.cast(getattr(library, name), ctypes.c_void_p).value)
+
+
 def _handle(mpi, kind) -> tuple:
-    """(Numba type, NumPy type) of an MPI handle of this kind."""
-    if mpi._sizeof(kind) == ctypes.sizeof(ctypes.c_int):
-        return types.int32, np.int32
-    return types.intp, np.intp
+    """(Numba type, a function giving the C value of mpi4py's `handle`) of an MPI handle of this
+    kind. mpi4py gives a handle's bits as a Python int, sign-extended or not; MPICH's
+    communicators made by MPI_Comm_dup or MPI_Comm_split have the top bit of their int set, so
+    the value is the handle's low bits read as the signed C type."""
+    bits = 8 * mpi._sizeof(kind)
+    numba_type, numpy_type = (types.int32, np.int32) if bits == 32 else (types.intp, np.intp)
+
+    def value(handle: int):
+        handle &= (1 << bits) - 1
+        return numpy_type(handle - (1 << bits) if handle >> (bits - 1) else handle)
+
+    return numba_type, value
 
 
-def compiled_calls(world) -> tuple | None:
-    """(The `mpi` argument of kernels/rank_messages.py for the ranks' communicator world.comm,
-    the NumPy type of an MPI request: that of ghost_mail's requests), or None where the MPI
-    functions cannot be found through the library of mpi4py's module (an mpi4py that loads its
-    MPI privately): the ranks then step from Python, with mpi4py's messages."""
-    mpi = world.mpi
+def compiled_calls(mpi, comm) -> tuple | None:
+    """(The `mpi` argument of kernels/rank_messages.py for the mpi4py communicator comm (the
+    ranks' world.comm), the NumPy type of an MPI request: that of ghost_mail's
+    requests), or None where the MPI functions cannot be found through the library of mpi4py's
+    module `mpi` (an mpi4py that loads its MPI privately): the ranks then step from Python, with
+    mpi4py's messages."""
     try:
         library = ctypes.CDLL(mpi.__file__)
         for name in FUNCTIONS:
             getattr(library, name)
     except (OSError, AttributeError):
         return None
-    handle, value = _handle(mpi, mpi.Comm)
+    _, value = _handle(mpi, mpi.Comm)
     request, _ = _handle(mpi, mpi.Request)
-    i32, address = types.int32, types.uintp
-    message = i32(address, i32, handle, i32, i32, handle, address)  # MPI_Isend and MPI_Irecv
-    return (
-        _CFunction(library, "MPI_Allreduce", i32(address, address, i32, handle, handle, handle)),
-        _CFunction(library, "MPI_Irecv", message),
-        _CFunction(library, "MPI_Isend", message),
-        _CFunction(library, "MPI_Waitall", i32(i32, address, address)),
-        _CFunction(ctypes.CDLL(None), "clock_gettime", i32(i32, address)),
-        value(world.comm.handle),
-        value(mpi.DOUBLE.handle),
-        value(mpi.MAX.handle),
-        np.int32(time.CLOCK_MONOTONIC),
-        value(mpi.INT64_T.handle),
-        value(mpi.SUM.handle),
-    ), np.dtype(np.int32 if request == types.int32 else np.intp)
+    calls = Calls(
+        (
+            *(_address(library, name) for name in FUNCTIONS),
+            _address(ctypes.CDLL(None), "clock_gettime"),
+            value(comm.handle),
+            value(mpi.DOUBLE.handle),
+            value(mpi.MAX.handle),
+            np.int32(time.CLOCK_MONOTONIC),
+            value(mpi.INT64_T.handle),
+            value(mpi.SUM.handle),
+        )
+    )
+    return calls, np.dtype(np.int32 if request == types.int32 else np.intp)
 
 
 def ghost_mail(world, send: dict, receive: dict, request_type: np.dtype, width: int = 6) -> tuple:

@@ -669,7 +669,7 @@ class RankSteps:
         kept; and the MPI functions found
         (physics/rank_calls.py compiled_calls)."""
         if self.calls is None:
-            self.calls = compiled_calls(self.world) or ()
+            self.calls = compiled_calls(self.world.mpi, self.world.comm) or ()
         # the template's (the lead's own before the scene is first shared out: run.log's line)
         fluid = self.t.fluid if self.t.fluid is not None else self.fluid
         if fluid is not None and fluid.force_loops is None:

@@ -41,10 +41,14 @@ from sphere_cli.physics.rank_calls import compiled_calls, ghost_mail
 comm = MPI.COMM_WORLD
 rank, other = comm.rank, 1 - comm.rank
 world = types.SimpleNamespace(mpi=MPI, comm=comm)
-mpi, request_type = compiled_calls(world)
+mpi, request_type = compiled_calls(MPI, comm)
 
 mine, largest = np.array([10.0 + rank]), np.zeros(1)
 code = largest_everywhere(mpi, mine, largest)
+# on a communicator made by MPI_Comm_dup (a fluid grid's): MPICH sets the top bit of its handle
+dup_mpi, _ = compiled_calls(MPI, comm.Dup())
+dup_largest = np.zeros(1)
+dup_code = largest_everywhere(dup_mpi, np.array([20.0 - rank]), dup_largest)
 
 # 4 particles a rank: rows 1 and 3 are owned and ghosts on the other rank, where they are
 # rows 0 and 2; each rank's forces are 100 * rank + row, torques their negatives, and a fluid's
@@ -100,6 +104,7 @@ else:
 KERNELS = (largest_everywhere, send_ghost_forces, seconds, rank_wall_totals)
 open(f"rank{rank}.json", "w").write(json.dumps({
     "rank": rank, "code": int(code), "largest": float(largest[0]), "sent": int(sent),
+    "dup_code": int(dup_code), "dup_largest": float(dup_largest[0]),
     "force": force[:, 0].tolist(), "torque": torque[:, 2].tolist(), "extra": extra[:, 0].tolist(),
     "slept": slept, "elapsed": elapsed,
     "totals": int(totals), "one": one.tolist(), "split": split.tolist(), "fluid": fluid_force.tolist(),
@@ -130,6 +135,7 @@ def test_compiled_messages_reach_the_other_rank_and_are_cached(tmp_path):
     for r in first:
         assert r["code"] == 0 and r["sent"] == 0
         assert r["largest"] == 11.0  # the larger of 10 and 11, on both ranks
+        assert r["dup_code"] == 0 and r["dup_largest"] == 20.0
         theirs = 100.0 * (1 - r["rank"])
         mine = 100.0 * r["rank"]
         # rows 0 and 2 now hold the owner's rows 1 and 3; rows 1 and 3 are untouched
@@ -160,4 +166,4 @@ def test_an_mpi_whose_functions_cannot_be_found_leaves_the_steps_to_python(tmp_p
     assert libc is not None
     for library in (libc, str(tmp_path / "missing.so")):
         world = types.SimpleNamespace(mpi=types.SimpleNamespace(__file__=library), comm=None)
-        assert compiled_calls(world) is None
+        assert compiled_calls(world.mpi, world.comm) is None
