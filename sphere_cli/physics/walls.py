@@ -354,6 +354,7 @@ class PlaneWallForces(Module):
             pieces,
             self._blocks,
             self._block_ids,
+            c.warm,
         )
 
     def measure(self, state: State) -> None:

@@ -499,9 +499,13 @@ def test_wall_blocks_reproduce_a_contact_by_contact_loop_bitwise(tmp_path):
         expected_f[i] = f
         expected_t[i] = t
     assert contacts > 2 * sweep.BLOCK, "the walls' contacts must fill several blocks"
-    p.force[...] = 0.0
-    p.torque[...] = 0.0
-    walls.forces(state)
-    assert np.array_equal(p.force, expected_f)
-    assert np.array_equal(p.torque, expected_t)
-    assert np.array_equal(w.hist, expected_h)
+    hist = w.hist.copy()
+    for warm in (False, True):  # the particles' lines prefetched or not: the same operations
+        scene.contact.warm = warm
+        w.hist[...] = hist
+        p.force[...] = 0.0
+        p.torque[...] = 0.0
+        walls.forces(state)
+        assert np.array_equal(p.force, expected_f), warm
+        assert np.array_equal(p.torque, expected_t), warm
+        assert np.array_equal(w.hist, expected_h), warm
