@@ -101,7 +101,7 @@ NC = 10
 # how many listed particles ahead of the one being measured wall_forces prefetches a particle's
 # lines on a bed beyond the cache (`warm`): the near-wall particles are spread over the whole
 # index range, so each brings its own lines from memory (100 000 spheres, the wall kernel alone
-# after a pair sweep, one thread: 5.1 -> 4.3 ns a particle of the bed)
+# after a pair sweep, one thread: 3.9-4.1 -> 3.1-3.3 ns a particle of the bed)
 WALL_PREFETCH_AHEAD = 16
 
 
