@@ -67,7 +67,7 @@ from .laws import (
     contact_response,
     reduced,
 )
-from .layout import U1, U2, U3, flat, prefetch
+from .layout import U1, U2, U3, flat, prefetch_particle
 from .neighbors import minimum_image
 from .serial import serial_twin
 
@@ -340,11 +340,7 @@ def touching_pairs(
     if warm:
         for pair in range(first + PREFETCH_AHEAD, min(last + PREFETCH_AHEAD, pair_partner.shape[0])):
             k = np.uint64(pair_partner[pair])
-            k3 = U3 * k
-            for array in (pos, vel, angvel, vel_pred, angvel_pred, force, torque):
-                prefetch(array, k3)
-            prefetch(inv_mass, k)
-            prefetch(radius, k)
+            prefetch_particle(k, (pos, vel, angvel, vel_pred, angvel_pred, force, torque), (inv_mass, radius))
     touching = np.uint64(0)
     for pair in range(first, last):
         p = np.uint64(pair - first)

@@ -1,5 +1,5 @@
 """Flat views of per-particle vectors, for loops the compiler can vectorise and keep in
-registers; a prefetch hint.
+registers; a prefetch hint, and the hints for one particle's lines.
 
 A (N,3) array indexed a[i, axis] costs an address computation with its run-time row stride per
 array, and a signed index makes Numba emit negative-index wraparound code at every access:
@@ -16,7 +16,7 @@ kick loop in 5.1 ns a particle with reshape and 2.2 ns with this view.
 
 import numpy as np
 from llvmlite import ir
-from numba import types
+from numba import njit, types
 from numba.core import cgutils
 from numba.core.imputils import impl_ret_borrowed
 from numba.extending import intrinsic
@@ -73,3 +73,16 @@ def prefetch(typingctx, a, index):
         return context.get_dummy_value()
 
     return types.void(a, index), hint
+
+
+@njit(cache=True, inline="always")
+def prefetch_particle(k, vectors, values):
+    """Prefetch hints for the lines of particle k (unsigned) in the flat views of (N,3) arrays
+    `vectors` and in the (N,) arrays `values` (tuples of float64 arrays): what the pair sweep and
+    the wall contacts read of a particle they reach a little later (kernels/contact.py,
+    kernels/walls.py)."""
+    k3 = U3 * k
+    for line in vectors:
+        prefetch(line, k3)
+    for value in values:
+        prefetch(value, k)

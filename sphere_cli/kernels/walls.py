@@ -80,7 +80,7 @@ from .contact import (
 from .contact_probe import wall_normal
 from .exact_sum import WORDS, add_exact, exact_value
 from .laws import COLUMNS
-from .layout import U1, U2, U3, flat, prefetch
+from .layout import U1, U2, U3, flat, prefetch, prefetch_particle
 from .serial import serial_twin
 
 FIXED = 0
@@ -215,10 +215,13 @@ def wall_forces(
         filled = ZERO
         for m in range(pieces[c], pieces[c + 1]):
             if warm and m + WALL_PREFETCH_AHEAD < pieces[c + 1]:
-                _prefetch_particle(
-                    np.uint64(near[m + WALL_PREFETCH_AHEAD]), pos_line, vel, angvel, vel_pred, angvel_pred,
-                    force, torque, radius, mass, inv_mass, material, springs, hist_line, hist_row,
-                )  # fmt: skip
+                k = np.uint64(near[m + WALL_PREFETCH_AHEAD])
+                vectors = (pos_line, vel, angvel, vel_pred, angvel_pred, force, torque)
+                prefetch_particle(k, vectors, (radius, mass, inv_mass))
+                prefetch(material, k)
+                prefetch(springs, k)
+                if wall_hist.shape[0] > 0:
+                    prefetch(hist_line, hist_row * k)
             i = np.uint64(near[m])
             i3 = U3 * i
             if recording:
@@ -308,25 +311,6 @@ def wall_forces(
             record,
             pforce,
         )
-
-
-@njit(cache=True, inline="always")
-def _prefetch_particle(
-    k, pos, vel, angvel, vel_pred, angvel_pred, force, torque, radius, mass, inv_mass, material, springs,
-    hist, hist_row,
-):  # fmt: skip
-    """Prefetch hints for the lines wall_forces reads of particle k (the (N,3) arrays and the
-    springs hist (N,W,3) as flat views, hist_row = 3 W doubles a particle)."""
-    k3 = U3 * k
-    for line in (pos, vel, angvel, vel_pred, angvel_pred, force, torque):
-        prefetch(line, k3)
-    prefetch(radius, k)
-    prefetch(mass, k)
-    prefetch(inv_mass, k)
-    prefetch(material, k)
-    prefetch(springs, k)
-    if hist.shape[0] > 0:
-        prefetch(hist, hist_row * k)
 
 
 @njit(cache=True)
