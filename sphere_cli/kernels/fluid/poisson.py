@@ -105,72 +105,99 @@ def prepare_system(
     over; partial = column sums of rhs^2."""
     nx, ny, nz = b.shape
     for col in prange(nx * ny):
-        i = col // ny
-        j = col % ny
-        acc = 0.0
-        for k in range(nz):
-            d = c[i, j, k]
-            if i > 0 or periodic_x:
-                d += ax[i, j, k] * ih2[0] if i > 0 else ax[0, j, k] * ih2[0]
-            if i < nx - 1 or periodic_x:
-                d += ax[i + 1, j, k] * ih2[0] if i < nx - 1 else ax[0, j, k] * ih2[0]
-            if j > 0 or periodic_y:
-                d += ay[i, j, k] * ih2[1] if j > 0 else ay[i, 0, k] * ih2[1]
-            if j < ny - 1 or periodic_y:
-                d += ay[i, j + 1, k] * ih2[1] if j < ny - 1 else ay[i, 0, k] * ih2[1]
-            value = b[i, j, k]
-            if k > 0:
-                d += az[i, j, k] * ih2[2]
-            elif dirichlet_bottom:
-                w = 2.0 * az[i, j, 0] * ih2[2]
-                d += w
-                value += w * bottom_value
-            if k < nz - 1:
-                d += az[i, j, k + 1] * ih2[2]
-            elif dirichlet_top:
-                w = 2.0 * az[i, j, nz] * ih2[2]
-                d += w
-                value += w * top_value
-            diag[i, j, k] = d
-            inv_diag[i, j, k] = 1.0 / d if d > 0.0 else 0.0
-            rhs[i, j, k] = value
-            acc += value * value
-        partial[col] = acc
+        prepare_column(
+            b, c, ax, ay, az, periodic_x, periodic_y, dirichlet_bottom, dirichlet_top, bottom_value,
+            top_value, ih2, rhs, diag, inv_diag, partial, col,
+        )  # fmt: skip
+
+
+# Each kernel's work on one column (i, j), col = i ny + j, is a function of its own: the column's
+# cells and its partial sum, what one thread does here and on a GPU (kernels/fluid/cuda_poisson.py
+# runs these functions, a thread a column), so that both give the same values.
+
+
+@njit(cache=True, inline="always")
+def prepare_column(
+    b, c, ax, ay, az, periodic_x, periodic_y, dirichlet_bottom, dirichlet_top, bottom_value, top_value, ih2,
+    rhs, diag, inv_diag, partial, col,
+):  # fmt: skip
+    nx, ny, nz = b.shape
+    i = col // ny
+    j = col % ny
+    acc = 0.0
+    for k in range(nz):
+        d = c[i, j, k]
+        if i > 0 or periodic_x:
+            d += ax[i, j, k] * ih2[0] if i > 0 else ax[0, j, k] * ih2[0]
+        if i < nx - 1 or periodic_x:
+            d += ax[i + 1, j, k] * ih2[0] if i < nx - 1 else ax[0, j, k] * ih2[0]
+        if j > 0 or periodic_y:
+            d += ay[i, j, k] * ih2[1] if j > 0 else ay[i, 0, k] * ih2[1]
+        if j < ny - 1 or periodic_y:
+            d += ay[i, j + 1, k] * ih2[1] if j < ny - 1 else ay[i, 0, k] * ih2[1]
+        value = b[i, j, k]
+        if k > 0:
+            d += az[i, j, k] * ih2[2]
+        elif dirichlet_bottom:
+            w = 2.0 * az[i, j, 0] * ih2[2]
+            d += w
+            value += w * bottom_value
+        if k < nz - 1:
+            d += az[i, j, k + 1] * ih2[2]
+        elif dirichlet_top:
+            w = 2.0 * az[i, j, nz] * ih2[2]
+            d += w
+            value += w * top_value
+        diag[i, j, k] = d
+        inv_diag[i, j, k] = 1.0 / d if d > 0.0 else 0.0
+        rhs[i, j, k] = value
+        acc += value * value
+    partial[col] = acc
 
 
 @njit(cache=True, parallel=True)
 def apply_operator(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial, lo, hi):
     """out = A x; partial = column sums of x * out."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
-        acc = 0.0
-        for k in range(nz):
-            v = diag[i, j, k] * x[i, j, k] - _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
-            out[i, j, k] = v
-            acc += x[i, j, k] * v
-        partial[col] = acc
+        apply_column(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def apply_column(x, diag, ax, ay, az, periodic_x, periodic_y, ih2, out, partial, col):
+    nx, ny, nz = x.shape
+    i = col // ny
+    j = col % ny
+    nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+    acc = 0.0
+    for k in range(nz):
+        v = diag[i, j, k] * x[i, j, k] - _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
+        out[i, j, k] = v
+        acc += x[i, j, k] * v
+    partial[col] = acc
 
 
 @njit(cache=True, parallel=True)
 def residual(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial, lo, hi):
     """r = rhs - A x; partial = column sums of r^2."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
-        acc = 0.0
-        for k in range(nz):
-            v = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
-            v += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
-            r[i, j, k] = v
-            acc += v * v
-        partial[col] = acc
+        residual_column(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def residual_column(rhs, x, diag, ax, ay, az, periodic_x, periodic_y, ih2, r, partial, col):
+    nx, ny, nz = x.shape
+    i = col // ny
+    j = col % ny
+    nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+    acc = 0.0
+    for k in range(nz):
+        v = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
+        v += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
+        r[i, j, k] = v
+        acc += v * v
+    partial[col] = acc
 
 
 @njit(cache=True)
@@ -185,84 +212,109 @@ def column_words(partial, first, last, words):
 
 @njit(cache=True, parallel=True)
 def column_sums(x, partial, lo, hi):
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        acc = 0.0
-        for k in range(nz):
-            acc += x[i, j, k]
-        partial[col] = acc
+        sum_column(x, partial, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def sum_column(x, partial, col):
+    ny, nz = x.shape[1], x.shape[2]
+    i = col // ny
+    j = col % ny
+    acc = 0.0
+    for k in range(nz):
+        acc += x[i, j, k]
+    partial[col] = acc
 
 
 @njit(cache=True, parallel=True)
 def column_squares(x, partial, lo, hi):
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        acc = 0.0
-        for k in range(nz):
-            acc += x[i, j, k] * x[i, j, k]
-        partial[col] = acc
+        square_column(x, partial, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def square_column(x, partial, col):
+    ny, nz = x.shape[1], x.shape[2]
+    i = col // ny
+    j = col % ny
+    acc = 0.0
+    for k in range(nz):
+        acc += x[i, j, k] * x[i, j, k]
+    partial[col] = acc
 
 
 @njit(cache=True, parallel=True)
 def shift(x, amount, lo, hi):
     """x -= amount (removes the mean of a field in the singular case)."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        for k in range(nz):
-            x[i, j, k] -= amount
+        shift_column(x, amount, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def shift_column(x, amount, col):
+    ny, nz = x.shape[1], x.shape[2]
+    i = col // ny
+    j = col % ny
+    for k in range(nz):
+        x[i, j, k] -= amount
 
 
 @njit(cache=True, parallel=True)
 def precondition(r, inv_diag, z, partial_rz, partial_z, lo, hi):
     """Jacobi preconditioner z = D^-1 r; partial_rz = column sums of r z, partial_z of z."""
-    nx, ny, nz = r.shape
+    ny = r.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        rz = 0.0
-        zs = 0.0
-        for k in range(nz):
-            v = inv_diag[i, j, k] * r[i, j, k]
-            z[i, j, k] = v
-            rz += r[i, j, k] * v
-            zs += v
-        partial_rz[col] = rz
-        partial_z[col] = zs
+        precondition_column(r, inv_diag, z, partial_rz, partial_z, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def precondition_column(r, inv_diag, z, partial_rz, partial_z, col):
+    ny, nz = r.shape[1], r.shape[2]
+    i = col // ny
+    j = col % ny
+    rz = 0.0
+    zs = 0.0
+    for k in range(nz):
+        v = inv_diag[i, j, k] * r[i, j, k]
+        z[i, j, k] = v
+        rz += r[i, j, k] * v
+        zs += v
+    partial_rz[col] = rz
+    partial_z[col] = zs
 
 
 @njit(cache=True, parallel=True)
 def cg_step(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z, lo, hi):
     """x += alpha p; r -= alpha q; z = D^-1 r; column sums of r^2, r z and z."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        rr = 0.0
-        rz = 0.0
-        zs = 0.0
-        for k in range(nz):
-            x[i, j, k] += alpha * p[i, j, k]
-            rv = r[i, j, k] - alpha * q[i, j, k]
-            r[i, j, k] = rv
-            zv = inv_diag[i, j, k] * rv
-            z[i, j, k] = zv
-            rr += rv * rv
-            rz += rv * zv
-            zs += zv
-        partial_rr[col] = rr
-        partial_rz[col] = rz
-        partial_z[col] = zs
+        cg_step_column(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def cg_step_column(x, r, p, q, alpha, inv_diag, z, partial_rr, partial_rz, partial_z, col):
+    ny, nz = x.shape[1], x.shape[2]
+    i = col // ny
+    j = col % ny
+    rr = 0.0
+    rz = 0.0
+    zs = 0.0
+    for k in range(nz):
+        x[i, j, k] += alpha * p[i, j, k]
+        rv = r[i, j, k] - alpha * q[i, j, k]
+        r[i, j, k] = rv
+        zv = inv_diag[i, j, k] * rv
+        z[i, j, k] = zv
+        rr += rv * rv
+        rz += rv * zv
+        zs += zv
+    partial_rr[col] = rr
+    partial_rz[col] = rz
+    partial_z[col] = zs
 
 
 @njit(cache=True)
@@ -307,14 +359,19 @@ def _total(partial, columns, words):
 def new_direction(p, z, beta, z_mean, lo, hi):
     """p = (z - z_mean) + beta p (z_mean = 0 unless the system is singular: the direction then
     stays orthogonal to the constant null vector)."""
-    nx, ny, nz = p.shape
+    ny = p.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        for k in range(nz):
-            # beta = 0 (a restart) overwrites p without reading it
-            p[i, j, k] = (z[i, j, k] - z_mean) + (beta * p[i, j, k] if beta != 0.0 else 0.0)
+        direction_column(p, z, beta, z_mean, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def direction_column(p, z, beta, z_mean, col):
+    ny, nz = p.shape[1], p.shape[2]
+    i = col // ny
+    j = col % ny
+    for k in range(nz):
+        # beta = 0 (a restart) overwrites p without reading it
+        p[i, j, k] = (z[i, j, k] - z_mean) + (beta * p[i, j, k] if beta != 0.0 else 0.0)
 
 
 # one thread: the inner iterations without parallel regions (kernels/serial.py), whose start
@@ -333,16 +390,24 @@ def jacobi_sweep(rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2
     sums of the squared residual (rhs - A x)^2 of the old iterate."""
     nx, ny, nz = x.shape
     for col in prange(nx * ny):
-        i = col // ny
-        j = col % ny
-        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
-        acc = 0.0
-        for k in range(nz):
-            s = rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
-            rv = s - diag[i, j, k] * x[i, j, k]
-            acc += rv * rv
-            x_new[i, j, k] = inv_diag[i, j, k] * s
-        partial[col] = acc
+        jacobi_sweep_column(
+            rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, x_new, partial, col
+        )
+
+
+@njit(cache=True, inline="always")
+def jacobi_sweep_column(rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, x_new, partial, col):
+    nx, ny, nz = x.shape
+    i = col // ny
+    j = col % ny
+    nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+    acc = 0.0
+    for k in range(nz):
+        s = rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
+        rv = s - diag[i, j, k] * x[i, j, k]
+        acc += rv * rv
+        x_new[i, j, k] = inv_diag[i, j, k] * s
+    partial[col] = acc
 
 
 @njit(cache=True, parallel=True)
@@ -393,93 +458,118 @@ def _mean(a, b, harmonic):
 def coarsen_coefficients(c, ax, ay, az, fx, fy, fz, cc, axc, ayc, azc):
     """Coefficients of the coarse operator, re-discretised: c and each coarse face's a are the
     means of the fine values they cover (a coarse face covers fy*fz fine x faces, and so on)."""
-    mx, my, mz = cc.shape
+    mx, my = cc.shape[0], cc.shape[1]
     for col in prange(mx * my):
-        ci = col // my
-        cj = col % my
-        for ck in range(mz):
-            s = 0.0
-            for i in range(ci * fx, ci * fx + fx):
-                for j in range(cj * fy, cj * fy + fy):
-                    for k in range(ck * fz, ck * fz + fz):
-                        s += c[i, j, k]
-            cc[ci, cj, ck] = s / (fx * fy * fz)
+        coarsen_column(c, ax, ay, az, fx, fy, fz, cc, axc, ayc, azc, col)
+
+
+@njit(cache=True, inline="always")
+def coarsen_column(c, ax, ay, az, fx, fy, fz, cc, axc, ayc, azc, col):
+    mx, my, mz = cc.shape
+    ci = col // my
+    cj = col % my
+    for ck in range(mz):
+        s = 0.0
+        for i in range(ci * fx, ci * fx + fx):
+            for j in range(cj * fy, cj * fy + fy):
+                for k in range(ck * fz, ck * fz + fz):
+                    s += c[i, j, k]
+        cc[ci, cj, ck] = s / (fx * fy * fz)
+        s = 0.0
+        for j in range(cj * fy, cj * fy + fy):
+            for k in range(ck * fz, ck * fz + fz):
+                s += ax[ci * fx, j, k]
+        axc[ci, cj, ck] = s / (fy * fz)
+        s = 0.0
+        for i in range(ci * fx, ci * fx + fx):
+            for k in range(ck * fz, ck * fz + fz):
+                s += ay[i, cj * fy, k]
+        ayc[ci, cj, ck] = s / (fx * fz)
+        s = 0.0
+        for i in range(ci * fx, ci * fx + fx):
+            for j in range(cj * fy, cj * fy + fy):
+                s += az[i, j, ck * fz]
+        azc[ci, cj, ck] = s / (fx * fy)
+        if ci == mx - 1:
             s = 0.0
             for j in range(cj * fy, cj * fy + fy):
                 for k in range(ck * fz, ck * fz + fz):
-                    s += ax[ci * fx, j, k]
-            axc[ci, cj, ck] = s / (fy * fz)
+                    s += ax[mx * fx, j, k]
+            axc[mx, cj, ck] = s / (fy * fz)
+        if cj == my - 1:
             s = 0.0
             for i in range(ci * fx, ci * fx + fx):
                 for k in range(ck * fz, ck * fz + fz):
-                    s += ay[i, cj * fy, k]
-            ayc[ci, cj, ck] = s / (fx * fz)
+                    s += ay[i, my * fy, k]
+            ayc[ci, my, ck] = s / (fx * fz)
+        if ck == mz - 1:
             s = 0.0
             for i in range(ci * fx, ci * fx + fx):
                 for j in range(cj * fy, cj * fy + fy):
-                    s += az[i, j, ck * fz]
-            azc[ci, cj, ck] = s / (fx * fy)
-            if ci == mx - 1:
-                s = 0.0
-                for j in range(cj * fy, cj * fy + fy):
-                    for k in range(ck * fz, ck * fz + fz):
-                        s += ax[mx * fx, j, k]
-                axc[mx, cj, ck] = s / (fy * fz)
-            if cj == my - 1:
-                s = 0.0
-                for i in range(ci * fx, ci * fx + fx):
-                    for k in range(ck * fz, ck * fz + fz):
-                        s += ay[i, my * fy, k]
-                ayc[ci, my, ck] = s / (fx * fz)
-            if ck == mz - 1:
-                s = 0.0
-                for i in range(ci * fx, ci * fx + fx):
-                    for j in range(cj * fy, cj * fy + fy):
-                        s += az[i, j, mz * fz]
-                azc[ci, cj, mz] = s / (fx * fy)
+                    s += az[i, j, mz * fz]
+            azc[ci, cj, mz] = s / (fx * fy)
 
 
 @njit(cache=True, parallel=True)
 def restrict(fine, fx, fy, fz, coarse, lo, hi):
     """coarse = mean of the children in fine."""
-    mx, my, mz = coarse.shape
+    my = coarse.shape[1]
     for c in prange((hi - lo) * my):
-        ci = lo + c // my
-        cj = c % my
-        for ck in range(mz):
-            s = 0.0
-            for i in range(ci * fx, ci * fx + fx):
-                for j in range(cj * fy, cj * fy + fy):
-                    for k in range(ck * fz, ck * fz + fz):
-                        s += fine[i, j, k]
-            coarse[ci, cj, ck] = s / (fx * fy * fz)
+        restrict_column(fine, fx, fy, fz, coarse, lo * my + c)
+
+
+@njit(cache=True, inline="always")
+def restrict_column(fine, fx, fy, fz, coarse, col):
+    """restrict of the coarse column col."""
+    my, mz = coarse.shape[1], coarse.shape[2]
+    ci = col // my
+    cj = col % my
+    for ck in range(mz):
+        s = 0.0
+        for i in range(ci * fx, ci * fx + fx):
+            for j in range(cj * fy, cj * fy + fy):
+                for k in range(ck * fz, ck * fz + fz):
+                    s += fine[i, j, k]
+        coarse[ci, cj, ck] = s / (fx * fy * fz)
 
 
 @njit(cache=True, parallel=True)
 def prolong_add(coarse, fx, fy, fz, fine, lo, hi):
     """fine += the coarse value of each cell's parent."""
-    nx, ny, nz = fine.shape
+    ny = fine.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        for k in range(nz):
-            fine[i, j, k] += coarse[i // fx, j // fy, k // fz]
+        prolong_column(coarse, fx, fy, fz, fine, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def prolong_column(coarse, fx, fy, fz, fine, col):
+    ny, nz = fine.shape[1], fine.shape[2]
+    i = col // ny
+    j = col % ny
+    for k in range(nz):
+        fine[i, j, k] += coarse[i // fx, j // fy, k // fz]
 
 
 @njit(cache=True, parallel=True)
 def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out, lo, hi):
     """One damped Jacobi sweep out = x + omega D^-1 (rhs - A x) (symmetric smoother)."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
-        for k in range(nz):
-            s = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
-            s += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
-            out[i, j, k] = x[i, j, k] + omega * inv_diag[i, j, k] * s
+        smooth_column(
+            rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out, lo * ny + c
+        )
+
+
+@njit(cache=True, inline="always")
+def smooth_column(rhs, x, inv_diag, diag, ax, ay, az, periodic_x, periodic_y, ih2, omega, out, col):
+    nx, ny, nz = x.shape
+    i = col // ny
+    j = col % ny
+    nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+    for k in range(nz):
+        s = rhs[i, j, k] - diag[i, j, k] * x[i, j, k]
+        s += _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k)
+        out[i, j, k] = x[i, j, k] + omega * inv_diag[i, j, k] * s
 
 
 @njit(cache=True)
@@ -498,11 +588,20 @@ def _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, 
     x_i = (b_i + sum of a_f x_neighbour / h^2) / A_ii. Each reads cells of the other colour
     only (a periodic axis needs an even cell count for that), so the order of the updates of a
     colour, and the threads or ranks sharing them, change nothing."""
-    nx, ny, nz = x.shape
+    ny = x.shape[1]
     for j in range(ny):
-        nb = _column(nx, ny, i, j, periodic_x, periodic_y)
-        for k in range((i + j + color) % 2, nz, 2):
-            x[i, j, k] = inv_diag[i, j, k] * (rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k))
+        red_black_column(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, i * ny + j)
+
+
+@njit(cache=True, inline="always")
+def red_black_column(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, col):
+    """The cells of colour `color` of column col (_red_black_plane)."""
+    nx, ny, nz = x.shape
+    i = col // ny
+    j = col % ny
+    nb = _column(nx, ny, i, j, periodic_x, periodic_y)
+    for k in range((i + j + color) % 2, nz, 2):
+        x[i, j, k] = inv_diag[i, j, k] * (rhs[i, j, k] + _neighbour_sum(x, ax, ay, az, ih2, nb, i, j, k))
 
 
 @njit(cache=True, parallel=True)
@@ -547,15 +646,20 @@ def red_black_smooth(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, 
 @njit(cache=True, parallel=True)
 def column_dots(r, z, partial_rz, partial_z, lo, hi):
     """partial_rz = column sums of r z, partial_z of z."""
-    nx, ny, nz = r.shape
+    ny = r.shape[1]
     for c in prange((hi - lo) * ny):
-        col = lo * ny + c
-        i = col // ny
-        j = col % ny
-        rz = 0.0
-        zs = 0.0
-        for k in range(nz):
-            rz += r[i, j, k] * z[i, j, k]
-            zs += z[i, j, k]
-        partial_rz[col] = rz
-        partial_z[col] = zs
+        dot_column(r, z, partial_rz, partial_z, lo * ny + c)
+
+
+@njit(cache=True, inline="always")
+def dot_column(r, z, partial_rz, partial_z, col):
+    ny, nz = r.shape[1], r.shape[2]
+    i = col // ny
+    j = col % ny
+    rz = 0.0
+    zs = 0.0
+    for k in range(nz):
+        rz += r[i, j, k] * z[i, j, k]
+        zs += z[i, j, k]
+    partial_rz[col] = rz
+    partial_z[col] = zs
