@@ -40,29 +40,8 @@ import numba
 import numpy as np
 
 from ...kernels.exact_sum import WORDS, exact_value
-from ...kernels.fluid.poisson import (
-    apply_operator,
-    cg_step,
-    coarsen_coefficients,
-    column_dots,
-    column_squares,
-    column_sums,
-    column_words,
-    diagonal_cg,
-    diagonal_cg_serial,
-    jacobi_smooth,
-    jacobi_smooth_pairs,
-    jacobi_sweep,
-    new_direction,
-    precondition,
-    prepare_system,
-    prolong_add,
-    red_black_smooth,
-    red_black_sweep,
-    residual,
-    restrict,
-    shift,
-)
+from ...kernels.fluid import poisson as poisson_kernels
+from ...kernels.fluid.poisson import diagonal_cg, diagonal_cg_serial, jacobi_smooth_pairs, red_black_smooth
 from ...kernels.serial import use_serial
 from .grid import FluidGrid
 
@@ -96,6 +75,55 @@ RESCALE_EXPONENT = 100  # a right-hand side norm outside 2^-100 .. 2^100 is resc
 SLAB_IMBALANCE = 1.25
 
 
+class OnProcessor:
+    """Where a solver's fields live and the kernels that work on them: the processor's memory and
+    kernels/fluid/poisson.py. A GPU's (physics/fluid/device_poisson.py OnGpu) answers the same
+    calls with the same kernels on its own arrays."""
+
+    kernels = poisson_kernels
+    fused = True  # whole-grid loops in one compiled call (red_black_smooth, jacobi_smooth_pairs, diagonal_cg)
+    where = ""  # for describe()
+
+    @staticmethod
+    def zeros(shape) -> np.ndarray:
+        return np.zeros(shape)
+
+    @staticmethod
+    def array(values: np.ndarray) -> np.ndarray:
+        """A field the kernels take, holding values (here: values itself)."""
+        return values
+
+    @staticmethod
+    def put(field, values) -> None:
+        field[...] = values
+
+    @staticmethod
+    def host(field) -> np.ndarray:
+        """The field's values in the processor's memory (here: the field itself)."""
+        return field
+
+    @staticmethod
+    def inputs(*arrays: np.ndarray) -> tuple:
+        """The caller's arrays, as the kernels take them (here: themselves)."""
+        return arrays
+
+    @staticmethod
+    def output(field, x: np.ndarray) -> None:
+        """The solution `field` into the caller's x (here: it is x)."""
+
+    @staticmethod
+    def fill(field, value: float) -> None:
+        field[...] = value
+
+    @staticmethod
+    def scale(field, exponent: int) -> None:
+        """field *= 2^exponent, exactly."""
+        np.ldexp(field, exponent, out=field)
+
+
+ON_PROCESSOR = OnProcessor()
+
+
 @dataclass(frozen=True)
 class PoissonResult:
     iterations: int
@@ -109,10 +137,11 @@ class Slabs:
     plane of every rank and the end), or the whole level on one rank (comm None): where the
     planes beside the slab come from, and the gathers that make a sum or a field whole."""
 
-    def __init__(self, shape, comm=None, bounds=None, periodic_x=False):
+    def __init__(self, shape, comm=None, bounds=None, periodic_x=False, kernels=poisson_kernels):
         nx, ny, nz = shape
         self.shape = shape
         self.comm = comm
+        self.k = kernels  # column_words of its partial sums
         if comm is None:
             bounds = np.array([0, nx], dtype=np.int64)
         rank = 0 if comm is None else comm.Get_rank()
@@ -173,7 +202,7 @@ class Slabs:
         (kernels/exact_sum.py) and the words added over the ranks (an Allreduce of 69 int64),
         so the same double on any number of ranks."""
         ny = self.shape[1]
-        column_words(partial, self.lo * ny, self.hi * ny, self.words)
+        self.k.column_words(partial, self.lo * ny, self.hi * ny, self.words)
         if self.comm is not None:
             self.comm.Allreduce(self.mpi.IN_PLACE, [self.words, self.mpi.INT64_T], op=self.mpi.SUM)
         return exact_value(self.words)
@@ -181,7 +210,7 @@ class Slabs:
     def whole_sum(self, partial: np.ndarray) -> float:
         """The sum of every column partial sum of this rank's partial (a field kept whole on
         every rank), as `sum` makes it."""
-        column_words(partial, 0, partial.shape[0], self.words)
+        self.k.column_words(partial, 0, partial.shape[0], self.words)
         return exact_value(self.words)
 
     def total(self, count: int) -> int:
@@ -203,22 +232,22 @@ class _Level:
     """One coarse level: its shape, the coarsening factors from the level above, coefficients,
     diagonal and work arrays."""
 
-    def __init__(self, shape, factors, ih2, flags):
+    def __init__(self, shape, factors, ih2, flags, on):
         self.shape = shape
         self.factors = factors
-        self.ih2 = ih2
+        self.ih2 = on.array(ih2)
         self.red_black = colourable(shape, flags)
         nx, ny, nz = shape
         self.c, self.diag, self.inv_diag, self.x, self.b, self.r, self.tmp = (
-            np.zeros(shape) for _ in range(7)
+            on.zeros(shape) for _ in range(7)
         )
         self.ax, self.ay, self.az = (
-            np.zeros((nx + 1, ny, nz)),
-            np.zeros((nx, ny + 1, nz)),
-            np.zeros((nx, ny, nz + 1)),
+            on.zeros((nx + 1, ny, nz)),
+            on.zeros((nx, ny + 1, nz)),
+            on.zeros((nx, ny, nz + 1)),
         )
-        self.partial = np.zeros(nx * ny)
-        self.slabs = Slabs(shape)
+        self.partial = on.zeros(nx * ny)
+        self.slabs = Slabs(shape, kernels=on.kernels)
 
 
 class Multigrid:
@@ -229,8 +258,9 @@ class Multigrid:
     adjoint (the colours in the other order) after, or the same damped Jacobi sweeps before and
     after on a level that cannot be coloured: M is symmetric positive definite, as CG needs."""
 
-    def __init__(self, grid: FluidGrid, flags):
+    def __init__(self, grid: FluidGrid, flags, on=ON_PROCESSOR):
         self.flags = flags  # periodic_x, periodic_y, dirichlet_bottom, dirichlet_top (uint8)
+        self.on = on
         shape = tuple(grid.shape)
         ih2 = 1.0 / np.asarray(grid.spacing, dtype=np.float64) ** 2
         self.levels: list[_Level] = []
@@ -240,21 +270,27 @@ class Multigrid:
                 break
             shape = tuple(n // f for n, f in zip(shape, factors, strict=True))
             ih2 = ih2 / np.asarray(factors, dtype=np.float64) ** 2
-            self.levels.append(_Level(shape, factors, ih2, flags))
+            self.levels.append(_Level(shape, factors, ih2, flags, on))
         self.usable = int(np.prod(shape)) <= COARSEST_LIMIT and bool(self.levels)
         self.grid = grid
         fine = grid.shape
-        self.fine_x, self.fine_tmp, self.fine_r = (np.zeros(fine) for _ in range(3))
-        self.fine_partial = np.zeros(fine[0] * fine[1])
-        self.fine_slabs = Slabs(fine)
+        self.fine_x, self.fine_tmp, self.fine_r = (on.zeros(fine) for _ in range(3))
+        self.fine_partial = on.zeros(fine[0] * fine[1])
+        self.fine_slabs = Slabs(fine, kernels=on.kernels)
         self.fine_red_black = colourable(fine, flags)
+
+    @property
+    def k(self):
+        """The kernels of the place the fields are at (a property: a module is not pickled with a
+        fluid sent to another rank)."""
+        return self.on.kernels
 
     def update_spacing(self) -> None:
         """Take the grid's current spacing (a grid following the top wall changes it)."""
         ih2 = 1.0 / self.grid.spacing**2
         for level in self.levels:
             ih2 = ih2 / np.asarray(level.factors, dtype=np.float64) ** 2
-            level.ih2[:] = ih2
+            self.on.put(level.ih2, ih2)
 
     def describe(self) -> str:
         shapes = " -> ".join("x".join(str(n) for n in level.shape) for level in self.levels)
@@ -266,8 +302,8 @@ class Multigrid:
         above = (c, ax, ay, az)
         for level in self.levels:
             fx, fy, fz = level.factors
-            coarsen_coefficients(*above, fx, fy, fz, level.c, level.ax, level.ay, level.az)
-            prepare_system(
+            self.k.coarsen_coefficients(*above, fx, fy, fz, level.c, level.ax, level.ay, level.az)
+            self.k.prepare_system(
                 level.b, level.c, level.ax, level.ay, level.az, px, py, db, dt, 0.0, 0.0, level.ih2,
                 level.b, level.diag, level.inv_diag, level.partial,
             )  # fmt: skip
@@ -283,7 +319,8 @@ class Multigrid:
         first sweep needs no messages)."""
         px, py = self.flags[0], self.flags[1]
         lo, hi = slabs.lo, slabs.hi
-        if first is not None and not slabs.split:  # a run of planes a thread
+        fused = self.on.fused and not slabs.split
+        if first is not None and fused:  # a run of planes a thread
             runs = numba.get_num_threads()
             red_black_smooth(rhs, x, inv_diag, ax, ay, az, px, py, ih2, first, sweeps, runs)
             return
@@ -292,18 +329,22 @@ class Multigrid:
                 if half or not zero:
                     slabs.halo(x)
                 colour = first if half % 2 == 0 else 1 - first
-                red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, colour, lo, hi)
+                self.k.red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, colour, lo, hi)
             return
-        if not slabs.split:
+        if fused:
             pairs = sweeps // 2
             jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs)
             return
         for sweep in range(sweeps // 2):
             if sweep or not zero:
                 slabs.halo(x)
-            jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, lo, hi)
+            self.k.jacobi_smooth(
+                rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, lo, hi
+            )
             slabs.halo(tmp)
-            jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, x, lo, hi)
+            self.k.jacobi_smooth(
+                rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, x, lo, hi
+            )
 
     def _cycle(self, index, rhs, x, fine):
         if index < 0:
@@ -324,7 +365,7 @@ class Multigrid:
             tmp, res, partial = level.tmp, level.r, level.partial
             slabs = level.slabs
             red_black = level.red_black
-        x[...] = 0.0
+        self.on.fill(x, 0.0)
         if index == len(self.levels) - 1:
             self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs, zero=True)
             return
@@ -332,15 +373,15 @@ class Multigrid:
         self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, zero=True, first=pre)
         px, py = self.flags[0], self.flags[1]
         slabs.halo(x)
-        residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial, slabs.lo, slabs.hi)
+        self.k.residual(rhs, x, diag, ax, ay, az, px, py, ih2, res, partial, slabs.lo, slabs.hi)
         coarse = self.levels[index + 1]
         if coarse.slabs.split or not slabs.split:
-            restrict(res, *coarse.factors, coarse.b, coarse.slabs.lo, coarse.slabs.hi)
+            self.k.restrict(res, *coarse.factors, coarse.b, coarse.slabs.lo, coarse.slabs.hi)
         else:  # the first level solved whole on every rank
             slabs.gather(res)
-            restrict(res, *coarse.factors, coarse.b, 0, coarse.shape[0])
+            self.k.restrict(res, *coarse.factors, coarse.b, 0, coarse.shape[0])
         self._cycle(index + 1, coarse.b, coarse.x, fine)
-        prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
+        self.k.prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
         self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, first=post)
 
 
@@ -370,6 +411,7 @@ class PoissonSolver:
         max_iterations: int = 100_000,
         preconditioner: str = "multigrid",
         split_cells: int = 4096,
+        on=ON_PROCESSOR,
     ):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -383,27 +425,38 @@ class PoissonSolver:
         if not tolerance > 0:
             raise ValueError(f"tolerance must be positive, got {tolerance}")
         self.grid = grid
+        self.boundaries = (bottom, top)
         self.method = method
+        self.preconditioner = preconditioner
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
         self.split_cells = int(split_cells)  # the least cells a rank of a level split across ranks
+        self.on = on  # where the fields live
         self.periodic_x = np.uint8(bool(grid.periodic[0]))
         self.periodic_y = np.uint8(bool(grid.periodic[1]))
         self.dirichlet_bottom = np.uint8(bottom == "dirichlet")
         self.dirichlet_top = np.uint8(top == "dirichlet")
-        self.ih2 = 1.0 / np.asarray(grid.spacing, dtype=np.float64) ** 2
+        self.ih2 = on.array(1.0 / np.asarray(grid.spacing, dtype=np.float64) ** 2)
         shape = tuple(grid.shape)
         self.rhs, self.diag, self.inv_diag, self.r, self.z, self.p, self.q = (
-            np.zeros(shape) for _ in range(7)
+            on.zeros(shape) for _ in range(7)
         )
         columns = shape[0] * shape[1]
-        self.part_a, self.part_b, self.part_c = (np.zeros(columns) for _ in range(3))
+        self.part_a, self.part_b, self.part_c = (on.zeros(columns) for _ in range(3))
         self.multigrid = None
         if method == "pcg" and preconditioner == "multigrid":
             flags = (self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top)
-            multigrid = Multigrid(grid, flags)
+            multigrid = Multigrid(grid, flags, on)
             self.multigrid = multigrid if multigrid.usable else None
-        self.slabs = Slabs(shape)
+        self.slabs = Slabs(shape, kernels=on.kernels)
+
+    def elsewhere(self, on) -> PoissonSolver:
+        """The same solver, not split across ranks, with its fields and kernels at `on`
+        (physics/fluid/device_poisson.py OnGpu: on a GPU)."""
+        return PoissonSolver(
+            self.grid, *self.boundaries, self.method, self.tolerance, self.max_iterations,
+            self.preconditioner, self.split_cells, on,
+        )  # fmt: skip
 
     def split(self, comm) -> None:
         """From now on solve on slabs of x planes, one per rank of the MPI communicator comm (one
@@ -439,10 +492,16 @@ class PoissonSolver:
                 whole = f > block or small or level is levels[-1]
                 level.slabs = Slabs(level.shape) if whole else Slabs(level.shape, comm, bounds // f, periodic)
 
+    @property
+    def k(self):
+        """The kernels of the place the fields are at (a property: a module is not pickled with a
+        fluid sent to another rank)."""
+        return self.on.kernels
+
     def update_spacing(self) -> None:
         """Take the grid's current spacing: call after grid.set_height (a grid that follows the
         top wall); the coefficients are rebuilt by every solve."""
-        self.ih2[:] = 1.0 / self.grid.spacing**2
+        self.on.put(self.ih2, 1.0 / self.grid.spacing**2)
         if self.multigrid is not None:
             self.multigrid.update_spacing()
 
@@ -453,7 +512,7 @@ class PoissonSolver:
             name = f"conjugate gradient preconditioned with a {self.multigrid.describe()}"
         else:
             name = "conjugate gradient, Jacobi-preconditioned"
-        return f"{name}, tolerance {self.tolerance:g}"
+        return f"{name}, tolerance {self.tolerance:g}{self.on.where}"
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zeroed face-coefficient arrays of the shapes solve() expects (allocate once)."""
@@ -475,68 +534,74 @@ class PoissonSolver:
         cell fields (nx, ny, nz); ax, ay, az the face coefficients (a > 0; shapes as
         face_arrays(), kernels/fluid/poisson.py says which face is which); bottom_value/top_value
         the Dirichlet values at the bottom/top boundary face (unused for no-flux)."""
-        prepare_system(
+        singular = not (self.dirichlet_bottom or self.dirichlet_top) and not c.any()
+        on = self.on
+        field, b, c, ax, ay, az = on.inputs(x, b, c, ax, ay, az)  # field: x where the kernels work
+        self.k.prepare_system(
             b, c, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
             float(bottom_value), float(top_value), self.ih2, self.rhs, self.diag, self.inv_diag, self.part_a,
         )  # fmt: skip
-        singular = not (self.dirichlet_bottom or self.dirichlet_top) and not c.any()
         mean_removed = 0.0
         nx = self.grid.shape[0]
         if singular:  # the right-hand side stays whole on every rank
-            column_sums(self.rhs, self.part_c, 0, nx)
+            self.k.column_sums(self.rhs, self.part_c, 0, nx)
             mean_removed = self.slabs.whole_sum(self.part_c) / self.rhs.size
-            shift(self.rhs, mean_removed, 0, nx)
-            column_squares(self.rhs, self.part_a, 0, nx)
+            self.k.shift(self.rhs, mean_removed, 0, nx)
+            self.k.column_squares(self.rhs, self.part_a, 0, nx)
         rhs_norm = math.sqrt(self.slabs.whole_sum(self.part_a))
-        if rhs_norm == 0.0 and not self.rhs.any():
-            x[:] = 0.0
+        if rhs_norm == 0.0 and not on.host(self.rhs).any():
+            on.fill(field, 0.0)
+            on.output(field, x)
             return PoissonResult(0, 0.0, True, mean_removed)
         # a right-hand side far from unit size (an incremental pressure that has settled decays
         # towards 1e-300) is scaled by a power of two, exactly, taken from its largest value, so
         # that the iteration's sums of squares neither underflow nor overflow
         rescale = not (2.0**-RESCALE_EXPONENT <= rhs_norm <= 2.0**RESCALE_EXPONENT)
         if rescale:
-            exponent = math.frexp(float(np.abs(self.rhs).max()))[1]
-            np.ldexp(self.rhs, -exponent, out=self.rhs)
-            np.ldexp(x, -exponent, out=x)
-            column_squares(self.rhs, self.part_a, 0, nx)
+            exponent = math.frexp(float(np.abs(on.host(self.rhs)).max()))[1]
+            on.scale(self.rhs, -exponent)
+            on.scale(field, -exponent)
+            self.k.column_squares(self.rhs, self.part_a, 0, nx)
             rhs_norm = math.sqrt(self.slabs.whole_sum(self.part_a))
         scale = 1.0 / max(rhs_norm, TINY)
         if self.method == "pcg":
-            iterations, res = self._pcg(x, c, ax, ay, az, singular, scale)
+            iterations, res = self._pcg(field, c, ax, ay, az, singular, scale)
         else:
-            iterations, res = self._jacobi(x, ax, ay, az, scale)
+            iterations, res = self._jacobi(field, ax, ay, az, scale)
         if singular:
-            shift(x, self._mean(x), self.slabs.lo, self.slabs.hi)
-        self.slabs.gather(x)
+            self.k.shift(field, self._mean(field), self.slabs.lo, self.slabs.hi)
+        self.slabs.gather(field)
         if rescale:
-            np.ldexp(x, exponent, out=x)
+            on.scale(field, exponent)
+        on.output(field, x)
         return PoissonResult(iterations, res, res <= self.tolerance, mean_removed)
 
     def explicit_step(self, x, b, c, ax, ay, az, bottom_value: float = 0.0, top_value: float = 0.0) -> None:
         """One forward-Euler step of the system that solve() would take one backward-Euler step
         of: with A = c + (the face and boundary terms), c (x' - x) = b - A x, so x += (b - A x)/c
         in place (c > 0 everywhere; no cell may have been eliminated into c)."""
-        prepare_system(
-            b, c, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
+        field, b_, c_, ax, ay, az = self.on.inputs(x, b, c, ax, ay, az)
+        self.k.prepare_system(
+            b_, c_, ax, ay, az, self.periodic_x, self.periodic_y, self.dirichlet_bottom, self.dirichlet_top,
             float(bottom_value), float(top_value), self.ih2, self.rhs, self.diag, self.inv_diag, self.part_a,
         )  # fmt: skip
-        residual(
-            self.rhs, x, self.diag, ax, ay, az, self.periodic_x, self.periodic_y, self.ih2,
+        self.k.residual(
+            self.rhs, field, self.diag, ax, ay, az, self.periodic_x, self.periodic_y, self.ih2,
             self.r, self.part_a, 0, self.grid.shape[0],
         )  # fmt: skip
-        np.divide(self.r, c, out=self.r)
-        x += self.r
+        r = self.on.host(self.r)
+        np.divide(r, c, out=r)
+        x += r
 
     # -- helpers -----------------------------------------------------------------------------
 
     def _mean(self, field: np.ndarray) -> float:
-        column_sums(field, self.part_c, self.slabs.lo, self.slabs.hi)
+        self.k.column_sums(field, self.part_c, self.slabs.lo, self.slabs.hi)
         return self.slabs.sum(self.part_c) / field.size
 
     def _true_residual(self, x, ax, ay, az) -> float:
         self.slabs.halo(x)
-        residual(
+        self.k.residual(
             self.rhs,
             x,
             self.diag,
@@ -562,14 +627,14 @@ class PoissonSolver:
         fine = (self.diag, self.inv_diag, ax, ay, az, self.ih2)
         if self.multigrid is not None:
             self.multigrid.setup(c, ax, ay, az)
-        compiled = self.multigrid is None and not slabs.split  # the inner loop in one call
+        compiled = self.multigrid is None and not slabs.split and self.on.fused  # the inner loop in one call
         # restarted from the true residual if the recursively updated one drifted from it
         while res > self.tolerance and iterations < self.max_iterations:
-            precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c, lo, hi)
+            self.k.precondition(self.r, self.inv_diag, self.z, self.part_b, self.part_c, lo, hi)
             self._multigrid(fine)
             rz = slabs.sum(self.part_b)
             z_mean = slabs.sum(self.part_c) / n if singular else 0.0
-            new_direction(self.p, self.z, 0.0, z_mean, lo, hi)
+            self.k.new_direction(self.p, self.z, 0.0, z_mean, lo, hi)
             if compiled:
                 inner = diagonal_cg_serial if use_serial() else diagonal_cg
                 iterations, status = inner(
@@ -583,7 +648,7 @@ class PoissonSolver:
                 continue
             while iterations < self.max_iterations:
                 slabs.halo(self.p)
-                apply_operator(
+                self.k.apply_operator(
                     self.p,
                     self.diag,
                     ax,
@@ -601,7 +666,7 @@ class PoissonSolver:
                 if not pq > 0.0:
                     return iterations, self._true_residual(x, ax, ay, az) * scale
                 alpha = rz / pq
-                cg_step(
+                self.k.cg_step(
                     x,
                     self.r,
                     self.p,
@@ -621,7 +686,7 @@ class PoissonSolver:
                 self._multigrid(fine)
                 rz_new = slabs.sum(self.part_b)
                 z_mean = slabs.sum(self.part_c) / n if singular else 0.0
-                new_direction(self.p, self.z, rz_new / rz, z_mean, lo, hi)
+                self.k.new_direction(self.p, self.z, rz_new / rz, z_mean, lo, hi)
                 rz = rz_new
             res = self._true_residual(x, ax, ay, az) * scale
         return iterations, res
@@ -630,13 +695,13 @@ class PoissonSolver:
         """Replace the diagonal preconditioner's z (and its partial sums) by the V-cycle's."""
         if self.multigrid is not None:
             self.multigrid.apply(self.r, self.z, fine)
-            column_dots(self.r, self.z, self.part_b, self.part_c, self.slabs.lo, self.slabs.hi)
+            self.k.column_dots(self.r, self.z, self.part_b, self.part_c, self.slabs.lo, self.slabs.hi)
 
     def _jacobi(self, x, ax, ay, az, scale):
         src, dst = x, self.r
         iterations = 0
         while True:
-            jacobi_sweep(
+            self.k.jacobi_sweep(
                 self.rhs, src, self.diag, self.inv_diag, ax, ay, az,
                 self.periodic_x, self.periodic_y, self.ih2, dst, self.part_a,
             )  # fmt: skip
@@ -646,5 +711,5 @@ class PoissonSolver:
             iterations += 1
             src, dst = dst, src
         if src is not x:
-            x[:] = src
+            self.on.put(x, src)
         return iterations, res
