@@ -143,6 +143,10 @@ class FluidModule(Module):
         GPU is used."""
         return None
 
+    def solve_on_gpu(self) -> None:
+        """Where the particles' steps run on a GPU (physics/device_steps.py): the grid's pressure
+        solve moves there too (physics/fluid/device_poisson.py), for a model that has one."""
+
     def steps_taken(self, state, done: int) -> None:
         """After `done` steps of its compiled loop (`steps_kernel`, physics/compiled_steps.py),
         before the clock counts them: what the module reports of them (nothing here)."""

@@ -1,17 +1,18 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
-kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, kernels/observe/cuda_energy_budget.py)
+kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, cuda_poisson.py,
+kernels/observe/cuda_energy_budget.py)
 for an H200 (compute capability 9.0)
 with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
 whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
 numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds in its code.
 
-The argument types are those physics/device_steps.py passes."""
+The argument types are those physics/device_steps.py and physics/fluid/device_poisson.py pass."""
 
 from numba import cuda
 from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
-from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_porosity, cuda_profile_forces
+from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_poisson, cuda_porosity, cuda_profile_forces
 from sphere_cli.kernels.observe import cuda_energy_budget
 
 V = t.float64[:]  # (N,) or (3,)
@@ -119,6 +120,29 @@ POROSITY_SIGNATURES = {
     "sort_cells": (I1, I1, I1),
     "sample_cells": (M, M, V, V, V, L1, B, F, F, L1, I1, I1, BOOL, H, H4, H, I1),
 }
+# the pressure solve (kernels/fluid/cuda_poisson.py; U: the boundary flags, np.uint8)
+U = t.uint8
+POISSON_SIGNATURES = {
+    "prepare_system": (H, H, H, H, H, U, U, U, U, F, F, V, H, H, H, V),
+    "apply_operator": (H, H, H, H, H, U, U, V, H, V, INT, INT),
+    "residual": (H, H, H, H, H, H, U, U, V, H, V, INT, INT),
+    "column_sums": (H, V, INT, INT),
+    "column_squares": (H, V, INT, INT),
+    "shift": (H, F, INT, INT),
+    "precondition": (H, H, H, V, V, INT, INT),
+    "cg_step": (H, H, H, H, F, H, H, V, V, V, INT, INT),
+    "new_direction": (H, H, F, F, INT, INT),
+    "jacobi_sweep": (H, H, H, H, H, H, H, U, U, V, H, V),
+    "coarsen_coefficients": (H, H, H, H, INT, INT, INT, H, H, H, H),
+    "restrict": (H, INT, INT, INT, H, INT, INT),
+    "prolong_add": (H, INT, INT, INT, H, INT, INT),
+    "jacobi_smooth": (H, H, H, H, H, H, H, U, U, V, F, H, INT, INT),
+    "red_black_sweep": (H, H, H, H, H, H, U, U, V, INT, INT, INT),
+    "column_dots": (H, H, V, V, INT, INT),
+    "fill": (H, F),
+    "add_words": (V, INT, INT, L1),
+    "clear_words": (L1,),
+}
 # the energy budget (kernels/observe/cuda_energy_budget.py)
 BUDGET_SIGNATURES = {
     "book": (
@@ -168,6 +192,7 @@ if __name__ == "__main__":
         (cuda_darcy, DARCY_SIGNATURES),
         (cuda_drag, DRAG_SIGNATURES),
         (cuda_porosity, POROSITY_SIGNATURES),
+        (cuda_poisson, POISSON_SIGNATURES),
         (cuda_energy_budget, BUDGET_SIGNATURES),
     ):
         for name, signature in signatures.items():

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cuda_dem import NAVIER_STOKES, RTOL, _compare, _scenes
+from test_cuda_dem import NAVIER_STOKES, RTOL, SIMULATED, _compare, _scenes
 
+from sphere_cli.physics.fluid.poisson import PoissonResult
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
 
@@ -88,7 +89,9 @@ fluctuations = { bed_elevation = 0.001, seed = 3 }
 """
 
 
-# Darcy pore pressure on a 2 x 2 x 3 grid, pulsed from below, solved every 5 steps
+# Darcy pore pressure on a 2 x 2 x 3 grid, pulsed from below, solved every 5 steps (on the GPU:
+# its fused multiply-adds round otherwise than the CPU, and a solve stopped at 1e-13 keeps the
+# difference at round-off, within RTOL)
 DARCY = """
 [[walls]]
 face = "z-"
@@ -99,6 +102,7 @@ grid = { cells = [2, 2, 3] }
 coupling = { steps = 5 }
 bottom = { type = "pressure", pressure = 80.0, amplitude = 60.0, period = 0.0002 }
 top = { type = "pressure", pressure = 0.0 }
+solver = { tolerance = 1e-13 }
 """
 
 
@@ -307,3 +311,87 @@ def test_the_fluidized_bed_example_starts_on_the_gpu_as_on_the_cpu():
         scenes.append(build_scene(loaded))
         advance(scenes[-1], 12)
     _compare(*scenes)
+
+
+def _system(shape, singular: bool, seed: int = 5):
+    """A right-hand side, c (zero: the singular Navier-Stokes pressure) and face coefficients
+    over two decades, on `shape`."""
+    rng = np.random.default_rng(seed)
+    nx, ny, nz = shape
+    b = rng.normal(size=shape)
+    c = np.zeros(shape) if singular else rng.uniform(0.5, 2.0, shape)
+    faces = [rng.uniform(0.1, 10.0, s) for s in ((nx + 1, ny, nz), (nx, ny + 1, nz), (nx, ny, nz + 1))]
+    return b, c, *faces
+
+
+@pytest.mark.parametrize(
+    "shape, periodic, boundaries, method, preconditioner, singular, scale",
+    [
+        ((8, 8, 16), (True, True, False), ("no-flux", "no-flux"), "pcg", "multigrid", True, 1.0),
+        ((6, 4, 5), (False, True, False), ("dirichlet", "no-flux"), "pcg", "jacobi", False, 1.0),
+        ((4, 4, 6), (True, False, False), ("no-flux", "dirichlet"), "pcg", "jacobi", False, 1e-200),
+        ((4, 3, 4), (False, False, False), ("dirichlet", "dirichlet"), "jacobi", "jacobi", False, 1.0),
+    ],
+    ids=["multigrid-singular", "diagonal-dirichlet", "diagonal-rescaled", "jacobi-method"],
+)
+def test_the_pressure_solve_on_the_gpu_is_the_cpus(
+    shape, periodic, boundaries, method, preconditioner, singular, scale
+):
+    """physics/fluid/device_poisson.py: the solver with its fields on the GPU (kernels/fluid/
+    cuda_poisson.py: the CPU's column functions, a thread a column; every sum the CPU's exact
+    sum of the same column sums) gives the CPU's iterates, so its iteration count, residual and
+    solution: the multigrid V-cycle (red-black sweeps, a Jacobi-smoothed coarsest level) on the
+    singular periodic pressure equation, the diagonal preconditioner with Dirichlet faces, a
+    right-hand side of 1e-200 (rescaled by a power of two), the Jacobi method; one forward-Euler
+    step (explicit_step); and a zero right-hand side. Bitwise under the simulator; on a GPU its
+    fused multiply-adds round otherwise, within the solve's tolerance (1e-12) times the
+    solution's size, amplified by the condition number (under 1e3 here)."""
+    from sphere_cli.physics.fluid.device_poisson import OnGpu, on_gpu
+    from sphere_cli.physics.fluid.grid import FluidGrid
+    from sphere_cli.physics.fluid.poisson import PoissonSolver
+
+    grid = FluidGrid(np.zeros(3), np.array([0.1, 0.12, 0.09]), shape, np.array(periodic))
+    cpu = PoissonSolver(grid, *boundaries, method, 1e-12, 1000, preconditioner)  # a broken sum: fails fast
+    gpu = on_gpu(cpu)
+    assert (
+        isinstance(gpu.on, OnGpu)
+        and on_gpu(gpu) is gpu
+        and gpu.describe() == cpu.describe() + " (on the GPU)"
+    )
+    assert (gpu.multigrid is not None) == (preconditioner == "multigrid")
+    b, c, ax, ay, az = _system(shape, singular)
+    b *= scale
+
+    def same(one, other):
+        if SIMULATED:
+            assert np.array_equal(one, other)
+        else:
+            np.testing.assert_allclose(one, other, rtol=0.0, atol=1e-9 * np.abs(other).max())
+
+    results = []
+    for solver in (cpu, gpu):
+        x = np.full(shape, 0.25 * scale)
+        results.append((solver.solve(x, b, c, ax, ay, az, 1.5 * scale, -0.5 * scale), x))
+    (on_cpu, x_cpu), (on_device, x_gpu) = results
+    assert on_cpu.converged and on_cpu.iterations > 3 and np.abs(x_cpu).max() > 0.0
+    same(x_gpu, x_cpu)
+    if SIMULATED:
+        assert on_device == on_cpu
+    if not singular:
+        steps = [np.full(shape, 2.0) for _ in range(2)]
+        for solver, x in zip((cpu, gpu), steps, strict=True):
+            solver.explicit_step(x, b, c, ax, ay, az, 1.0, -1.0)
+        same(steps[1], steps[0])
+    x = np.ones(shape)
+    assert gpu.solve(x, np.zeros(shape), c, ax, ay, az) == PoissonResult(0, 0.0, True, 0.0) and not x.any()
+
+
+def test_a_gpu_run_solves_its_fluid_on_the_gpu(tmp_path):
+    """The fluids with a pressure solve take it to the GPU with the particles (FluidModule.
+    solve_on_gpu); the fluid's line of run.log (its summary) says so."""
+    for name, fluid in (("darcy", DARCY), ("navier-stokes", NAVIER_STOKES)):
+        (tmp_path / name).mkdir()
+        gpu, cpu = _scenes(tmp_path / name, walls=fluid)
+        on_gpu = [key for key, fact in gpu.fluid.summary().items() if fact.endswith("(on the GPU)")]
+        assert on_gpu == ["solver" if name == "darcy" else "pressure solver"], name
+        assert not any(fact.endswith("(on the GPU)") for fact in cpu.fluid.summary().values())

@@ -398,6 +398,11 @@ class Darcy(FluidModule):
             forces.insert(0, (cuda_darcy.push_wall, 1, self._push_arguments(state)))
         return GpuSteps(forces)
 
+    def solve_on_gpu(self) -> None:
+        from .device_poisson import on_gpu
+
+        self.pore.solver = on_gpu(self.pore.solver)
+
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the
         particle is (the fluid's own arrays, kept whole on every MPI rank)."""

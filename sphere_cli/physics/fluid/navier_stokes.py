@@ -639,6 +639,11 @@ class NavierStokes(FluidModule):
     on_gpu = True
     stability_reads_particles = True  # the fastest particle's cells a fluid step
 
+    def solve_on_gpu(self) -> None:
+        from .device_poisson import on_gpu
+
+        self.solver.poisson = on_gpu(self.solver.poisson)
+
     def gpu_steps(self, state) -> GpuSteps:
         """The drag on the GPU; on a grid that keeps its cells (no top wall to follow), also the
         porosity and the momentum exchange at the end of each step before a fluid step, so that

@@ -1,0 +1,120 @@
+"""The fluids' pressure solve on a CUDA GPU (simulation.device = "cuda"): physics/fluid/poisson.py
+PoissonSolver, the same conjugate gradient and multigrid V-cycle, with its fields on the device
+and kernels/fluid/cuda_poisson.py's kernels working on them (`OnGpu`, the place it is given).
+
+A solve takes the caller's arrays on the host as before: the right-hand side, the coefficients
+and the first guess go to the device (six copies), the iterations run there, and the solution
+comes back (one copy); every sum of the iteration is the processor's exact sum of the same column
+partial sums (69 words back from the device a sum), so the iterates, the iteration count and the
+solution are the processor's, bitwise under Numba's simulator. The rest of the grid's step stays
+on the processor.
+
+Imported only where a GPU is used (physics/device_steps.py), like every CUDA module."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import config, cuda
+
+from ...kernels.exact_sum import WORDS
+from ...kernels.fluid import cuda_poisson
+
+# as physics/device_steps.py launches the DEM's kernels: threads a block, and under the simulator
+# one thread (each kernel loops over its columns by cuda.gridsize)
+THREADS = 128
+SIMULATOR_LAUNCH = (1, 1)
+KERNELS = (
+    "prepare_system", "apply_operator", "residual", "column_sums", "column_squares", "shift", "precondition",
+    "cg_step", "new_direction", "jacobi_sweep", "coarsen_coefficients", "restrict", "prolong_add",
+    "jacobi_smooth", "red_black_sweep", "column_dots",
+)  # fmt: skip
+
+
+class GpuKernels:
+    """kernels/fluid/poisson.py's kernels by the same names and arguments, launched on the GPU
+    (cuda_poisson.py), and column_words adding the partial sums there."""
+
+    def __init__(self, launch: tuple):
+        for name in KERNELS:
+            setattr(self, name, getattr(cuda_poisson, name)[launch])
+        self._clear = cuda_poisson.clear_words[launch]
+        self._add = cuda_poisson.add_words[launch]
+        self._words = cuda.to_device(np.zeros(WORDS, dtype=np.int64))
+
+    def column_words(self, partial, first: int, last: int, words: np.ndarray) -> None:
+        """words (host) = the exact sum of partial[first:last] (poisson.py column_words)."""
+        self._clear(self._words)
+        self._add(partial, first, last, self._words)
+        self._words.copy_to_host(words)
+
+
+class OnGpu:
+    """A solver's fields on the GPU (physics/fluid/poisson.py OnProcessor's calls): kernels of one
+    launch sized for the finest grid's columns, the caller's arrays copied in and out."""
+
+    fused = False  # no whole-grid loops in one compiled call: each kernel is a launch
+    where = " (on the GPU)"
+
+    def __init__(self, shape):
+        columns = int(shape[0]) * int(shape[1])
+        launch = (
+            SIMULATOR_LAUNCH if config.ENABLE_CUDASIM else (max(1, math.ceil(columns / THREADS)), THREADS)
+        )
+        self.kernels = GpuKernels(launch)
+        self._fill = cuda_poisson.fill[launch]
+        self.held = {}  # the device's copy of each argument of inputs(), by its place
+
+    @staticmethod
+    def zeros(shape):
+        return cuda.to_device(np.zeros(shape))
+
+    @staticmethod
+    def array(values: np.ndarray):
+        return cuda.to_device(np.ascontiguousarray(values, dtype=np.float64))
+
+    @staticmethod
+    def put(field, values) -> None:
+        """field = values (on the host or the device)."""
+        on_host = isinstance(values, np.ndarray)
+        field.copy_to_device(np.ascontiguousarray(values, dtype=np.float64) if on_host else values)
+
+    @staticmethod
+    def host(field) -> np.ndarray:
+        return field.copy_to_host()
+
+    def inputs(self, *arrays: np.ndarray) -> tuple:
+        """The caller's host arrays copied into the device's arrays kept for their places."""
+        out = []
+        for place, values in enumerate(arrays):
+            held = self.held.get(place)
+            if held is None or held.shape != values.shape:
+                held = self.held[place] = cuda.device_array(values.shape)
+            held.copy_to_device(np.ascontiguousarray(values, dtype=np.float64))
+            out.append(held)
+        return tuple(out)
+
+    @staticmethod
+    def output(field, x: np.ndarray) -> None:
+        if x.flags.c_contiguous:
+            field.copy_to_host(x)
+        else:
+            x[...] = field.copy_to_host()
+
+    def fill(self, field, value: float) -> None:
+        self._fill(field, value)
+
+    @staticmethod
+    def scale(field, exponent: int) -> None:
+        """field *= 2^exponent, exactly (on the host: a right-hand side far from unit size is rare)."""
+        values = field.copy_to_host()
+        np.ldexp(values, exponent, out=values)
+        field.copy_to_device(values)
+
+
+def on_gpu(solver):
+    """The same solver (physics/fluid/poisson.py PoissonSolver) with its fields on the GPU."""
+    if isinstance(solver.on, OnGpu):
+        return solver
+    return solver.elsewhere(OnGpu(solver.grid.shape))
