@@ -137,6 +137,7 @@ POISSON_SIGNATURES = {
     "restrict": (H, INT, INT, INT, H, INT, INT),
     "prolong_add": (H, INT, INT, INT, H, INT, INT),
     "jacobi_smooth": (H, H, H, H, H, H, H, U, U, V, F, H, INT, INT),
+    "jacobi_smooth_pairs": (H, H, H, H, H, H, H, U, U, V, F, H, INT),
     "red_black_sweep": (H, H, H, H, H, H, U, U, V, INT, INT, INT),
     "column_dots": (H, H, V, V, INT, INT),
     "fill": (H, F),

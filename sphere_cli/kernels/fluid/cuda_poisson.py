@@ -5,7 +5,8 @@ exactly by integer atomics (kernels/exact_sum.py, as cuda_dem.py push_sums adds 
 every sum is the processor's too, whatever the order of the threads, and so are the iterates.
 
 Arguments and the columns [lo, hi) as in poisson.py; the kernels are launched over any number of
-threads (each takes the columns cuda.grid(1), then on by cuda.gridsize(1)). A red-black sweep runs
+threads (each takes the columns cuda.grid(1), then on by cuda.gridsize(1)), but for
+jacobi_smooth_pairs, one block's. A red-black sweep runs
 one colour of each column of the planes [lo, hi): the cells of one colour read only the other's,
 so the order of their updates changes nothing."""
 
@@ -120,6 +121,21 @@ def prolong_add(coarse, fx, fy, fz, fine, lo, hi):
 def jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, out, lo, hi):
     for col in range(lo * x.shape[1] + cuda.grid(1), hi * x.shape[1], cuda.gridsize(1)):
         smooth_column(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, out, col)
+
+
+@cuda.jit
+def jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, tmp, pairs):
+    """poisson.py jacobi_smooth_pairs in one launch of one block (a small level: the coarsest's
+    40 sweeps were 40 launches): its threads share the columns and wait for each other after each
+    sweep, which reads only the last one's values."""
+    columns = x.shape[0] * x.shape[1]
+    for _ in range(pairs):
+        for col in range(cuda.threadIdx.x, columns, cuda.blockDim.x):
+            smooth_column(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, tmp, col)
+        cuda.syncthreads()
+        for col in range(cuda.threadIdx.x, columns, cuda.blockDim.x):
+            smooth_column(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, omega, x, col)
+        cuda.syncthreads()
 
 
 @cuda.jit

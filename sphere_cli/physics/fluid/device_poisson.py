@@ -25,6 +25,10 @@ from ...kernels.fluid import cuda_poisson
 # one thread (each kernel loops over its columns by cuda.gridsize)
 THREADS = 128
 SIMULATOR_LAUNCH = (1, 1)
+# a level of at most this many cells is smoothed by Jacobi sweeps in one launch of one block (the
+# coarsest level's 40 sweeps of 64 cells were 40 launches of latency alone, 40 of the 95 launches
+# of an iteration at 64^3); a larger one (a level that cannot be coloured) in two launches a pair
+ONE_BLOCK_CELLS = 32768
 KERNELS = (
     "prepare_system", "apply_operator", "residual", "column_sums", "column_squares", "shift", "precondition",
     "cg_step", "new_direction", "jacobi_sweep", "coarsen_coefficients", "restrict", "prolong_add",
@@ -36,12 +40,24 @@ class GpuKernels:
     """kernels/fluid/poisson.py's kernels by the same names and arguments, launched on the GPU
     (cuda_poisson.py), and column_words adding the partial sums there."""
 
-    def __init__(self, launch: tuple):
+    def __init__(self, launch: tuple, one_block: tuple):
         for name in KERNELS:
             setattr(self, name, getattr(cuda_poisson, name)[launch])
+        self._pairs = cuda_poisson.jacobi_smooth_pairs[one_block]
         self._clear = cuda_poisson.clear_words[launch]
         self._add = cuda_poisson.add_words[launch]
         self._words = cuda.to_device(np.zeros(WORDS, dtype=np.int64))
+
+    def jacobi_smooth_pairs(self, rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, tmp, pairs) -> None:
+        """`pairs` pairs of damped Jacobi sweeps of a whole level, x into tmp and back (poisson.py
+        jacobi_smooth_pairs)."""
+        if x.size <= ONE_BLOCK_CELLS:
+            self._pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, tmp, pairs)
+            return
+        nx = x.shape[0]
+        for _ in range(pairs):
+            self.jacobi_smooth(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, omega, tmp, 0, nx)
+            self.jacobi_smooth(rhs, tmp, inv_diag, diag, ax, ay, az, px, py, ih2, omega, x, 0, nx)
 
     def column_words(self, partial, first: int, last: int, words: np.ndarray) -> None:
         """words (host) = the exact sum of partial[first:last] (poisson.py column_words)."""
@@ -59,10 +75,9 @@ class OnGpu:
 
     def __init__(self, shape):
         columns = int(shape[0]) * int(shape[1])
-        launch = (
-            SIMULATOR_LAUNCH if config.ENABLE_CUDASIM else (max(1, math.ceil(columns / THREADS)), THREADS)
-        )
-        self.kernels = GpuKernels(launch)
+        simulated = bool(config.ENABLE_CUDASIM)
+        launch = SIMULATOR_LAUNCH if simulated else (max(1, math.ceil(columns / THREADS)), THREADS)
+        self.kernels = GpuKernels(launch, SIMULATOR_LAUNCH if simulated else (1, THREADS))
         self._fill = cuda_poisson.fill[launch]
         self.held = {}  # the device's copy of each argument of inputs(), by its place
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from ...kernels.exact_sum import WORDS, exact_value
 from ...kernels.fluid import poisson as poisson_kernels
-from ...kernels.fluid.poisson import diagonal_cg, diagonal_cg_serial, jacobi_smooth_pairs, red_black_smooth
+from ...kernels.fluid.poisson import diagonal_cg, diagonal_cg_serial, red_black_smooth
 from ...kernels.serial import use_serial
 from .grid import FluidGrid
 
@@ -81,7 +81,7 @@ class OnProcessor:
     calls with the same kernels on its own arrays."""
 
     kernels = poisson_kernels
-    fused = True  # whole-grid loops in one compiled call (red_black_smooth, jacobi_smooth_pairs, diagonal_cg)
+    fused = True  # whole-grid loops in one compiled call (red_black_smooth, diagonal_cg)
     where = ""  # for describe()
 
     @staticmethod
@@ -319,8 +319,7 @@ class Multigrid:
         first sweep needs no messages)."""
         px, py = self.flags[0], self.flags[1]
         lo, hi = slabs.lo, slabs.hi
-        fused = self.on.fused and not slabs.split
-        if first is not None and fused:  # a run of planes a thread
+        if first is not None and self.on.fused and not slabs.split:  # a run of planes a thread
             runs = numba.get_num_threads()
             red_black_smooth(rhs, x, inv_diag, ax, ay, az, px, py, ih2, first, sweeps, runs)
             return
@@ -331,9 +330,11 @@ class Multigrid:
                 colour = first if half % 2 == 0 else 1 - first
                 self.k.red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, colour, lo, hi)
             return
-        if fused:
+        if not slabs.split:  # the pairs of sweeps in one call
             pairs = sweeps // 2
-            jacobi_smooth_pairs(rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs)
+            self.k.jacobi_smooth_pairs(
+                rhs, x, inv_diag, diag, ax, ay, az, px, py, ih2, SMOOTHING_WEIGHT, tmp, pairs
+            )
             return
         for sweep in range(sweeps // 2):
             if sweep or not zero:
