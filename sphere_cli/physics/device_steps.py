@@ -102,7 +102,7 @@ def _cuda():
     return cuda, cuda_dem
 
 
-def _on_gpu(work):
+def on_gpu_or_error(work):
     """Run `work` (host calls into numba.cuda); a CUDA error (out of memory above all) becomes a
     CaseError naming the key instead of a traceback."""
     try:
@@ -465,12 +465,12 @@ class DeviceSteps:
 
     def run(self, state: State, steps: int) -> tuple[int, bool]:
         """Take `steps` whole steps on the device; the host arrays are stale until to_host."""
-        return _on_gpu(lambda: self._run(state, steps))
+        return on_gpu_or_error(lambda: self._run(state, steps))
 
     def to_host(self, state: State) -> None:
         """Bring the state back into the host's arrays, if steps were taken since."""
         if self.host_stale:
-            _on_gpu(lambda: self.download(state))
+            on_gpu_or_error(lambda: self.download(state))
             self.host_stale = False
 
     def _particles_to_host(self, state: State) -> None:
@@ -509,7 +509,7 @@ class DeviceSteps:
         current anyway."""
         if not self.host_stale:
             return False
-        return _on_gpu(lambda: self._stable_on_device(state))
+        return on_gpu_or_error(lambda: self._stable_on_device(state))
 
     def _stable_on_device(self, state: State) -> bool:
         k = self.k

@@ -407,3 +407,32 @@ def test_a_gpu_run_solves_its_fluid_on_the_gpu(tmp_path):
         on_gpu = [key for key, fact in gpu.fluid.summary().items() if fact.endswith("(on the GPU)")]
         assert on_gpu == ["solver" if name == "darcy" else "pressure solver"], name
         assert not any(fact.endswith("(on the GPU)") for fact in cpu.fluid.summary().values())
+
+
+def test_a_gpu_failure_in_the_pressure_solve_is_the_users_error(monkeypatch):
+    """A CUDA error in a solve on the GPU (out of memory above all), which runs in the fluid's own
+    step on the host, outside DeviceSteps.run, is a CaseError naming simulation.device (exit 65),
+    not a traceback; any other error is left as it is."""
+    from sphere_cli.errors import CaseError
+    from sphere_cli.physics.fluid.device_poisson import OnGpu, on_gpu
+    from sphere_cli.physics.fluid.grid import FluidGrid
+    from sphere_cli.physics.fluid.poisson import PoissonSolver
+
+    shape = (3, 3, 4)
+    grid = FluidGrid(np.zeros(3), np.full(3, 0.1), shape, np.array([False, False, False]))
+    gpu = on_gpu(PoissonSolver(grid, "dirichlet", "no-flux", "pcg", 1e-10, 100, "jacobi"))
+    arguments = _system(shape, singular=False)
+    out_of_memory = type("CudaAPIError", (Exception,), {"__module__": "numba.cuda.cudadrv.driver"})
+    for error, expected in ((out_of_memory, CaseError), (ZeroDivisionError, ZeroDivisionError)):
+
+        def fail(*_, error=error):
+            raise error("CUDA_ERROR_OUT_OF_MEMORY")
+
+        monkeypatch.setattr(OnGpu, "inputs", fail)
+        for call in (gpu.solve, gpu.explicit_step):
+            with pytest.raises(expected) as raised:
+                call(np.zeros(shape), *arguments)
+            if expected is CaseError:
+                assert str(raised.value).startswith(
+                    'simulation.device = "cuda": the GPU failed: CudaAPIError: CUDA_ERROR_OUT_OF_MEMORY'
+                )

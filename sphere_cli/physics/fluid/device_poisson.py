@@ -20,6 +20,8 @@ from numba import config, cuda
 
 from ...kernels.exact_sum import WORDS
 from ...kernels.fluid import cuda_poisson
+from ..device_steps import on_gpu_or_error
+from .poisson import PoissonResult, PoissonSolver
 
 # as physics/device_steps.py launches the DEM's kernels: threads a block, and under the simulator
 # one thread (each kernel loops over its columns by cuda.gridsize)
@@ -128,8 +130,20 @@ class OnGpu:
         field.copy_to_device(values)
 
 
-def on_gpu(solver):
-    """The same solver (physics/fluid/poisson.py PoissonSolver) with its fields on the GPU."""
-    if isinstance(solver.on, OnGpu):
+class GpuPoissonSolver(PoissonSolver):
+    """PoissonSolver with its fields on the GPU, whose failures (out of memory above all) are the
+    user's error naming simulation.device, not a traceback (its solves run in the fluid's step on
+    the host, outside DeviceSteps.run)."""
+
+    def solve(self, *arguments) -> PoissonResult:
+        return on_gpu_or_error(lambda: super(GpuPoissonSolver, self).solve(*arguments))
+
+    def explicit_step(self, *arguments) -> None:
+        on_gpu_or_error(lambda: super(GpuPoissonSolver, self).explicit_step(*arguments))
+
+
+def on_gpu(solver: PoissonSolver) -> PoissonSolver:
+    """The same solver with its fields on the GPU."""
+    if isinstance(solver, GpuPoissonSolver):
         return solver
-    return solver.elsewhere(OnGpu(solver.grid.shape))
+    return on_gpu_or_error(lambda: GpuPoissonSolver.like(solver, OnGpu(solver.grid.shape)))

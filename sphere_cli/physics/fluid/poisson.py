@@ -451,12 +451,13 @@ class PoissonSolver:
             self.multigrid = multigrid if multigrid.usable else None
         self.slabs = Slabs(shape, kernels=on.kernels)
 
-    def elsewhere(self, on) -> PoissonSolver:
-        """The same solver, not split across ranks, with its fields and kernels at `on`
-        (physics/fluid/device_poisson.py OnGpu: on a GPU)."""
-        return PoissonSolver(
-            self.grid, *self.boundaries, self.method, self.tolerance, self.max_iterations,
-            self.preconditioner, self.split_cells, on,
+    @classmethod
+    def like(cls, solver: PoissonSolver, on) -> PoissonSolver:
+        """A solver of this class with solver's grid, boundaries and settings, not split across
+        ranks, its fields and kernels at `on` (physics/fluid/device_poisson.py: on a GPU)."""
+        return cls(
+            solver.grid, *solver.boundaries, solver.method, solver.tolerance, solver.max_iterations,
+            solver.preconditioner, solver.split_cells, on,
         )  # fmt: skip
 
     def split(self, comm) -> None:
