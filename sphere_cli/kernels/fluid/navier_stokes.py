@@ -199,19 +199,22 @@ def edge_porosity(phi, edges):
     for ii in prange(nx):
         i = np.int64(ii)
         for j in range(ny):
-            for k in range(nz + 1):
-                for m in range(3):
-                    c = 1 if m == 0 else 0
-                    a = 1 if m == 2 else 2
-                    ic, jc, kc = _shift(i, j, k, c, -1)
-                    ia, ja, ka = _shift(i, j, k, a, -1)
-                    ib, jb, kb = _shift(ic, jc, kc, a, -1)
-                    edges[i, j, k, m] = 0.25 * (
-                        _cell(phi, i, j, k)
-                        + _cell(phi, ic, jc, kc)
-                        + _cell(phi, ia, ja, ka)
-                        + _cell(phi, ib, jb, kb)
-                    )
+            edge_porosity_column(phi, edges, i, j)
+
+
+@njit(cache=True, inline="always")
+def edge_porosity_column(phi, edges, i, j):
+    nz = phi.shape[2]
+    for k in range(nz + 1):
+        for m in range(3):
+            c = 1 if m == 0 else 0
+            a = 1 if m == 2 else 2
+            ic, jc, kc = _shift(i, j, k, c, -1)
+            ia, ja, ka = _shift(i, j, k, a, -1)
+            ib, jb, kb = _shift(ic, jc, kc, a, -1)
+            edges[i, j, k, m] = 0.25 * (
+                _cell(phi, i, j, k) + _cell(phi, ic, jc, kc) + _cell(phi, ia, ja, ka) + _cell(phi, ib, jb, kb)
+            )
 
 
 @njit(cache=True, inline="always")
@@ -244,13 +247,19 @@ def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
-            for k in range(nz):
-                for a in range(3):
-                    i1, j1, k1 = _shift(i, j, k, a, 1)
-                    i0, j0, k0 = _shift(i, j, k, a, -1)
-                    grad_p[i, j, k, a] = (
-                        _pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)
-                    ) / (2.0 * spacing[a])
+            pressure_gradient_column(p, spacing, p_kind, p_bound, grad_p, i, j)
+
+
+@njit(cache=True, inline="always")
+def pressure_gradient_column(p, spacing, p_kind, p_bound, grad_p, i, j):
+    nz = p.shape[2]
+    for k in range(nz):
+        for a in range(3):
+            i1, j1, k1 = _shift(i, j, k, a, 1)
+            i0, j0, k0 = _shift(i, j, k, a, -1)
+            grad_p[i, j, k, a] = (
+                _pres(p, i1, j1, k1, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)
+            ) / (2.0 * spacing[a])
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -263,25 +272,31 @@ def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear, lo, hi
     for t in prange(hi - lo):
         i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
-            for k in range(-1, nz + 1):
-                for c in range(3):
-                    i1, j1, k1 = _shift(i, j, k, c, 1)
-                    normal[i, j, k + 1, c] = _cell(phi, i, j, k) * (
-                        _face(v_face, i1, j1, k1, c, bc_sign) - _face(v_face, i, j, k, c, bc_sign)
-                    )
-                if k < 0:
-                    continue
-                for m in range(3):
-                    c = 1 if m == 0 else 0
-                    a = 1 if m == 2 else 2
-                    ia, ja, ka = _shift(i, j, k, a, -1)
-                    ic, jc, kc = _shift(i, j, k, c, -1)
-                    uc = _face(v_face, i, j, k, c, bc_sign)
-                    ua = _face(v_face, i, j, k, a, bc_sign)
-                    shear[i, j, k, m] = edges[i, j, k, m] * (
-                        (uc - _face(v_face, ia, ja, ka, c, bc_sign)) / spacing[a]
-                        + (ua - _face(v_face, ic, jc, kc, a, bc_sign)) / spacing[c]
-                    )
+            viscous_stresses_column(v_face, phi, edges, spacing, bc_sign, normal, shear, i, j)
+
+
+@njit(cache=True, inline="always")
+def viscous_stresses_column(v_face, phi, edges, spacing, bc_sign, normal, shear, i, j):
+    nz = phi.shape[2]
+    for k in range(-1, nz + 1):
+        for c in range(3):
+            i1, j1, k1 = _shift(i, j, k, c, 1)
+            normal[i, j, k + 1, c] = _cell(phi, i, j, k) * (
+                _face(v_face, i1, j1, k1, c, bc_sign) - _face(v_face, i, j, k, c, bc_sign)
+            )
+        if k < 0:
+            continue
+        for m in range(3):
+            c = 1 if m == 0 else 0
+            a = 1 if m == 2 else 2
+            ia, ja, ka = _shift(i, j, k, a, -1)
+            ic, jc, kc = _shift(i, j, k, c, -1)
+            uc = _face(v_face, i, j, k, c, bc_sign)
+            ua = _face(v_face, i, j, k, a, bc_sign)
+            shear[i, j, k, m] = edges[i, j, k, m] * (
+                (uc - _face(v_face, ia, ja, ka, c, bc_sign)) / spacing[a]
+                + (ua - _face(v_face, ic, jc, kc, a, bc_sign)) / spacing[c]
+            )
 
 
 @njit(cache=True, inline="always")
@@ -330,38 +345,44 @@ def advective_fluxes(v_face, phi, edges, bc_sign, flux, lo, hi):
     for t in prange(hi - lo):
         i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
-            for k in range(nz + 2):
-                for c in range(3):
-                    uc = _face(v_face, i, j, k, c, bc_sign)
-                    for a in range(3):
-                        if k > nz and (a != 2 or c != 2):  # beyond the +z side of the top z faces
-                            flux[i, j, k, c, a] = 0.0
-                            continue
-                        i0, j0, k0 = _shift(i, j, k, a, -1)
-                        west = _face(v_face, i0, j0, k0, c, bc_sign)
-                        if a == c:
-                            transport = _cell(phi, i0, j0, k0) * 0.5 * (west + uc)
-                        else:
-                            ic, jc, kc = _shift(i, j, k, c, -1)
-                            transport = (
-                                edges[i, j, k, 3 - c - a]
-                                * 0.5
-                                * (_face(v_face, i, j, k, a, bc_sign) + _face(v_face, ic, jc, kc, a, bc_sign))
-                            )
-                        # (far upwind, upwind, downwind) of the side; one call site each (compile time)
-                        if a == 2 and c != 2 and (k == 0 or k == nz):
-                            # a side on a z boundary carries the boundary's own value, the mean
-                            # of the faces either side (0 at a no-slip face, through which a
-                            # prescribed or open flow brings no tangential velocity)
-                            flux[i, j, k, c, a] = transport * 0.5 * (west + uc)
-                            continue
-                        if transport > 0.0:
-                            im, jm, km = _far(i, j, k, a, -1, nx, ny)
-                            value = _limited_face_value(_face(v_face, im, jm, km, c, bc_sign), west, uc)
-                        else:
-                            i1, j1, k1 = _shift(i, j, k, a, 1)
-                            value = _limited_face_value(_face(v_face, i1, j1, k1, c, bc_sign), uc, west)
-                        flux[i, j, k, c, a] = transport * value
+            advective_fluxes_column(v_face, phi, edges, bc_sign, flux, i, j)
+
+
+@njit(cache=True, inline="always")
+def advective_fluxes_column(v_face, phi, edges, bc_sign, flux, i, j):
+    nx, ny, nz = phi.shape
+    for k in range(nz + 2):
+        for c in range(3):
+            uc = _face(v_face, i, j, k, c, bc_sign)
+            for a in range(3):
+                if k > nz and (a != 2 or c != 2):  # beyond the +z side of the top z faces
+                    flux[i, j, k, c, a] = 0.0
+                    continue
+                i0, j0, k0 = _shift(i, j, k, a, -1)
+                west = _face(v_face, i0, j0, k0, c, bc_sign)
+                if a == c:
+                    transport = _cell(phi, i0, j0, k0) * 0.5 * (west + uc)
+                else:
+                    ic, jc, kc = _shift(i, j, k, c, -1)
+                    transport = (
+                        edges[i, j, k, 3 - c - a]
+                        * 0.5
+                        * (_face(v_face, i, j, k, a, bc_sign) + _face(v_face, ic, jc, kc, a, bc_sign))
+                    )
+                # (far upwind, upwind, downwind) of the side; one call site each (compile time)
+                if a == 2 and c != 2 and (k == 0 or k == nz):
+                    # a side on a z boundary carries the boundary's own value, the mean
+                    # of the faces either side (0 at a no-slip face, through which a
+                    # prescribed or open flow brings no tangential velocity)
+                    flux[i, j, k, c, a] = transport * 0.5 * (west + uc)
+                    continue
+                if transport > 0.0:
+                    im, jm, km = _far(i, j, k, a, -1, nx, ny)
+                    value = _limited_face_value(_face(v_face, im, jm, km, c, bc_sign), west, uc)
+                else:
+                    i1, j1, k1 = _shift(i, j, k, a, 1)
+                    value = _limited_face_value(_face(v_face, i1, j1, k1, c, bc_sign), uc, west)
+                flux[i, j, k, c, a] = transport * value
 
 
 @njit(cache=True, inline="always")
@@ -416,58 +437,77 @@ def predict(
     derivative, so it is implicit in the fluid's own velocity. Solving the face's momentum
     balance for v_new divides every explicit increment, the pressure's included, by 1 + dt k_f/
     (rho phi_f): v* = v + D_f dt [...], v_new = v* - dt/rho (mobility/phi_f) grad eps."""
-    nx, ny, nz = phi.shape
-    for t in prange(hi - lo):
-        i = np.int64(_wrap(lo + np.int64(t), nx))  # the prange index is unsigned: i - 1 must not wrap
-        for j in range(ny):
-            for k in range(nz + 1):
-                for c in range(3):
-                    if not _is_face(k, c, nz, p_kind):
-                        prescribed = 0.0
-                        if c == 2:
-                            prescribed = inflow[0 if k == 0 else 1] / _phi_face(phi, i, j, k, 2)
-                        v_star[i, j, k, c] = prescribed
-                        mobility[i, j, k, c] = 0.0
-                        continue
-                    i0, j0, k0 = _shift(i, j, k, c, -1)
-                    ph = _phi_face(phi, i, j, k, c)
-                    rate_phi = 0.5 * (_cell(dphi, i, j, k) + _cell(dphi, i0, j0, k0))
-                    force = 0.5 * (_cell_vec(f_i, i, j, k, c) + _cell_vec(f_i, i0, j0, k0, c))
-                    coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
-                    grad = (
-                        _pres(p, i, j, k, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)
-                    ) / spacing[c]
-                    inv = 1.0 / (rho * ph)
-                    p_factor = 1.0 / rho if pressure_in_solid else inv
-                    implicit = dt * coefficient * inv
-                    uc = v_face[i, j, k, c]
-                    rate = (
-                        mu * inv * _viscous(normal, shear, i, j, k, c, spacing)
-                        - _advection(flux, i, j, k, c, spacing) / ph
-                        - beta * p_factor * grad
-                        + acceleration[i, j, k, c]
-                        - inv * force
-                    )
-                    explicit = uc + dt * rate - uc * rate_phi * dt / ph
-                    v_star[i, j, k, c] = (explicit + implicit * uc) / (1.0 + implicit)
-                    mobility[i, j, k, c] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
+    nx, ny = phi.shape[0], phi.shape[1]
+    # one loop over the columns: a loop over j in one over the planes around the inlined column
+    # took 4.7 ms against 2.4 ms at 32^3 (one thread)
+    for t in prange((hi - lo) * ny):
+        i = np.int64(_wrap(lo + np.int64(t // ny), nx))  # the prange index is unsigned: i - 1 must not wrap
+        j = np.int64(t % ny)
+        predict_column(
+            v_face, p, phi, normal, shear, flux, dphi, f_i, k_drag, acceleration, spacing, bc_sign, p_kind,
+            p_bound, rho, mu, beta, pressure_in_solid, dt, inflow, v_star, mobility, i, j,
+        )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def predict_column(
+    v_face, p, phi, normal, shear, flux, dphi, f_i, k_drag, acceleration, spacing, bc_sign, p_kind, p_bound,
+    rho, mu, beta, pressure_in_solid, dt, inflow, v_star, mobility, i, j,
+):  # fmt: skip
+    nz = phi.shape[2]
+    for k in range(nz + 1):
+        for c in range(3):
+            if not _is_face(k, c, nz, p_kind):
+                prescribed = 0.0
+                if c == 2:
+                    prescribed = inflow[0 if k == 0 else 1] / _phi_face(phi, i, j, k, 2)
+                v_star[i, j, k, c] = prescribed
+                mobility[i, j, k, c] = 0.0
+                continue
+            i0, j0, k0 = _shift(i, j, k, c, -1)
+            ph = _phi_face(phi, i, j, k, c)
+            rate_phi = 0.5 * (_cell(dphi, i, j, k) + _cell(dphi, i0, j0, k0))
+            force = 0.5 * (_cell_vec(f_i, i, j, k, c) + _cell_vec(f_i, i0, j0, k0, c))
+            coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
+            grad = (_pres(p, i, j, k, p_kind, p_bound) - _pres(p, i0, j0, k0, p_kind, p_bound)) / spacing[c]
+            inv = 1.0 / (rho * ph)
+            p_factor = 1.0 / rho if pressure_in_solid else inv
+            implicit = dt * coefficient * inv
+            uc = v_face[i, j, k, c]
+            rate = (
+                mu * inv * _viscous(normal, shear, i, j, k, c, spacing)
+                - _advection(flux, i, j, k, c, spacing) / ph
+                - beta * p_factor * grad
+                + acceleration[i, j, k, c]
+                - inv * force
+            )
+            explicit = uc + dt * rate - uc * rate_phi * dt / ph
+            v_star[i, j, k, c] = (explicit + implicit * uc) / (1.0 + implicit)
+            mobility[i, j, k, c] = (ph if pressure_in_solid else 1.0) / (1.0 + implicit)
 
 
 @njit(cache=True, parallel=True)
 def face_coefficients(mobility, ax, ay, az):
     """Copy the face mobilities into the pressure solver's face arrays (kernels/fluid/poisson.py:
     ax (nx+1,ny,nz), ay (nx,ny+1,nz), az (nx,ny,nz+1); the periodic faces nx and ny repeat 0)."""
-    nx, ny, nz = ax.shape[0] - 1, ay.shape[1] - 1, ax.shape[2]
+    nx, ny = ax.shape[0] - 1, ay.shape[1] - 1
     for ii in prange(nx + 1):
         i = np.int64(ii)
         for j in range(ny + 1):
-            for k in range(nz + 1):
-                if j < ny and k < nz:
-                    ax[i, j, k] = mobility[i % nx, j, k, 0]
-                if i < nx and k < nz:
-                    ay[i, j, k] = mobility[i, j % ny, k, 1]
-                if i < nx and j < ny:
-                    az[i, j, k] = mobility[i, j, k, 2]
+            face_coefficients_column(mobility, ax, ay, az, i, j)
+
+
+@njit(cache=True, inline="always")
+def face_coefficients_column(mobility, ax, ay, az, i, j):
+    """face_coefficients of column (i, j) of the (nx + 1) x (ny + 1) columns of faces."""
+    nx, ny, nz = ax.shape[0] - 1, ay.shape[1] - 1, ax.shape[2]
+    for k in range(nz + 1):
+        if j < ny and k < nz:
+            ax[i, j, k] = mobility[i % nx, j, k, 0]
+        if i < nx and k < nz:
+            ay[i, j, k] = mobility[i, j % ny, k, 1]
+        if i < nx and j < ny:
+            az[i, j, k] = mobility[i, j, k, 2]
 
 
 @njit(cache=True, inline="always")
@@ -496,8 +536,14 @@ def pressure_rhs(v_star, phi, dphi, spacing, rho, dt, rhs):
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
         for j in range(ny):
-            for k in range(nz):
-                rhs[i, j, k] = -rho / dt * (_divergence(v_star, phi, i, j, k, spacing) + dphi[i, j, k])
+            pressure_rhs_column(v_star, phi, dphi, spacing, rho, dt, rhs, i, j)
+
+
+@njit(cache=True, inline="always")
+def pressure_rhs_column(v_star, phi, dphi, spacing, rho, dt, rhs, i, j):
+    nz = phi.shape[2]
+    for k in range(nz):
+        rhs[i, j, k] = -rho / dt * (_divergence(v_star, phi, i, j, k, spacing) + dphi[i, j, k])
 
 
 @njit(cache=True, parallel=True)
@@ -519,19 +565,27 @@ def correct(v_star, eps, phi, mobility, spacing, p_kind, eps_bound, rho, beta, d
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i - 1 must not wrap
         for j in range(ny):
-            for k in range(nz + 1):
-                for c in range(3):
-                    if not _is_face(k, c, nz, p_kind):
-                        v_face[i, j, k, c] = v_star[i, j, k, c]
-                        continue
-                    i0, j0, k0 = _shift(i, j, k, c, -1)
-                    ph = _phi_face(phi, i, j, k, c)
-                    grad = (
-                        _pres(eps, i, j, k, p_kind, eps_bound) - _pres(eps, i0, j0, k0, p_kind, eps_bound)
-                    ) / spacing[c]
-                    v_face[i, j, k, c] = v_star[i, j, k, c] - dt / rho * mobility[i, j, k, c] / ph * grad
-                if k < nz:
-                    p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
+            correct_column(
+                v_star, eps, phi, mobility, spacing, p_kind, eps_bound, rho, beta, dt, v_face, p, i, j
+            )
+
+
+@njit(cache=True, inline="always")
+def correct_column(v_star, eps, phi, mobility, spacing, p_kind, eps_bound, rho, beta, dt, v_face, p, i, j):
+    nz = phi.shape[2]
+    for k in range(nz + 1):
+        for c in range(3):
+            if not _is_face(k, c, nz, p_kind):
+                v_face[i, j, k, c] = v_star[i, j, k, c]
+                continue
+            i0, j0, k0 = _shift(i, j, k, c, -1)
+            ph = _phi_face(phi, i, j, k, c)
+            grad = (
+                _pres(eps, i, j, k, p_kind, eps_bound) - _pres(eps, i0, j0, k0, p_kind, eps_bound)
+            ) / spacing[c]
+            v_face[i, j, k, c] = v_star[i, j, k, c] - dt / rho * mobility[i, j, k, c] / ph * grad
+        if k < nz:
+            p[i, j, k] = beta * p[i, j, k] + eps[i, j, k]
 
 
 @njit(cache=True, parallel=True)
@@ -544,27 +598,33 @@ def cell_velocity(v_face, v_old, phi, f_i, k_drag, p_kind, v, f_exchange):
     takes the mean of its two cells' f_i + k_drag (v_new - v_old), so these sum to what the fluid
     received, with the opposite sign. A z boundary face without one (no flow, prescribed
     velocity) passes its half of the boundary cell's f_i to the boundary, and no implicit part."""
-    nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
+    nx, ny = v.shape[0], v.shape[1]
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
-        i1 = i + 1 if i + 1 < nx else 0
         for j in range(ny):
-            j1 = j + 1 if j + 1 < ny else 0
-            for k in range(nz):
-                half = 0.5 / phi[i, j, k]
-                kd = 0.5 * k_drag[i, j, k]
-                for c in range(3):
-                    i2, j2, k2 = (i1, j, k) if c == 0 else ((i, j1, k) if c == 1 else (i, j, k + 1))
-                    v[i, j, k, c] = half * (
-                        _phi_face(phi, i, j, k, c) * v_face[i, j, k, c]
-                        + _phi_face(phi, i2, j2, k2, c) * v_face[i2, j2, k2, c]
-                    )
-                    change = 0.0
-                    if _is_face(k, c, nz, p_kind):
-                        change += v_face[i, j, k, c] - v_old[i, j, k, c]
-                    if _is_face(k2, c, nz, p_kind):
-                        change += v_face[i2, j2, k2, c] - v_old[i2, j2, k2, c]
-                    f_exchange[i, j, k, c] = f_i[i, j, k, c] + kd * change
+            cell_velocity_column(v_face, v_old, phi, f_i, k_drag, p_kind, v, f_exchange, i, j)
+
+
+@njit(cache=True, inline="always")
+def cell_velocity_column(v_face, v_old, phi, f_i, k_drag, p_kind, v, f_exchange, i, j):
+    nx, ny, nz = v.shape[0], v.shape[1], v.shape[2]
+    i1 = i + 1 if i + 1 < nx else 0
+    j1 = j + 1 if j + 1 < ny else 0
+    for k in range(nz):
+        half = 0.5 / phi[i, j, k]
+        kd = 0.5 * k_drag[i, j, k]
+        for c in range(3):
+            i2, j2, k2 = (i1, j, k) if c == 0 else ((i, j1, k) if c == 1 else (i, j, k + 1))
+            v[i, j, k, c] = half * (
+                _phi_face(phi, i, j, k, c) * v_face[i, j, k, c]
+                + _phi_face(phi, i2, j2, k2, c) * v_face[i2, j2, k2, c]
+            )
+            change = 0.0
+            if _is_face(k, c, nz, p_kind):
+                change += v_face[i, j, k, c] - v_old[i, j, k, c]
+            if _is_face(k2, c, nz, p_kind):
+                change += v_face[i2, j2, k2, c] - v_old[i2, j2, k2, c]
+            f_exchange[i, j, k, c] = f_i[i, j, k, c] + kd * change
 
 
 @njit(cache=True, inline="always")
@@ -599,17 +659,23 @@ def add_grid_motion(v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretc
     for ii in prange(nx):
         i = np.int64(ii)
         for j in range(ny):
-            for k in range(nz + 1):
-                for c in range(3):
-                    if not _is_face(k, c, nz, p_kind):
-                        continue
-                    i0, j0, k0 = _shift(i, j, k, c, -1)
-                    ph = _phi_face(phi, i, j, k, c)
-                    coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
-                    d = 1.0 / (1.0 + dt * coefficient / (rho * ph))
-                    v_star[i, j, k, c] += (
-                        dt * d * _grid_advection(v_face, phi, edges, i, j, k, c, stretch, bc_sign)
-                    )
+            add_grid_motion_column(
+                v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretch, v_star, i, j
+            )
+
+
+@njit(cache=True, inline="always")
+def add_grid_motion_column(v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretch, v_star, i, j):
+    nz = phi.shape[2]
+    for k in range(nz + 1):
+        for c in range(3):
+            if not _is_face(k, c, nz, p_kind):
+                continue
+            i0, j0, k0 = _shift(i, j, k, c, -1)
+            ph = _phi_face(phi, i, j, k, c)
+            coefficient = 0.5 * (_cell(k_drag, i, j, k) + _cell(k_drag, i0, j0, k0))
+            d = 1.0 / (1.0 + dt * coefficient / (rho * ph))
+            v_star[i, j, k, c] += dt * d * _grid_advection(v_face, phi, edges, i, j, k, c, stretch, bc_sign)
 
 
 @njit(cache=True, parallel=True)
@@ -619,12 +685,18 @@ def add_grid_source(phi, dphi, rho, dt, stretch, rhs):
     for ii in prange(nx):
         i = np.int64(ii)  # the prange index is unsigned: i + 1 must stay an integer
         for j in range(ny):
-            for k in range(nz):
-                ph = phi[i, j, k]
-                source = (ph - dt * dphi[i, j, k]) * stretch - stretch * (
-                    (k + 1) * _phi_face(phi, i, j, k + 1, 2) - k * _phi_face(phi, i, j, k, 2)
-                )
-                rhs[i, j, k] -= rho / dt * source
+            add_grid_source_column(phi, dphi, rho, dt, stretch, rhs, i, j)
+
+
+@njit(cache=True, inline="always")
+def add_grid_source_column(phi, dphi, rho, dt, stretch, rhs, i, j):
+    nz = phi.shape[2]
+    for k in range(nz):
+        ph = phi[i, j, k]
+        source = (ph - dt * dphi[i, j, k]) * stretch - stretch * (
+            (k + 1) * _phi_face(phi, i, j, k + 1, 2) - k * _phi_face(phi, i, j, k, 2)
+        )
+        rhs[i, j, k] -= rho / dt * source
 
 
 @njit(cache=True)
