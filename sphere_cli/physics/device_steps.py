@@ -166,7 +166,7 @@ class DeviceSteps:
         self.budget = scene.budget  # the energy budget (its shares booked on the device), or None
         self.fluid = _fluid_on_gpu(scene)  # a fluid: its own step on the host, or None
         if self.fluid is not None:
-            self.fluid.solve_on_gpu()  # but for its pressure solve
+            self.fluid.grid_on_gpu()  # but for what of it the GPU takes
         self.fluid_due = None  # the step at whose end the fluid takes its step on the host
         self.fluid_steps = None  # its GpuSteps with the arguments on the device (_fluid_arguments)
         # (host array, device array) of those its kernels write, its stability test reads of

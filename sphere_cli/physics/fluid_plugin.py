@@ -143,9 +143,10 @@ class FluidModule(Module):
         GPU is used."""
         return None
 
-    def solve_on_gpu(self) -> None:
-        """Where the particles' steps run on a GPU (physics/device_steps.py): the grid's pressure
-        solve moves there too (physics/fluid/device_poisson.py), for a model that has one."""
+    def grid_on_gpu(self) -> None:
+        """Where the particles' steps run on a GPU (physics/device_steps.py): what of the grid's
+        own step runs there too (Navier-Stokes: the step, physics/fluid/device_navier_stokes.py;
+        Darcy: its pressure solve, physics/fluid/device_poisson.py)."""
 
     def steps_taken(self, state, done: int) -> None:
         """After `done` steps of its compiled loop (`steps_kernel`, physics/compiled_steps.py),

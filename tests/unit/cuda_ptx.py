@@ -1,18 +1,25 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
-kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, cuda_poisson.py,
+kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, cuda_poisson.py, cuda_navier_stokes.py,
 kernels/observe/cuda_energy_budget.py)
 for an H200 (compute capability 9.0)
 with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
 whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
 numba-cuda is installed (the CUDA extra); prints each kernel's name and the fused multiply-adds in its code.
 
-The argument types are those physics/device_steps.py and physics/fluid/device_poisson.py pass."""
+The argument types are those physics/device_steps.py and physics/fluid/device_*.py pass."""
 
 from numba import cuda
 from numba import types as t
 
 from sphere_cli.kernels import cuda_dem
-from sphere_cli.kernels.fluid import cuda_darcy, cuda_drag, cuda_poisson, cuda_porosity, cuda_profile_forces
+from sphere_cli.kernels.fluid import (
+    cuda_darcy,
+    cuda_drag,
+    cuda_navier_stokes,
+    cuda_poisson,
+    cuda_porosity,
+    cuda_profile_forces,
+)
 from sphere_cli.kernels.observe import cuda_energy_budget
 
 V = t.float64[:]  # (N,) or (3,)
@@ -144,6 +151,22 @@ POISSON_SIGNATURES = {
     "add_words": (V, INT, INT, L1),
     "clear_words": (L1,),
 }
+# the Navier-Stokes step (kernels/fluid/cuda_navier_stokes.py; H5: the advective fluxes)
+H5 = t.float64[:, :, :, :, :]
+NAVIER_STOKES_SIGNATURES = {
+    "edge_porosity": (H, H4),
+    "pressure_gradient": (H, V, L1, V, H4),
+    "viscous_stresses": (H4, H, H4, V, M, H4, H4, INT, INT),
+    "advective_fluxes": (H4, H, H4, M, H5, INT, INT),
+    "predict": (H4, H, H, H4, H4, H5, H, H4, H, H4, V, M, L1, V, F, F, F, BOOL, F, V, H4, H4, INT, INT),
+    "face_coefficients": (H4, H, H, H),
+    "pressure_rhs": (H4, H, H, V, F, F, H),
+    "correct": (H4, H, H, H4, V, L1, V, F, F, F, H4, H),
+    "cell_velocity": (H4, H4, H, H4, H, L1, H4, H4),
+    "add_grid_motion": (H4, H, H4, H, M, L1, F, F, F, H4),
+    "add_grid_source": (H, H, F, F, F, H),
+    "scale": (V, F, V),
+}
 # the energy budget (kernels/observe/cuda_energy_budget.py)
 BUDGET_SIGNATURES = {
     "book": (
@@ -194,6 +217,7 @@ if __name__ == "__main__":
         (cuda_drag, DRAG_SIGNATURES),
         (cuda_porosity, POROSITY_SIGNATURES),
         (cuda_poisson, POISSON_SIGNATURES),
+        (cuda_navier_stokes, NAVIER_STOKES_SIGNATURES),
         (cuda_energy_budget, BUDGET_SIGNATURES),
     ):
         for name, signature in signatures.items():

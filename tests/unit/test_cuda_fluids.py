@@ -118,6 +118,10 @@ NAVIER_STOKES_UNDER_A_LID = NAVIER_STOKES.replace(
 ).replace("grid = { cells = [2, 2, 3] }", "grid = { cells = [2, 2, 3], follow_top_wall = true }")
 
 
+# a grid of 3 x 2 columns, so that a GPU kernel taking a column's i for its j is seen
+NAVIER_STOKES_3X2 = NAVIER_STOKES.replace("cells = [2, 2, 3]", "cells = [3, 2, 3]")
+
+
 def _darcy_and_lid_fields(scene) -> dict:
     w = scene.state.walls
     return {**_darcy_fields(scene), "wall_coord": w.coord, "wall_fluid_force": w.fluid_force}
@@ -127,7 +131,9 @@ def _navier_stokes_fields(scene) -> dict:
     fs, drag = scene.fluid.fs, scene.fluid.drag
     fields = {
         "v": fs.v,
+        "v_face": fs.v_face,
         "p": fs.p,
+        "grad_p": fs.grad_p,
         "f_exchange": fs.f_exchange,
         "impulse": drag.impulse,
         "f_drag": drag.f_drag,
@@ -255,6 +261,7 @@ def _darcy_fields(scene) -> dict:
         (NAVIER_STOKES, _navier_stokes_fields, (12, 23, 6)),
         (NAVIER_STOKES_CELL_DRAG, _navier_stokes_fields, (12, 23, 6)),
         (NAVIER_STOKES_UNDER_A_LID, _navier_stokes_fields, (12, 23, 6)),
+        (NAVIER_STOKES_3X2, _navier_stokes_fields, (12, 23, 6)),
     ],
     ids=[
         "vans1d",
@@ -264,6 +271,7 @@ def _darcy_fields(scene) -> dict:
         "navier-stokes",
         "navier-stokes-cell-drag",
         "navier-stokes-lid",
+        "navier-stokes-3x2",
     ],
 )
 def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
@@ -398,15 +406,16 @@ def test_the_pressure_solve_on_the_gpu_is_the_cpus(
     assert gpu.solve(x, np.zeros(shape), c, ax, ay, az) == PoissonResult(0, 0.0, True, 0.0) and not x.any()
 
 
-def test_a_gpu_run_solves_its_fluid_on_the_gpu(tmp_path):
-    """The fluids with a pressure solve take it to the GPU with the particles (FluidModule.
-    solve_on_gpu); the fluid's line of run.log (its summary) says so."""
+def test_a_gpu_run_steps_its_fluid_grid_on_the_gpu(tmp_path):
+    """With the particles on the GPU (FluidModule.grid_on_gpu) the Navier-Stokes grid takes its
+    steps there, the pressure solve included, and Darcy its pressure solve; the fluid's line of
+    run.log (its summary) says so."""
     for name, fluid in (("darcy", DARCY), ("navier-stokes", NAVIER_STOKES)):
         (tmp_path / name).mkdir()
         gpu, cpu = _scenes(tmp_path / name, walls=fluid)
-        on_gpu = [key for key, fact in gpu.fluid.summary().items() if fact.endswith("(on the GPU)")]
-        assert on_gpu == ["solver" if name == "darcy" else "pressure solver"], name
-        assert not any(fact.endswith("(on the GPU)") for fact in cpu.fluid.summary().values())
+        on_gpu = [key for key, fact in gpu.fluid.summary().items() if "on the GPU" in fact]
+        assert on_gpu == (["solver"] if name == "darcy" else ["fluid grid", "pressure solver"]), name
+        assert not any("on the GPU" in fact for fact in cpu.fluid.summary().values())
 
 
 def test_a_gpu_failure_in_the_pressure_solve_is_the_users_error(monkeypatch):
@@ -436,3 +445,20 @@ def test_a_gpu_failure_in_the_pressure_solve_is_the_users_error(monkeypatch):
                 assert str(raised.value).startswith(
                     'simulation.device = "cuda": the GPU failed: CudaAPIError: CUDA_ERROR_OUT_OF_MEMORY'
                 )
+
+
+def test_a_non_finite_navier_stokes_step_on_the_gpu_says_where_as_on_the_cpu(tmp_path):
+    """A Navier-Stokes step on the GPU that meets a non-finite input stops the run with the CPU's
+    message, naming the quantity, the cell and the value (the fields it names brought back)."""
+    from sphere_cli.errors import NumericalError
+
+    gpu, cpu = _scenes(tmp_path, walls=NAVIER_STOKES)
+    messages = []
+    for scene in (gpu, cpu):
+        fluid = scene.fluid
+        fluid.fs.f_i[1, 0, 2, 1] = np.nan
+        with pytest.raises(NumericalError) as raised:
+            fluid.solver.step(fluid.fs, 0.0, fluid.fluid_dt)
+        messages.append(str(raised.value))
+    assert messages[0] == messages[1]
+    assert "a non-finite interaction force density y (nan N/m^3) at fluid cell (1, 0, 2)" in messages[0]

@@ -398,7 +398,7 @@ class Darcy(FluidModule):
             forces.insert(0, (cuda_darcy.push_wall, 1, self._push_arguments(state)))
         return GpuSteps(forces)
 
-    def solve_on_gpu(self) -> None:
+    def grid_on_gpu(self) -> None:
         from .device_poisson import on_gpu
 
         self.pore.solver = on_gpu(self.pore.solver)

@@ -101,10 +101,14 @@ class OnGpu:
     def host(field) -> np.ndarray:
         return field.copy_to_host()
 
-    def inputs(self, *arrays: np.ndarray) -> tuple:
-        """The caller's host arrays copied into the device's arrays kept for their places."""
+    def inputs(self, *arrays) -> tuple:
+        """The caller's host arrays copied into the device's arrays kept for their places (the
+        caller's device arrays as they are: the Navier-Stokes step on the GPU)."""
         out = []
         for place, values in enumerate(arrays):
+            if not isinstance(values, np.ndarray):
+                out.append(values)
+                continue
             held = self.held.get(place)
             if held is None or held.shape != values.shape:
                 held = self.held[place] = cuda.device_array(values.shape)
@@ -113,7 +117,9 @@ class OnGpu:
         return tuple(out)
 
     @staticmethod
-    def output(field, x: np.ndarray) -> None:
+    def output(field, x) -> None:
+        if field is x:
+            return
         if x.flags.c_contiguous:
             field.copy_to_host(x)
         else:

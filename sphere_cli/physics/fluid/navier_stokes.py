@@ -24,23 +24,16 @@ import numpy as np
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
 from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
 from ...errors import NumericalError
+from ...kernels.fluid import navier_stokes as navier_stokes_kernels
 from ...kernels.fluid.drag import drag_steps, drag_steps_serial, rank_drag_steps, rank_drag_steps_serial
 from ...kernels.fluid.navier_stokes import (
-    add_grid_motion,
-    add_grid_source,
-    advective_fluxes,
     cell_velocity,
     continuity_error,
-    correct,
-    edge_porosity,
-    face_coefficients,
     first_unstable,
     max_courant,
     predict,
     pressure_gradient,
-    pressure_rhs,
     top_outflow,
-    viscous_stresses,
 )
 from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .drag import FluidParticleDrag
@@ -104,6 +97,45 @@ COURANT_LIMIT = 0.5
 CROSSING_AUTO = 0.5
 CROSSING_LIMIT = 1.0
 
+# the fields a fluid step reads of the state, and those it writes there (the rest is scratch)
+STEP_INPUTS = ("v_face", "p", "porosity", "porosity_rate", "f_i", "k_drag", "acceleration")
+STEP_OUTPUTS = ("v_face", "v", "p", "grad_p", "f_exchange")
+
+
+class FieldsOnProcessor:
+    """Where a fluid step's fields are and the kernels that work on them: the state's own arrays
+    and kernels/fluid/navier_stokes.py. The GPU's place (physics/fluid/device_navier_stokes.py
+    FieldsOnGpu) answers the same calls on its own arrays."""
+
+    kernels = navier_stokes_kernels
+    where = ""  # for describe()
+
+    @staticmethod
+    def run(step):
+        return step()
+
+    @staticmethod
+    def fields(fs: NavierStokesState) -> NavierStokesState:
+        """The state as the kernels take it, its STEP_INPUTS current (here: fs itself)."""
+        return fs
+
+    @staticmethod
+    def results(work, fs: NavierStokesState, names=STEP_OUTPUTS) -> None:
+        """The fields `names` of work into fs (here: they are fs's)."""
+
+    @staticmethod
+    def small(values: np.ndarray) -> np.ndarray:
+        """A few numbers (spacing, boundary values) as the kernels take them."""
+        return values
+
+    @staticmethod
+    def scale(a, factor: float, out) -> None:
+        np.multiply(a, factor, out=out)
+
+    @staticmethod
+    def copy(destination, source) -> None:
+        np.copyto(destination, source)
+
 
 class NavierStokesSolver:
     """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
@@ -117,6 +149,7 @@ class NavierStokesSolver:
     def __init__(self, config: NavierStokesFluid, grid: FluidGrid, gravity):
         self.config = config
         self.grid = grid
+        self.on = FieldsOnProcessor()  # where the step's fields are (FieldsOnGpu: on a GPU)
         self.follows = bool(config.grid.follow_top_wall)
         self.height = grid.height  # of the grid now [m]
         self.spacing = np.ascontiguousarray(grid.spacing, dtype=np.float64)
@@ -260,11 +293,19 @@ class NavierStokesSolver:
     def step(self, fs: NavierStokesState, time: float, dt: float) -> PoissonResult:
         """Advance the fluid from `time` to `time + dt` [s] with the porosity, its rate and the
         interaction force already in fs."""
+        return self.on.run(lambda: self._step(fs, time, dt))
+
+    def _step(self, fs: NavierStokesState, time: float, dt: float) -> PoissonResult:
         rho, beta, solid = self.rho, self.old_pressure_weight, self.pressure_in_solid
-        old = self.boundary_pressure(time, self.p_old)
+        on, k = self.on, self.on.kernels
+        old = on.small(self.boundary_pressure(time, self.p_old))
+        spacing, bc_sign, p_kind, inflow = (
+            on.small(a) for a in (self.spacing, self.bc_sign, self.p_kind, self.inflow)
+        )
+        work = on.fields(fs)  # fs, or its fields on the GPU
         # (V_new - V_old) / (V_new dt) of every cell of a grid following the top wall
         stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
-        edge_porosity(fs.porosity, fs.edges)
+        k.edge_porosity(work.porosity, work.edges)
         # split across MPI ranks with the pressure solve (its slabs of x planes), the prediction
         # takes the rank's planes, from the stresses and fluxes of those and the plane either side
         slabs = self.poisson.slabs
@@ -272,44 +313,37 @@ class NavierStokesSolver:
         wide = (lo, hi)
         if slabs.split and lo < hi:
             wide = (lo - 1, hi + 1) if hi - lo + 2 <= fs.porosity.shape[0] else (0, fs.porosity.shape[0])
-        advective_fluxes(fs.v_face, fs.porosity, fs.edges, self.bc_sign, fs.flux, *wide)
-        viscous_stresses(
-            fs.v_face, fs.porosity, fs.edges, self.spacing, self.bc_sign, fs.normal, fs.shear, *wide
+        k.advective_fluxes(work.v_face, work.porosity, work.edges, bc_sign, work.flux, *wide)
+        k.viscous_stresses(
+            work.v_face, work.porosity, work.edges, spacing, bc_sign, work.normal, work.shear, *wide
         )  # fmt: skip
-        predict(
-            fs.v_face, fs.p, fs.porosity, fs.normal, fs.shear, fs.flux, fs.porosity_rate, fs.f_i, fs.k_drag,
-            fs.acceleration, self.spacing, self.bc_sign, self.p_kind, old, rho, self.mu, beta, solid, dt,
-            self.inflow, fs.v_star, fs.mobility, lo, hi,
+        k.predict(
+            work.v_face, work.p, work.porosity, work.normal, work.shear, work.flux, work.porosity_rate,
+            work.f_i, work.k_drag, work.acceleration, spacing, bc_sign, p_kind, old, rho, self.mu, beta,
+            solid, dt, inflow, work.v_star, work.mobility, lo, hi,
         )  # fmt: skip
-        slabs.gather(fs.v_star)
-        slabs.gather(fs.mobility)
+        slabs.gather(work.v_star)
+        slabs.gather(work.mobility)
         if stretch != 0.0:
-            add_grid_motion(
-                fs.v_face,
-                fs.porosity,
-                fs.edges,
-                fs.k_drag,
-                self.bc_sign,
-                self.p_kind,
-                rho,
-                dt,
-                stretch,
-                fs.v_star,
-            )
-        pressure_rhs(fs.v_star, fs.porosity, fs.porosity_rate, self.spacing, rho, dt, fs.rhs)
+            k.add_grid_motion(
+                work.v_face, work.porosity, work.edges, work.k_drag, bc_sign, p_kind, rho, dt, stretch,
+                work.v_star,
+            )  # fmt: skip
+        k.pressure_rhs(work.v_star, work.porosity, work.porosity_rate, spacing, rho, dt, work.rhs)
         if stretch != 0.0:
-            add_grid_source(fs.porosity, fs.porosity_rate, rho, dt, stretch, fs.rhs)
-        face_coefficients(fs.mobility, fs.ax, fs.ay, fs.az)
+            k.add_grid_source(work.porosity, work.porosity_rate, rho, dt, stretch, work.rhs)
+        k.face_coefficients(work.mobility, work.ax, work.ay, work.az)
         self.boundary_pressure(time + dt, self.p_bound)
-        np.multiply(old, -beta, out=self.eps_bound)
+        np.multiply(self.p_old, -beta, out=self.eps_bound)
         self.eps_bound += self.p_bound
         # first guess: eps = p_new - beta p_old with p_new ~ p_old
-        np.multiply(fs.p, 1.0 - beta, out=fs.eps)
+        on.scale(work.p, 1.0 - beta, work.eps)
         result = self.poisson.solve(
-            fs.eps, fs.rhs, fs.zero, fs.ax, fs.ay, fs.az, self.eps_bound[0], self.eps_bound[1]
+            work.eps, work.rhs, work.zero, work.ax, work.ay, work.az, self.eps_bound[0], self.eps_bound[1]
         )
         fs.iterations, fs.residual = result.iterations, result.residual
         if not math.isfinite(result.residual):
+            on.results(work, fs, ("v_star",))  # what the message may name
             raise NumericalError(f"at t = {time + dt:.6g} s the fluid step met {self._first_non_finite(fs)}")
         if not result.converged:
             raise NumericalError(
@@ -318,16 +352,19 @@ class NavierStokesSolver:
                 f"t = {time + dt:.6g} s; raise fluid.solver.max_iterations or the tolerance, or "
                 'use method = "pcg"'
             )
-        np.copyto(fs.v_old, fs.v_face)
-        correct(
-            fs.v_star, fs.eps, fs.porosity, fs.mobility, self.spacing, self.p_kind, self.eps_bound, rho, beta,
-            dt, fs.v_face, fs.p,
+        on.copy(work.v_old, work.v_face)
+        k.correct(
+            work.v_star, work.eps, work.porosity, work.mobility, spacing, p_kind, on.small(self.eps_bound),
+            rho, beta, dt, work.v_face, work.p,
         )  # fmt: skip
+        k.cell_velocity(
+            work.v_face, work.v_old, work.porosity, work.f_i, work.k_drag, p_kind, work.v, work.f_exchange
+        )  # fmt: skip
+        k.pressure_gradient(work.p, spacing, p_kind, on.small(self.p_bound), work.grad_p)
+        on.results(work, fs)
         if self.follows:
             fs.outflow += dt * top_outflow(fs.v_face, fs.porosity, self.spacing, stretch)
             fs.height = self.height
-        cell_velocity(fs.v_face, fs.v_old, fs.porosity, fs.f_i, fs.k_drag, self.p_kind, fs.v, fs.f_exchange)
-        pressure_gradient(fs.p, self.spacing, self.p_kind, self.p_bound, fs.grad_p)
         fs.steps += 1
         return result
 
@@ -431,7 +468,8 @@ class NavierStokesSolver:
             ),
             "fluid grid": self.grid.describe()
             + ", periodic in x and y"
-            + (", top following the z+ wall" if self.follows else ""),
+            + (", top following the z+ wall" if self.follows else "")
+            + self.on.where,
             "fluid boundaries": "; ".join(bounds),
             "pressure solver": self.poisson.describe(),
         }
@@ -639,10 +677,10 @@ class NavierStokes(FluidModule):
     on_gpu = True
     stability_reads_particles = True  # the fastest particle's cells a fluid step
 
-    def solve_on_gpu(self) -> None:
-        from .device_poisson import on_gpu
+    def grid_on_gpu(self) -> None:
+        from .device_navier_stokes import step_on_gpu
 
-        self.solver.poisson = on_gpu(self.solver.poisson)
+        step_on_gpu(self.solver)
 
     def gpu_steps(self, state) -> GpuSteps:
         """The drag on the GPU; on a grid that keeps its cells (no top wall to follow), also the
