@@ -38,7 +38,7 @@ class FieldsOnGpu:
     """A fluid step's fields on the GPU (navier_stokes.py FieldsOnProcessor's calls): a device
     array for each of the state's, kernels of one launch sized for the face arrays' columns."""
 
-    where = "; its steps on the GPU"
+    where = ", stepped on the GPU"
 
     def __init__(self, shape):
         columns = (int(shape[0]) + 1) * (int(shape[1]) + 1)
