@@ -19,7 +19,10 @@ exactly, without iterating. When c = 0 everywhere and no boundary is Dirichlet t
 singular (x is defined up to a constant): the mean of b is removed (a compatible b has none;
 the amount is reported) and the zero-mean solution is returned.
 
-The solver object holds all its scratch arrays: a solve allocates nothing.
+The solver object holds all its scratch arrays: a solve allocates nothing. They and the kernels
+that work on them are at a place the solver is given: the processor's (`OnProcessor`,
+kernels/fluid/poisson.py) or a GPU's (physics/fluid/device_poisson.py), the same iteration on
+either.
 
 Across MPI ranks (`PoissonSolver.split`, a fluid stepped on every rank of a split run) the
 conjugate gradient and the multigrid levels whose planes allow it work on slabs of x planes, one
