@@ -102,6 +102,15 @@ def _cuda():
     return cuda, cuda_dem
 
 
+def launch_shape(items: int) -> tuple[int, int]:
+    """(blocks, threads) of a launch over `items`: a thread an item, in blocks of THREADS (one
+    block of `items` threads where that is fewer), or SIMULATOR_LAUNCH under the simulator."""
+    if config.ENABLE_CUDASIM:
+        return SIMULATOR_LAUNCH
+    threads = min(THREADS, max(items, 1))
+    return math.ceil(max(items, 1) / threads), threads
+
+
 def on_gpu_or_error(work):
     """Run `work` (host calls into numba.cuda); a CUDA error (out of memory above all) becomes a
     CaseError naming the key instead of a traceback."""
@@ -209,13 +218,8 @@ class DeviceSteps:
     # --- host <-> device ------------------------------------------------------------------
 
     def _launch(self, kernel, size: int, *args) -> None:
-        """`kernel` over `size` items: a thread an item, in blocks of THREADS (one block of `size`
-        threads where that is fewer), or SIMULATOR_LAUNCH under the simulator."""
-        if config.ENABLE_CUDASIM:
-            launch = kernel[SIMULATOR_LAUNCH]
-        else:
-            threads = min(THREADS, max(size, 1))
-            launch = kernel[math.ceil(max(size, 1) / threads), threads]
+        """`kernel` over `size` items (launch_shape)."""
+        launch = kernel[launch_shape(size)]
         if self.timings is None:
             launch(*args)
             return

@@ -333,13 +333,22 @@ def _system(shape, singular: bool, seed: int = 5):
 
 
 @pytest.mark.parametrize(
-    "shape, periodic, boundaries, method, preconditioner, singular, scale",
+    "shape, periodic, boundaries, method, preconditioner, singular, scale, launch",
     [
-        ((8, 8, 16), (True, True, False), ("no-flux", "no-flux"), "pcg", "multigrid", True, 1.0),
-        ((5, 4, 8), (True, False, False), ("dirichlet", "no-flux"), "pcg", "multigrid", False, 1.0),
-        ((6, 4, 5), (False, True, False), ("dirichlet", "no-flux"), "pcg", "jacobi", False, 1.0),
-        ((4, 4, 6), (True, False, False), ("no-flux", "dirichlet"), "pcg", "jacobi", False, 1e-200),
-        ((4, 3, 4), (False, False, False), ("dirichlet", "dirichlet"), "jacobi", "jacobi", False, 1.0),
+        ((8, 8, 16), (True, True, False), ("no-flux", "no-flux"), "pcg", "multigrid", True, 1.0, (1, 1)),
+        ((5, 4, 8), (True, False, False), ("dirichlet", "no-flux"), "pcg", "multigrid", False, 1.0, (2, 3)),
+        ((6, 4, 5), (False, True, False), ("dirichlet", "no-flux"), "pcg", "jacobi", False, 1.0, (1, 1)),
+        ((4, 4, 6), (True, False, False), ("no-flux", "dirichlet"), "pcg", "jacobi", False, 1e-200, (1, 1)),
+        (
+            (4, 3, 4),
+            (False, False, False),
+            ("dirichlet", "dirichlet"),
+            "jacobi",
+            "jacobi",
+            False,
+            1.0,
+            (1, 1),
+        ),
     ],
     ids=[
         "multigrid-singular",
@@ -350,7 +359,7 @@ def _system(shape, singular: bool, seed: int = 5):
     ],
 )
 def test_the_pressure_solve_on_the_gpu_is_the_cpus(
-    shape, periodic, boundaries, method, preconditioner, singular, scale, monkeypatch
+    shape, periodic, boundaries, method, preconditioner, singular, scale, launch, monkeypatch
 ):
     """physics/fluid/device_poisson.py: the solver with its fields on the GPU (kernels/fluid/
     cuda_poisson.py: the CPU's column functions, a thread a column; every sum the CPU's exact
@@ -358,17 +367,22 @@ def test_the_pressure_solve_on_the_gpu_is_the_cpus(
     solution: the multigrid V-cycle (red-black sweeps, a Jacobi-smoothed coarsest level) on the
     singular periodic pressure equation and on a grid whose odd periodic count leaves its finest
     level to Jacobi sweeps (of more than ONE_BLOCK_CELLS, set to 100: two launches a pair; the
-    coarsest's in one launch of one block), the diagonal preconditioner with Dirichlet faces, a
-    right-hand side of 1e-200 (rescaled by a power of two), the Jacobi method; one forward-Euler
-    step (explicit_step); and a zero right-hand side. Bitwise under the simulator; on a GPU its
-    fused multiply-adds round otherwise, within the solve's tolerance (1e-12) times the
-    solution's size, amplified by the condition number (under 1e3 here)."""
+    coarsest's in one launch of one block), there launched as 2 blocks of 3 threads (the one
+    block's 3 threads waiting for each other between sweeps), the diagonal preconditioner with
+    Dirichlet faces, a right-hand side of 1e-200 (rescaled by a power of two), the Jacobi
+    method; one forward-Euler step (explicit_step); and a zero right-hand side. Bitwise under
+    the simulator; on a GPU its fused multiply-adds round otherwise, within the solve's
+    tolerance (1e-12) times the solution's size, amplified by the condition number (under 1e3
+    here)."""
+    from sphere_cli.physics import device_steps
     from sphere_cli.physics.fluid import device_poisson
     from sphere_cli.physics.fluid.device_poisson import OnGpu, on_gpu
     from sphere_cli.physics.fluid.grid import FluidGrid
     from sphere_cli.physics.fluid.poisson import PoissonSolver
 
     monkeypatch.setattr(device_poisson, "ONE_BLOCK_CELLS", 100)
+    if SIMULATED:  # (on a GPU, blocks of THREADS)
+        monkeypatch.setattr(device_steps, "SIMULATOR_LAUNCH", launch)
 
     grid = FluidGrid(np.zeros(3), np.array([0.1, 0.12, 0.09]), shape, np.array(periodic))
     cpu = PoissonSolver(grid, *boundaries, method, 1e-12, 1000, preconditioner)  # a broken sum: fails fast

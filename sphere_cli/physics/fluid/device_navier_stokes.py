@@ -11,15 +11,13 @@ Imported only where a GPU is used, like every CUDA module."""
 
 from __future__ import annotations
 
-import math
 import types
 
 import numpy as np
-from numba import config, cuda
+from numba import cuda
 
 from ...kernels.fluid import cuda_navier_stokes
-from ..device_steps import on_gpu_or_error
-from .device_poisson import SIMULATOR_LAUNCH, THREADS
+from ..device_steps import launch_shape, on_gpu_or_error
 from .navier_stokes import STEP_INPUTS, STEP_OUTPUTS, NavierStokesState
 
 KERNELS = (
@@ -41,10 +39,7 @@ class FieldsOnGpu:
     where = ", stepped on the GPU"
 
     def __init__(self, shape):
-        columns = (int(shape[0]) + 1) * (int(shape[1]) + 1)
-        launch = (
-            SIMULATOR_LAUNCH if config.ENABLE_CUDASIM else (max(1, math.ceil(columns / THREADS)), THREADS)
-        )
+        launch = launch_shape((int(shape[0]) + 1) * (int(shape[1]) + 1))  # the face arrays' columns
         self.kernels = types.SimpleNamespace(
             **{name: getattr(cuda_navier_stokes, name)[launch] for name in KERNELS}
         )

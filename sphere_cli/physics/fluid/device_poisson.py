@@ -13,20 +13,14 @@ Imported only where a GPU is used (physics/device_steps.py), like every CUDA mod
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import config, cuda
+from numba import cuda
 
 from ...kernels.exact_sum import WORDS
 from ...kernels.fluid import cuda_poisson
-from ..device_steps import on_gpu_or_error
+from ..device_steps import launch_shape, on_gpu_or_error
 from .poisson import PoissonResult, PoissonSolver
 
-# as physics/device_steps.py launches the DEM's kernels: threads a block, and under the simulator
-# one thread (each kernel loops over its columns by cuda.gridsize)
-THREADS = 128
-SIMULATOR_LAUNCH = (1, 1)
 # a level of at most this many cells is smoothed by Jacobi sweeps in one launch of one block (the
 # coarsest level's 40 sweeps of 64 cells were 40 launches of latency alone, 40 of the 95 launches
 # of an iteration at 64^3); a larger one (a level that cannot be coloured) in two launches a pair
@@ -76,10 +70,10 @@ class OnGpu:
     where = " (on the GPU)"
 
     def __init__(self, shape):
-        columns = int(shape[0]) * int(shape[1])
-        simulated = bool(config.ENABLE_CUDASIM)
-        launch = SIMULATOR_LAUNCH if simulated else (max(1, math.ceil(columns / THREADS)), THREADS)
-        self.kernels = GpuKernels(launch, SIMULATOR_LAUNCH if simulated else (1, THREADS))
+        # a thread a column (physics/device_steps.py launch_shape); one block of as many threads
+        # for jacobi_smooth_pairs
+        launch = launch_shape(int(shape[0]) * int(shape[1]))
+        self.kernels = GpuKernels(launch, (1, launch[1]))
         self._fill = cuda_poisson.fill[launch]
         self.held = {}  # the device's copy of each argument of inputs(), by its place
 
