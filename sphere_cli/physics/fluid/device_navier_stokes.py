@@ -45,6 +45,7 @@ class FieldsOnGpu:
         )
         self._scale = cuda_navier_stokes.scale[launch]
         self.work = None  # the device's arrays, made at the first step
+        self.smalls = {}  # id of a host array -> (it, its device array): small()
 
     @staticmethod
     def run(step):
@@ -65,9 +66,15 @@ class FieldsOnGpu:
         for name in names:
             getattr(work, name).copy_to_host(getattr(fs, name))
 
-    @staticmethod
-    def small(values: np.ndarray):
-        return cuda.to_device(np.ascontiguousarray(values))
+    def small(self, values: np.ndarray):
+        """values in the device array kept for that host array (the solver's spacing and boundary
+        values, the same arrays every step: copied, not allocated, at each)."""
+        held = self.smalls.get(id(values))
+        if held is None or held[0] is not values:
+            held = self.smalls[id(values)] = (values, cuda.to_device(np.ascontiguousarray(values)))
+        else:
+            held[1].copy_to_device(np.ascontiguousarray(values))
+        return held[1]
 
     def scale(self, a, factor: float, out) -> None:
         self._scale(a.reshape(a.size), factor, out.reshape(out.size))
