@@ -2,12 +2,12 @@
 PoissonSolver, the same conjugate gradient and multigrid V-cycle, with its fields on the device
 and kernels/fluid/cuda_poisson.py's kernels working on them (`OnGpu`, the place it is given).
 
-A solve takes the caller's arrays on the host as before: the right-hand side, the coefficients
-and the first guess go to the device (six copies), the iterations run there, and the solution
-comes back (one copy); every sum of the iteration is the processor's exact sum of the same column
+A solve takes the caller's arrays: from the host (Darcy's step, on the processor) the right-hand
+side, the coefficients and the first guess go to the device (six copies) and the solution comes
+back (one copy); the device arrays of the Navier-Stokes step on the GPU (device_navier_stokes.py)
+are taken as they are. Every sum of the iteration is the processor's exact sum of the same column
 partial sums (69 words back from the device a sum), so the iterates, the iteration count and the
-solution are the processor's, bitwise under Numba's simulator. The rest of the grid's step stays
-on the processor.
+solution are the processor's, bitwise under Numba's simulator.
 
 Imported only where a GPU is used (physics/device_steps.py), like every CUDA module."""
 
@@ -64,7 +64,7 @@ class GpuKernels:
 
 class OnGpu:
     """A solver's fields on the GPU (physics/fluid/poisson.py OnProcessor's calls): kernels of one
-    launch sized for the finest grid's columns, the caller's arrays copied in and out."""
+    launch sized for the finest grid's columns, the caller's host arrays copied in and out."""
 
     fused = False  # no whole-grid loops in one compiled call: each kernel is a launch
     where = " (on the GPU)"
