@@ -10,10 +10,11 @@ copy costs as much as a few hundred steps. `walls` "moving" adds loose rows whos
 normal stress and slides along x at a set velocity (MOVING_LID): the walls' own steps and the
 exact sum of the particles' forces on them, on top of the same scene. `fluids` "navier-stokes"
 adds loose rows in water, periodic across (without the side walls), on a Navier-Stokes grid of
-cells about four diameters wide solved on the host every COUPLING_STEPS steps (NAVIER_STOKES):
-the drag and its kick every step, the porosity and the momentum exchange on the device and the
-grid's fields to and fro at each fluid step, the pressure solve on the host, whose time is shared
-out beside the kernels' as "fluid (host)". Never part of the tests' timings.
+cells about four diameters wide stepped every COUPLING_STEPS steps (NAVIER_STOKES): the drag and
+its kick every step, the porosity and the momentum exchange on the device and the grid's fields
+to and fro at each fluid step, the grid's step itself on the device too (physics/fluid/
+device_navier_stokes.py) from the fluid module's hook on the host, whose whole time is shared out
+beside the kernels' as "fluid step". Never part of the tests' timings.
 """
 
 from __future__ import annotations
@@ -113,9 +114,10 @@ def run_gpu_benchmark(
 
 
 def _timed(module, hook, timings: dict) -> tuple:
-    """(module, its after_step hook timed into timings as "<module> (host)"): a fluid's own step
-    and the stages run on the host, between the device's runs of steps."""
-    name = f"{module.name} (host)"
+    """(module, its after_step hook timed into timings as "<module> step"): a fluid's own step
+    and the stages, called from the host between the device's runs of steps (a Navier-Stokes
+    grid's step launches its own kernels on the device)."""
+    name = f"{module.name} step"
 
     def timed_hook(state) -> None:
         started = time.perf_counter()
