@@ -122,9 +122,9 @@ def _drive(
         log.info("steps on the GPU (simulation.device = cuda): %s", gpu)
         if scene.fluid is not None:
             log.info(
-                "fluid: its action on the particles on the GPU every step, its own step on the processor "
-                "every %d steps",
+                "fluid: its action on the particles on the GPU every step, its own step every %d steps: %s",
                 scene.fluid.coupling_steps,
+                scene.fluid.own_step_where,
             )
     if hasattr(scene.step.compiled, "world"):
         log.info("steps %s", scene.step.compiled.describe())

@@ -143,6 +143,9 @@ class FluidModule(Module):
         GPU is used."""
         return None
 
+    # where its own step runs with the particles on a GPU (run.log), once grid_on_gpu has run
+    own_step_where = "on the processor"
+
     def grid_on_gpu(self) -> None:
         """Where the particles' steps run on a GPU (physics/device_steps.py): what of the grid's
         own step runs there too (Navier-Stokes: the step, physics/fluid/device_navier_stokes.py;

@@ -583,7 +583,8 @@ def test_a_gpu_run_resumes_on_the_cpu_as_a_cpu_run(tmp_path, fluid):
     log = (tmp_path / "gpu" / "run.log").read_text()
     assert log.count("steps on the GPU") == 2
     # where a fluid's parts run, for the batch log's reader
-    assert log.count("its own step on the processor every 5 steps") == (2 if fluid else 0)
+    own_step = "its own step every 5 steps: the grid's kernels and its pressure solve on the GPU"
+    assert log.count(own_step) == (2 if fluid else 0)
 
 
 def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):

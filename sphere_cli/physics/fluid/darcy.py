@@ -398,6 +398,8 @@ class Darcy(FluidModule):
             forces.insert(0, (cuda_darcy.push_wall, 1, self._push_arguments(state)))
         return GpuSteps(forces)
 
+    own_step_where = "on the processor, its pressure solve on the GPU"
+
     def grid_on_gpu(self) -> None:
         from .device_poisson import on_gpu
 

@@ -677,6 +677,8 @@ class NavierStokes(FluidModule):
     on_gpu = True
     stability_reads_particles = True  # the fastest particle's cells a fluid step
 
+    own_step_where = "the grid's kernels and its pressure solve on the GPU, from the processor"
+
     def grid_on_gpu(self) -> None:
         from .device_navier_stokes import step_on_gpu
 
