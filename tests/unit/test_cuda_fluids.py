@@ -371,9 +371,10 @@ def test_the_pressure_solve_on_the_gpu_is_the_cpus(
     block's 3 threads waiting for each other between sweeps), the diagonal preconditioner with
     Dirichlet faces, a right-hand side of 1e-200 (rescaled by a power of two), the Jacobi
     method; one forward-Euler step (explicit_step); and a zero right-hand side. Bitwise under
-    the simulator; on a GPU its fused multiply-adds round otherwise, within the solve's
-    tolerance (1e-12) times the solution's size, amplified by the condition number (under 1e3
-    here)."""
+    the simulator. On a GPU its fused multiply-adds round otherwise: both solutions then meet the
+    relative residual 1e-12, so they differ by at most 2e-12 times the condition number (under
+    400 for these systems, from their eigenvalues) times the solution's 2-norm, at most sqrt(cells)
+    = 32 times its largest value: under 3e-8 of the largest value (1e-7 allowed)."""
     from sphere_cli.physics import device_steps
     from sphere_cli.physics.fluid import device_poisson
     from sphere_cli.physics.fluid.device_poisson import OnGpu, on_gpu
@@ -400,7 +401,7 @@ def test_the_pressure_solve_on_the_gpu_is_the_cpus(
         if SIMULATED:
             assert np.array_equal(one, other)
         else:
-            np.testing.assert_allclose(one, other, rtol=0.0, atol=1e-9 * np.abs(other).max())
+            np.testing.assert_allclose(one, other, rtol=0.0, atol=1e-7 * np.abs(other).max())
 
     results = []
     for solver in (cpu, gpu):
