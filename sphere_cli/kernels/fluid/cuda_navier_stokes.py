@@ -22,6 +22,7 @@ correct_column = for_gpu(on_processor.correct_column)
 cell_velocity_column = for_gpu(on_processor.cell_velocity_column)
 add_grid_motion_column = for_gpu(on_processor.add_grid_motion_column)
 add_grid_source_column = for_gpu(on_processor.add_grid_source_column)
+wrap = for_gpu(on_processor._wrap)  # the plane lo + t of a slab, wrapped (lo may be -1)
 
 
 @cuda.jit
@@ -36,22 +37,11 @@ def pressure_gradient(p, spacing, p_kind, p_bound, grad_p):
         pressure_gradient_column(p, spacing, p_kind, p_bound, grad_p, col // p.shape[1], col % p.shape[1])
 
 
-@cuda.jit(device=True, inline=True)
-def _plane(lo, t, nx):
-    """The plane lo + t, wrapped (lo may be -1, lo + t up to nx)."""
-    i = lo + t
-    if i < 0:
-        return i + nx
-    if i >= nx:
-        return i - nx
-    return i
-
-
 @cuda.jit
 def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear, lo, hi):
     nx, ny = phi.shape[0], phi.shape[1]
     for col in range(cuda.grid(1), (hi - lo) * ny, cuda.gridsize(1)):
-        i, j = _plane(lo, col // ny, nx), col % ny
+        i, j = wrap(lo + col // ny, nx), col % ny
         viscous_stresses_column(v_face, phi, edges, spacing, bc_sign, normal, shear, i, j)
 
 
@@ -59,7 +49,7 @@ def viscous_stresses(v_face, phi, edges, spacing, bc_sign, normal, shear, lo, hi
 def advective_fluxes(v_face, phi, edges, bc_sign, flux, lo, hi):
     nx, ny = phi.shape[0], phi.shape[1]
     for col in range(cuda.grid(1), (hi - lo) * ny, cuda.gridsize(1)):
-        advective_fluxes_column(v_face, phi, edges, bc_sign, flux, _plane(lo, col // ny, nx), col % ny)
+        advective_fluxes_column(v_face, phi, edges, bc_sign, flux, wrap(lo + col // ny, nx), col % ny)
 
 
 @cuda.jit
@@ -69,7 +59,7 @@ def predict(
 ):  # fmt: skip
     nx, ny = phi.shape[0], phi.shape[1]
     for col in range(cuda.grid(1), (hi - lo) * ny, cuda.gridsize(1)):
-        i, j = _plane(lo, col // ny, nx), col % ny
+        i, j = wrap(lo + col // ny, nx), col % ny
         predict_column(
             v_face, p, phi, normal, shear, flux, dphi, f_i, k_drag, acceleration, spacing, bc_sign, p_kind,
             p_bound, rho, mu, beta, pressure_in_solid, dt, inflow, v_star, mobility, i, j,
