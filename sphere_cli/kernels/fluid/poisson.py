@@ -410,6 +410,30 @@ def jacobi_sweep_column(rhs, x, diag, inv_diag, ax, ay, az, periodic_x, periodic
     partial[col] = acc
 
 
+@njit(cache=True, inline="always")
+def face_means_column(cell, periodic_x, periodic_y, harmonic, ax, ay, az, i, j):
+    nx, ny, nz = cell.shape
+    for k in range(nz):
+        here = cell[i, j, k]
+        if i > 0:
+            ax[i, j, k] = _mean(cell[i - 1, j, k], here, harmonic)
+        else:
+            other = cell[nx - 1, j, k] if periodic_x else here
+            ax[0, j, k] = _mean(other, here, harmonic)
+            ax[nx, j, k] = ax[0, j, k] if periodic_x else cell[nx - 1, j, k]
+        if j > 0:
+            ay[i, j, k] = _mean(cell[i, j - 1, k], here, harmonic)
+        else:
+            other = cell[i, ny - 1, k] if periodic_y else here
+            ay[i, 0, k] = _mean(other, here, harmonic)
+            ay[i, ny, k] = ay[i, 0, k] if periodic_y else cell[i, ny - 1, k]
+        if k > 0:
+            az[i, j, k] = _mean(cell[i, j, k - 1], here, harmonic)
+        else:
+            az[i, j, 0] = here
+            az[i, j, nz] = cell[i, j, nz - 1]
+
+
 @njit(cache=True, parallel=True)
 def face_means(cell, periodic_x, periodic_y, harmonic, ax, ay, az):
     """Face coefficients from a cell field: the harmonic (harmonic = 1) or arithmetic mean of
@@ -417,27 +441,7 @@ def face_means(cell, periodic_x, periodic_y, harmonic, ax, ay, az):
     mean where periodic)."""
     nx, ny, nz = cell.shape
     for col in prange(nx * ny):
-        i = col // ny
-        j = col % ny
-        for k in range(nz):
-            here = cell[i, j, k]
-            if i > 0:
-                ax[i, j, k] = _mean(cell[i - 1, j, k], here, harmonic)
-            else:
-                other = cell[nx - 1, j, k] if periodic_x else here
-                ax[0, j, k] = _mean(other, here, harmonic)
-                ax[nx, j, k] = ax[0, j, k] if periodic_x else cell[nx - 1, j, k]
-            if j > 0:
-                ay[i, j, k] = _mean(cell[i, j - 1, k], here, harmonic)
-            else:
-                other = cell[i, ny - 1, k] if periodic_y else here
-                ay[i, 0, k] = _mean(other, here, harmonic)
-                ay[i, ny, k] = ay[i, 0, k] if periodic_y else cell[i, ny - 1, k]
-            if k > 0:
-                az[i, j, k] = _mean(cell[i, j, k - 1], here, harmonic)
-            else:
-                az[i, j, 0] = here
-                az[i, j, nz] = cell[i, j, nz - 1]
+        face_means_column(cell, periodic_x, periodic_y, harmonic, ax, ay, az, col // ny, col % ny)
 
 
 @njit(cache=True, inline="always")
