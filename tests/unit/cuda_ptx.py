@@ -1,6 +1,6 @@
 """Compile every GPU kernel (sphere_cli/kernels/cuda_dem.py, kernels/fluid/cuda_profile_forces.py,
 kernels/fluid/cuda_darcy.py, cuda_drag.py, cuda_porosity.py, cuda_poisson.py, cuda_navier_stokes.py,
-kernels/observe/cuda_energy_budget.py)
+cuda_pore_pressure.py, kernels/observe/cuda_energy_budget.py)
 for an H200 (compute capability 9.0)
 with NVIDIA's compiler, without a GPU: the simulator runs the kernels as Python and cannot tell
 whether they compile. Run by tests/unit/test_cuda_dem.py with NUMBA_ENABLE_CUDASIM=0 where
@@ -17,6 +17,7 @@ from sphere_cli.kernels.fluid import (
     cuda_drag,
     cuda_navier_stokes,
     cuda_poisson,
+    cuda_pore_pressure,
     cuda_porosity,
     cuda_profile_forces,
 )
@@ -148,6 +149,7 @@ POISSON_SIGNATURES = {
     "red_black_sweep": (H, H, H, H, H, H, U, U, V, INT, INT, INT),
     "column_dots": (H, H, V, V, INT, INT),
     "fill": (H, F),
+    "scale": (V, F, V),
     "add_words": (V, INT, INT, L1),
     "clear_words": (L1,),
 }
@@ -165,7 +167,20 @@ NAVIER_STOKES_SIGNATURES = {
     "cell_velocity": (H4, H4, H, H4, H, L1, H4, H4),
     "add_grid_motion": (H4, H, H4, H, M, L1, F, F, F, H4),
     "add_grid_source": (H, H, F, F, F, H),
-    "scale": (V, F, V),
+}
+# the Darcy step (kernels/fluid/cuda_pore_pressure.py; U3: the fixed cells' mask)
+U3 = t.uint8[:, :, :]
+PORE_PRESSURE_SIGNATURES = {
+    "clamp_porosity": (H, F, F, H, L1),
+    "kozeny_carman": (H, F, H),
+    "constant_permeability": (F, H),
+    "face_means": (H, U, U, INT, H, H, H),
+    "solid_divergence": (H, H, H, H4, V, B, H),
+    "backward_euler_system": (H, H, H, F, F, F, H, H),
+    "eliminate_fixed_cells": (U3, H, H, H, H, V, B, H, H),
+    "cut_fixed_faces": (U3, H, H, H, B),
+    "pressure_gradient": (H, V, B, U, U, F, F, H4),
+    "darcy_velocity": (H, H, H, H, V, B, U, U, F, F, H, F, H4),
 }
 # the energy budget (kernels/observe/cuda_energy_budget.py)
 BUDGET_SIGNATURES = {
@@ -218,6 +233,7 @@ if __name__ == "__main__":
         (cuda_porosity, POROSITY_SIGNATURES),
         (cuda_poisson, POISSON_SIGNATURES),
         (cuda_navier_stokes, NAVIER_STOKES_SIGNATURES),
+        (cuda_pore_pressure, PORE_PRESSURE_SIGNATURES),
         (cuda_energy_budget, BUDGET_SIGNATURES),
     ):
         for name, signature in signatures.items():

@@ -104,10 +104,3 @@ def add_grid_motion(v_face, phi, edges, k_drag, bc_sign, p_kind, rho, dt, stretc
 def add_grid_source(phi, dphi, rho, dt, stretch, rhs):
     for col in range(cuda.grid(1), phi.shape[0] * phi.shape[1], cuda.gridsize(1)):
         add_grid_source_column(phi, dphi, rho, dt, stretch, rhs, col // phi.shape[1], col % phi.shape[1])
-
-
-@cuda.jit
-def scale(a, factor, out):
-    """out = factor a, element by element (flat arrays of one size)."""
-    for n in range(cuda.grid(1), a.shape[0], cuda.gridsize(1)):
-        out[n] = factor * a[n]

@@ -160,6 +160,13 @@ def fill(x, value):
 
 
 @cuda.jit
+def scale(a, factor, out):
+    """out = factor a, element by element (flat arrays of one size)."""
+    for n in range(cuda.grid(1), a.shape[0], cuda.gridsize(1)):
+        out[n] = factor * a[n]
+
+
+@cuda.jit
 def add_words(partial, first, last, words):
     """words (WORDS,) int64, zero on entry, += the exact sum of partial[first:last] (poisson.py
     column_words), by integer atomics: exact, so the same whatever the order of the threads."""

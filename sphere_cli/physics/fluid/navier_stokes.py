@@ -42,6 +42,7 @@ from .fixed_bed import FixedBed
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .poisson import PoissonResult, PoissonSolver, preconditioner_for
 from .porosity import Porosity
+from .step_place import FieldsOnProcessor
 
 
 @dataclass
@@ -102,41 +103,6 @@ STEP_INPUTS = ("v_face", "p", "porosity", "porosity_rate", "f_i", "k_drag", "acc
 STEP_OUTPUTS = ("v_face", "v", "p", "grad_p", "f_exchange")
 
 
-class FieldsOnProcessor:
-    """Where a fluid step's fields are and the kernels that work on them: the state's own arrays
-    and kernels/fluid/navier_stokes.py. The GPU's place (physics/fluid/device_navier_stokes.py
-    FieldsOnGpu) answers the same calls on its own arrays."""
-
-    kernels = navier_stokes_kernels
-    where = ""  # for describe()
-
-    @staticmethod
-    def run(step):
-        return step()
-
-    @staticmethod
-    def fields(fs: NavierStokesState) -> NavierStokesState:
-        """The state as the kernels take it, its STEP_INPUTS current (here: fs itself)."""
-        return fs
-
-    @staticmethod
-    def results(work, fs: NavierStokesState, names=STEP_OUTPUTS) -> None:
-        """The fields `names` of work into fs (here: they are fs's)."""
-
-    @staticmethod
-    def small(values: np.ndarray) -> np.ndarray:
-        """A few numbers (spacing, boundary values) as the kernels take them."""
-        return values
-
-    @staticmethod
-    def scale(a, factor: float, out) -> None:
-        np.multiply(a, factor, out=out)
-
-    @staticmethod
-    def copy(destination, source) -> None:
-        np.copyto(destination, source)
-
-
 class NavierStokesSolver:
     """One fluid step of the porous Navier-Stokes equations on `grid`, for the fluid `config`
     under the body acceleration `gravity` (3,) [m/s^2].
@@ -149,7 +115,8 @@ class NavierStokesSolver:
     def __init__(self, config: NavierStokesFluid, grid: FluidGrid, gravity):
         self.config = config
         self.grid = grid
-        self.on = FieldsOnProcessor()  # where the step's fields are (FieldsOnGpu: on a GPU)
+        # where the step's fields are (device_fields.py FieldsOnGpu: on a GPU)
+        self.on = FieldsOnProcessor(navier_stokes_kernels)
         self.follows = bool(config.grid.follow_top_wall)
         self.height = grid.height  # of the grid now [m]
         self.spacing = np.ascontiguousarray(grid.spacing, dtype=np.float64)
