@@ -19,7 +19,8 @@ profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's and its push on a
 kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/cuda_drag.py):
 its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
 brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
-and momentum exchange, kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its
+and momentum exchange, the Darcy porosity and mean particle velocity, kernels/fluid/
+cuda_porosity.py, on a grid that keeps its cells), and its
 arrays go up again after each. The energy budget books each particle's share of a step on the
 device (kernels/observe/cuda_energy_budget.py), its copies of the half-step velocities and of the
 last wall springs taken before the contacts, the last pair springs those of the spare spring

@@ -37,6 +37,10 @@ MOVING_GRID_SPACING = "grid_spacing"
 RESOLVED_PERIOD = 20
 
 
+# own_step_where of a fluid whose grid's step runs on the GPU (grid_on_gpu)
+GRID_ON_GPU = "the grid's kernels and its pressure solve on the GPU, from the processor"
+
+
 @dataclass
 class GpuSteps:
     """A fluid's kernels on a GPU (physics/device_steps.py), each (CUDA kernel, threads, arguments
@@ -148,8 +152,9 @@ class FluidModule(Module):
 
     def grid_on_gpu(self) -> None:
         """Where the particles' steps run on a GPU (physics/device_steps.py): what of the grid's
-        own step runs there too (Navier-Stokes: the step, physics/fluid/device_navier_stokes.py;
-        Darcy: its pressure solve, physics/fluid/device_poisson.py)."""
+        own step runs there too (Navier-Stokes and Darcy: the step, physics/fluid/
+        device_navier_stokes.py and device_pore_pressure.py; their own_step_where is then
+        GRID_ON_GPU)."""
 
     def steps_taken(self, state, done: int) -> None:
         """After `done` steps of its compiled loop (`steps_kernel`, physics/compiled_steps.py),

@@ -248,7 +248,12 @@ DARCY_UNDER_A_LID = (
 
 def _darcy_fields(scene) -> dict:
     s = scene.fluid.pore.state
-    return {"pressure": s.pressure, "gradient": s.gradient, "porosity": s.porosity}
+    return {
+        "pressure": s.pressure,
+        "gradient": s.gradient,
+        "porosity": s.porosity,
+        "particle_velocity": s.particle_velocity,
+    }
 
 
 @pytest.mark.parametrize(
@@ -276,7 +281,8 @@ def _darcy_fields(scene) -> dict:
 )
 def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
     """A fluid with the particles on the GPU: its own step (the VANS column, the Darcy pore
-    pressure) solved on the host at each coupling step from the particles brought back, its force
+    pressure) taken at each coupling step from the particles brought back or from what the
+    device measured of them, its force
     (drag, buoyancy, lift and fluctuations; the seepage force and buoyancy) on the device every
     step, from the fields sent up after each fluid step. The runs end inside and at the coupling
     intervals."""
@@ -290,6 +296,33 @@ def test_a_fluid_acts_on_the_gpu_as_on_the_cpu(tmp_path, fluid, fields, runs):
     for name, other in b.items():
         assert np.abs(other).max() > 0.0, name  # the fluid did act
         np.testing.assert_allclose(a[name], other, rtol=RTOL, atol=RTOL * np.abs(other).max(), err_msg=name)
+
+
+@pytest.mark.parametrize(
+    "fluid, measured",
+    [
+        (DARCY, lambda s: (s.fluid.pore.state.porosity, s.fluid.pore.state.particle_velocity)),
+        (NAVIER_STOKES, lambda s: (s.fluid.fs.porosity,)),
+    ],
+    ids=["darcy", "navier-stokes"],
+)
+def test_a_fixed_grid_measures_the_particles_on_the_gpu(tmp_path, monkeypatch, fluid, measured):
+    """On a grid that keeps its cells, what a fluid's own step reads of the particles (the
+    porosity; Darcy's mean particle velocity too) is measured on the device at the end of the step
+    before it: the particles do not come back for it, and the fields are the CPU's."""
+    from sphere_cli.physics.device_steps import DeviceSteps
+
+    gpu, cpu = _scenes(tmp_path, walls=fluid)
+
+    def refused(self, state):
+        raise AssertionError("the particles came back for the fluid's step")
+
+    monkeypatch.setattr(DeviceSteps, "_particles_to_host", refused)
+    advance(gpu, 12, sync=False)  # past the fluid step at 10
+    advance(cpu, 12)
+    for a, b in zip(measured(gpu), measured(cpu), strict=True):
+        assert np.abs(b - b.flat[0]).max() > 0.0  # not uniform: the particles' own
+        np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max())
 
 
 CONFIGS = Path(__file__).parents[2] / "configs"
@@ -421,15 +454,89 @@ def test_the_pressure_solve_on_the_gpu_is_the_cpus(
     assert gpu.solve(x, np.zeros(shape), c, ax, ay, az) == PoissonResult(0, 0.0, True, 0.0) and not x.any()
 
 
+@pytest.mark.parametrize(
+    "settings, shape, periodic, mean_source, launch",
+    [
+        ({}, (3, 2, 5), (True, True, False), None, (1, 1)),
+        (
+            {
+                "bottom": {"type": "pressure", "pressure": 50.0},
+                "fixed_pressure": [{"lower": [0, 0, 0.3], "upper": [0.15, 0.2, 0.5], "pressure": 20.0}],
+                "permeability": {"model": "constant", "value": 1e-10},
+            },
+            (4, 3, 5),
+            (True, False, False),
+            None,
+            (2, 3),
+        ),
+        ({"top": {"type": "no-flow"}}, (3, 3, 4), (False, True, False), 0.7, (1, 1)),
+        ({"time_scheme": "explicit"}, (3, 2, 4), (True, True, False), None, (1, 1)),
+        ({"porosity_min": 0.35, "porosity_max": 0.45}, (2, 3, 4), (False, False, False), None, (1, 1)),
+    ],
+    ids=["kozeny-carman", "fixed-cells-constant-k", "mean-source", "explicit", "clamped"],
+)
+def test_the_darcy_step_on_the_gpu_is_the_cpus(settings, shape, periodic, mean_source, launch, monkeypatch):
+    """physics/fluid/device_pore_pressure.py: a pore-pressure step with its fields on the GPU
+    (kernels/fluid/cuda_pore_pressure.py: the CPU's column functions, a thread a column; the solve
+    device_poisson.py's) from random porosities, rates and particle velocities: Kozeny-Carman on
+    a periodic grid; fixed cells (eliminated, their faces cut) with a constant permeability and a
+    pressure face, launched as 2 blocks of 3 simulated threads; the mean source of a grid
+    following its top wall; the explicit scheme; porosities clamped in most cells, their count
+    the CPU's. Bitwise under the simulator; on a GPU the solve's bound of
+    test_the_pressure_solve_on_the_gpu_is_the_cpus (1e-7 of the largest value) holds the fields
+    made from the solution."""
+    from sphere_cli.config.fluid_darcy import DarcyFluid
+    from sphere_cli.physics import device_steps
+    from sphere_cli.physics.fluid.device_fields import FieldsOnGpu
+    from sphere_cli.physics.fluid.device_pore_pressure import step_on_gpu
+    from sphere_cli.physics.fluid.grid import FluidGrid
+    from sphere_cli.physics.fluid.pore_pressure import STEP_OUTPUTS, PorePressure
+
+    if SIMULATED:
+        monkeypatch.setattr(device_steps, "SIMULATOR_LAUNCH", launch)
+    config = DarcyFluid.model_validate({"model": "darcy", "solver": {"tolerance": 1e-12}, **settings})
+    grid = FluidGrid(np.zeros(3), np.array([0.05, 0.07, 0.1]), shape, np.array(periodic))
+    pores = [PorePressure(config, grid, 1e-9) for _ in range(2)]
+    step_on_gpu(pores[0])
+    assert isinstance(pores[0].on, FieldsOnGpu) and not isinstance(pores[1].on, FieldsOnGpu)
+    rng = np.random.default_rng(2)
+    explicit = config.time_scheme == "explicit"
+    dt = 0.2 * pores[1].explicit_step_limit() if explicit else 1e-3
+    pressure = rng.normal(0.0, 10.0, shape)
+    for step in range(2):  # the second from the pressure the first left, the device's arrays kept
+        inputs = {
+            "porosity": rng.uniform(0.3, 0.5, shape),
+            "porosity_rate": rng.normal(0.0, 1.0, shape),
+            "particle_velocity": rng.normal(0.0, 0.01, shape + (3,)),
+        }
+        for pore in pores:
+            for name, values in inputs.items():
+                getattr(pore.state, name)[...] = values
+            if step == 0:
+                pore.state.pressure[...] = pressure
+            pore.advance(dt, (step + 1) * dt, mean_source)
+        gpu, cpu = (pore.state for pore in pores)
+        assert (gpu.iterations, gpu.clamped_cells) == (cpu.iterations, cpu.clamped_cells)
+        assert cpu.iterations > 0 or explicit
+        assert (cpu.clamped_cells > shape[0] * shape[1]) == ("porosity_min" in settings)
+        for name in STEP_OUTPUTS:
+            a, b = getattr(gpu, name), getattr(cpu, name)
+            assert np.abs(b).max() > 0.0, name
+            if SIMULATED:
+                assert np.array_equal(a, b), name
+            else:
+                np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-7 * np.abs(b).max(), err_msg=name)
+
+
 def test_a_gpu_run_steps_its_fluid_grid_on_the_gpu(tmp_path):
-    """With the particles on the GPU (FluidModule.grid_on_gpu) the Navier-Stokes grid takes its
-    steps there, the pressure solve included, and Darcy its pressure solve; the fluid's line of
-    run.log (its summary) says so."""
+    """With the particles on the GPU (FluidModule.grid_on_gpu) the Navier-Stokes and Darcy grids
+    take their steps there, the pressure solve included; the fluid's line of run.log (its
+    summary) says so."""
     for name, fluid in (("darcy", DARCY), ("navier-stokes", NAVIER_STOKES)):
         (tmp_path / name).mkdir()
         gpu, cpu = _scenes(tmp_path / name, walls=fluid)
         on_gpu = [key for key, fact in gpu.fluid.summary().items() if "on the GPU" in fact]
-        assert on_gpu == (["solver"] if name == "darcy" else ["fluid grid", "pressure solver"]), name
+        assert on_gpu == (["grid", "solver"] if name == "darcy" else ["fluid grid", "pressure solver"]), name
         assert not any("on the GPU" in fact for fact in cpu.fluid.summary().values())
 
 

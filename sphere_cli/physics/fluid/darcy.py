@@ -23,7 +23,7 @@ from ...config.fluid_darcy import DarcyFluid
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces, push_wall
 from ...kernels.fluid.pore_pressure import backward_euler_system
-from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
+from ..fluid_plugin import GRID_ON_GPU, MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .grid import FluidGrid, fluid_grid, top_wall_index, wall_cells
 from .pore_pressure import PorePressure, fixed_pressure_cells
 from .porosity import Porosity
@@ -116,6 +116,10 @@ class Darcy(FluidModule):
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
         self.warned_clamp = False
+        # with the particles on a GPU and a grid that keeps its cells: the porosity and mean
+        # particle velocity measured there at the end of each step before a fluid step
+        # (gpu_steps), and the (1,) count of cells it clamped at 0
+        self.measured = self.measured_clamped = None
         self.whole_seepage = np.uint8(config.pressure_force == "seepage")
         # an impermeable top wall takes the pore pressure under it (a permeable one has the same
         # pressure on both faces and carries the effective stress only)
@@ -367,6 +371,10 @@ class Darcy(FluidModule):
 
     def _measure(self, particles) -> None:
         s = self.pore.state
+        if self.measured is not None:  # measured on a GPU at the end of this step (gpu_steps)
+            s.porosity[...], s.particle_velocity[...] = self.measured
+            self.porosity.report_clamped(int(self.measured_clamped[0]))
+            return
         # the largest radius of all the particles (a rank may be given only some: step_on_rank)
         largest = 0.5 * self.diameter
         self.porosity.measure(particles, s.porosity, mean_velocity=s.particle_velocity, largest=largest)
@@ -390,20 +398,35 @@ class Darcy(FluidModule):
     on_gpu = True
 
     def gpu_steps(self, state) -> GpuSteps:
-        """The force on the particles, and on a wall it pushes (one thread), on a GPU."""
+        """The force on the particles, and on a wall it pushes (one thread), on a GPU; on a grid
+        that keeps its cells (no top wall to follow), also the porosity and the particles' mean
+        velocity per cell at the end of each step before a fluid step, so that only the grid's
+        fields travel (a moving grid's cells change in this module's step, before the porosity:
+        the particles come back for it instead)."""
         from ...kernels.fluid import cuda_darcy
 
         forces = [(cuda_darcy.pressure_forces, state.particles.count, self.force_arguments(state))]
         if self.pushes_wall:
             forces.insert(0, (cuda_darcy.push_wall, 1, self._push_arguments(state)))
-        return GpuSteps(forces)
+        steps = GpuSteps(forces)
+        if self.top_wall is not None:
+            return steps
+        if self.measured is None:
+            s = self.pore.state
+            self.measured = (np.zeros_like(s.porosity), np.zeros_like(s.particle_velocity))
+        porosity, velocity = self.measured
+        steps.coupling, self.measured_clamped = self.porosity.gpu_measure(state.particles, porosity, velocity)
+        steps.coupled = (porosity, velocity, self.measured_clamped)
+        sort = self.porosity
+        steps.scratch = (*sort.gpu_sort, sort.cell_of, sort.wrapped, porosity, velocity)
+        return steps
 
-    own_step_where = "on the processor, its pressure solve on the GPU"
+    own_step_where = GRID_ON_GPU
 
     def grid_on_gpu(self) -> None:
-        from .device_poisson import on_gpu
+        from .device_pore_pressure import step_on_gpu
 
-        self.pore.solver = on_gpu(self.pore.solver)
+        step_on_gpu(self.pore)
 
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the
@@ -478,7 +501,7 @@ class Darcy(FluidModule):
             law = f"Kozeny-Carman, k_c = {pore.kc:.4g} m^2"
         return {
             "model": "darcy (pore-pressure diffusion, backward Euler)",
-            "grid": pore.grid.describe(),
+            "grid": pore.grid.describe() + pore.on.where,
             "permeability": law,
             "solver": pore.solver.describe(),
             "fluid step": f"{self.fluid_dt:.4g} s (every {self.coupling_steps} DEM steps); explicit limit "

@@ -35,7 +35,7 @@ from ...kernels.fluid.navier_stokes import (
     pressure_gradient,
     top_outflow,
 )
-from ..fluid_plugin import MOVING_GRID_SPACING, FluidModule, GpuSteps
+from ..fluid_plugin import GRID_ON_GPU, MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
 from .fixed_bed import FixedBed
@@ -644,7 +644,7 @@ class NavierStokes(FluidModule):
     on_gpu = True
     stability_reads_particles = True  # the fastest particle's cells a fluid step
 
-    own_step_where = "the grid's kernels and its pressure solve on the GPU, from the processor"
+    own_step_where = GRID_ON_GPU
 
     def grid_on_gpu(self) -> None:
         from .device_navier_stokes import step_on_gpu

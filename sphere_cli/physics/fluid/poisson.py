@@ -595,8 +595,11 @@ class PoissonSolver:
             self.r, self.part_a, 0, self.grid.shape[0],
         )  # fmt: skip
         r = self.on.host(self.r)
-        np.divide(r, c, out=r)
-        x += r
+        np.divide(r, self.on.host(c_), out=r)
+        values = self.on.host(field)  # x itself on the processor
+        values += r
+        self.on.put(field, values)
+        self.on.output(field, x)
 
     # -- helpers -----------------------------------------------------------------------------
 

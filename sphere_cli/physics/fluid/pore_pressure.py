@@ -24,20 +24,11 @@ import numpy as np
 
 from ...config.fluid_common import PressureBoundary
 from ...config.fluid_darcy import ConstantPermeability, DarcyFluid
-from ...kernels.fluid.poisson import face_means
-from ...kernels.fluid.pore_pressure import (
-    backward_euler_system,
-    clamp_porosity,
-    cut_fixed_faces,
-    darcy_velocity,
-    eliminate_fixed_cells,
-    first_bad_cell,
-    kozeny_carman,
-    pressure_gradient,
-    solid_divergence,
-)
+from ...kernels.fluid import pore_pressure as pore_pressure_kernels
+from ...kernels.fluid.pore_pressure import first_bad_cell
 from .grid import FluidGrid
 from .poisson import PoissonResult, PoissonSolver, preconditioner_for
+from .step_place import FieldsOnProcessor
 
 
 def boundary_pressure(boundary, time: float) -> float:
@@ -64,6 +55,13 @@ def fixed_pressure_cells(config: DarcyFluid, grid: FluidGrid) -> tuple[np.ndarra
     return fixed, value, empty
 
 
+# the fields a step reads of the state, and those it writes there (the rest is scratch)
+STEP_INPUTS = ("pressure", "porosity", "porosity_rate", "particle_velocity")
+STEP_OUTPUTS = ("pressure", "porosity_used", "permeability", "gradient", "velocity")
+# the state's own arrays and the processor's kernels (poisson.py's face_means with them)
+ON_PROCESSOR = FieldsOnProcessor(pore_pressure_kernels)
+
+
 @dataclass
 class DarcyState:
     """The fluid arrays of a Darcy scene (cell-centred, shape (nx, ny, nz) or (nx, ny, nz, 3))."""
@@ -88,6 +86,8 @@ class DarcyState:
     residual: float = 0.0
     clamped_cells: int = 0
 
+    SCALARS = ("iterations", "residual", "clamped_cells")
+
 
 class PorePressure:
     """The pore-pressure equation on a grid: porosity, its rate and the particle velocity are
@@ -99,6 +99,7 @@ class PorePressure:
             raise ValueError("the Darcy grid cannot be periodic along z")
         self.config = config
         self.grid = grid
+        self.on = ON_PROCESSOR  # where a step's fields are (device_fields.py FieldsOnGpu: on a GPU)
         perm = config.permeability
         if isinstance(perm, ConstantPermeability):
             self.kc = None
@@ -157,56 +158,64 @@ class PorePressure:
 
     def update_permeability(self) -> None:
         """porosity -> clamped porosity -> k per cell."""
-        s, c = self.state, self.config
-        s.clamped_cells = int(clamp_porosity(s.porosity, c.porosity_min, c.porosity_max, s.porosity_used))
+        self.state.clamped_cells = self._permeability(pore_pressure_kernels, self.state)
+
+    def _permeability(self, k, work) -> int:
+        """The clamped porosity and k of work's cells with the kernels k; the cells clamped."""
+        c = self.config
+        clamped = int(k.clamp_porosity(work.porosity, c.porosity_min, c.porosity_max, work.porosity_used))
         if self.kc is None:
-            s.permeability[...] = c.permeability.value
+            k.constant_permeability(c.permeability.value, work.permeability)
         else:
-            kozeny_carman(s.porosity_used, self.kc, s.permeability)
+            k.kozeny_carman(work.porosity_used, self.kc, work.permeability)
+        return clamped
 
     def advance(self, dt: float, time: float, mean_source: float | None = None) -> PoissonResult:
         """One backward-Euler step of length dt [s] ending at `time` [s] (boundary values taken
         there), from the current inputs. With `mean_source` [1/s], the skeleton's divergence is
         shifted uniformly to have that mean over the grid. Raises ArithmeticError if the solve
         did not converge."""
-        s, c = self.state, self.config
-        self.update_permeability()
-        ax, ay, az = s.faces
-        face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
-        solid_divergence(
-            s.porosity_used,
-            s.porosity,
-            s.porosity_rate,
-            s.particle_velocity,
-            self.ih,
-            self.periodic,
-            s.source,
-        )
+        return self.on.run(lambda: self._advance(dt, time, mean_source))
+
+    def _advance(self, dt: float, time: float, mean_source: float | None) -> PoissonResult:
+        s, c, on = self.state, self.config, self.on
+        k = on.kernels
+        work = on.fields(s)  # s, or its fields on the GPU
+        ih, ih2, periodic = (on.small(a) for a in (self.ih, self.ih2, self.periodic))
+        s.clamped_cells = self._permeability(k, work)
+        ax, ay, az = work.faces
+        k.face_means(work.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        k.solid_divergence(
+            work.porosity_used, work.porosity, work.porosity_rate, work.particle_velocity, ih, periodic,
+            work.source,
+        )  # fmt: skip
         if mean_source is not None:
-            s.source += mean_source - float(np.mean(s.source))
-        backward_euler_system(
-            s.pressure, s.porosity_used, s.source, c.compressibility, c.viscosity, dt, s.storage, s.rhs
-        )
+            on.shift_to_mean(work.source, mean_source)
+        k.backward_euler_system(
+            work.pressure, work.porosity_used, work.source, c.compressibility, c.viscosity, dt, work.storage,
+            work.rhs,
+        )  # fmt: skip
         if self.has_fixed:
-            eliminate_fixed_cells(
-                s.fixed, s.fixed_value, ax, ay, az, self.ih2, self.periodic, s.storage, s.rhs
-            )
-            cut_fixed_faces(s.fixed, ax, ay, az, self.periodic)
+            k.eliminate_fixed_cells(
+                work.fixed, work.fixed_value, ax, ay, az, ih2, periodic, work.storage, work.rhs
+            )  # fmt: skip
+            k.cut_fixed_faces(work.fixed, ax, ay, az, periodic)
         bottom, top = self.boundary_values(time)
         if self.explicit:
-            self.solver.explicit_step(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
-            s.iterations, s.residual = 0, 0.0
-            self.update_gradient(time, faces_cut=self.has_fixed)
-            return PoissonResult(0, 0.0, True)
-        result = self.solver.solve(s.pressure, s.rhs, s.storage, ax, ay, az, bottom, top)
+            self.solver.explicit_step(work.pressure, work.rhs, work.storage, ax, ay, az, bottom, top)
+            result = PoissonResult(0, 0.0, True)
+        else:
+            result = self.solver.solve(work.pressure, work.rhs, work.storage, ax, ay, az, bottom, top)
         s.iterations, s.residual = result.iterations, result.residual
+        if result.converged:
+            self._gradient(on, work, time, faces_cut=self.has_fixed)
+        on.results(work, s)
         if not result.converged:
             raise ArithmeticError(
                 f"the pore-pressure solve did not converge: residual {result.residual:.3g} after "
                 f"{result.iterations} iterations (fluid.solver.tolerance = {c.solver.tolerance:g}, "
                 f"max_iterations = {c.solver.max_iterations})"
             )
-        self.update_gradient(time, faces_cut=self.has_fixed)
         return result
 
     def boundary_values(self, time: float) -> tuple[float, float]:
@@ -214,20 +223,24 @@ class PorePressure:
 
     def update_gradient(self, time: float, faces_cut: bool = True) -> None:
         """grad p and the Darcy velocity from the current pressure and permeability (boundary
-        values at `time`). faces_cut: False where the face arrays already hold the means of the
-        current permeability (`advance` without fixed cells: nothing has written them since)."""
-        s = self.state
+        values at `time`)."""
+        self._gradient(ON_PROCESSOR, self.state, time, faces_cut)
+
+    def _gradient(self, on, work, time: float, faces_cut: bool) -> None:
+        """update_gradient on work's fields at the place `on`. faces_cut: False where the face
+        arrays already hold the means of the current permeability (a step without fixed cells:
+        nothing has written them since)."""
+        k = on.kernels
+        ih, periodic = on.small(self.ih), on.small(self.periodic)
         bottom, top = self.boundary_values(time)
-        pressure_gradient(
-            s.pressure, self.ih, self.periodic, np.uint8(self.bottom_dirichlet), np.uint8(self.top_dirichlet),
-            bottom, top, s.gradient,
-        )  # fmt: skip
-        ax, ay, az = s.faces
+        dirichlet = np.uint8(self.bottom_dirichlet), np.uint8(self.top_dirichlet)
+        k.pressure_gradient(work.pressure, ih, periodic, *dirichlet, bottom, top, work.gradient)
+        ax, ay, az = work.faces
         if faces_cut:  # the faces again, uncut: a fixed cell exchanges fluid with its neighbours
-            face_means(s.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
-        darcy_velocity(
-            s.pressure, ax, ay, az, self.ih, self.periodic, np.uint8(self.bottom_dirichlet),
-            np.uint8(self.top_dirichlet), bottom, top, s.porosity_used, self.config.viscosity, s.velocity,
+            k.face_means(work.permeability, self.periodic[0], self.periodic[1], 1, ax, ay, az)
+        k.darcy_velocity(
+            work.pressure, ax, ay, az, ih, periodic, *dirichlet, bottom, top, work.porosity_used,
+            self.config.viscosity, work.velocity,
         )  # fmt: skip
 
     # -- facts -----------------------------------------------------------------------------------
