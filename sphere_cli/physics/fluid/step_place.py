@@ -6,6 +6,8 @@ calls, so the two places run the same sequence of kernels on the same values."""
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 
 
@@ -16,6 +18,11 @@ class FieldsOnProcessor:
 
     def __init__(self, kernels):
         self.kernels = kernels
+
+    def __reduce__(self):
+        # by the module's name: a module cannot be pickled, and a solver travels (to MPI ranks,
+        # to the compile-ahead helper)
+        return _on_processor, (self.kernels.__name__,)
 
     @staticmethod
     def run(step):
@@ -48,3 +55,7 @@ class FieldsOnProcessor:
     def shift_to_mean(field, mean: float) -> None:
         """field += mean - its mean (the one scalar added to every value)."""
         field += mean - float(np.mean(field))
+
+
+def _on_processor(kernels: str) -> FieldsOnProcessor:
+    return FieldsOnProcessor(importlib.import_module(kernels))
