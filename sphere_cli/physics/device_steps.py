@@ -246,7 +246,8 @@ class DeviceSteps:
         ]
         for rows in (self.rows, self.spare):
             arrays += [rows.nbr, rows.count, rows.mate]
-        return sum(a.nbytes for a in arrays)
+        grid = 0 if self.fluid is None else self.fluid.grid_device_bytes()
+        return sum(a.nbytes for a in arrays) + grid
 
     def upload(self, state: State) -> None:
         """The particles, the box, the contact table and the host's list with its springs."""

@@ -156,6 +156,10 @@ class FluidModule(Module):
         device_navier_stokes.py and device_pore_pressure.py; their own_step_where is then
         GRID_ON_GPU)."""
 
+    def grid_device_bytes(self) -> int:
+        """The bytes its grid's own step keeps on the GPU (after grid_on_gpu; none here)."""
+        return 0
+
     def steps_taken(self, state, done: int) -> None:
         """After `done` steps of its compiled loop (`steps_kernel`, physics/compiled_steps.py),
         before the clock counts them: what the module reports of them (nothing here)."""

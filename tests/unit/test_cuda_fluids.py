@@ -540,6 +540,26 @@ def test_a_gpu_run_steps_its_fluid_grid_on_the_gpu(tmp_path):
         assert not any("on the GPU" in fact for fact in cpu.fluid.summary().values())
 
 
+@pytest.mark.parametrize(
+    "fluid, state",
+    [(DARCY, lambda s: s.fluid.pore.state), (NAVIER_STOKES, lambda s: s.fluid.fs)],
+    ids=["darcy", "navier-stokes"],
+)
+def test_the_gpus_bytes_count_its_fluid_grid(tmp_path, fluid, state):
+    """DeviceSteps.device_bytes (sphere bench gpu's memory per particle) counts what the fluid's
+    grid keeps on the GPU: its pressure solve's fields from the start (seven grids at least),
+    its step's fields (a device array for each of its state's) from its first step."""
+    gpu, _ = _scenes(tmp_path, walls=fluid)
+    advance(gpu, 3)  # before the first fluid step
+    steps = gpu.step.compiled
+    cells = gpu.fluid.grid().cell_count
+    assert gpu.fluid.grid_device_bytes() >= 7 * 8 * cells
+    before = steps.device_bytes()
+    advance(gpu, 10)
+    arrays = [a for a in vars(state(gpu)).values() if isinstance(a, np.ndarray)]
+    assert steps.device_bytes() - before >= sum(a.nbytes for a in arrays)
+
+
 def test_a_gpu_failure_in_the_pressure_solve_is_the_users_error(monkeypatch):
     """A CUDA error in a solve on the GPU (out of memory above all), which runs in the fluid's own
     step on the host, outside DeviceSteps.run, is a CaseError naming simulation.device (exit 65),

@@ -428,6 +428,9 @@ class Darcy(FluidModule):
 
         step_on_gpu(self.pore)
 
+    def grid_device_bytes(self) -> int:
+        return self.pore.on.device_bytes() + self.pore.solver.on.device_bytes()
+
     def particle_arrays(self, state) -> dict:
         """Nothing kept per particle: its force on one is that of the pore pressure where the
         particle is (the fluid's own arrays, kept whole on every MPI rank)."""

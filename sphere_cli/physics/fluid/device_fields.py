@@ -61,6 +61,12 @@ class FieldsOnGpu:
             held[1].copy_to_device(np.ascontiguousarray(values))
         return held[1]
 
+    def device_bytes(self) -> int:
+        """The bytes of the step's fields on the device (none before its first step)."""
+        arrays = [] if self.work is None else list(vars(self.work).values())
+        arrays = [a for value in arrays for a in (value if isinstance(value, tuple) else (value,))]
+        return sum(a.nbytes for a in (*arrays, *(held for _, held in self.smalls.values())))
+
     def scale(self, a, factor: float, out) -> None:
         self._scale(a.reshape(a.size), factor, out.reshape(out.size))
 

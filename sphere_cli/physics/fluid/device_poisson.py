@@ -76,14 +76,19 @@ class OnGpu:
         self.kernels = GpuKernels(launch, (1, launch[1]))
         self._fill = cuda_poisson.fill[launch]
         self.held = {}  # the device's copy of each argument of inputs(), by its place
+        self.made = []  # the solver's own fields (zeros, array)
 
-    @staticmethod
-    def zeros(shape):
-        return cuda.to_device(np.zeros(shape))
+    def zeros(self, shape):
+        self.made.append(cuda.to_device(np.zeros(shape)))
+        return self.made[-1]
 
-    @staticmethod
-    def array(values: np.ndarray):
-        return cuda.to_device(np.ascontiguousarray(values, dtype=np.float64))
+    def array(self, values: np.ndarray):
+        self.made.append(cuda.to_device(np.ascontiguousarray(values, dtype=np.float64)))
+        return self.made[-1]
+
+    def device_bytes(self) -> int:
+        """The bytes of the solver's fields and the copies of its inputs on the device."""
+        return sum(a.nbytes for a in (*self.made, *self.held.values()))
 
     @staticmethod
     def put(field, values) -> None:

@@ -651,6 +651,9 @@ class NavierStokes(FluidModule):
 
         step_on_gpu(self.solver)
 
+    def grid_device_bytes(self) -> int:
+        return self.solver.on.device_bytes() + self.solver.poisson.on.device_bytes()
+
     def gpu_steps(self, state) -> GpuSteps:
         """The drag on the GPU; on a grid that keeps its cells (no top wall to follow), also the
         porosity and the momentum exchange at the end of each step before a fluid step, so that

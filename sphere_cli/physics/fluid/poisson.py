@@ -88,6 +88,11 @@ class OnProcessor:
     where = ""  # for describe()
 
     @staticmethod
+    def device_bytes() -> int:
+        """The bytes its fields take on a GPU: none here."""
+        return 0
+
+    @staticmethod
     def zeros(shape) -> np.ndarray:
         return np.zeros(shape)
 

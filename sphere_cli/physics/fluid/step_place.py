@@ -44,6 +44,11 @@ class FieldsOnProcessor:
         return values
 
     @staticmethod
+    def device_bytes() -> int:
+        """The bytes its fields take on a GPU: none here."""
+        return 0
+
+    @staticmethod
     def scale(a, factor: float, out) -> None:
         np.multiply(a, factor, out=out)
 
