@@ -208,7 +208,7 @@ class PorePressure:
             result = self.solver.solve(work.pressure, work.rhs, work.storage, ax, ay, az, bottom, top)
         s.iterations, s.residual = result.iterations, result.residual
         if result.converged:
-            self._gradient(on, work, time, faces_cut=self.has_fixed)
+            self._gradient(k, work, ih, periodic, time, faces_cut=self.has_fixed)
         on.results(work, s)
         if not result.converged:
             raise ArithmeticError(
@@ -224,14 +224,12 @@ class PorePressure:
     def update_gradient(self, time: float, faces_cut: bool = True) -> None:
         """grad p and the Darcy velocity from the current pressure and permeability (boundary
         values at `time`)."""
-        self._gradient(ON_PROCESSOR, self.state, time, faces_cut)
+        self._gradient(pore_pressure_kernels, self.state, self.ih, self.periodic, time, faces_cut)
 
-    def _gradient(self, on, work, time: float, faces_cut: bool) -> None:
-        """update_gradient on work's fields at the place `on`. faces_cut: False where the face
-        arrays already hold the means of the current permeability (a step without fixed cells:
-        nothing has written them since)."""
-        k = on.kernels
-        ih, periodic = on.small(self.ih), on.small(self.periodic)
+    def _gradient(self, k, work, ih, periodic, time: float, faces_cut: bool) -> None:
+        """update_gradient on work's fields with the kernels k (ih, periodic: self's as they take
+        them). faces_cut: False where the face arrays already hold the means of the current
+        permeability (a step without fixed cells: nothing has written them since)."""
         bottom, top = self.boundary_values(time)
         dirichlet = np.uint8(self.bottom_dirichlet), np.uint8(self.top_dirichlet)
         k.pressure_gradient(work.pressure, ih, periodic, *dirichlet, bottom, top, work.gradient)
