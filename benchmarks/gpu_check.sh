@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The checks to run where a GPU is at hand, in one go (docs/performance.md, "The GPU"): the GPU
 # tests on the device (not the simulator), then `sphere bench gpu`, dry and in a Navier-Stokes
-# fluid, with moving walls, and the pressure solve on the GPU against the processor's
+# and a Darcy fluid, with moving walls, and the pressure solve on the GPU against the processor's
 # (benchmarks/gpu_solve.py). Run from the repository root:
 #
 #     bash benchmarks/gpu_check.sh [SIZES [STATES]]   # 100000,1000000 and loose by default
@@ -37,6 +37,6 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 NUMBA_ENA
     python3 -m pytest -q -p no:randomly -p no:cacheprovider -W ignore \
         tests/unit/test_cuda_dem.py tests/unit/test_cuda_fluids.py
     python3 -m sphere_cli bench gpu --sizes "$sizes" --states "$states" --walls fixed,moving \
-        --fluids none,navier-stokes
+        --fluids none,navier-stokes,darcy
     python3 benchmarks/gpu_solve.py 5 32x32x64,64x64x64,128x128x128
 } 2>&1 | tee -a "$log"

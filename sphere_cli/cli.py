@@ -318,7 +318,7 @@ def bench_gpu(
     fluids: str = typer.Option(
         "none",
         "--fluids",
-        help="none and/or navier-stokes: navier-stokes adds loose rows in water on a Navier-Stokes grid.",
+        help="none, navier-stokes and/or darcy: each fluid adds loose rows in water on its grid.",
     ),
     output: Path = OUTPUT_OPTION,
 ) -> None:
@@ -331,8 +331,8 @@ def bench_gpu(
         raise typer.BadParameter(f"--states {states!r}: expected loose and/or settled")
     lids = _lids(walls)
     media = tuple(s.strip() for s in fluids.split(",") if s.strip())
-    if not media or not set(media) <= {"none", "navier-stokes"}:
-        raise typer.BadParameter(f"--fluids {fluids!r}: expected none and/or navier-stokes")
+    if not media or not set(media) <= {"none", "navier-stokes", "darcy"}:
+        raise typer.BadParameter(f"--fluids {fluids!r}: expected none, navier-stokes and/or darcy")
     counts = _numbers(sizes, "--sizes")
     _bench(lambda: run_gpu_benchmark(counts, steps, repeats, chosen, output, walls=lids, fluids=media))
 

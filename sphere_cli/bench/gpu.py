@@ -14,7 +14,10 @@ cells about four diameters wide stepped every COUPLING_STEPS steps (NAVIER_STOKE
 its kick every step, the porosity and the momentum exchange on the device and the grid's fields
 to and fro at each fluid step, the grid's step itself on the device too (physics/fluid/
 device_navier_stokes.py) from the fluid module's hook on the host, whose whole time is shared out
-beside the kernels' as "fluid step". Never part of the tests' timings.
+beside the kernels' as "fluid step". `fluids` "darcy" adds loose rows in the same box (its walls
+kept) filled with water on a Darcy grid of the same cells: the seepage force every step, the
+porosity and mean particle velocity on the device and the pore pressure's step there too
+(physics/fluid/device_pore_pressure.py) at each fluid step. Never part of the tests' timings.
 """
 
 from __future__ import annotations
@@ -31,16 +34,24 @@ from ..simulation import advance
 from . import machine
 from .dem import FIXED_LID, MOVING_LID, SPACING, canonical_case, on_device, settled_scene
 
-# the canonical scene in water (`fluids` "navier-stokes"): cells about four diameters wide
+# the canonical scene in water (`fluids`): cells about four diameters wide
 COUPLING_STEPS = 10
-NAVIER_STOKES = """
+IN_WATER = {
+    "navier-stokes": """
 [fluid]
 model = "navier-stokes"
 density = 1000.0
 viscosity = 1.0e-3
 grid = {{ cells = [{across}, {across}, {up}] }}
 coupling = {{ steps = {steps} }}
-"""
+""",
+    "darcy": """
+[fluid]
+model = "darcy"
+grid = {{ cells = [{across}, {across}, {up}] }}
+coupling = {{ steps = {steps} }}
+""",
+}
 
 
 def run_gpu_benchmark(
@@ -57,15 +68,15 @@ def run_gpu_benchmark(
     results = {"machine": machine(), "steps": steps, "repeats": repeats, "rows": []}
     rows = [(state, "fixed", "none") for state in states if "fixed" in walls and "none" in fluids]
     rows += [("loose", "moving", "none")] if "moving" in walls else []
-    rows += [("loose", "fixed", "navier-stokes")] if "navier-stokes" in fluids else []
+    rows += [("loose", "fixed", fluid) for fluid in IN_WATER if fluid in fluids]
     for n in sizes:
         for state, lid, fluid in rows:
             if state == "loose":
                 text = canonical_case(n)
                 if lid == "moving":
                     text = text.replace(FIXED_LID, MOVING_LID)
-                if fluid == "navier-stokes":
-                    text = _in_water(text, n)
+                if fluid != "none":
+                    text = _in_water(text, n, fluid)
                 scene = build_scene(parse_case(on_device(text, "cuda")))
             else:
                 scene = settled_scene(n, log, device="cuda")
@@ -127,15 +138,17 @@ def _timed(module, hook, timings: dict) -> tuple:
     return module, timed_hook
 
 
-def _in_water(text: str, n: int) -> str:
-    """The canonical scene of n spheres (its case text) in water: periodic across, as the
-    Navier-Stokes grid requires, without the side walls; cells about four diameters wide."""
-    for face in ("x-", "x+", "y-", "y+"):
-        text = text.replace(f'[[walls]]\nface = "{face}"\n', "")
-    text = text.replace("[particles]", "periodic = [true, true, false]\n[particles]")
+def _in_water(text: str, n: int, model: str) -> str:
+    """The canonical scene of n spheres (its case text) in water of the fluid `model` (IN_WATER),
+    on cells about four diameters wide; for Navier-Stokes periodic across, as its grid requires,
+    without the side walls."""
+    if model == "navier-stokes":
+        for face in ("x-", "x+", "y-", "y+"):
+            text = text.replace(f'[[walls]]\nface = "{face}"\n', "")
+        text = text.replace("[particles]", "periodic = [true, true, false]\n[particles]")
     side = math.ceil(n ** (1.0 / 3.0))  # lattice sites across (bench/dem.py canonical_case)
     across = max(1, round(side * SPACING / 4.0))
-    return text + NAVIER_STOKES.format(across=across, up=2 * across, steps=COUPLING_STEPS)
+    return text + IN_WATER[model].format(across=across, up=2 * across, steps=COUPLING_STEPS)
 
 
 def _time_on_device(scene, steps: int, repeats: int) -> tuple[list[float], list[float]]:

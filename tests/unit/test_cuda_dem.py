@@ -613,8 +613,9 @@ def test_without_a_gpu_the_command_exits_65_naming_the_key(tmp_path):
 
 
 def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
-    """sphere bench gpu on a tiny loose bed, with a moving lid and in water (its figures mean
-    nothing under the simulator; the test is that a session with a GPU can run it at once)."""
+    """sphere bench gpu on a tiny loose bed, with a moving lid and in water (Navier-Stokes and
+    Darcy; its figures mean nothing under the simulator; the test is that a session with a GPU can
+    run it at once)."""
     from typer.testing import CliRunner
 
     from sphere_cli.cli import app
@@ -635,13 +636,13 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
             "--walls",
             "fixed,moving",
             "--fluids",
-            "none,navier-stokes",
+            "none,navier-stokes,darcy",
             "-o",
             str(tmp_path),
         ],
     )
     assert result.exit_code == 0, result.output
-    row, moving, in_water = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"]
+    row, moving, in_water, in_pores = json.loads((tmp_path / "bench-gpu.json").read_text())["rows"]
     assert row["n"] == 40 and row["to_host_seconds"] > 0
     assert row["particle_steps_per_second"] > row["particle_steps_per_second_with_output"] > 0
     assert 200 < row["device_bytes_per_particle"] < 5000
@@ -658,3 +659,7 @@ def test_the_gpu_benchmark_reports_rate_memory_and_kernel_shares(tmp_path):
     coupling = {"bin_in_fluid_cells", "sort_cells", "sample_cells", "exchange"}
     host = {"fluid step"}  # the fluid's own step, timed beside the kernels
     assert set(in_water["kernel_shares"]) == ({*row["kernel_shares"], *drag, *coupling, *host} - {"kick"})
+    # in a Darcy fluid: its force every step, the porosity and mean velocity before the fluid step
+    assert (in_pores["walls"], in_pores["fluid"]) == ("fixed", "darcy")
+    measured = {"bin_in_fluid_cells", "cell_starts", "fill_cells", "sort_cells", "sample_cells"}
+    assert set(in_pores["kernel_shares"]) == {*row["kernel_shares"], "pressure_forces", *measured, *host}
