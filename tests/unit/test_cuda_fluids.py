@@ -623,3 +623,22 @@ def test_a_non_finite_navier_stokes_step_on_the_gpu_says_where_as_on_the_cpu(tmp
         messages.append(str(raised.value))
     assert messages[0] == messages[1]
     assert "a non-finite interaction force density y (nan N/m^3) at fluid cell (1, 0, 2)" in messages[0]
+
+
+def test_a_darcy_solve_that_fails_on_the_gpu_stops_the_run_as_on_the_cpu(tmp_path):
+    """A pore-pressure solve on the GPU that does not converge (one iteration allowed) stops the
+    run at the same step with the CPU's message, and the pressure it leaves on the host (what a
+    run's last frame would show) is the CPU's."""
+    from sphere_cli.errors import NumericalError
+
+    text = DARCY.replace("tolerance = 1e-13 }", "tolerance = 1e-13, max_iterations = 1 }")
+    gpu, cpu = _scenes(tmp_path, walls=text)
+    messages = []
+    for scene in (gpu, cpu):
+        with pytest.raises(NumericalError) as raised:
+            advance(scene, 12)
+        messages.append(str(raised.value))
+    assert messages[0] == messages[1]
+    assert "at step 5 " in messages[0] and "did not converge" in messages[0]
+    a, b = gpu.fluid.pore.state.pressure, cpu.fluid.pore.state.pressure
+    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * np.abs(b).max())
