@@ -210,8 +210,7 @@ def test_gpu_steps_are_the_cpu_steps(tmp_path, hertz, walls):
 
 # a Navier-Stokes fluid over the floor on a 2 x 2 x 3 grid, open at the top, solved every 5 steps:
 # the drag of each particle (with its self-induced velocity subtracted, the default) and its
-# exact kick on the device; the pressure solved there too, to 1e-13 (test_cuda_fluids.py DARCY
-# says why)
+# exact kick on the device; the pressure solved there too, to 1e-13 (DARCY below says why)
 NAVIER_STOKES = """
 [[walls]]
 face = "z-"
@@ -223,6 +222,22 @@ viscosity = 1.0e-3
 grid = { cells = [2, 2, 3] }
 coupling = { steps = 5 }
 bottom = { type = "no-flow" }
+top = { type = "pressure", pressure = 0.0 }
+solver = { tolerance = 1e-13 }
+"""
+
+# Darcy pore pressure on a 2 x 2 x 3 grid, pulsed from below, solved every 5 steps (on the GPU:
+# its fused multiply-adds round otherwise than the CPU, and a solve stopped at 1e-13 keeps the
+# difference at round-off, within RTOL)
+DARCY = """
+[[walls]]
+face = "z-"
+material = "b"
+[fluid]
+model = "darcy"
+grid = { cells = [2, 2, 3] }
+coupling = { steps = 5 }
+bottom = { type = "pressure", pressure = 80.0, amplitude = 60.0, period = 0.0002 }
 top = { type = "pressure", pressure = 0.0 }
 solver = { tolerance = 1e-13 }
 """
@@ -553,14 +568,15 @@ def _final(run_dir: Path) -> dict:
         return final
 
 
-@pytest.mark.parametrize("fluid", ["", NAVIER_STOKES], ids=["dry", "navier-stokes"])
+@pytest.mark.parametrize("fluid", ["", NAVIER_STOKES, DARCY], ids=["dry", "navier-stokes", "darcy"])
 def test_a_gpu_run_resumes_on_the_cpu_as_a_cpu_run(tmp_path, fluid):
     """sphere run --device cuda, sphere resume (still on the GPU), then sphere resume --device
     cpu from its checkpoint: the trajectory ends where a run on the CPU alone ends (bitwise
     under the simulator), so the checkpoint written from the GPU's state holds the whole state,
     springs included, and, in a Navier-Stokes fluid, the drag's arrays that stay on the device
     (its impulses, the drag of the next half kick, the self-induced velocity, the exchange's
-    prediction)."""
+    prediction); in a Darcy fluid, its pore pressure stepped on the device from the porosity
+    measured there, restored on the host and taken up again by the device."""
     from sphere_cli import api
 
     path = tmp_path / "spheres.csv"
