@@ -17,11 +17,12 @@ goes up again when the next has begun (its walls' modes, its friction, an approa
 fluid whose action on the particles runs on the GPU (FluidModule.on_gpu, gpu_steps: the 1D VANS
 profile's force, kernels/fluid/cuda_profile_forces.py; Darcy's and its push on a wall,
 kernels/fluid/cuda_darcy.py; the Navier-Stokes drag and its kick, kernels/fluid/cuda_drag.py):
-its own step is the host's, at its coupling steps, from the particles and what its kernels wrote
-brought back, or from what its coupling kernels made on the device (the Navier-Stokes porosity
-and momentum exchange, the Darcy porosity and mean particle velocity, kernels/fluid/
-cuda_porosity.py, on a grid that keeps its cells), and its
-arrays go up again after each. The energy budget books each particle's share of a step on the
+its own step is called from the host at its coupling steps (the Navier-Stokes and Darcy grids'
+kernels and pressure solve then run on the device: FluidModule.grid_on_gpu), from the particles
+and what its kernels wrote brought back, or from what its coupling kernels made on the device (the
+Navier-Stokes porosity and momentum exchange, the Darcy porosity and mean particle velocity,
+kernels/fluid/cuda_porosity.py, on a grid that keeps its cells), and its arrays go up again
+after each. The energy budget books each particle's share of a step on the
 device (kernels/observe/cuda_energy_budget.py), its copies of the half-step velocities and of the
 last wall springs taken before the contacts, the last pair springs those of the spare spring
 buffer after the contacts. A case with anything else in its step is refused with the modules

@@ -415,10 +415,10 @@ class Darcy(FluidModule):
             s = self.pore.state
             self.measured = (np.zeros_like(s.porosity), np.zeros_like(s.particle_velocity))
         porosity, velocity = self.measured
-        steps.coupling, self.measured_clamped = self.porosity.gpu_measure(state.particles, porosity, velocity)
+        measure = self.porosity.gpu_measure(state.particles, porosity, velocity)
+        steps.coupling, self.measured_clamped, sort = measure
         steps.coupled = (porosity, velocity, self.measured_clamped)
-        sort = self.porosity
-        steps.scratch = (*sort.gpu_sort, sort.cell_of, sort.wrapped, porosity, velocity)
+        steps.scratch = (*sort, porosity, velocity)
         return steps
 
     own_step_where = GRID_ON_GPU

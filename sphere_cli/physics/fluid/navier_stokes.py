@@ -670,15 +670,11 @@ class NavierStokes(FluidModule):
             if drag.averaged
             else ()
         )
-        measure, self.measured_clamped = self.porosity.gpu_measure(state.particles, self.measured, *means)
+        particles = state.particles
+        measure, self.measured_clamped, sort = self.porosity.gpu_measure(particles, self.measured, *means)
         steps.coupling = [*measure, *steps.coupling]
         steps.coupled += (self.measured, self.measured_clamped)
-        steps.scratch += (
-            *self.porosity.gpu_sort,
-            self.porosity.cell_of,
-            self.porosity.wrapped,
-            self.measured,
-        )
+        steps.scratch += (*sort, self.measured)
         return steps
 
     def particle_arrays(self, state) -> dict:

@@ -104,7 +104,8 @@ class Porosity:
 
     def gpu_measure(self, particles, porosity, mean_velocity=None, mean_diameter=None) -> tuple:
         """`measure` on a GPU (kernels/fluid/cuda_porosity.py), for a grid that keeps its cells:
-        (the launches, the (1,) count of clamped cells they write, for report_clamped)."""
+        (the launches, the (1,) count of clamped cells they write, for report_clamped, and the
+        sort's own arrays, which the launches write before they read them: GpuSteps.scratch)."""
         from ...kernels.fluid import cuda_porosity as k
 
         p, n, cells = particles, particles.count, self.grid.cell_count
@@ -118,13 +119,17 @@ class Porosity:
             want, porosity, vbar, dbar, clamped,
         )  # fmt: skip
         binned = (p.pos, *grid, self.cell_of, self.wrapped)
-        return [
-            (k.bin_in_fluid_cells, n, (*binned, count, clamped)),
-            (k.cell_starts, cells, (count, start, following)),
-            (k.fill_cells, n, (self.cell_of, following, order)),
-            (k.sort_cells, cells, (start, order, count)),
-            (k.sample_cells, cells, sample),
-        ], clamped
+        return (
+            [
+                (k.bin_in_fluid_cells, n, (*binned, count, clamped)),
+                (k.cell_starts, cells, (count, start, following)),
+                (k.fill_cells, n, (self.cell_of, following, order)),
+                (k.sort_cells, cells, (start, order, count)),
+                (k.sample_cells, cells, sample),
+            ],
+            clamped,
+            (*self.gpu_sort, self.cell_of, self.wrapped),
+        )
 
     def split(self, comm, solved) -> None:
         """Sample on slabs of x planes, one per rank of the MPI communicator comm: those of the
