@@ -257,6 +257,29 @@ def carry_springs(old_nbr, old_count, old_start, old_hist, nbr, nbr_count, start
                     hist[s, a] = 0.0
 
 
+@njit(cache=True, parallel=True)
+def carry_springs_from_rows(gid, row_first, row_count, partner, spring, nbr, nbr_count, start, hist):
+    """carry_springs from the half rows of a rank's particles by global index
+    (physics/rank_steps.py): row i's partners in partner[row_first[i] :][: row_count[i]],
+    ascending, their springs in spring; the new rows ascend in local index, which is global
+    order."""
+    cap = nbr.shape[1]
+    for i in prange(nbr.shape[0]):
+        p = row_first[i]
+        end = p + row_count[i]
+        for k in range(min(nbr_count[i], cap)):
+            j = gid[nbr[i, k]]
+            while p < end and partner[p] < j:
+                p += 1
+            s = start[i] + k
+            if p < end and partner[p] == j:
+                for a in range(3):
+                    hist[s, a] = spring[p, a]
+            else:
+                for a in range(3):
+                    hist[s, a] = 0.0
+
+
 @njit(cache=True)
 def build_reverse(nbr, nbr_count, start, rev, rev_count):
     """Fill rev/rev_count from the half rows: the packed indices start[j] + k of the pairs
@@ -413,6 +436,21 @@ def drop_ghost_pairs(owned, nbr, nbr_count, start, hist, springs):
         nbr_count[i] = kept
         first += kept
     start[nbr.shape[0]] = first
+
+
+@njit(cache=True)
+def merge_rows(kept, keep, came, source, out):
+    """out[m] = kept[keep[source[m]]] where source[m] < keep.size, else came[source[m] -
+    keep.size] (each (n, w)): a rank's particles after a list build, those it keeps and those
+    that came, copied once."""
+    for m in range(source.shape[0]):
+        k = source[m]
+        if k < keep.shape[0]:
+            for a in range(out.shape[1]):
+                out[m, a] = kept[keep[k], a]
+        else:
+            for a in range(out.shape[1]):
+                out[m, a] = came[k - keep.shape[0], a]
 
 
 @njit(cache=True)

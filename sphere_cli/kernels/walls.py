@@ -106,6 +106,19 @@ WALL_PREFETCH_AHEAD = 16
 
 
 @njit(cache=True)
+def spring_bits(hist, bits):
+    """bits[i]: bit w set where particle i's spring on wall w may be set (hist (N, W, 3)): any
+    component non-zero, or -0.0, as a run that set it leaves it."""
+    for i in range(hist.shape[0]):
+        held = np.uint64(0)
+        for w in range(hist.shape[1]):
+            for a in range(3):
+                if hist[i, w, a] != 0.0 or math.copysign(1.0, hist[i, w, a]) < 0.0:
+                    held |= np.uint64(1) << np.uint64(w)
+        bits[i] = held
+
+
+@njit(cache=True)
 def _flush_walls(
     buf, ids, count, law, rolling, spring_dt, step_dt, radius, wall_hist, force, torque, record, pforce
 ):

@@ -12,8 +12,10 @@ from ..kernels.neighbors import (
     build_lists,
     build_reverse,
     carry_springs,
+    carry_springs_from_rows,
     cell_index,
     counting_sort,
+    drop_ghost_pairs,
     row_starts,
     sort_occupied,
 )
@@ -96,7 +98,11 @@ class NeighborSearch(Module):
         if state.neighbors.moved2 > self.threshold2:
             self.rebuild(state)
 
-    def rebuild(self, state: State) -> None:
+    def rebuild(self, state: State, received: tuple | None = None, owned: np.ndarray | None = None) -> None:
+        """The list built again from the positions, each pair listed before keeping its spring.
+        On a rank of a split run (physics/rank_steps.py) the springs come from the half rows it
+        `received` (global indices, row starts, partners by global index, springs) instead, and
+        the pairs of two particles it does not `own` are left out."""
         box, p, nl = state.box, state.particles, state.neighbors
         cell_index(p.pos, box.lower, self.cell_size, self.ncell, self.cell_of)
         if self.dense:
@@ -115,16 +121,11 @@ class NeighborSearch(Module):
         if self.springs:
             if self.spare_hist.shape[0] < pairs:
                 self.spare_hist = np.zeros((int(SPRING_ROOM * pairs) + 64, 3))
-            carry_springs(
-                nl.nbr,
-                nl.nbr_count,
-                nl.start,
-                nl.hist,
-                self.spare_nbr,
-                self.spare_count,
-                self.spare_start,
-                self.spare_hist,
-            )
+            new_rows = (self.spare_nbr, self.spare_count, self.spare_start, self.spare_hist)
+            if received is None:
+                carry_springs(nl.nbr, nl.nbr_count, nl.start, nl.hist, *new_rows)
+            else:
+                carry_springs_from_rows(*received, *new_rows)
         nl.nbr, self.spare_nbr = self.spare_nbr, nl.nbr
         nl.nbr_count, self.spare_count = self.spare_count, nl.nbr_count
         nl.start, self.spare_start = self.spare_start, nl.start
@@ -138,6 +139,8 @@ class NeighborSearch(Module):
         nl.ref_pos[:] = p.pos
         nl.moved2 = 0.0
         nl.builds += 1
+        if owned is not None:
+            drop_ghost_pairs(owned, nl.nbr, nl.nbr_count, nl.start, nl.hist, self.springs)
         self._reverse(nl)
 
     def list_arguments(self, state: State, used: int = -1) -> tuple:

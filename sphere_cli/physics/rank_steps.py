@@ -29,8 +29,9 @@ The stability check runs on every rank, on its particles and its view of a fluid
 gathers the scene to report the first failure only when some rank finds one.
 
 **At a build** the owners send each particle, with its half row of springs by global index and
-its wall springs, to the ranks that own or hold it next; each rank rebuilds its list from
-those rows, carrying the springs as one rank does (NeighborSearch.rebuild). The rows' width
+its wall springs, to the other ranks that own or hold it next, and keep those they hold next;
+each rank builds its list from the positions, carrying each pair's spring from those rows as
+one rank carries it from its last list (NeighborSearch.rebuild). The rows' width
 follows the longest row over all ranks, so a checkpoint's layout is one rank's.
 
 **The host.** The lead keeps the whole scene (physics/rank_steps is its scene.step.compiled,
@@ -92,6 +93,7 @@ from ..kernels.neighbors import (
     drop_ghost_pairs,
     fill_rows,
     local_partners,
+    merge_rows,
     row_starts,
     rows_by_global_index,
     rows_in,
@@ -839,24 +841,31 @@ class RankSteps:
         return [out] if world.leads else None
 
     def _rebuild(self) -> None:
-        """A list build: ownership from the positions now, particles sent to their new owners
-        and holders with their rows, and the list rebuilt there carrying the springs."""
-        part = self.part
-        own = np.flatnonzero(part.owned)
+        """A list build, collective: ownership from the positions now, each own particle sent
+        with its rows to the other ranks that own or hold it next, and this rank's new part made
+        of those it keeps and those that came, its list built carrying their springs."""
+        part, t, world = self.part, self.t, self.world
         state = part.state
-        packed = _pack(state, part.gid, own, self.t.springs, state.particles.pos, part.fluid, part.budget)
-        self.t.capacity = state.neighbors.nbr.shape[1]
-        self.t.builds = state.neighbors.builds
-        self.t.builds_since_growth = part.search.builds_since_growth
-        self.t.step = state.clock.step
+        t.capacity = state.neighbors.nbr.shape[1]
+        t.builds = state.neighbors.builds
+        t.builds_since_growth = part.search.builds_since_growth
+        t.step = state.clock.step
         if state.walls is not None:  # moving walls have moved since the last share
-            self.t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
-        self._share([packed], state.neighbors.moved2)
-        part = self.part
-        part.search.rebuild(part.state)
-        nl = part.state.neighbors
-        drop_ghost_pairs(part.owned, nl.nbr, nl.nbr_count, nl.start, nl.hist, self.t.springs)
-        NeighborSearch._reverse(nl)
+            t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
+        own = np.flatnonzero(part.owned)
+        pos = state.particles.pos
+        self._cut(pos[own])
+        _, holders = self._owners(self._cut_cells(pos[own]))
+        held = [own[(holders == r).any(axis=0)] for r in range(world.size)]
+        outgoing = [
+            {}
+            if r == world.rank
+            else _pack(state, part.gid, held[r], t.springs, pos, part.fluid, part.budget)
+            for r in range(world.size)
+        ]
+        came = _merge(world.comm.alltoall(outgoing))
+        rec = _assembled(part, held[world.rank], came, t.springs)
+        self.part = self._make_part(rec, state.neighbors.moved2, build=True)
         self._plan_fluid()
 
     def _plan_fluid(self) -> None:
@@ -865,10 +874,10 @@ class RankSteps:
         if self.part.fluid is not None:
             self.part.fluid.plan_rank_steps(self.part.state)
 
-    def _share(self, packs: list, moved2: float = 0.0) -> None:
-        """Collective: the particles in `packs` (this rank's own, or the whole scene at the
-        lead) go to the ranks that own or hold them by the cells of their `ref` positions; this
-        rank's part is made of what it receives (`moved2`: the displacement a build is for)."""
+    def _share(self, packs: list) -> None:
+        """Collective: the particles in `packs` (the whole scene at the lead, none elsewhere) go
+        to the ranks that own or hold them by the cells of their `ref` positions, with their
+        list; this rank's part is made of what it receives."""
         world = self.world
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
         ref = mine["ref"] if mine else np.zeros((0, 3))
@@ -884,7 +893,7 @@ class RankSteps:
         stays = mine["gid"].size if mine else 0
         take = np.concatenate([held[world.rank], np.arange(stays, pool["gid"].size)])
         take = take[np.argsort(pool["gid"][take], kind="stable")]
-        self.part = self._make_part(_select(pool, take), moved2)
+        self.part = self._make_part(_select(pool, take), 0.0, build=False)
 
     def _cells(self, ref: np.ndarray, axis: int) -> np.ndarray:
         """Each position's search cell along `axis` (kernels/neighbors.py cell_number)."""
@@ -971,24 +980,30 @@ class RankSteps:
                 best = (score, cut)
         self.cut = best[1]
 
-    def _make_part(self, rec: dict, moved2: float) -> Part:
+    def _make_part(self, rec: dict, moved2: float, build: bool) -> Part:
+        """This rank's part of the particles of `rec` (a pack: _pack, _select, _assembled), its
+        list taken from their rows, or, where `build`, built from their positions (`moved2`:
+        the displacement it is built for)."""
         t, world = self.t, self.world
         n = rec["gid"].size
         owned = self._owner_of_cell(self._cut_cells(rec["ref"])) == world.rank
         particles = Particles(**{name: rec[name] for name in CARRIED})
-        # each row's partners by local index, those this rank does not hold left out (they lie
-        # beyond the ghosts: out of reach of every particle here), and the pairs of two ghosts
         row_start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(rec["row_count"], out=row_start[1:])
-        where = np.empty(row_start[-1], dtype=np.int64)
-        count = np.empty(n, dtype=np.int32)
-        local_partners(rec["gid"], row_start, rec["partner"], where, count)
         nbr = np.zeros((n, t.capacity), dtype=np.int32)
+        count = np.zeros(n, dtype=np.int32)
         start = np.zeros(n + 1, dtype=np.int64)
-        row_starts(count, t.capacity, start)
-        hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
-        fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist)
-        drop_ghost_pairs(owned, nbr, count, start, hist, t.springs)
+        hist = np.zeros((0, 3))
+        if not build:
+            # each row's partners by local index, those this rank does not hold left out (they
+            # lie beyond the ghosts: out of reach of every particle here), and the pairs of two
+            # ghosts
+            where = np.empty(row_start[-1], dtype=np.int64)
+            local_partners(rec["gid"], row_start, rec["partner"], where, count)
+            row_starts(count, t.capacity, start)
+            hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
+            fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist)
+            drop_ghost_pairs(owned, nbr, count, start, hist, t.springs)
         nl = NeighborList(
             skin=t.skin,
             nbr=nbr,
@@ -1023,7 +1038,17 @@ class RankSteps:
         search = NeighborSearch(state, t.springs)
         search.builds_since_growth = t.builds_since_growth
         search.longest = self._longest
-        NeighborSearch._reverse(nl)
+        if build:  # the springs carried from the rows received (collective: the rows' width)
+            received = (
+                rec["gid"],
+                rec["row_first"],
+                rec["row_count"],
+                rec["partner"],
+                rec.get("spring", hist),
+            )
+            search.rebuild(state, received, owned)
+        else:
+            NeighborSearch._reverse(nl)
         contact = PairContactForces(t.tables)
         contact.table[...] = t.table  # the friction of the stage under way
         plane_walls = None if walls is None else PlaneWallForces(contact)
@@ -1199,6 +1224,61 @@ def _select(rec: dict, idx: np.ndarray) -> dict:
     for name, value in rec.items():
         out[name] = value[rows] if name in ("partner", "spring") else value[idx]
     return out
+
+
+def _assembled(part: Part, keep: np.ndarray, came: dict, springs: bool) -> dict:
+    """The pack of a rank's particles after a list build, in global order: those of its part it
+    keeps (local indices `keep`, its own) and those that `came` (a pack), each array copied once
+    (merge_rows); the rows stay where they are, found by "row_first" (their order in "partner"
+    and "spring" is the kept ones', then those that came)."""
+    state, kept = part.state, len(keep)
+    nl, walls = state.neighbors, state.walls
+    gid = np.concatenate([part.gid[keep], came["gid"] if came else np.zeros(0, dtype=np.int64)])
+    source = np.argsort(gid, kind="stable")
+    arrays = {name: getattr(state.particles, name) for name in CARRIED}
+    if springs and walls is not None:
+        arrays["wall_hist"] = walls.hist
+    if part.fluid is not None:
+        for name, (holder, attribute) in part.fluid.particle_arrays(state).items():
+            arrays[FLUID + name] = getattr(holder, attribute)
+    if part.budget is not None:
+        arrays["budget"] = part.budget.booked
+    rec = {"gid": gid[source]}
+    for name, array in arrays.items():
+        width = math.prod(array.shape[1:])
+        out = np.empty((source.size, *array.shape[1:]), dtype=array.dtype)
+        arrived = came[name] if came else array[:0]
+        merge_rows(
+            array.reshape(-1, width),
+            keep,
+            arrived.reshape(len(arrived), width),
+            source,
+            out.reshape(-1, width),
+        )
+        rec[name] = out
+    rec["ref"] = rec["pos"].copy()
+    # the kept particles' rows by global index, those that came after them
+    count = np.minimum(nl.nbr_count[keep], nl.nbr.shape[1]).astype(np.int64)
+    first = np.zeros(kept + 1, dtype=np.int64)
+    np.cumsum(count, out=first[1:])
+    came_count = came["row_count"] if came else np.zeros(0, dtype=np.int64)
+    came_first = first[-1] + np.cumsum(came_count) - came_count
+    pairs = first[-1] + came_count.sum()
+    partner = np.empty(pairs, dtype=np.int64)
+    spring = np.empty((pairs if springs else 0, 3))
+    rows_by_global_index(
+        keep, part.gid, nl.nbr, nl.nbr_count, nl.start, nl.hist, springs, first, partner, spring
+    )
+    if came:
+        partner[first[-1] :] = came["partner"]
+        if springs:
+            spring[first[-1] :] = came["spring"]
+    rec["row_first"] = np.concatenate([first[:-1], came_first])[source]
+    rec["row_count"] = np.concatenate([count, came_count])[source]
+    rec["partner"] = partner
+    if springs:
+        rec["spring"] = spring
+    return rec
 
 
 def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:

@@ -54,6 +54,7 @@ from ..kernels.walls import (
     VELOCITY,
     listed_wall_totals,
     near_walls,
+    spring_bits,
     wall_areas,
     wall_forces,
     wall_forces_serial,
@@ -198,11 +199,9 @@ class PlaneWallForces(Module):
         has no rows). A spring of -0.0 counts as set, as it is in the run that set it: the end of
         its contact then clears it to +0.0 there too (a resumed run stays bitwise)."""
         if self._springs_of is not hist:
+            self._springs = np.zeros(n, dtype=np.uint64)
             if hist.shape[0]:
-                held = np.any((hist != 0.0) | np.signbit(hist), axis=2).astype(np.uint64)
-            else:
-                held = np.zeros((n, hist.shape[1]), dtype=np.uint64)
-            self._springs = (held << np.arange(hist.shape[1], dtype=np.uint64)).sum(axis=1, dtype=np.uint64)
+                spring_bits(hist, self._springs)
             self._springs_of = hist
             self._near_build = -1
         return self._springs

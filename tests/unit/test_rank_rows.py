@@ -1,16 +1,20 @@
 """The half rows a rank sends at a list build, by global index, and the list another rank makes
 of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
-physics/rank_steps.py), the pairs of two ghosts left out of it (drop_ghost_pairs), and the
-ghosts' forces packed into one message and out of it (rows_out, rows_in)."""
+physics/rank_steps.py), the springs a new list carries from such rows (carry_springs_from_rows),
+the particles a rank keeps and those that came merged in global order (merge_rows), the pairs
+of two ghosts left out of a list (drop_ghost_pairs), and the ghosts' forces packed into one
+message and out of it (rows_out, rows_in)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from sphere_cli.kernels.neighbors import (
+    carry_springs_from_rows,
     drop_ghost_pairs,
     fill_rows,
     local_partners,
+    merge_rows,
     row_starts,
     rows_by_global_index,
     rows_in,
@@ -70,6 +74,34 @@ def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held
     assert [list(new_nbr[i, : kept[i]]) for i in range(8)] == expected
     # the pair (30, 50) is gone with its spring; every other spring is where its pair is
     assert np.array_equal(new_hist, np.delete(spring, 4, axis=0))
+
+
+def test_a_new_list_carries_each_listed_pairs_spring_from_the_rows_by_global_index():
+    """Four particles, global indices 3, 5, 8, 12; their rows by global index lie out of order in
+    the pool (particle 2's first, then 0's): each pair of the new list that a row names keeps its
+    spring, whatever the row's partners not listed now (5 in row 0, 20 in row 2); a new pair
+    (0, 8), and every pair of a row with none, start at zero."""
+    gid = np.array([3, 5, 8, 12], dtype=np.int64)
+    partner = np.array([12, 20, 5, 12], dtype=np.int64)  # row 2: 12, 20; row 0: 5, 12
+    spring = np.arange(12, dtype=np.float64).reshape(4, 3) + 1.0
+    row_first = np.array([2, 0, 0, 0], dtype=np.int64)
+    row_count = np.array([2, 0, 2, 0], dtype=np.int64)
+    nbr, nbr_count, start = half_rows({0: [2, 3], 1: [2], 2: [3]}, 4, 3)
+    hist = np.full((start[-1], 3), np.nan)
+    carry_springs_from_rows(gid, row_first, row_count, partner, spring, nbr, nbr_count, start, hist)
+    assert np.array_equal(hist, [[0, 0, 0], spring[3], [0, 0, 0], spring[0]])
+
+
+def test_the_kept_particles_and_those_that_came_merge_in_the_order_given_each_row_whole():
+    """Rows (n, 2) of a part, three of them kept, and two that came: each row of the result the
+    one its source names, kept ones by their place in `keep`."""
+    kept = np.arange(12.0).reshape(6, 2)
+    came = np.array([[-1.0, -2.0], [-3.0, -4.0]])
+    keep = np.array([1, 4, 5])
+    source = np.array([3, 0, 4, 2, 1])
+    out = np.full((5, 2), np.nan)
+    merge_rows(kept, keep, came, source, out)
+    assert np.array_equal(out, [came[0], kept[1], came[1], kept[5], kept[4]])
 
 
 def test_the_pairs_of_two_ghosts_are_left_out_and_the_rest_keep_their_order_and_springs():
