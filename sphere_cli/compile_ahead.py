@@ -73,7 +73,7 @@ def helper_jobs(scene) -> list[tuple]:
     serial = use_serial()
     jobs = [
         (build_lists, scene.neighbors.list_arguments(state)),
-        (kick_drift_serial if serial else kick_drift, Motion.drift_arguments(state)),
+        (kick_drift_serial if serial else kick_drift, (*Motion.drift_arguments(state), False)),
         (kick_serial if serial else kick, Motion.kick_arguments(state)),
     ]
     if scene.walls is not None:

@@ -52,6 +52,7 @@ def kick_drift(
     vel_pred,
     angvel_pred,
     ref_pos,
+    kick_first,
 ):
     """Half kick with the old forces, full drift, wrap into the periodic box; also the
     prediction v_n + dt a_n of v_{n+1} that the dashpots use (vel_pred, angvel_pred). Returns
@@ -61,7 +62,10 @@ def kick_drift(
     over runs of KICK_RUN particles or more, two loops in each run: the kick vectorises, the
     drift with its reduction does not, and together they would not either. (Each region wakes
     the threads where they sleep between regions, OMP_WAIT_POLICY=PASSIVE: about 45 us; two
-    regions took 106-110 us a call at 10 000 on two threads, one 63-76 us.)"""
+    regions took 106-110 us a call at 10 000 on two threads, one 63-76 us.) With `kick_first`
+    the last step's second half kick (`kick`) comes first, in the same loop: bitwise the two
+    kernels one after the other, in one pass over the particles instead of two (at 100 000,
+    beyond the cache, 10.6 -> 7.2 ns a particle on one thread) and one parallel region."""
     half = 0.5 * dt
     v, w, f, t = flat(vel), flat(angvel), flat(force), flat(torque)
     v_pred, w_pred = flat(vel_pred), flat(angvel_pred)
@@ -72,6 +76,8 @@ def kick_drift(
     for r in prange(runs):
         first, last = np.uint64(r * n // runs), np.uint64((r + 1) * n // runs)
         for u in range(first, last):  # unsigned: no wraparound code in the indexing
+            if kick_first:
+                half_kick(v, w, f, t, inv_mass, inv_inertia, half, u)
             half_kick(v, w, f, t, inv_mass, inv_inertia, half, u)
             for a in range(3):
                 m = U3 * u + np.uint64(a)

@@ -75,22 +75,23 @@ def largest_everywhere(mpi, mine, largest):
 
 
 @njit(cache=True)
-def drift_everywhere(drift, mpi, mine, largest):
-    """The step's kick-drift of this rank's particles, and the largest squared displacement over
-    every rank into largest (1,) (mine (1,) scratch); returns MPI's error code."""
-    mine[0] = kick_drift(*drift)
+def drift_everywhere(drift, mpi, mine, largest, kick_first):
+    """The step's kick-drift of this rank's particles (kick_first: the last step's kick with
+    it), and the largest squared displacement over every rank into largest (1,) (mine (1,)
+    scratch); returns MPI's error code."""
+    mine[0] = kick_drift(*drift, kick_first)
     return largest_everywhere(mpi, mine, largest)
 
 
 @njit(cache=True)
-def rank_drift(motion, drift, mpi, mine, largest, threshold2):
+def rank_drift(motion, drift, mpi, mine, largest, threshold2, kick_first):
     """The start of a rank loop's step: the walls' kick-drift (motion: rank_dem_steps's, None
     where no wall moves), the particles' (drift_everywhere), and whether the step must end in
     Python: a particle on any rank beyond half the skin, or a wall beyond the reach of its
     near-wall list. Returns (MPI's error code, that)."""
     if motion is not None:
         wall_kick_drift(*motion[0])
-    code = drift_everywhere(drift, mpi, mine, largest)
+    code = drift_everywhere(drift, mpi, mine, largest, kick_first)
     if code != 0:
         return code, False
     if largest[0] > threshold2:
@@ -208,8 +209,11 @@ def rank_dem_steps(
     mine, largest = moved[:1], moved[1:]
     busy = 0.0
     force, torque = kicks[2], kicks[3]
+    code, stale = 0, False
+    kicked = False  # this step's kick-drift taken with the last step's kick (as dem_steps)
     for done in range(steps):
-        code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2)
+        if not kicked:
+            code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2, False)
         if code != 0 or stale:
             return done, largest[0], stale, busy, code
         if budget is not None:
@@ -225,9 +229,13 @@ def rank_dem_steps(
         code = rank_walls_kick(motion, mpi, step, done)
         if code != 0:
             return done, largest[0], False, busy, code
-        kick(*kicks)
-        if budget is not None:
-            accumulate_budget(*budget[1])
+        kicked = motion is None and budget is None and done + 1 < steps
+        if kicked:
+            code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2, True)
+        else:
+            kick(*kicks)
+            if budget is not None:
+                accumulate_budget(*budget[1])
     return steps, largest[0], False, busy, 0
 
 

@@ -75,10 +75,12 @@ def fluid_force(*arguments):
 @njit(cache=True)
 def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget):
     moved2 = 0.0
+    kicked = False  # this step's kick-drift taken with the last step's kick
     for done in range(steps):
-        if motion is not None:
-            wall_kick_drift(*motion[0])
-        moved2 = kick_drift(*drift)
+        if not kicked:
+            if motion is not None:
+                wall_kick_drift(*motion[0])
+            moved2 = kick_drift(*drift, False)
         if moved2 > threshold2:
             return done, moved2, True
         if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
@@ -89,9 +91,14 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motio
         if fluid is not None:
             fluid_force(*fluid)
         walls_kick(motion, done)
-        kick(*kicks)
-        if budget is not None:
-            accumulate_budget(*budget[1])
+        # with nothing between the kick and the next step's kick-drift, both in one pass
+        kicked = motion is None and budget is None and done + 1 < steps
+        if kicked:
+            moved2 = kick_drift(*drift, True)
+        else:
+            kick(*kicks)
+            if budget is not None:
+                accumulate_budget(*budget[1])
     return steps, moved2, False
 
 

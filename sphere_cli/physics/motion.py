@@ -15,7 +15,7 @@ class Motion(Module):
         """The drift also measures how far the particles have moved since the neighbour list
         was built (NeighborSearch.prepare, next in the step, reads it)."""
         kernel = kick_drift_serial if use_serial() else kick_drift
-        state.neighbors.moved2 = kernel(*self.drift_arguments(state))
+        state.neighbors.moved2 = kernel(*self.drift_arguments(state), False)
 
     def kick(self, state: State) -> None:
         (kick_serial if use_serial() else kick)(*self.kick_arguments(state))

@@ -574,7 +574,7 @@ class RankSteps:
         if part.wall_motion is not None:
             part.wall_motion.kick_drift(state)
         if state.particles.count:
-            state.neighbors.moved2 = calls.drift[0](*calls.drift[1])
+            state.neighbors.moved2 = calls.drift[0](*calls.drift[1], False)
         moved[0] = state.neighbors.moved2
         self.world.comm.Allreduce(moved, largest, op=self.world.mpi.MAX)
         state.neighbors.moved2 = float(largest[0])

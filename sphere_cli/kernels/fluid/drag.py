@@ -510,7 +510,7 @@ def drag_steps(steps, threshold2, drift, cross, pairs, walls, drag, kicks, motio
     for done in range(steps):
         if motion is not None:
             wall_kick_drift(*motion[0])
-        moved2 = kick_drift(*drift)
+        moved2 = kick_drift(*drift, False)
         if moved2 > threshold2:
             return done, moved2, True
         if motion is not None and walls_moved(motion[0][4], motion[4], motion[5]):
@@ -547,7 +547,7 @@ def rank_drag_steps(
     busy = 0.0
     force, torque, others = kicks[10], kicks[2], kicks[8]
     for done in range(steps):
-        code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2)
+        code, stale = rank_drift(motion, drift, mpi, mine, largest, threshold2, False)
         if code != 0 or stale:
             return done, largest[0], stale, busy, code
         started = seconds(mpi, clock)
