@@ -854,9 +854,7 @@ class RankSteps:
             t.walls = {name: getattr(state.walls, name) for name in WALL_FIELDS}
         own = np.flatnonzero(part.owned)
         pos = state.particles.pos
-        self._cut(pos[own])
-        _, holders = self._owners(self._cut_cells(pos[own]))
-        held = [own[(holders == r).any(axis=0)] for r in range(world.size)]
+        held = [own[mine] for mine in self._cut_and_hold(pos[own])]
         outgoing = [
             {}
             if r == world.rank
@@ -880,10 +878,7 @@ class RankSteps:
         list; this rank's part is made of what it receives."""
         world = self.world
         mine = _merge(packs)  # empty: a follower before its first share (the lead sends all)
-        ref = mine["ref"] if mine else np.zeros((0, 3))
-        self._cut(ref)
-        _, holders = self._owners(self._cut_cells(ref))
-        held = [np.flatnonzero((holders == r).any(axis=0)) for r in range(world.size)]
+        held = self._cut_and_hold(mine["ref"] if mine else np.zeros((0, 3)))
         # what stays is neither pickled nor copied before the one copy below
         outgoing = [{} if r == world.rank else _select(mine, held[r]) for r in range(world.size)]
         arrived = world.comm.alltoall(outgoing)
@@ -894,6 +889,13 @@ class RankSteps:
         take = np.concatenate([held[world.rank], np.arange(stays, pool["gid"].size)])
         take = take[np.argsort(pool["gid"][take], kind="stable")]
         self.part = self._make_part(_select(pool, take), 0.0, build=False)
+
+    def _cut_and_hold(self, ref: np.ndarray) -> list[np.ndarray]:
+        """Collective: the cut made again (`_cut`) from the positions `ref` this rank sends, and
+        for each rank which of them it holds next (indices into ref, ascending)."""
+        self._cut(ref)
+        _, holders = self._owners(self._cut_cells(ref))
+        return [np.flatnonzero((holders == r).any(axis=0)) for r in range(self.world.size)]
 
     def _cells(self, ref: np.ndarray, axis: int) -> np.ndarray:
         """Each position's search cell along `axis` (kernels/neighbors.py cell_number)."""
@@ -988,8 +990,6 @@ class RankSteps:
         n = rec["gid"].size
         owned = self._owner_of_cell(self._cut_cells(rec["ref"])) == world.rank
         particles = Particles(**{name: rec[name] for name in CARRIED})
-        row_start = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(rec["row_count"], out=row_start[1:])
         nbr = np.zeros((n, t.capacity), dtype=np.int32)
         count = np.zeros(n, dtype=np.int32)
         start = np.zeros(n + 1, dtype=np.int64)
@@ -998,6 +998,8 @@ class RankSteps:
             # each row's partners by local index, those this rank does not hold left out (they
             # lie beyond the ghosts: out of reach of every particle here), and the pairs of two
             # ghosts
+            row_start = np.zeros(n + 1, dtype=np.int64)
+            np.cumsum(rec["row_count"], out=row_start[1:])
             where = np.empty(row_start[-1], dtype=np.int64)
             local_partners(rec["gid"], row_start, rec["partner"], where, count)
             row_starts(count, t.capacity, start)
@@ -1180,29 +1182,42 @@ def _pack(
     """The particles `idx` of a state (global indices gid[idx]) with their half rows by global
     index, their springs, the fluid's arrays of them and their shares of the energy budget:
     what a rank sends of them."""
-    p, nl, walls = state.particles, state.neighbors, state.walls
-    rec = {name: getattr(p, name)[idx] for name in CARRIED}
+    rec = {name: array[idx] for name, array in _carried(state, springs, fluid, budget).items()}
     rec["gid"] = gid[idx].astype(np.int64)
     rec["ref"] = ref[idx]
-    count = np.minimum(nl.nbr_count[idx], nl.nbr.shape[1]).astype(np.int64)
-    rec["row_count"] = count
-    row_start = np.zeros(idx.size + 1, dtype=np.int64)
-    np.cumsum(count, out=row_start[1:])
-    rec["partner"] = np.empty(row_start[-1], dtype=np.int64)
-    spring = np.empty((row_start[-1] if springs else 0, 3))
-    rows_by_global_index(
-        idx, gid, nl.nbr, nl.nbr_count, nl.start, nl.hist, springs, row_start, rec["partner"], spring
-    )
+    rec["row_count"], rec["partner"], spring = _half_rows(state, gid, idx, springs)
     if springs:
         rec["spring"] = spring
-        if walls is not None:
-            rec["wall_hist"] = walls.hist[idx]
+    return rec
+
+
+def _carried(state: State, springs: bool, fluid, budget) -> dict:
+    """{name in a pack: the state's array} of what travels with a particle besides its rows:
+    CARRIED, its wall springs, the fluid's arrays of it and its share of the energy budget."""
+    arrays = {name: getattr(state.particles, name) for name in CARRIED}
+    if springs and state.walls is not None:
+        arrays["wall_hist"] = state.walls.hist
     if fluid is not None:
         for name, (holder, attribute) in fluid.particle_arrays(state).items():
-            rec[FLUID + name] = getattr(holder, attribute)[idx]
+            arrays[FLUID + name] = getattr(holder, attribute)
     if budget is not None:
-        rec["budget"] = budget.booked[idx]
-    return rec
+        arrays["budget"] = budget.booked
+    return arrays
+
+
+def _half_rows(state: State, gid: np.ndarray, idx: np.ndarray, springs: bool) -> tuple:
+    """The half rows of the particles idx by global index: each row's length, the partners
+    one row after the other, and (springs) their springs in the same places."""
+    nl = state.neighbors
+    count = np.minimum(nl.nbr_count[idx], nl.nbr.shape[1]).astype(np.int64)
+    row_start = np.zeros(idx.size + 1, dtype=np.int64)
+    np.cumsum(count, out=row_start[1:])
+    partner = np.empty(row_start[-1], dtype=np.int64)
+    spring = np.empty((row_start[-1] if springs else 0, 3))
+    rows_by_global_index(
+        idx, gid, nl.nbr, nl.nbr_count, nl.start, nl.hist, springs, row_start, partner, spring
+    )
+    return count, partner, spring
 
 
 def _merge(packs: list) -> dict:
@@ -1231,20 +1246,11 @@ def _assembled(part: Part, keep: np.ndarray, came: dict, springs: bool) -> dict:
     keeps (local indices `keep`, its own) and those that `came` (a pack), each array copied once
     (merge_rows); the rows stay where they are, found by "row_first" (their order in "partner"
     and "spring" is the kept ones', then those that came)."""
-    state, kept = part.state, len(keep)
-    nl, walls = state.neighbors, state.walls
+    state = part.state
     gid = np.concatenate([part.gid[keep], came["gid"] if came else np.zeros(0, dtype=np.int64)])
     source = np.argsort(gid, kind="stable")
-    arrays = {name: getattr(state.particles, name) for name in CARRIED}
-    if springs and walls is not None:
-        arrays["wall_hist"] = walls.hist
-    if part.fluid is not None:
-        for name, (holder, attribute) in part.fluid.particle_arrays(state).items():
-            arrays[FLUID + name] = getattr(holder, attribute)
-    if part.budget is not None:
-        arrays["budget"] = part.budget.booked
     rec = {"gid": gid[source]}
-    for name, array in arrays.items():
+    for name, array in _carried(state, springs, part.fluid, part.budget).items():
         width = math.prod(array.shape[1:])
         out = np.empty((source.size, *array.shape[1:]), dtype=array.dtype)
         arrived = came[name] if came else array[:0]
@@ -1257,24 +1263,14 @@ def _assembled(part: Part, keep: np.ndarray, came: dict, springs: bool) -> dict:
         )
         rec[name] = out
     rec["ref"] = rec["pos"].copy()
-    # the kept particles' rows by global index, those that came after them
-    count = np.minimum(nl.nbr_count[keep], nl.nbr.shape[1]).astype(np.int64)
-    first = np.zeros(kept + 1, dtype=np.int64)
-    np.cumsum(count, out=first[1:])
-    came_count = came["row_count"] if came else np.zeros(0, dtype=np.int64)
-    came_first = first[-1] + np.cumsum(came_count) - came_count
-    pairs = first[-1] + came_count.sum()
-    partner = np.empty(pairs, dtype=np.int64)
-    spring = np.empty((pairs if springs else 0, 3))
-    rows_by_global_index(
-        keep, part.gid, nl.nbr, nl.nbr_count, nl.start, nl.hist, springs, first, partner, spring
-    )
+    count, partner, spring = _half_rows(state, part.gid, keep, springs)
     if came:
-        partner[first[-1] :] = came["partner"]
+        count = np.concatenate([count, came["row_count"]])
+        partner = np.concatenate([partner, came["partner"]])
         if springs:
-            spring[first[-1] :] = came["spring"]
-    rec["row_first"] = np.concatenate([first[:-1], came_first])[source]
-    rec["row_count"] = np.concatenate([count, came_count])[source]
+            spring = np.concatenate([spring, came["spring"]])
+    rec["row_first"] = (np.cumsum(count) - count)[source]
+    rec["row_count"] = count[source]
     rec["partner"] = partner
     if springs:
         rec["spring"] = spring
