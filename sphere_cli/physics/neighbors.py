@@ -101,7 +101,8 @@ class NeighborSearch(Module):
     def rebuild(self, state: State, received: tuple | None = None, owned: np.ndarray | None = None) -> None:
         """The list built again from the positions, each pair listed before keeping its spring.
         On a rank of a split run (physics/rank_steps.py) the springs come from the half rows it
-        `received` (global indices, row starts, partners by global index, springs) instead, and
+        `received` (global indices, each row's first place and length, partners by global index,
+        springs: kernels/neighbors.py carry_springs_from_rows) instead, and
         the pairs of two particles it does not `own` are left out."""
         box, p, nl = state.box, state.particles, state.neighbors
         cell_index(p.pos, box.lower, self.cell_size, self.ncell, self.cell_of)
