@@ -454,6 +454,22 @@ def merge_rows(kept, keep, came, source, out):
 
 
 @njit(cache=True)
+def rows_into_place(gid, row_count, partner, spring, springs, start, nbr, hist):
+    """The lead's whole list from the owners' half rows (physics/rank_steps.py): the m-th row
+    received (its partners by global index, one row after the other in partner) into row
+    gid[m] of nbr, and (springs) its springs packed from start[gid[m]]."""
+    s = 0
+    for m in range(gid.shape[0]):
+        i = gid[m]
+        for k in range(row_count[m]):
+            nbr[i, k] = partner[s + k]
+            if springs:
+                for a in range(3):
+                    hist[start[i] + k, a] = spring[s + k, a]
+        s += row_count[m]
+
+
+@njit(cache=True)
 def rows_out(source, local, box, first):
     """box[m, first : first + k] = source[local[m]] (source (n, k)): a rank's ghost message."""
     for m in range(local.shape[0]):

@@ -97,6 +97,7 @@ from ..kernels.neighbors import (
     row_starts,
     rows_by_global_index,
     rows_in,
+    rows_into_place,
     rows_out,
 )
 from ..kernels.rank_messages import TAG, own_wall_sums, rank_dem_steps, rank_dem_steps_serial
@@ -106,7 +107,7 @@ from ..kernels.walls import finish_wall_totals, wall_areas, wall_kick
 from ..state import Clock, NeighborList, Particles, State, Walls
 from .compiled_steps import plain_step, step_arguments
 from .contact import PairContactForces
-from .neighbors import SPRING_ROOM, NeighborSearch, listed_slots
+from .neighbors import SPRING_ROOM, NeighborSearch
 from .observe.energy_budget import EnergyBudget
 from .rank_calls import compiled_calls, ghost_mail
 from .walls import PlaneWallForces, WallMotion, wall_sums
@@ -1287,34 +1288,27 @@ def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:
 
 
 def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, fluid, budget) -> None:
-    """The gathered owners' particles into the lead's whole scene (its list in one rank's layout)."""
+    """The gathered owners' particles into the lead's whole scene (its list in one rank's layout),
+    each row placed by its global index in one compiled pass (rows_in, rows_into_place)."""
     rec = _merge(packs)
     gid = rec["gid"]
-    p, nl = state.particles, state.neighbors
-    for name in CARRIED:
-        getattr(p, name)[gid] = rec[name]
-    nl.ref_pos[gid] = rec["ref"]
-    if fluid is not None:
-        for name, (holder, attribute) in fluid.particle_arrays(state).items():
-            getattr(holder, attribute)[gid] = rec[FLUID + name]
-    if budget is not None:
-        budget.booked[gid] = rec["budget"]
-    n = p.count
-    cap = capacity
-    nbr = np.zeros((n, cap), dtype=np.int32)
-    count = np.zeros(n, dtype=np.int32)
-    count[gid] = rec["row_count"]
-    slots = listed_slots(nbr, count)
-    rows = _rows(rec["row_count"], np.argsort(gid, kind="stable"))
-    nbr[slots] = rec["partner"][rows]
-    nl.nbr, nl.nbr_count = nbr, count
+    nl = state.neighbors
+    for name, target in {**_carried(state, springs, fluid, budget), "ref": nl.ref_pos}.items():
+        width = math.prod(target.shape[1:])
+        if target.flags.c_contiguous:
+            rows_in(rec[name].reshape(len(gid), width), gid, target.reshape(-1, width), 0)
+        else:  # its rows are not one block of memory: reshaped, they would be a copy
+            target[gid] = rec[name]
+    n = state.particles.count
+    nl.nbr = np.zeros((n, capacity), dtype=np.int32)
+    nl.nbr_count = np.zeros(n, dtype=np.int32)
+    nl.nbr_count[gid] = rec["row_count"]
     nl.start = np.zeros(n + 1, dtype=np.int64)
-    row_starts(count, cap, nl.start)
+    row_starts(nl.nbr_count, capacity, nl.start)
     if springs:
-        hist = np.zeros((int(SPRING_ROOM * nl.start[-1]) + 64, 3))
-        hist[: nl.start[-1]] = rec["spring"][rows]
-        nl.hist = hist
-        if state.walls is not None:
-            state.walls.hist[gid] = rec["wall_hist"]
-    nl.rev = np.zeros((n, cap), dtype=np.int32)
+        nl.hist = np.zeros((int(SPRING_ROOM * nl.start[-1]) + 64, 3))
+    rows_into_place(
+        gid, rec["row_count"], rec["partner"], rec.get("spring", nl.hist), springs, nl.start, nl.nbr, nl.hist
+    )
+    nl.rev = np.zeros((n, capacity), dtype=np.int32)
     NeighborSearch._reverse(nl)

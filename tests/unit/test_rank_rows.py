@@ -1,7 +1,8 @@
 """The half rows a rank sends at a list build, by global index, and the list another rank makes
 of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
 physics/rank_steps.py), the springs a new list carries from such rows (carry_springs_from_rows),
-the particles a rank keeps and those that came merged in global order (merge_rows), the pairs
+the particles a rank keeps and those that came merged in global order (merge_rows), the
+owners' rows placed into the lead's whole list by global index (rows_into_place), the pairs
 of two ghosts left out of a list (drop_ghost_pairs), and the ghosts' forces packed into one
 message and out of it (rows_out, rows_in)."""
 
@@ -18,6 +19,7 @@ from sphere_cli.kernels.neighbors import (
     row_starts,
     rows_by_global_index,
     rows_in,
+    rows_into_place,
     rows_out,
 )
 
@@ -102,6 +104,25 @@ def test_the_kept_particles_and_those_that_came_merge_in_the_order_given_each_ro
     out = np.full((5, 2), np.nan)
     merge_rows(kept, keep, came, source, out)
     assert np.array_equal(out, [came[0], kept[1], came[1], kept[5], kept[4]])
+
+
+def test_the_owners_rows_land_in_the_leads_list_by_global_index():
+    """Rows of particles 3, 0 and 2 of four, in the order two ranks sent them (1 has no row):
+    each lands in its particle's row of the lead's list, its springs packed from that row's start,
+    the slots past a row's end left as they were."""
+    gid = np.array([3, 0, 2], dtype=np.int64)
+    row_count = np.array([0, 2, 1], dtype=np.int64)
+    partner = np.array([1, 3, 3], dtype=np.int64)
+    spring = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]])
+    nbr_count = np.zeros(4, dtype=np.int32)
+    nbr_count[gid] = row_count
+    start = np.zeros(5, dtype=np.int64)
+    row_starts(nbr_count, 3, start)
+    nbr = np.full((4, 3), -7, dtype=np.int32)
+    hist = np.full((start[-1] + 2, 3), np.nan)
+    rows_into_place(gid, row_count, partner, spring, True, start, nbr, hist)
+    assert nbr.tolist() == [[1, 3, -7], [-7, -7, -7], [3, -7, -7], [-7, -7, -7]]
+    assert np.array_equal(hist[:3], spring) and np.isnan(hist[3:]).all()
 
 
 def test_the_pairs_of_two_ghosts_are_left_out_and_the_rest_keep_their_order_and_springs():
