@@ -1293,12 +1293,11 @@ def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, f
     rec = _merge(packs)
     gid = rec["gid"]
     nl = state.neighbors
+    # the scene's per-particle arrays are C-contiguous (the kernels' flat views need it), so
+    # each reshaped is a view of it
     for name, target in {**_carried(state, springs, fluid, budget), "ref": nl.ref_pos}.items():
         width = math.prod(target.shape[1:])
-        if target.flags.c_contiguous:
-            rows_in(rec[name].reshape(len(gid), width), gid, target.reshape(-1, width), 0)
-        else:  # its rows are not one block of memory: reshaped, they would be a copy
-            target[gid] = rec[name]
+        rows_in(rec[name].reshape(len(gid), width), gid, target.reshape(-1, width), 0)
     n = state.particles.count
     nl.nbr = np.zeros((n, capacity), dtype=np.int32)
     nl.nbr_count = np.zeros(n, dtype=np.int32)
