@@ -7,12 +7,14 @@ between, and the builds' own functions profiled on the lead.
 
 (with OMP_WAIT_POLICY=PASSIVE NUMBA_NUM_THREADS=1, as `sphere bench ranks` runs its members).
 On one process it times the one-rank list build (physics/neighbors.py NeighborSearch.rebuild)
-instead. Prints each timing of the steps, each build's seconds on every rank, and on the lead
-the functions taking most of the builds after the first (which shares the scene out)."""
+instead. Prints each timing of the steps, each build's seconds on every rank, the median timing
+without a build and with one, and on the lead the functions taking most of the builds after
+the first (which shares the scene out)."""
 
 import cProfile
 import io
 import pstats
+import statistics
 import sys
 import time
 
@@ -56,14 +58,20 @@ def main(n: int, steps: int, timings: int) -> None:
     with ranks.leading(world):
         scene = settled_scene(n, log=lambda *_: None)
         advance(scene, steps, sync=False)
-        seconds = []
+        seconds, built = [], []
         for _ in range(timings):
+            before = len(builds)
             started = time.perf_counter()
             advance(scene, steps, sync=False)
             seconds.append(time.perf_counter() - started)
+            built.append(len(builds) > before)
         to_host(scene)
         print(f"{ranks.count()} rank(s), {n} particles: {steps} steps [s]", [round(s, 3) for s in seconds])
         print("rank 0: list builds [s]", [round(b, 4) for b in builds], flush=True)
+        for label, holds in (("without", False), ("with", True)):
+            chosen = [s for s, b in zip(seconds, built, strict=True) if b == holds]
+            if chosen:
+                print(f"timings {label} a build: {len(chosen)}, median {statistics.median(chosen):.4f} s")
         if world is not None:
             text = io.StringIO()
             pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(20)
