@@ -7,7 +7,7 @@ and y+ walls keep PRESSED_SIDES: the walls' steps and the particles' pushes on t
 the ranks, each step.
 
 A timing is one call of advance as the run loop makes it between two outputs (the ranks'
-steps), after one such call untimed; the gather of the state at the lead that an output then
+steps), after one such call and one gather untimed; the gather of the state at the lead that an output then
 needs is timed apart. Each rank count runs in its own `mpiexec -n K python -m sphere_cli bench
 ranks-member` process group, which prints its timings as one JSON line.
 """
@@ -52,8 +52,10 @@ def member(n: int, steps: int, repeats: int, lid: str = "fixed") -> None:
     with ranks.leading(world):
         scene = settled_scene(n, log=lambda *_: None, lid=lid)
         # kernels loaded, the scene shared out, and (most likely) a list build of the parts: the
-        # first loads its kernels from Numba's cache on each rank, 0.1 s once a run
+        # first loads its kernels from Numba's cache on each rank, 0.1 s once a run; so does
+        # the first gather (its kernels placing the rows at the lead: 20-30 ms once)
         advance(scene, steps, sync=False)
+        to_host(scene)
         times, gathers = [], []
         for _ in range(repeats):
             started = time.perf_counter()
