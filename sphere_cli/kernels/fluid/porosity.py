@@ -29,6 +29,10 @@ from numba import njit, prange
 
 from ..serial import serial_twin
 
+# d^2 beyond (R + r)^2 by this factor: d >= R + r whatever the rounding of the square, its root
+# and the sum (each half an ulp, 1e-16), so the particle adds exactly nothing (lens_volume's 0)
+BEYOND_ROUNDING = 1.0 + 1e-12
+
 
 @njit(cache=True, inline="always")
 def lens_volume(big_r, r, d):
@@ -122,7 +126,11 @@ def _add_particles(first, last, order, wrapped, vel, radius, sx, sy, sz, cx, cy,
         dx = wrapped[p, 0] + sx - cx
         dy = wrapped[p, 1] + sy - cy
         dz = wrapped[p, 2] + sz - cz
-        v = lens_volume(big_r, radius[p], math.sqrt(dx * dx + dy * dy + dz * dz))
+        d2 = dx * dx + dy * dy + dz * dz
+        touch = big_r + radius[p]
+        if d2 > touch * touch * BEYOND_ROUNDING:  # surely apart: lens_volume's 0, without its root
+            continue
+        v = lens_volume(big_r, radius[p], math.sqrt(d2))
         if v > 0.0:
             solid += v
             if want_means:
@@ -177,10 +185,12 @@ def _bins(
                     lo += 1
                 while trim and hi > k and across + _gap(cz, hi, origin[2], spacing[2]) ** 2 > wide2:
                     hi -= 1
-                sums = _add_particles(
-                    cell_start[column + lo], cell_start[column + hi + 1], order, wrapped, vel, radius,
-                    ix * lx, iy * ly, 0.0, cx, cy, cz, big_r, want_means, sums,
-                )  # fmt: skip
+                first, last = cell_start[column + lo], cell_start[column + hi + 1]
+                if first < last:  # (most columns about a cell above a bed hold none: no call)
+                    sums = _add_particles(
+                        first, last, order, wrapped, vel, radius, ix * lx, iy * ly, 0.0, cx, cy, cz, big_r,
+                        want_means, sums,
+                    )  # fmt: skip
     return sums
 
 
@@ -210,12 +220,18 @@ def sample_cells(
     with want_means also the lens-volume-weighted mean particle velocity and diameter (0 where no
     particle reaches the sampling sphere). Returns the number of those cells clamped."""
     clamped = 0
-    for c in prange(last - first):
-        cell = first + np.int64(c)  # the prange index is unsigned
-        clamped += sample_cell(
-            cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
-            cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
-        )  # fmt: skip
+    ny, nz = shape[1], shape[2]
+    # by columns of cells along z (first and last bound whole x planes): a division a column to
+    # find (i, j), not three a cell (one thread, 16 000 beads in the lowest 12 of 80 mm under 32 x
+    # 32 x 64 cells: 4.35 -> 3.40 ms a call with the test of BEYOND_ROUNDING, 1.73 -> 1.15 empty)
+    for c in prange((last - first) // nz):
+        column = first // nz + np.int64(c)  # the prange index is unsigned
+        i, j = column // ny, column % ny
+        for k in range(nz):
+            clamped += sample_at(
+                i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest,
+                reach, cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+            )  # fmt: skip
     return clamped
 
 
@@ -227,11 +243,21 @@ def sample_cell(
     """sample_cells for one cell (also the GPU's, kernels/fluid/cuda_porosity.py): 1 if its
     porosity was clamped at 0, else 0."""
     ny, nz = shape[1], shape[2]
+    return sample_at(
+        cell // (ny * nz), (cell // nz) % ny, cell % nz, wrapped, vel, radius, origin, spacing, shape,
+        periodic, sampling_radius, largest, reach, cell_start, order, want_means, porosity, mean_velocity,
+        mean_diameter,
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def sample_at(
+    i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
+    cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+):  # fmt: skip
+    """sample_cell for the cell (i, j, k)."""
     big_r = sampling_radius
     sample_volume = 4.0 / 3.0 * math.pi * big_r * big_r * big_r
-    i = cell // (ny * nz)
-    j = (cell // nz) % ny
-    k = cell % nz
     cx = origin[0] + (i + 0.5) * spacing[0]
     cy = origin[1] + (j + 0.5) * spacing[1]
     cz = origin[2] + (k + 0.5) * spacing[2]
