@@ -343,7 +343,12 @@ def bench_ranks(
     rank_counts: str = typer.Option(
         "1,2", "--ranks", help="MPI rank counts, comma-separated (the first is the base)."
     ),
-    steps: int = typer.Option(100, "--steps", min=1, help="Steps per timing."),
+    steps: int = typer.Option(
+        300,
+        "--steps",
+        min=1,
+        help="Steps per timing (300 hold a neighbour-list build or two at 100 000, as a run's steps do).",
+    ),
     repeats: int = typer.Option(3, "--repeats", min=1, help="Timings per rank count and round (median)."),
     rounds: int = typer.Option(3, "--rounds", min=1, help="Rounds, the rank counts alternating."),
     walls: str = typer.Option(
