@@ -69,7 +69,7 @@ from .laws import (
 )
 from .layout import U1, U2, U3, flat, prefetch_particle
 from .neighbors import minimum_image
-from .serial import serial_twin
+from .serial import positions, serial_twin
 
 # Rows of a block (module docstring). 64 contacts: the block's 48 rows (24 KB) stay in L1.
 BLOCK = 64
@@ -769,3 +769,19 @@ def chunk_pair_forces(
 # one thread: the sweep without a parallel region (kernels/serial.py); its arrays are the
 # particles', the list's and this kernel's scratch (physics/contact.py), none a view of another
 chunk_pair_forces_serial = serial_twin(chunk_pair_forces, distinct=True)
+
+# where chunk_pair_forces takes the chunks' bounds, the slots and its scratch of a chunk each
+BOUNDS, SLOTS, BLOCKS, BLOCK_IDS, BLOCK_ROWS = positions(
+    chunk_pair_forces, "bounds", "slots", "blocks", "block_ids", "block_rows"
+)
+AFTER_SCRATCH = BLOCK_ROWS + 1
+
+
+@njit(cache=True)
+def one_chunk(pairs, c):
+    """chunk_pair_forces's arguments `pairs` for its chunk c alone (its bounds and its rows of the
+    scratch; the slots every chunk's), which its serial twin sweeps as that kernel sweeps it
+    (kernels/steps.py chunk_steps_end)."""
+    bounds, blocks, ids, rows = pairs[BOUNDS], pairs[BLOCKS], pairs[BLOCK_IDS], pairs[BLOCK_ROWS]
+    chunk = (bounds[c : c + 2], pairs[SLOTS], blocks[c : c + 1], ids[c : c + 1], rows[c : c + 1])
+    return pairs[:BOUNDS] + chunk + pairs[AFTER_SCRATCH:]

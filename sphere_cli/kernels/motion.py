@@ -145,3 +145,17 @@ def first_unstable(pos, vel, angvel, radius, lower, upper, periodic, dt):
 # one thread: one run of every particle, the kick's loop over all of them before the drift's
 kick_drift_serial = serial_twin(kick_drift, distinct=True, KICK_RUN=np.iinfo(np.int64).max)
 kick_serial = serial_twin(kick, distinct=True)
+
+
+@njit(cache=True)
+def particles_of(drift, first, last):
+    """kick_drift's arguments `drift` for the particles first .. last - 1 alone (views of their
+    rows; the box and the step as they are)."""
+    pos, vel, angvel, force, torque, inv_mass, inv_inertia = drift[:7]
+    vel_pred, angvel_pred, ref_pos = drift[11:]
+    return (
+        (pos[first:last], vel[first:last], angvel[first:last], force[first:last], torque[first:last])
+        + (inv_mass[first:last], inv_inertia[first:last])
+        + drift[7:11]
+        + (vel_pred[first:last], angvel_pred[first:last], ref_pos[first:last])
+    )

@@ -27,6 +27,7 @@ under another qualified name: Numba's cache files machine code by module and qua
 not by compile options, so a twin of the same name would overwrite the parallel kernel's entry.
 `callees` gives the kernels the twin calls in place of the parallel ones (their own twins)."""
 
+import inspect
 import types
 
 import numba
@@ -76,6 +77,13 @@ def serial_twin(kernel, distinct: bool = False, **callees):
         options["pipeline_class"] = _DistinctArrays
     # cached like every kernel here (caching is not among a dispatcher's target options)
     return numba.jit(**options, cache=True)(twin)
+
+
+def positions(kernel, *names: str) -> tuple[int, ...]:
+    """Where `kernel` takes each of its parameters `names` (a tuple of its arguments is indexed by
+    such constants: Numba indexes a tuple by constants only)."""
+    parameters = list(inspect.signature(getattr(kernel, "py_func", kernel)).parameters)
+    return tuple(parameters.index(name) for name in names)
 
 
 def use_serial() -> bool:

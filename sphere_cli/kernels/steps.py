@@ -22,18 +22,30 @@ of keep_half_step and accumulate_budget (kernels/observe/energy_budget.py), call
 contacts and after the kick as its hooks are. Returns (the complete steps taken, the last
 squared displacement, whether a drift ended the loop: a particle beyond half the skin, or a wall
 as far from where the near-wall list was made, which the wall hook then makes again).
+chunked_walls: wall_forces's arguments with the near-wall list cut at chunk_pair_forces's
+chunks' bounds (None without walls), for chunk_steps_end, which takes a step's sweep, walls and
+next kick-drift where the pairs are swept in several chunks (more than one thread), no fluid's
+force comes between and nothing between the kick and the next kick-drift.
 A fluid whose step between its own needs more (the Navier-Stokes drag's exact kick and its
 sums over cells) has its own loop calling `contacts` and its kernels (kernels/fluid/drag.py
 drag_steps): a kernel passed as an argument would key Numba's cache by an object that differs
 in every process, so it would compile on every run."""
 
-from numba import njit
+from numba import njit, prange
 
-from .contact import chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs
-from .motion import kick, kick_drift, kick_drift_serial, kick_serial
+from .contact import BOUNDS, chunk_pair_forces, chunk_pair_forces_serial, cross_chunk_pairs, one_chunk
+from .motion import kick, kick_drift, kick_drift_serial, kick_serial, particles_of
 from .observe.energy_budget import accumulate_budget, accumulate_budget_serial, keep_half_step
 from .serial import serial_twin
-from .walls import listed_wall_totals, wall_areas, wall_forces, wall_forces_serial, wall_kick, wall_kick_drift
+from .walls import (
+    listed_wall_totals,
+    one_piece,
+    wall_areas,
+    wall_forces,
+    wall_forces_serial,
+    wall_kick,
+    wall_kick_drift,
+)
 
 
 @njit(cache=True)
@@ -44,6 +56,28 @@ def contacts(cross, pairs, walls):
     chunk_pair_forces(*pairs)
     if walls is not None:
         wall_forces(*walls)
+
+
+@njit(cache=True, parallel=True)
+def chunk_steps_end(pairs, walls, drift):
+    """A step's pair sweep and walls and the next step's kick-drift with this step's kick, in
+    one parallel region, chunk by chunk: in chunk c the serial twins of chunk_pair_forces (its
+    chunk c), of wall_forces (its piece c: `walls` cut at the chunks' bounds) and of kick_drift
+    (the chunk's particles). A chunk's sweep reads and writes only its own particles and the
+    slots cross_chunk_pairs filled before, so its particles' forces are whole once it ends, and
+    their walls and kick-drift follow at once, while other threads sweep their chunks; each
+    particle's sums and steps are those of contacts and kick_drift one after the other. Where
+    threads sleep between regions (OMP_WAIT_POLICY=PASSIVE), each region first wakes them:
+    two regions a step fewer. Returns the largest squared displacement (kick_drift's)."""
+    bounds = pairs[BOUNDS]
+    worst = 0.0
+    for c in prange(bounds.shape[0] - 1):
+        chunk_pair_forces_serial(*one_chunk(pairs, c))
+        if walls is not None:
+            wall_forces_serial(*one_piece(walls, c))
+        largest = kick_drift_serial(*particles_of(drift, bounds[c], bounds[c + 1]), True)
+        worst = max(worst, largest)
+    return worst
 
 
 @njit(cache=True)
@@ -73,7 +107,7 @@ def fluid_force(*arguments):
 
 
 @njit(cache=True)
-def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget):
+def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, chunked_walls):
     moved2 = 0.0
     kicked = False  # this step's kick-drift taken with the last step's kick
     for done in range(steps):
@@ -87,12 +121,16 @@ def dem_steps(steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motio
             return done, moved2, True
         if budget is not None:
             keep_half_step(*budget[0])
+        kicked = motion is None and budget is None and done + 1 < steps
+        if kicked and cross is not None and fluid is None:  # chunks on several threads
+            cross_chunk_pairs(*cross)
+            moved2 = chunk_steps_end(pairs, chunked_walls, drift)
+            continue
         contacts(cross, pairs, walls)
         if fluid is not None:
             fluid_force(*fluid)
         walls_kick(motion, done)
         # with nothing between the kick and the next step's kick-drift, both in one pass
-        kicked = motion is None and budget is None and done + 1 < steps
         if kicked:
             moved2 = kick_drift(*drift, True)
         else:

@@ -81,7 +81,7 @@ from .contact_probe import wall_normal
 from .exact_sum import WORDS, add_exact, exact_value
 from .laws import COLUMNS
 from .layout import U1, U2, U3, flat, prefetch, prefetch_particle
-from .serial import serial_twin
+from .serial import positions, serial_twin
 
 FIXED = 0
 VELOCITY = 1
@@ -528,3 +528,17 @@ def wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, t
 # one thread: the same kernel without parallel regions (kernels/serial.py); every array argument
 # is an array of its own (physics/walls.py PlaneWallForces._arguments)
 wall_forces_serial = serial_twin(wall_forces, distinct=True)
+
+# where wall_forces takes the particles near the walls, its pieces of them and their scratch
+NEAR, PIECES, WALL_BLOCKS, WALL_BLOCK_IDS = positions(wall_forces, "near", "pieces", "blocks", "block_ids")
+AFTER_WALL_SCRATCH = WALL_BLOCK_IDS + 1
+
+
+@njit(cache=True)
+def one_piece(walls, c):
+    """wall_forces's arguments `walls` for its piece c alone (its bounds in `near` and its rows
+    of the scratch), which its serial twin takes as that kernel takes it (kernels/steps.py
+    chunk_steps_end)."""
+    pieces, blocks, ids = walls[PIECES], walls[WALL_BLOCKS], walls[WALL_BLOCK_IDS]
+    piece = (pieces[c : c + 2], blocks[c : c + 1], ids[c : c + 1])
+    return walls[:PIECES] + piece + walls[AFTER_WALL_SCRATCH:]

@@ -196,8 +196,12 @@ class CompiledSteps:
             fluid, loop = None, dem_steps_serial if serial else dem_steps
             if self.fluid is not None:  # its variant of the loop, with its force in it
                 fluid, loop = self.fluid.force_arguments(state), self.fluid.force_loops[1 if serial else 0]
+            # with several chunks, each one's walls after its pairs (kernels/steps.py chunk_steps_end)
+            chunked = None
+            if cross is not None and walls is not None:
+                chunked = PlaneWallForces.by_chunks(walls, self.contact.bounds)
             done, moved2, drifted = loop(
-                steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget
+                steps, threshold2, drift, cross, pairs, walls, fluid, kicks, motion, budget, chunked
             )
         else:
             extra = self.extra.force_arguments(state)

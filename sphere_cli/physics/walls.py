@@ -50,6 +50,8 @@ from ..kernels.walls import (
     C_STRESS,
     C_VELOCITY,
     FIXED,
+    NEAR,
+    PIECES,
     STRESS,
     VELOCITY,
     listed_wall_totals,
@@ -293,6 +295,16 @@ class PlaneWallForces(Module):
         return self._arguments(
             state, spring_dt, hist, p.force, p.torque, springs, near, self._reach, self._pieces
         )
+
+    @staticmethod
+    def by_chunks(arguments: tuple, bounds: np.ndarray) -> tuple:
+        """wall_forces's arguments (kernel_arguments's) with the particles near the walls cut
+        into one piece per chunk of the pair sweep (bounds: its chunks of particles), for
+        kernels/steps.py chunk_steps_end, which takes each chunk's walls after its pairs."""
+        pieces = arguments[PIECES]
+        near = arguments[NEAR][: pieces[-1]]  # (ascending)
+        cut = np.searchsorted(near, bounds).astype(np.int64)
+        return arguments[:PIECES] + (cut,) + arguments[PIECES + 1 :]
 
     def argument_example(self, state: State) -> tuple:
         """Arguments of wall_forces of the types kernel_arguments gives, made without listing
