@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from .layout import U3, flat
 from .neighbors import minimum_image
-from .serial import serial_twin
+from .serial import positions, serial_twin
 
 # the least particles of a run of kick_drift's region: its loops long enough to vectorise, and
 # enough runs for the threads to share them evenly (a thread's share rounded to a run: 2.5 %
@@ -147,15 +147,19 @@ kick_drift_serial = serial_twin(kick_drift, distinct=True, KICK_RUN=np.iinfo(np.
 kick_serial = serial_twin(kick, distinct=True)
 
 
+# where kick_drift takes the box (lower, length, periodic) and dt, between its particle arrays
+LOWER, VEL_PRED = positions(kick_drift, "lower", "vel_pred")
+
+
 @njit(cache=True)
 def particles_of(drift, first, last):
     """kick_drift's arguments `drift` for the particles first .. last - 1 alone (views of their
     rows; the box and the step as they are)."""
-    pos, vel, angvel, force, torque, inv_mass, inv_inertia = drift[:7]
-    vel_pred, angvel_pred, ref_pos = drift[11:]
+    pos, vel, angvel, force, torque, inv_mass, inv_inertia = drift[:LOWER]
+    vel_pred, angvel_pred, ref_pos = drift[VEL_PRED:]
     return (
         (pos[first:last], vel[first:last], angvel[first:last], force[first:last], torque[first:last])
         + (inv_mass[first:last], inv_inertia[first:last])
-        + drift[7:11]
+        + drift[LOWER:VEL_PRED]
         + (vel_pred[first:last], angvel_pred[first:last], ref_pos[first:last])
     )
