@@ -222,6 +222,27 @@ def test_moving_walls_and_stages_in_the_compiled_loop_are_the_step_by_step_loop_
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
+def test_each_chunk_of_the_one_region_step_takes_the_walls_of_its_own_particles():
+    """PlaneWallForces.by_chunks cuts the near-wall list at the pair sweep's chunks, so that
+    kernels/steps.py chunk_steps_end's chunk c takes the walls of its own particles only (another
+    chunk's particles are kicked and drifted by their own thread meanwhile), every listed
+    particle once; the rest of wall_forces's arguments stay as they are."""
+    from sphere_cli.physics.walls import PlaneWallForces
+
+    near = np.array([0, 3, 4, 9, 10, 11, 17, 0, 0], dtype=np.int64)  # 7 listed, then unused room
+    arguments = list(range(kernels_walls.PIECES + 4))
+    arguments[kernels_walls.NEAR] = near
+    arguments[kernels_walls.PIECES] = np.array([0, 5, 7], dtype=np.int64)  # two threads' cut
+    bounds = np.array([0, 4, 10, 20], dtype=np.int64)
+    chunked = PlaneWallForces.by_chunks(tuple(arguments), bounds)
+    cut = chunked[kernels_walls.PIECES]
+    assert cut.tolist() == [0, 2, 4, 7]
+    for c in range(3):
+        assert np.all((near[cut[c] : cut[c + 1]] >= bounds[c]) & (near[cut[c] : cut[c + 1]] < bounds[c + 1]))
+    others = [i for i in range(len(arguments)) if i != kernels_walls.PIECES]
+    assert all(chunked[i] is arguments[i] for i in others)
+
+
 def test_the_walls_totals_from_the_near_wall_list_are_the_dense_sums_bitwise():
     """The compiled loop sums the particles' pushes on moving walls over the near-wall list
     (listed_wall_totals), the hooks over every particle (wall_totals): the same bits, with the
