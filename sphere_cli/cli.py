@@ -18,6 +18,7 @@ import typer
 
 from . import api
 from .errors import SphereError, StoppedEarly, UsageError
+from .io.console import guard_console
 from .runtime import StopFlag, parse_wall_time, signal_handlers, usable_cores
 
 app = typer.Typer(
@@ -680,6 +681,7 @@ def _report(result: api.RunResult) -> None:
 
 
 def main() -> None:
+    guard_console()  # a console that goes away does not end a run (io/console.py)
     try:
         app()
     except KeyboardInterrupt:
