@@ -355,8 +355,12 @@ def start_threads(case, count: int | None = None) -> str | None:
 
 @contextmanager
 def signal_handlers(stop: StopFlag, enabled: bool):
-    """SIGTERM/SIGUSR1 (what SLURM sends before a time limit) and a first SIGINT ask for a
-    checkpoint at the next step; a second SIGINT stops at once (KeyboardInterrupt)."""
+    """SIGTERM/SIGUSR1 (what SLURM sends before a time limit), SIGHUP (the terminal the run was
+    started from has closed; its default would end the run without a checkpoint, and what it
+    prints now goes nowhere, io/console.py) and a first SIGINT ask for a checkpoint at the next
+    step; a second SIGINT stops at once (KeyboardInterrupt). A signal the run was started
+    ignoring stays ignored: SIGHUP under nohup, whose user wants the run to outlive the
+    terminal."""
     if not enabled:
         yield
         return
@@ -374,7 +378,8 @@ def signal_handlers(stop: StopFlag, enabled: bool):
         if not issubclass(unraisable.exc_type, KeyboardInterrupt):
             previous_hook(unraisable)
 
-    previous = {s: signal.signal(s, polite) for s in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)}
+    asking = (signal.SIGTERM, signal.SIGUSR1, signal.SIGHUP, signal.SIGINT)
+    previous = {s: signal.signal(s, polite) for s in asking if signal.getsignal(s) != signal.SIG_IGN}
     previous_hook, sys.unraisablehook = sys.unraisablehook, drop_interrupt
     try:
         yield

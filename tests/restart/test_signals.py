@@ -1,5 +1,6 @@
-"""Batch-job stops: SIGTERM/SIGUSR1 (sent by SLURM before a time limit), Ctrl-C and the
-wall-time budget write a checkpoint at the next step and exit 75; the run then resumes."""
+"""Batch-job stops: SIGTERM/SIGUSR1 (sent by SLURM before a time limit), SIGHUP (the terminal
+closed), Ctrl-C and the wall-time budget write a checkpoint at the next step and exit 75; the
+run then resumes. Under nohup (SIGHUP ignored) a hang-up changes nothing."""
 
 from __future__ import annotations
 
@@ -42,7 +43,9 @@ CASE = """
 """
 
 
-def _start(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+def _start(tmp_path: Path, nohup: bool = False) -> tuple[subprocess.Popen, Path]:
+    """The case run in a process of its own (`nohup`: started with SIGHUP ignored, as nohup
+    starts it), once its time loop is running."""
     case = tmp_path / "case.toml"
     case.write_text(textwrap.dedent(CASE))
     run_dir = tmp_path / "run"
@@ -51,6 +54,7 @@ def _start(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=(lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN)) if nohup else None,
     )
     deadline = time.monotonic() + 120
     log = run_dir / "run.log"
@@ -64,7 +68,9 @@ def _start(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     return proc, run_dir
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1, signal.SIGINT], ids=lambda s: s.name)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGTERM, signal.SIGUSR1, signal.SIGHUP, signal.SIGINT], ids=lambda s: s.name
+)
 def test_signal_writes_checkpoint_and_exits_75(tmp_path: Path, sig):
     proc, run_dir = _start(tmp_path)
     proc.send_signal(sig)
@@ -78,6 +84,20 @@ def test_signal_writes_checkpoint_and_exits_75(tmp_path: Path, sig):
     assert status["state"] == "stopped" and status["step"] == newest.step
     result = api.resume(run_dir, until=newest.step * newest.dt + 0.01)
     assert result.status == "done"
+
+
+def test_a_hang_up_under_nohup_changes_nothing(tmp_path: Path):
+    """A run started ignoring SIGHUP (nohup) keeps running after one, and still stops politely
+    on SIGTERM."""
+    proc, run_dir = _start(tmp_path, nohup=True)
+    proc.send_signal(signal.SIGHUP)
+    time.sleep(1.0)
+    assert proc.poll() is None, proc.communicate()
+    assert "SIGHUP" not in (run_dir / "run.log").read_text()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 75, err
+    assert "SIGTERM received" in (run_dir / "run.log").read_text()
 
 
 def test_second_interrupt_stops_at_once(tmp_path: Path):
