@@ -30,6 +30,9 @@ class GuardedStream:
         if not self.gone:
             try:
                 return self._stream.write(text)
+            except UnicodeEncodeError:  # a console whose encoding lacks a character: still there
+                encoding = getattr(self._stream, "encoding", None) or "ascii"
+                return self.write(text.encode(encoding, "replace").decode(encoding))
             except (OSError, ValueError) as exc:  # ValueError: the stream was closed
                 self._lose(exc)
         return len(text)

@@ -81,3 +81,26 @@ def test_a_guarded_stream_stops_writing_after_its_first_failure(caplog):
         "stderr is gone (BrokenPipeError: [Errno 32] Broken pipe): nothing more is printed there; "
         "run.log keeps the record"
     ]
+
+
+class _Latin1:
+    """A console that cannot show every character (a Latin-1 terminal)."""
+
+    encoding = "latin-1"
+
+    def __init__(self):
+        self.text = ""
+
+    def write(self, text):
+        text.encode(self.encoding)  # raises UnicodeEncodeError as a text stream would
+        self.text += text
+        return len(text)
+
+
+def test_a_character_the_console_cannot_show_is_replaced_not_taken_for_a_lost_console():
+    console = _Latin1()
+    stream = GuardedStream(console, "stderr")
+    stream.write("phi >= 0.61 \u2265 \u03c6\n")
+    stream.write("next\n")
+    assert not stream.gone
+    assert console.text == "phi >= 0.61 ? ?\nnext\n"
