@@ -164,6 +164,12 @@ def test_the_slabs_split_the_multigrid_levels_the_planes_allow():
     # periodic x: rank 1's halo planes are 7 and 0, both rank 0's
     assert periodic16.slabs.receive == [(0, 0, 0), (7, 0, 1)]
     assert periodic16.slabs.send == [(15, 0, 1), (8, 0, 0)]
+    # two planes deep for the smoothing: 0-1 and 6-7 from rank 0, and the first colour swept
+    # on planes 7 to 16 (16: plane 0)
+    assert periodic16.slabs.wide and levels[0].slabs.wide
+    assert periodic16.slabs.wide_receive == [(0, 0, 2), (6, 0, 3)]
+    assert periodic16.slabs.wide_send == [(14, 0, 3), (8, 0, 2)]
+    assert periodic16.slabs.extended == (7, 17)
     periodic16.split(Fake(2, 3))  # slabs of 4 planes would give the last 8: pairs, 4, 6 and 6
     assert (periodic16.slabs.lo, periodic16.slabs.hi) == (10, 16)
     assert (levels[0].slabs.lo, levels[0].slabs.hi) == (5, 8) and not levels[1].slabs.split
@@ -182,6 +188,23 @@ def test_the_slabs_split_the_multigrid_levels_the_planes_allow():
     default = PoissonSolver(grid, "dirichlet", "no-flux")
     default.split(Fake(1, 4))
     assert not default.slabs.split
+
+
+def test_two_planes_deep_only_where_each_lies_in_one_other_slab():
+    """Slabs.wide: every slab two planes or more, and around a periodic axis four or more beyond
+    each, so that the two planes either side come from one neighbour each and never overlap."""
+    from sphere_cli.physics.fluid.poisson import _two_deep
+
+    assert _two_deep(np.array([0, 4, 8]), True)
+    assert not _two_deep(np.array([0, 2, 4]), True)  # both sides' planes 2 and 3
+    assert _two_deep(np.array([0, 2, 4]), False)
+    assert not _two_deep(np.array([0, 1, 8]), False)  # a slab of one plane
+    assert not _two_deep(np.array([0, 8]), True)  # one rank: nothing beside
+    grid = FluidGrid(np.zeros(3), 1.0 / np.array([4, 4, 4]), (4, 4, 4), np.array([True, True, False]))
+    solver = PoissonSolver(grid, "dirichlet", "no-flux", "pcg", 1e-8, 100, "jacobi", split_cells=1)
+    solver.split(Fake(0, 2))
+    assert solver.slabs.receive and not solver.slabs.wide and not solver.slabs.wide_receive
+    assert solver.slabs.extended == (solver.slabs.lo, solver.slabs.hi)
 
 
 def test_a_split_solver_sent_to_another_process_arrives_whole():

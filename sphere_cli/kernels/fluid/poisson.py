@@ -610,9 +610,12 @@ def red_black_column(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, 
 
 @njit(cache=True, parallel=True)
 def red_black_sweep(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, lo, hi):
-    """One colour of a red-black Gauss-Seidel sweep of the planes [lo, hi) (_red_black_plane)."""
+    """One colour of a red-black Gauss-Seidel sweep of the planes [lo, hi) (_red_black_plane),
+    counted around a periodic x axis: -1 is the last plane, nx the first (a rank's slab and the
+    plane either side, physics/fluid/poisson.py Slabs.extended)."""
+    nx = x.shape[0]
     for t in prange(hi - lo):
-        _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, lo + t)
+        _red_black_plane(rhs, x, inv_diag, ax, ay, az, periodic_x, periodic_y, ih2, color, (lo + t) % nx)
 
 
 @njit(cache=True, parallel=True)

@@ -159,7 +159,13 @@ class Slabs:
         # (plane to receive, its owner, tag) and (plane to send, to whom, tag) beside the slab;
         # tag 0: a slab's first plane, which is its left neighbour's right halo, 1: its last
         self.receive, self.send = [], []
-        self.persistent = {}  # id(field) -> (field, its persistent requests): `halo`
+        # the same two planes deep (first plane of the two, peer, tag 2: a slab's first two,
+        # 3: its last two), where every slab has room for them (`wide`), and the planes a
+        # colour is swept on with them: the slab and the plane either side (`extended`)
+        self.wide_receive, self.wide_send = [], []
+        self.wide = False
+        self.extended = (self.lo, self.hi)
+        self.persistent = {}  # (id(field), wide) -> (field, its persistent requests): `halo`
         self.counts = {}  # plane size -> (counts, displacements) of `gather`
         if comm is None:
             return
@@ -178,6 +184,15 @@ class Slabs:
             if plane is not None and owner(plane) != rank:
                 self.receive.append((plane, owner(plane), tag))
                 self.send.append((mine, owner(plane), 1 - tag))
+        self.wide = _two_deep(bounds, periodic_x)
+        if self.wide:
+            if right is not None:
+                self.wide_receive.append((right, owner(right), 2))
+                self.wide_send.append((self.hi - 2, owner(right), 3))
+            if left is not None:
+                self.wide_receive.append((left - 1, owner(left), 3))
+                self.wide_send.append((self.lo, owner(left), 2))
+            self.extended = (self.lo - (left is not None), self.hi + (right is not None))
 
     def __reduce__(self):
         return Slabs, (self.shape,)  # a copy sent to another process is whole until split there
@@ -186,22 +201,27 @@ class Slabs:
     def split(self) -> bool:
         return self.comm is not None
 
-    def halo(self, field: np.ndarray) -> None:
-        """The planes beside the slab from the ranks that own them. The messages of each field
+    def halo(self, field: np.ndarray, wide: bool = False) -> None:
+        """The planes beside the slab from the ranks that own them: one either side, or two
+        with `wide` (where the slabs allow it: `wide`). The messages of each field
         are persistent requests, made at its first halo and started again at each: two calls
         into MPI a halo instead of one a message and a wait (the solver halos the same few
         arrays thousands of times a solve)."""
-        if not self.receive:
+        receive, send = (self.wide_receive, self.wide_send) if wide else (self.receive, self.send)
+        if not receive:
             return
-        held = self.persistent.get(id(field))
+        depth = 2 if wide else 1
+        held = self.persistent.get((id(field), wide))
         if held is None or held[0] is not field:  # (the field is kept: its id stays its own)
             requests = [
-                self.comm.Recv_init(field[plane], source=src, tag=tag) for plane, src, tag in self.receive
+                self.comm.Recv_init(field[plane : plane + depth], source=src, tag=tag)
+                for plane, src, tag in receive
             ]
             requests += [
-                self.comm.Send_init(field[plane], dest=dst, tag=tag) for plane, dst, tag in self.send
+                self.comm.Send_init(field[plane : plane + depth], dest=dst, tag=tag)
+                for plane, dst, tag in send
             ]
-            held = self.persistent[id(field)] = (field, requests)
+            held = self.persistent[(id(field), wide)] = (field, requests)
         self.mpi.Prequest.Startall(held[1])
         self.mpi.Request.Waitall(held[1])
 
@@ -331,6 +351,17 @@ class Multigrid:
             runs = numba.get_num_threads()
             red_black_smooth(rhs, x, inv_diag, ax, ay, az, px, py, ih2, first, sweeps, runs)
             return
+        if first is not None and slabs.wide:
+            # one message a sweep instead of one a colour: with the two planes either side, the
+            # first colour is swept on the plane either side too (the same inputs and operations
+            # as their owners', so the same bits), which the second colour of the slab then reads
+            # (the right-hand side of those planes: _cycle's halo)
+            for sweep in range(sweeps):
+                if sweep or not zero:
+                    slabs.halo(x, wide=True)
+                self.k.red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, first, *slabs.extended)
+                self.k.red_black_sweep(rhs, x, inv_diag, ax, ay, az, px, py, ih2, 1 - first, lo, hi)
+            return
         if first is not None:  # each colour reads the other's planes beside the slab
             for half in range(2 * sweeps):
                 if half or not zero:
@@ -379,6 +410,8 @@ class Multigrid:
             self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, COARSEST_SWEEPS, slabs, zero=True)
             return
         pre, post = (0, 1) if red_black else (None, None)
+        if red_black and slabs.wide:  # the smoothing sweeps the plane either side too
+            slabs.halo(rhs)
         self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, zero=True, first=pre)
         px, py = self.flags[0], self.flags[1]
         slabs.halo(x)
@@ -392,6 +425,18 @@ class Multigrid:
         self._cycle(index + 1, coarse.b, coarse.x, fine)
         self.k.prolong_add(coarse.x, *coarse.factors, x, slabs.lo, slabs.hi)
         self._smooth(rhs, x, tmp, diag, inv_diag, ax, ay, az, ih2, SWEEPS, slabs, first=post)
+
+
+def _two_deep(bounds: np.ndarray, periodic_x: bool) -> bool:
+    """Whether every rank's two planes either side of its slab (bounds: every rank's first plane
+    and the end) lie in one neighbour's slab each, none its own nor both sides' at once: every
+    slab two planes or more, and four or more beyond each slab where both sides wrap around. The
+    same answer on every rank, so that all take the same messages."""
+    sizes = np.diff(bounds)
+    if sizes.size < 2 or np.any(sizes < 2):
+        return False
+    nx = int(bounds[-1])
+    return not periodic_x or bool(np.all(nx - sizes >= 4))
 
 
 def colourable(shape, flags) -> bool:
