@@ -400,17 +400,21 @@ def local_partners(gid, row_start, partner, where, count):
 
 
 @njit(cache=True)
-def fill_rows(row_start, where, spring, springs, start, nbr, hist):
-    """The rows of a list from the received ones (local_partners' where): the partners held, in
-    their order, and (springs) their springs packed from start."""
+def fill_rows(row_start, where, spring, springs, start, nbr, hist, rows):
+    """The rows of a list from the received ones: received row m (row_start[m] <= s <
+    row_start[m+1]) into row rows[m] of nbr, its partners held (where[s] >= 0: local_partners'
+    where, or the partners themselves), in their order, and (springs) their springs packed from
+    start[rows[m]]. A rank's new list takes its rows in order (rows 0, 1, ...); the lead's whole
+    list each owner's row at its particle's global index (physics/rank_steps.py)."""
     for m in range(row_start.shape[0] - 1):
+        i = rows[m]
         k = 0
         for s in range(row_start[m], row_start[m + 1]):
             if where[s] >= 0:
-                nbr[m, k] = where[s]
+                nbr[i, k] = where[s]
                 if springs:
                     for a in range(3):
-                        hist[start[m] + k, a] = spring[s, a]
+                        hist[start[i] + k, a] = spring[s, a]
                 k += 1
 
 
@@ -451,22 +455,6 @@ def merge_rows(kept, keep, came, source, out):
         else:
             for a in range(out.shape[1]):
                 out[m, a] = came[k - keep.shape[0], a]
-
-
-@njit(cache=True)
-def rows_into_place(gid, row_count, partner, spring, springs, start, nbr, hist):
-    """The lead's whole list from the owners' half rows (physics/rank_steps.py): the m-th row
-    received (its partners by global index, one row after the other in partner) into row
-    gid[m] of nbr, and (springs) its springs packed from start[gid[m]]."""
-    s = 0
-    for m in range(gid.shape[0]):
-        i = gid[m]
-        for k in range(row_count[m]):
-            nbr[i, k] = partner[s + k]
-            if springs:
-                for a in range(3):
-                    hist[start[i] + k, a] = spring[s + k, a]
-        s += row_count[m]
 
 
 @njit(cache=True)

@@ -97,7 +97,6 @@ from ..kernels.neighbors import (
     row_starts,
     rows_by_global_index,
     rows_in,
-    rows_into_place,
     rows_out,
 )
 from ..kernels.rank_messages import TAG, own_wall_sums, rank_dem_steps, rank_dem_steps_serial
@@ -1005,7 +1004,7 @@ class RankSteps:
             local_partners(rec["gid"], row_start, rec["partner"], where, count)
             row_starts(count, t.capacity, start)
             hist = np.zeros((int(SPRING_ROOM * start[-1]) + 64, 3) if t.springs else (0, 3))
-            fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist)
+            fill_rows(row_start, where, rec.get("spring", hist), t.springs, start, nbr, hist, np.arange(n))
             drop_ghost_pairs(owned, nbr, count, start, hist, t.springs)
         nl = NeighborList(
             skin=t.skin,
@@ -1289,7 +1288,7 @@ def _rows(row_count: np.ndarray, idx: np.ndarray) -> np.ndarray:
 
 def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, fluid, budget) -> None:
     """The gathered owners' particles into the lead's whole scene (its list in one rank's layout),
-    each row placed by its global index in one compiled pass (rows_in, rows_into_place)."""
+    each row placed by its global index in one compiled pass (rows_in, fill_rows)."""
     rec = _merge(packs)
     gid = rec["gid"]
     nl = state.neighbors
@@ -1306,8 +1305,9 @@ def _unpack_into_host(state: State, packs: list, capacity: int, springs: bool, f
     row_starts(nl.nbr_count, capacity, nl.start)
     if springs:
         nl.hist = np.zeros((int(SPRING_ROOM * nl.start[-1]) + 64, 3))
-    rows_into_place(
-        gid, rec["row_count"], rec["partner"], rec.get("spring", nl.hist), springs, nl.start, nl.nbr, nl.hist
-    )
+    row_start = np.zeros(len(gid) + 1, dtype=np.int64)
+    np.cumsum(rec["row_count"], out=row_start[1:])
+    spring = rec.get("spring", nl.hist)
+    fill_rows(row_start, rec["partner"], spring, springs, nl.start, nl.nbr, nl.hist, gid)
     nl.rev = np.zeros((n, capacity), dtype=np.int32)
     NeighborSearch._reverse(nl)

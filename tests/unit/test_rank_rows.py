@@ -2,7 +2,7 @@
 of them (kernels/neighbors.py rows_by_global_index, local_partners, fill_rows; used by
 physics/rank_steps.py), the springs a new list carries from such rows (carry_springs_from_rows),
 the particles a rank keeps and those that came merged in global order (merge_rows), the
-owners' rows placed into the lead's whole list by global index (rows_into_place), the pairs
+owners' rows placed into the lead's whole list by global index (fill_rows again), the pairs
 of two ghosts left out of a list (drop_ghost_pairs), and the ghosts' forces packed into one
 message and out of it (rows_out, rows_in)."""
 
@@ -19,7 +19,6 @@ from sphere_cli.kernels.neighbors import (
     row_starts,
     rows_by_global_index,
     rows_in,
-    rows_into_place,
     rows_out,
 )
 
@@ -71,7 +70,7 @@ def test_rows_travel_by_global_index_and_come_back_without_the_partners_not_held
     row_starts(kept, cap, new_start)
     new_nbr = np.zeros((8, cap), dtype=np.int32)
     new_hist = np.zeros((new_start[-1], 3))
-    fill_rows(received, where, spring, True, new_start, new_nbr, new_hist)
+    fill_rows(received, where, spring, True, new_start, new_nbr, new_hist, np.arange(new_nbr.shape[0]))
     expected = [[1, 2, 7], [], [3, 4], [], [5, 7], [6, 7], [], []]
     assert [list(new_nbr[i, : kept[i]]) for i in range(8)] == expected
     # the pair (30, 50) is gone with its spring; every other spring is where its pair is
@@ -120,7 +119,8 @@ def test_the_owners_rows_land_in_the_leads_list_by_global_index():
     row_starts(nbr_count, 3, start)
     nbr = np.full((4, 3), -7, dtype=np.int32)
     hist = np.full((start[-1] + 2, 3), np.nan)
-    rows_into_place(gid, row_count, partner, spring, True, start, nbr, hist)
+    row_start = np.concatenate(([0], np.cumsum(row_count)))
+    fill_rows(row_start, partner, spring, True, start, nbr, hist, gid)
     assert nbr.tolist() == [[1, 3, -7], [-7, -7, -7], [3, -7, -7], [-7, -7, -7]]
     assert np.array_equal(hist[:3], spring) and np.isnan(hist[3:]).all()
 
