@@ -80,4 +80,6 @@ def machine() -> dict:
         "numba": numba.__version__,
         "numpy": np.__version__,
         "threading_layer_requested": numba.config.THREADING_LAYER,
+        # how idle threads wait between parallel regions: the two-thread figures depend on it
+        "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "").strip().upper() or "default",
     }

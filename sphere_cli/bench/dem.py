@@ -349,3 +349,10 @@ def _speedups(results: dict, log) -> None:
                 f"N = {row['n']:>7} {row['state']:>7}  {row['threads']} threads: "
                 f"{row['speedup']:.2f} x one thread"
             )
+    policy = results["machine"]["omp_wait_policy"]
+    if policy == "PASSIVE" and any(row["threads"] > 1 for row in rows):
+        log(
+            "    (OMP_WAIT_POLICY=PASSIVE: the threads sleep between parallel regions and each region "
+            "wakes them, which lowers the figures of several threads most on small scenes; a run on "
+            "cores of its own keeps the default)"
+        )

@@ -6,6 +6,7 @@ bed for 0.15 s of simulated time)."""
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from cli_test_support import sphere_inproc
@@ -44,6 +45,12 @@ def test_dem_bench_reports_rate_contacts_memory_and_speedup(tmp_path):
     if len(rows) == 2:
         one, two = rows
         assert two["speedup"] == two["particle_steps_per_second"] / one["particle_steps_per_second"]
+    # how idle threads wait changes the figures of two threads: recorded, and said where they sleep
+    policy = os.environ.get("OMP_WAIT_POLICY", "").strip().upper() or "default"
+    assert machine["omp_wait_policy"] == policy
+    assert ("(OMP_WAIT_POLICY=PASSIVE: the threads sleep" in result.stdout) == (
+        policy == "PASSIVE" and len(rows) == 2
+    )
     assert f"N = {216:>7}" in result.stdout
     assert "ns a particle-step through the hooks: Motion.kick_drift" in result.stdout
     # the fixed cost: a straight line through the step times of the two sizes
