@@ -155,17 +155,22 @@ def _drive(
         return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate, compiling)
     except NumericalError as exc:
         log.error("%s", exc)
-        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": str(exc)})
+        _record_failure(rundir, clock, str(exc))
         output.close(scene)
         raise
-    except OutputError as exc:
+    except OutputError as exc:  # its files cannot be written (a full disk): status.json may still be
         log.error("%s", exc)
+        _record_failure(rundir, clock, str(exc))
         raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
         output.close(scene)
         raise
-    except SphereError:
+    except StoppedEarly:  # status.json says "stopped" already
+        raise
+    except SphereError as exc:
+        log.error("%s", exc)
+        _record_failure(rundir, clock, str(exc))
         raise
     except Exception as exc:
         _record_internal_error(exc, scene, rundir, output, log)
@@ -173,6 +178,16 @@ def _drive(
     finally:
         progress.close()
         rundir.close_logger()
+
+
+def _record_failure(rundir: RunDirectory, clock, error: str) -> None:
+    """status.json says "failed", with the error and the step reached, so that a batch job's
+    monitor does not see "running" for ever. Best effort: on a full disk it may not be written
+    either (the error is on stderr and, where it fits, in run.log)."""
+    try:
+        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": error})
+    except OutputError:
+        pass
 
 
 def _record_internal_error(exc: Exception, scene, rundir: RunDirectory, output: RunOutput, log) -> None:
@@ -183,8 +198,8 @@ def _record_internal_error(exc: Exception, scene, rundir: RunDirectory, output: 
     clock = scene.state.clock
     error = f"internal error at step {clock.step}: {type(exc).__name__}: {exc}"
     log.exception("%s (a bug: please report it with this log)", error)
+    _record_failure(rundir, clock, error)
     try:
-        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": error})
         output.close(scene)
     except Exception as late:
         log.error("while recording it: %s: %s", type(late).__name__, late)

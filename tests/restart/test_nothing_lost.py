@@ -531,7 +531,11 @@ def test_a_full_disk_stops_cleanly_and_resumes_bitwise(tmp_path, small_disk, sch
     run = small_disk / "run"
     result = _sphere_without_waits("run", case, "-o", run, "-q", cwd=tmp_path)
     _clean_error(result, 74, "No space left on device", f"{len(trajectory.WRITE_RETRY_DELAYS) + 1} tries")
+    # a batch job's monitor reads that it failed, where and why (status.json is small: it fits)
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "failed" and "No space left on device" in status["error"], status
     newest = list_checkpoints(run / "checkpoints")[-1]
+    assert status["step"] >= read_checkpoint(newest).step
     assert read_checkpoint(newest).step < END
     subprocess.run(["mount", "-o", "remount,size=64m", str(small_disk)], check=True)
     result = _sphere("resume", run, "-q", cwd=tmp_path)
