@@ -155,12 +155,12 @@ def _drive(
         return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate, compiling)
     except NumericalError as exc:
         log.error("%s", exc)
-        _record_failure(rundir, clock, str(exc))
+        _record_failure(rundir, clock, str(exc), exc.exit_code)
         output.close(scene)
         raise
     except OutputError as exc:  # its files cannot be written (a full disk): status.json may still be
         log.error("%s", exc)
-        _record_failure(rundir, clock, str(exc))
+        _record_failure(rundir, clock, str(exc), exc.exit_code)
         raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
@@ -170,7 +170,7 @@ def _drive(
         raise
     except SphereError as exc:
         log.error("%s", exc)
-        _record_failure(rundir, clock, str(exc))
+        _record_failure(rundir, clock, str(exc), exc.exit_code)
         raise
     except Exception as exc:
         _record_internal_error(exc, scene, rundir, output, log)
@@ -180,12 +180,16 @@ def _drive(
         rundir.close_logger()
 
 
-def _record_failure(rundir: RunDirectory, clock, error: str) -> None:
-    """status.json says "failed", with the error and the step reached, so that a batch job's
-    monitor does not see "running" for ever. Best effort: on a full disk it may not be written
-    either (the error is on stderr and, where it fits, in run.log)."""
+def _record_failure(rundir: RunDirectory, clock, error: str, exit_code: int | None = None) -> None:
+    """status.json says "failed", with the error, the step reached and the exit code (74, its
+    files could not be written, tells a sweep to resume it), so that a batch job's monitor does
+    not see "running" for ever. Best effort: on a full disk it may not be written either (the
+    error is on stderr and, where it fits, in run.log)."""
+    status = {"state": "failed", "step": clock.step, "time": clock.time, "error": error}
+    if exit_code is not None:
+        status["exit_code"] = exit_code
     try:
-        rundir.write_status({"state": "failed", "step": clock.step, "time": clock.time, "error": error})
+        rundir.write_status(status)
     except OutputError:
         pass
 

@@ -398,8 +398,9 @@ exec "$SPHERE_PYTHON" -m sphere_cli sweep-member {shlex.quote(str(path))} "$task
 
 def member_state(sweep: Sweep, name: str) -> tuple[str, dict]:
     """(state, status.json) of a member: not started, running (its run directory is locked),
-    interrupted (killed: no process holds it, its status says it was running), stopped (a stop
-    request; it continues from its checkpoint), done, failed (the integration failed)."""
+    interrupted (killed: no process holds it, its status says it was running; or stopped by its
+    files, a full disk: it continues from its checkpoint once they can be written), stopped (a
+    stop request; it continues from its checkpoint), done, failed (the integration failed)."""
     rundir = RunDirectory(sweep.run_dir(name))
     if not rundir.is_run():
         return NOT_STARTED, {}
@@ -415,7 +416,7 @@ def member_state(sweep: Sweep, name: str) -> tuple[str, dict]:
     state = status.get("state")
     if state == "done" and status.get("step") == status.get("end_step"):
         return DONE, status
-    if state == "failed":
+    if state == "failed" and status.get("exit_code") != OutputError.exit_code:
         return FAILED, status
     if state == "stopped":
         return STOPPED, status

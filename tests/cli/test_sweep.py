@@ -284,6 +284,14 @@ def test_member_stopped_before_its_time_limit_requeues_its_task(base, tmp_path, 
     assert_clean_error(
         sphere_inproc("sweep-member", out, "1", "-q"), 70, "failed before", "blow-up", "remove"
     )
+    failed = {"state": "failed", "step": 9, "error": "blow-up at step 9", "exit_code": 70}
+    status.write_text(json.dumps(failed))
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.FAILED
+    # one stopped by its files (a full disk, exit 74) resumes from its checkpoint once they can be written
+    status.write_text(json.dumps({**failed, "error": "trajectory.h5: no space left", "exit_code": 74}))
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.INTERRUPTED
+    assert sphere_inproc("sweep-member", out, "1", "-q").code == 0
+    assert sweeps.member_state(sweeps.Sweep.load(out), "m001")[0] == sweeps.DONE
 
 
 @pytest.mark.slow

@@ -534,6 +534,7 @@ def test_a_full_disk_stops_cleanly_and_resumes_bitwise(tmp_path, small_disk, sch
     # a batch job's monitor reads that it failed, where and why (status.json is small: it fits)
     status = json.loads((run / "status.json").read_text())
     assert status["state"] == "failed" and "No space left on device" in status["error"], status
+    assert status["exit_code"] == 74  # a sweep resumes such a member (sphere_cli/sweep.py member_state)
     newest = list_checkpoints(run / "checkpoints")[-1]
     assert status["step"] >= read_checkpoint(newest).step
     assert read_checkpoint(newest).step < END
