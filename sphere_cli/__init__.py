@@ -2,6 +2,8 @@
 
 import hashlib
 import os
+import stat
+import tempfile
 from pathlib import Path
 
 import numba
@@ -13,7 +15,7 @@ from . import compile_lock
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 
 
-def _kernel_cache_dir() -> Path:
+def _kernel_sources_digest() -> str:
     """Numba's cache checks only the source file of each kernel, not the functions it inlines
     from other files: a cache keyed by the hash of every kernel source cannot go stale."""
     digest = hashlib.sha256()
@@ -21,20 +23,57 @@ def _kernel_cache_dir() -> Path:
     for path in sorted(kernels.rglob("*.py")):
         digest.update(str(path.relative_to(kernels)).encode())
         digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _kernel_cache_dirs() -> list[Path]:
+    """Where the compiled kernels may be cached, in order: the user's cache directory, then one
+    of this user's own in the temporary directory (a read-only home, as in some containers and
+    on some clusters' compute nodes; Numba's own place beside the package is often read-only
+    too, and without a writable place every command would fail at import)."""
+    digest = _kernel_sources_digest()
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    return base / "sphere" / "numba" / digest.hexdigest()[:16]
+    if not hasattr(os, "getuid"):  # (not POSIX)
+        return [base / "sphere" / "numba" / digest]
+    own = Path(tempfile.gettempdir()) / f"sphere-{os.getuid()}"
+    return [base / "sphere" / "numba" / digest, own / "numba" / digest]
 
 
-def _use_kernel_cache_dir() -> None:
-    path = _kernel_cache_dir()
+def _writable(path: Path, owned_below: Path | None = None) -> bool:
+    """Whether `path` can be made and written; with `owned_below` (a folder in a directory other
+    users share), only if that folder is this user's alone: no one else may plant kernels, which
+    Numba loads as pickles."""
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        if owned_below is not None:
+            owned_below.mkdir(mode=0o700, exist_ok=True)
+            held = owned_below.lstat()  # (a link is not followed)
+            if not stat.S_ISDIR(held.st_mode) or held.st_uid != os.getuid() or held.st_mode & 0o022:
+                return False
+        path.mkdir(mode=0o700, parents=True, exist_ok=True)
         probe = path / f".probe-{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()
     except OSError:
-        return  # unwritable home: numba's own cache location (beside the package) is used
-    numba.config.CACHE_DIR = str(path)
+        return False
+    return True
+
+
+# said in each run's log where the kernels are cached when it is not the user's cache directory
+KERNEL_CACHE_NOTE: str | None = None
+
+
+def _use_kernel_cache_dir() -> None:
+    global KERNEL_CACHE_NOTE
+    preferred, *others = _kernel_cache_dirs()
+    for path in (preferred, *others):
+        if _writable(path, None if path == preferred else path.parent.parent):
+            numba.config.CACHE_DIR = str(path)
+            if path != preferred:
+                KERNEL_CACHE_NOTE = (
+                    f"{preferred.parents[2]} cannot be written: the compiled kernels are cached in "
+                    f"{path}, which may not last; set NUMBA_CACHE_DIR to a directory that does"
+                )
+            return
 
 
 if not os.environ.get("NUMBA_CACHE_DIR"):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import ranks
+from . import KERNEL_CACHE_NOTE, ranks
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict, run_record
 from .config.schema import NON_PHYSICS_KEYS, Case
 from .errors import (
@@ -280,6 +280,7 @@ def _starting(rundir: RunDirectory, show_progress: bool) -> None:
     """status.json and the terminal say what happens before the first step; on several ranks,
     each learns where to record an error that aborts them all."""
     rundir.write_starting()
+    _log_note(rundir.logger(), KERNEL_CACHE_NOTE)  # kernels cached where they may not last
     world = ranks.current()
     if world is not None:
         world.record_failures_in(rundir.path.resolve())
