@@ -315,7 +315,7 @@ def resume(
     refuse_many_ranks(joined=ranks.current() is not None)
     rundir = RunDirectory(Path(run_dir))
     if not rundir.is_run():
-        raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
+        raise MissingInputError(rundir.why_not_run())
     rundir.lock()
     try:
         with threads_restored():

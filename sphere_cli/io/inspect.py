@@ -37,7 +37,7 @@ def _run_directory(rundir: RunDirectory) -> dict:
                 f"{rundir.path}: a sweep's folder, not a run directory: `sphere sweep-summary {rundir.path}` "
                 "tabulates its members; each member's run is in its runs/ folder"
             )
-        raise MissingInputError(f"{rundir.path}: not a run directory (no case.toml)")
+        raise MissingInputError(rundir.why_not_run())
     out = {"kind": "run directory", "path": str(rundir.path)}
     if rundir.status_path.is_file():
         try:

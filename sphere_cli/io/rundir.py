@@ -84,7 +84,20 @@ class RunDirectory:
         self._echo: _WarningsToLog | None = None
 
     def is_run(self) -> bool:
-        return self.case.is_file()
+        return self.why_not_run() is None
+
+    def why_not_run(self) -> str | None:
+        """Why the directory is not a run directory (None if it is): a run's holds its case.toml
+        and something only a run writes (its marker, status.json, checkpoints/); a folder of
+        the user's that holds a case.toml is not one, and resuming it would write a run there."""
+        if not self.case.is_file():
+            return f"{self.path}: not a run directory (no case.toml)"
+        if not (self.marker.is_file() or self.status_path.is_file() or self.checkpoints.is_dir()):
+            return (
+                f"{self.path}: not a run directory: it holds a case.toml but nothing a run writes "
+                f"({MARKER}, status.json, checkpoints/); give the directory that `sphere run -o` made"
+            )
+        return None
 
     def check_new(self, overwrite: bool) -> None:
         """Refuse, before any work, to clobber an existing run unless told to, and to let

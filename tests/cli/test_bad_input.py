@@ -542,6 +542,16 @@ def test_resume_of_a_directory_that_is_not_a_run(tmp_path):
     (tmp_path / "empty").mkdir()
     assert_clean_error(sphere("resume", "empty", cwd=tmp_path), 66, "empty", "not a run directory")
     assert_clean_error(sphere("resume", "nowhere", cwd=tmp_path), 66, "nowhere")
+    # the user's folder of cases: `sphere resume .` there would have started a run in it
+    cases = tmp_path / "cases"
+    cases.mkdir()
+    (cases / "case.toml").write_text(TINY)
+    for command in ("resume", "inspect"):
+        assert_clean_error(
+            sphere(command, "cases", cwd=tmp_path), 66, "cases: not a run directory: it holds a case.toml",
+            "give the directory that `sphere run -o` made",
+        )  # fmt: skip
+    assert [entry.name for entry in cases.iterdir()] == ["case.toml"]
 
 
 def test_resume_with_every_checkpoint_truncated(run_copy):
