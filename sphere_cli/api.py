@@ -158,17 +158,13 @@ def _drive(
         _record_failure(rundir, clock, str(exc), exc.exit_code)
         output.close(scene)
         raise
-    except OutputError as exc:  # its files cannot be written (a full disk): status.json may still be
-        log.error("%s", exc)
-        _record_failure(rundir, clock, str(exc), exc.exit_code)
-        raise
     except KeyboardInterrupt:
         log.warning("interrupted at step %d; resume starts from the newest checkpoint", clock.step)
         output.close(scene)
         raise
     except StoppedEarly:  # status.json says "stopped" already
         raise
-    except SphereError as exc:
+    except SphereError as exc:  # its files cannot be written (a full disk), an error of the case
         log.error("%s", exc)
         _record_failure(rundir, clock, str(exc), exc.exit_code)
         raise
