@@ -11,6 +11,7 @@ import sys
 import textwrap
 import time
 import weakref
+from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -43,6 +44,20 @@ CASE = """
 """
 
 
+def _as_started_from_a_terminal(nohup: bool):
+    """The child's signals as a command typed in a terminal gets them, whatever this test process
+    inherited: Ctrl-C's SIGINT handled (a background job of a non-interactive shell, as `make
+    test &` runs the suite, starts with SIGINT ignored, and the run keeps a signal it was started
+    ignoring), SIGHUP ignored under `nohup`."""
+
+    def arrange() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        if nohup:
+            signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    return arrange
+
+
 def _start(tmp_path: Path, nohup: bool = False) -> tuple[subprocess.Popen, Path]:
     """The case run in a process of its own (`nohup`: started with SIGHUP ignored, as nohup
     starts it), once its time loop is running."""
@@ -54,7 +69,7 @@ def _start(tmp_path: Path, nohup: bool = False) -> tuple[subprocess.Popen, Path]
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=(lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN)) if nohup else None,
+        preexec_fn=_as_started_from_a_terminal(nohup),
     )
     deadline = time.monotonic() + 120
     log = run_dir / "run.log"
@@ -143,7 +158,7 @@ def test_second_interrupt_inside_a_finalizer_still_stops(capfd):
     class Body:
         pass
 
-    with runtime.signal_handlers(stop, enabled=True):
+    with _sigint_handled(), runtime.signal_handlers(stop, enabled=True):
         signal.raise_signal(signal.SIGINT)  # the first: a checkpoint at the next step
         assert stop.reason == "SIGINT received" and not stop.interrupted
         body = Body()
@@ -158,3 +173,14 @@ def test_second_interrupt_inside_a_finalizer_still_stops(capfd):
     with pytest.raises(KeyboardInterrupt):
         loop.run()
     assert scene.state.clock.step == 0
+
+
+@contextmanager
+def _sigint_handled():
+    """SIGINT handled by Python, as in a process started from a terminal, whatever this test
+    process inherited (_as_started_from_a_terminal)."""
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, inherited)
