@@ -277,6 +277,7 @@ def _starting(rundir: RunDirectory, show_progress: bool) -> None:
     each learns where to record an error that aborts them all."""
     rundir.write_starting()
     _log_note(rundir.logger(), KERNEL_CACHE_NOTE)  # kernels cached where they may not last
+    _log_note(rundir.logger(), rundir.lock_note)  # a file system that cannot lock
     world = ranks.current()
     if world is not None:
         world.record_failures_in(rundir.path.resolve())

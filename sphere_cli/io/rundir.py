@@ -43,6 +43,9 @@ from .xdmf import frame_grid, write_xdmf
 MARKER = ".sphere-run"
 # how long `lock` waits for a lock held by someone else before saying the run is in use [s]
 LOCK_PATIENCE = 0.2
+# what flock(2) answers on a file system that cannot lock (NFS without its lock service, a
+# Lustre client mounted without flock): the run goes on without the lock, warned in run.log
+NO_LOCKS = {errno.ENOLCK, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL}
 # The ParaView sidecar lists every frame and is replaced whole, so rewriting it at each frame
 # costs in proportion to the frames so far (quadratic in a run); during a run it is rewritten at
 # most this often [s] (wall clock), and always with the run's end frame
@@ -82,6 +85,8 @@ class RunDirectory:
         self.replaced: Path | None = None
         self.created = False  # prepare_new made the directory itself
         self._echo: _WarningsToLog | None = None
+        # why the writer lock could not be taken where the file system has no locks (else None)
+        self.lock_note: str | None = None
 
     def is_run(self) -> bool:
         return self.why_not_run() is None
@@ -258,6 +263,14 @@ class RunDirectory:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as exc:
+                if exc.errno in NO_LOCKS:  # the file system cannot lock: run unguarded, and say so
+                    self._lock_fd = fd
+                    self.lock_note = (
+                        f"{self.path}: its file system cannot lock files ({exc.strerror}): nothing keeps "
+                        "a second sphere process from writing this run directory at the same time; "
+                        "do not start another run or resume on it while this one goes on"
+                    )
+                    return
                 os.close(fd)
                 held = exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
                 if not held:

@@ -10,6 +10,7 @@ leaves every file as it was.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -26,6 +27,7 @@ from restart_support import CASE, assert_same_state, final_state, frames, step_d
 
 from sphere_cli import api
 from sphere_cli.errors import OutputError, RunBusy, UsageError
+from sphere_cli.io import rundir as rundir_module
 from sphere_cli.io import trajectory
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.io.rundir import RunDirectory
@@ -314,6 +316,30 @@ def test_a_second_writer_is_refused(case, whole, tmp_path):
     released = RunDirectory(run)
     released.lock()  # released with its holder
     released.unlock()
+
+
+@pytest.mark.parametrize("answer", [errno.ENOLCK, errno.ENOSYS], ids=["nfs-without-lockd", "no-flock"])
+def test_a_file_system_that_cannot_lock_runs_unguarded_and_says_so(
+    case, whole, tmp_path, monkeypatch, answer
+):
+    """NFS without its lock service answers flock with ENOLCK, a Lustre client mounted without
+    flock with ENOSYS: the run and its resume go on (they were refused with exit 74, so no run
+    could be made on such a scratch file system), each saying in run.log that nothing guards the
+    directory against a second writer; the result is the uninterrupted run's."""
+
+    def flock(fd, operation):
+        raise OSError(answer, os.strerror(answer))
+
+    monkeypatch.setattr(rundir_module.fcntl, "flock", flock)
+    run = tmp_path / "run"
+    half = read_checkpoint(list_checkpoints(whole / "checkpoints")[0])
+    api.run(case, run, until=half.step * half.dt)
+    api.resume(run)
+    log = (run / "run.log").read_text()
+    warning = f"WARNING {run}: its file system cannot lock files ({os.strerror(answer)}): nothing keeps"
+    assert log.count(warning) == 2, log
+    assert not RunDirectory(run).busy()  # nothing to probe: never taken for a run in use
+    assert_same_state(final_state(whole), final_state(run))
 
 
 def test_a_resume_goes_on_while_a_reader_holds_the_trajectory(case, whole, tmp_path):
