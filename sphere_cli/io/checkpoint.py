@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import OutputError, ResumeRefused
 from .atomic import publish
+from .trajectory import open_to_read
 
 # 2: with the digest; 3: one fluid vocabulary, no springs without friction; 4: the Navier-Stokes
 # velocity on the faces of a staggered grid (3 held it at the cell centres); 5: the self-induced
@@ -110,7 +111,7 @@ def read_checkpoint(path: Path) -> CheckpointData:
     """Read and verify a checkpoint: the completion mark, the format, the digest of every
     attribute and dataset, and (while reading) every chunk's checksum."""
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             if int(f.attrs.get("complete", 0)) != 1:
                 raise OutputError(f"{path}: incomplete checkpoint")
             if int(f.attrs.get("format", -1)) != FORMAT:

@@ -14,7 +14,7 @@ from ..errors import MissingInputError, OutputError, ResumeRefused
 from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
-from .trajectory import complete_samples, frame_clock
+from .trajectory import complete_samples, frame_clock, open_to_read
 
 
 def summarize(path: Path) -> dict:
@@ -23,7 +23,7 @@ def summarize(path: Path) -> dict:
     if path.is_dir():
         return _run_directory(RunDirectory(path))
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             is_trajectory = "h5md" in f
     except Exception as exc:  # a damaged file can fail in any way inside h5py
         raise OutputError(f"{path}: not a readable HDF5 file ({exc})") from None
@@ -87,7 +87,7 @@ def last_observables(path: Path) -> dict[str, np.ndarray]:
 
 def _read_last_observables(path: Path) -> dict[str, np.ndarray]:
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             return {name: g["value"][-1] for name, g in f["observables"].items() if g["value"].shape[0]}
     except Exception as exc:  # a damaged file can fail in any way inside h5py
         raise OutputError(f"{path}: not a readable sphere trajectory ({type(exc).__name__}: {exc})") from None
@@ -95,7 +95,7 @@ def _read_last_observables(path: Path) -> dict[str, np.ndarray]:
 
 def _read_trajectory(path: Path) -> dict:
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             params = f["parameters"].attrs
             resolved = json.loads(params["resolved_case"])
             part = f["particles/trajectory"]

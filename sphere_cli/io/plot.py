@@ -31,6 +31,7 @@ import h5py
 import numpy as np
 
 from ..errors import MissingDependency, MissingInputError, OutputError
+from .trajectory import open_to_read
 
 INSTALL_HINT = "pip install 'sphere-cli[plot]'"
 
@@ -80,7 +81,7 @@ def _read(trajectory: Path) -> tuple[dict, str, dict]:
     too) the grid fields (frames, nz, ny, nx[, 3]), in a column of layers the profiles
     (frames, layers)}, or {} without a fluid."""
     try:
-        with h5py.File(trajectory, "r") as f:
+        with open_to_read(trajectory) as f:
             series = {}
             for name, group in f["observables"].items():
                 unit = group["value"].attrs.get("unit", "")

@@ -72,6 +72,15 @@ def open_as_writer(path: Path, mode: str) -> h5py.File:
     return h5py.File(path, mode, locking=False)
 
 
+def open_to_read(path: Path) -> h5py.File:
+    """A file sphere reads (a checkpoint, a trajectory, an input): without HDF5's lock, so that
+    the read does not fail where the lock cannot be taken (a file system without locks, NFS
+    without its lock service; a file another program holds open for writing), which made a valid
+    checkpoint look corrupt and a resume start from an older one. Checkpoints are never written
+    in place and the trajectory's writer takes no lock either, so the lock guarded nothing."""
+    return h5py.File(path, "r", locking=False)
+
+
 # A unit string of the H5MD units module: factors separated by single spaces, an optional number
 # first, then symbols each followed by an optional signed non-zero integer power ("m s-1")
 _UNIT_NUMBER = re.compile(r"[0-9]+(\.[0-9]+)?")

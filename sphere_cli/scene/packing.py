@@ -111,9 +111,9 @@ def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
     path = _particle_file_path(placement, base_dir)
     try:
         if path.suffix.lower() in (".h5", ".hdf5"):
-            import h5py
+            from ..io.trajectory import open_to_read
 
-            with h5py.File(path, "r") as f:
+            with open_to_read(path) as f:
                 return int(f["position"].shape[0])
         with path.open(encoding="utf-8") as lines:
             return max(0, sum(1 for line in lines if _content(line).strip()) - 1)  # the header
@@ -202,10 +202,10 @@ def _field(path: Path, line: int, column: int, name: str, field: str):
 
 
 def _read_hdf5(path: Path) -> ParticleFile:
-    import h5py
+    from ..io.trajectory import open_to_read
 
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             if "position" not in f:
                 raise CaseError(f"{path}: the HDF5 particle file needs a dataset 'position' (N,3)")
 

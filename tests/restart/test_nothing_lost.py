@@ -11,6 +11,7 @@ leaves every file as it was.
 from __future__ import annotations
 
 import errno
+import fcntl
 import hashlib
 import json
 import os
@@ -340,6 +341,30 @@ def test_a_file_system_that_cannot_lock_runs_unguarded_and_says_so(
     assert log.count(warning) == 2, log
     assert not RunDirectory(run).busy()  # nothing to probe: never taken for a run in use
     assert_same_state(final_state(whole), final_state(run))
+
+
+def test_a_checkpoint_whose_lock_cannot_be_taken_is_read_as_it_is(whole, tmp_path):
+    """HDF5 locks a file it opens (h5py's default); where that fails (NFS without its lock
+    service, a program holding the file open for writing: here an exclusive lock held by this
+    test), sphere read the newest checkpoint as corrupt and resumed from the one before. Its
+    reads take no lock: the checkpoint verifies, inspect lists it valid, and resume starts there."""
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    newest = list_checkpoints(run / "checkpoints")[-1]
+    held = [os.open(path, os.O_RDONLY) for path in (newest, run / "trajectory.h5")]
+    try:
+        for fd in held:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(OSError, match="unable to lock file"):
+            h5py.File(newest, "r")  # what a default open meets
+        assert read_checkpoint(newest).step == END
+        listed = api.inspect(run)["checkpoints"]
+        assert [(c["step"], c["valid"]) for c in listed][-1] == (END, True), listed
+        api.resume(run, until=(END + 20) * read_checkpoint(newest).dt)
+    finally:
+        for fd in held:
+            os.close(fd)
+    assert f"resuming from {newest.name}" in (run / "run.log").read_text()
 
 
 def test_a_resume_goes_on_while_a_reader_holds_the_trajectory(case, whole, tmp_path):

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from ...config.expression import ExpressionError, parse
 from ...errors import CaseError, MissingInputError
+from ...io.trajectory import open_to_read
 
 COMPONENTS = ("x", "y", "z")
 
@@ -69,7 +69,7 @@ def read_grid_file(text: str, shapes: dict, key: tuple, loaded, required: bool) 
         raise MissingInputError(loaded.describe(key, f"file not found ({path})"))
     arrays = {}
     try:
-        with h5py.File(path, "r") as f:
+        with open_to_read(path) as f:
             for name, shape in shapes.items():
                 if name not in f:
                     if required:
