@@ -290,16 +290,23 @@ class Trajectory:
     def _with_retries(self, what: str, failure: str, write) -> None:
         """Run write(retry) until it succeeds, logging each failure, up to len(WRITE_RETRY_DELAYS)
         more tries; then raise OutputError."""
+        first = None  # the first failure says why; a later try may meet only what it left
         for attempt, delay in enumerate((*WRITE_RETRY_DELAYS, None)):
             try:
                 write(attempt > 0)
                 if attempt and self.log is not None:
                     self.log.warning("%s written to %s at try %d", what, self.path.name, attempt + 1)
                 return
-            except OSError as exc:
+            # RuntimeError: h5py's report of HDF5's writes failing as it flushes the file at its
+            # close (a disk quota, which the free-space check cannot see, or a full disk)
+            except (OSError, RuntimeError) as exc:
+                first = first or exc
                 if delay is None:
                     tries = len(WRITE_RETRY_DELAYS) + 1
-                    raise OutputError(f"{self.path}: {failure} ({exc}; {tries} tries)") from None
+                    why = " ".join(str(first).split())  # HDF5's messages span lines
+                    if str(exc) != str(first):
+                        why += f"; at the last try: {' '.join(str(exc).split())}"
+                    raise OutputError(f"{self.path}: {failure} ({why}; {tries} tries)") from None
                 if self.log is not None:
                     self.log.warning(
                         "%s: cannot write %s (%s); trying again in %g s", self.path.name, what, exc, delay
