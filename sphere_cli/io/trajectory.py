@@ -63,6 +63,10 @@ VERTICES = f"{VIEWS}/vertices"  # 0 .. N-1: the Polyvertex connectivity (one ver
 # Seconds waited before each new try of a failed frame or observables write: a file server's
 # hiccup or a disk freed by another job in the meantime does not end the run
 WRITE_RETRY_DELAYS = (1.0, 2.0, 4.0)
+# What a write into an HDF5 file raises when the file system refuses it: OSError, or RuntimeError,
+# h5py's report of HDF5's writes failing as it flushes the file at its close (a disk quota, which
+# the free-space check cannot see, or a full disk)
+HDF5_WRITE_ERRORS = (OSError, RuntimeError)
 
 
 def open_as_writer(path: Path, mode: str) -> h5py.File:
@@ -228,7 +232,7 @@ class Trajectory:
                 prov = f.create_group("sphere/provenance")
                 for key, value in provenance.items():
                     prov.attrs[key] = value
-        except OSError as exc:
+        except HDF5_WRITE_ERRORS as exc:
             raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
 
     def append(self, scene) -> None:
@@ -297,9 +301,7 @@ class Trajectory:
                 if attempt and self.log is not None:
                     self.log.warning("%s written to %s at try %d", what, self.path.name, attempt + 1)
                 return
-            # RuntimeError: h5py's report of HDF5's writes failing as it flushes the file at its
-            # close (a disk quota, which the free-space check cannot see, or a full disk)
-            except (OSError, RuntimeError) as exc:
+            except HDF5_WRITE_ERRORS as exc:
                 first = first or exc
                 if delay is None:
                     tries = len(WRITE_RETRY_DELAYS) + 1
@@ -346,7 +348,7 @@ class Trajectory:
                 group.attrs["from_step"] = step
                 for key, value in provenance.items():
                     group.attrs[key] = value
-        except OSError as exc:
+        except HDF5_WRITE_ERRORS as exc:
             raise OutputError(f"{self.path}: cannot open the trajectory to resume ({exc})") from None
 
 
