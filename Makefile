@@ -45,10 +45,12 @@ $(PARAVIEW_STAMP): $(STAMP)
 
 # Python's bytecode written ahead: where PYTHONDONTWRITEBYTECODE is set (container and CI images),
 # each of the suite's ~200 processes (runs, MPI ranks) compiled sphere's modules again: 0.12 s of
-# the 0.75 s a `sphere` process took to import itself.
+# the 0.75 s a `sphere` process took to import itself. Whole files go to the workers in the order
+# tests/conftest.py collects them, the longest first (xdist would order them by their count of
+# tests), so that no long file runs alone at the end.
 test: $(STAMP) $(PARAVIEW_STAMP)
 	$(BIN)/python -m compileall -q sphere_cli tests
-	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q --durations=10 -n auto --maxprocesses=4 --dist=loadfile
+	OMP_WAIT_POLICY=PASSIVE $(BIN)/python -m pytest -q --durations=10 -n auto --maxprocesses=4 --dist=loadfile --no-loadscope-reorder
 
 # The GPU path with the CUDA extra (numba-cuda and NVIDIA's compiler as wheels, about 0.5 GB, in a
 # venv of its own): the GPU tests under numba-cuda's simulator, and every GPU kernel compiled for
