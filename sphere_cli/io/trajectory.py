@@ -302,16 +302,15 @@ class Trajectory:
                     self.log.warning("%s written to %s at try %d", what, self.path.name, attempt + 1)
                 return
             except HDF5_WRITE_ERRORS as exc:
-                first = first or exc
+                said = " ".join(str(exc).split())  # HDF5's messages span lines
+                first = first or said
                 if delay is None:
                     tries = len(WRITE_RETRY_DELAYS) + 1
-                    why = " ".join(str(first).split())  # HDF5's messages span lines
-                    if str(exc) != str(first):
-                        why += f"; at the last try: {' '.join(str(exc).split())}"
+                    why = first if said == first else f"{first}; at the last try: {said}"
                     raise OutputError(f"{self.path}: {failure} ({why}; {tries} tries)") from None
                 if self.log is not None:
                     self.log.warning(
-                        "%s: cannot write %s (%s); trying again in %g s", self.path.name, what, exc, delay
+                        "%s: cannot write %s (%s); trying again in %g s", self.path.name, what, said, delay
                     )
                 time.sleep(delay)
 
