@@ -71,6 +71,13 @@ def _log_note(log, note: str | None) -> None:
         log.warning("%s", note)
 
 
+def _warn(log, note: str | None) -> None:
+    """A warning for run.log and the terminal (the run's logger writes to run.log alone)."""
+    if note is not None:
+        log.warning("%s", note)
+        print(f"sphere: warning: {note}", file=sys.stderr)
+
+
 def _with_simulation(loaded: LoadedCase, **given) -> LoadedCase:
     """The case with the [simulation] keys given on the command line (None: not given)."""
     update = {key: value for key, value in given.items() if value is not None}
@@ -116,6 +123,13 @@ def _drive(
         clock.dt,
         scene.state.particles.count,
     )
+    if end_step < start_step:  # `resume --until` earlier than where the run is: said, not silent
+        _warn(
+            log,
+            f"the end asked for, t = {scene.case.simulation.duration:.6g} s (step {end_step}), is before "
+            f"where the run is, t = {clock.time:.6g} s (step {start_step}): nothing is stepped; give a "
+            "later --until",
+        )
     log.info("threads: %s", _threads_line(scene))
     gpu = getattr(scene.step.compiled, "device_name", None)
     if gpu is not None:
@@ -276,8 +290,8 @@ def _starting(rundir: RunDirectory, show_progress: bool) -> None:
     """status.json and the terminal say what happens before the first step; on several ranks,
     each learns where to record an error that aborts them all."""
     rundir.write_starting()
-    _log_note(rundir.logger(), KERNEL_CACHE_NOTE)  # kernels cached where they may not last
-    _log_note(rundir.logger(), rundir.lock_note)  # a file system that cannot lock
+    _warn(rundir.logger(), KERNEL_CACHE_NOTE)  # kernels cached where they may not last
+    _warn(rundir.logger(), rundir.lock_note)  # a file system that cannot lock
     world = ranks.current()
     if world is not None:
         world.record_failures_in(rundir.path.resolve())

@@ -538,6 +538,18 @@ def _flip_bytes_in_positions(path: Path) -> None:
         raw.write(bytes([byte[0] ^ 0xFF]))
 
 
+def test_resume_until_a_time_the_run_has_passed_says_so(tmp_path):
+    """`resume --until` earlier than where the run stopped steps nothing, as before, but says
+    why on the terminal and in run.log (it was a silent "done" at the later time)."""
+    (tmp_path / "case.toml").write_text(TINY)
+    assert sphere("run", "case.toml", "-o", "run", "-q", "--until", "0.001", cwd=tmp_path).code == 0
+    result = sphere("resume", "run", "-q", "--until", "0.0005", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    said = "warning: the end asked for, t = 0.0005 s"
+    assert f"sphere: {said}" in result.stderr and "is before where the run is" in result.stderr
+    assert said.removeprefix("warning: ") in (tmp_path / "run" / "run.log").read_text()
+
+
 def test_resume_of_a_directory_that_is_not_a_run(tmp_path):
     (tmp_path / "empty").mkdir()
     assert_clean_error(sphere("resume", "empty", cwd=tmp_path), 66, "empty", "not a run directory")

@@ -60,10 +60,11 @@ def test_a_temporary_directory_others_can_write_to_is_not_used(tmp_path):
 
 
 def test_a_run_says_in_its_log_where_its_kernels_are_cached_when_not_in_the_users_cache(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, capsys
 ):
     (tmp_path / "case.toml").write_text(TINY)
     note = "/home/u/.cache cannot be written: the compiled kernels are cached in /tmp/sphere-1/numba/x"
     monkeypatch.setattr(api, "KERNEL_CACHE_NOTE", note)
     api.run(tmp_path / "case.toml", tmp_path / "run")
     assert f"WARNING {note}" in (tmp_path / "run" / "run.log").read_text()
+    assert f"sphere: warning: {note}" in capsys.readouterr().err

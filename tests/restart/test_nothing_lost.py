@@ -321,7 +321,7 @@ def test_a_second_writer_is_refused(case, whole, tmp_path):
 
 @pytest.mark.parametrize("answer", [errno.ENOLCK, errno.ENOSYS], ids=["nfs-without-lockd", "no-flock"])
 def test_a_file_system_that_cannot_lock_runs_unguarded_and_says_so(
-    case, whole, tmp_path, monkeypatch, answer
+    case, whole, tmp_path, monkeypatch, capsys, answer
 ):
     """NFS without its lock service answers flock with ENOLCK, a Lustre client mounted without
     flock with ENOSYS: the run and its resume go on (they were refused with exit 74, so no run
@@ -339,6 +339,7 @@ def test_a_file_system_that_cannot_lock_runs_unguarded_and_says_so(
     log = (run / "run.log").read_text()
     warning = f"WARNING {run}: its file system cannot lock files ({os.strerror(answer)}): nothing keeps"
     assert log.count(warning) == 2, log
+    assert capsys.readouterr().err.count("sphere: warning: " + warning.removeprefix("WARNING ")) == 2
     assert not RunDirectory(run).busy()  # nothing to probe: never taken for a run in use
     assert_same_state(final_state(whole), final_state(run))
 
