@@ -81,12 +81,9 @@ class GuardedStream:
         return getattr(self._stream, name)
 
     def _write_raw(self, text: str) -> None:
-        """Write to the descriptor of an unbuffered stream, waiting while its pipe is full."""
-        encoding = self._stream.encoding or "ascii"
-        try:
-            data = memoryview(text.encode(encoding, self._stream.errors or "strict"))
-        except UnicodeEncodeError:  # a console whose encoding lacks a character: still there
-            data = memoryview(text.encode(encoding, "replace"))
+        """Write to the descriptor of an unbuffered stream, waiting while its pipe is full (a
+        character its encoding lacks raises UnicodeEncodeError, which `write` replaces)."""
+        data = memoryview(text.encode(self._stream.encoding or "ascii", self._stream.errors or "strict"))
         deadline = self._deadline()
         while data:
             written = self._raw.write(data)

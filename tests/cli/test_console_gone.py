@@ -184,3 +184,16 @@ def test_a_stalled_reader_is_waited_for_once_then_its_lines_dropped_until_it_rea
         "until it is read again; run.log keeps the record"
     ]
     os.close(read)
+
+
+def test_an_unbuffered_console_that_cannot_show_a_character_gets_it_replaced():
+    """Under PYTHONUNBUFFERED the guard writes the bytes itself: the same replacement."""
+    read, write = os.pipe()
+    raw = io.FileIO(write, "w")
+    stream = GuardedStream(io.TextIOWrapper(raw, encoding="latin-1", write_through=True), "stderr")
+    stream.write("phi >= 0.61 \u2265 \u03c6\n")
+    stream.write("next\n")
+    raw.close()
+    assert not stream.gone
+    assert os.read(read, 100) == b"phi >= 0.61 ? ?\nnext\n"
+    os.close(read)
