@@ -360,7 +360,7 @@ def signal_handlers(stop: StopFlag, enabled: bool):
     prints now goes nowhere, io/console.py) and a first SIGINT ask for a checkpoint at the next
     step; a second SIGINT stops at once (KeyboardInterrupt). A signal the run was started
     ignoring stays ignored: SIGHUP under nohup, whose user wants the run to outlive the
-    terminal."""
+    terminal, and SIGINT in a background job of a non-interactive shell, as Python keeps it."""
     if not enabled:
         yield
         return
