@@ -113,7 +113,7 @@ class World:
             from .io.rundir import RunDirectory
 
             state = "interrupted" if code == STOPPED else "failed"
-            RunDirectory(self.run_path).record_abort(recorded or message, state, progress)
+            RunDirectory(self.run_path).record_abort(recorded or message, state, code, progress)
         self.abort(code)
 
     def together(self, work, progress=None):

@@ -341,11 +341,12 @@ class RunDirectory:
         except OSError as exc:
             raise OutputError(f"{self.status_path}: cannot write status ({exc})") from None
 
-    def record_abort(self, message: str, state: str, progress: dict | None = None) -> None:
+    def record_abort(self, message: str, state: str, exit_code: int, progress: dict | None = None) -> None:
         """A rank's error just before it aborts every rank (ranks.py): run.log gets the message and
-        status.json the state ("failed", or "interrupted" for a second Ctrl-C), its progress kept,
-        or `progress` (step, time) where given (no rank writes again). Best effort: the message
-        is on stderr already."""
+        status.json the state ("failed", or "interrupted" for a second Ctrl-C) and the exit code
+        every rank ends with (74, the files could not be written, tells a sweep to resume it, as
+        on one rank), its progress kept, or `progress` (step, time) where given (no rank writes
+        again). Best effort: the message is on stderr already."""
         try:
             status = json.loads(self.status_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
@@ -353,7 +354,9 @@ class RunDirectory:
         status.pop("activity", None)  # the start's ("building the scene"), over with the run
         try:
             self.logger().log(logging.ERROR if state == "failed" else logging.WARNING, "%s", message)
-            self.write_status({**status, **(progress or {}), "state": state, "error": message})
+            self.write_status(
+                {**status, **(progress or {}), "state": state, "error": message, "exit_code": exit_code}
+            )
         except OutputError:
             pass
         finally:

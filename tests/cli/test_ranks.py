@@ -709,8 +709,8 @@ def test_a_fluid_step_failing_on_every_rank_is_reported_once_as_on_one_rank(tmp_
     """tests/cli/test_fluid_moving_grid_input.py's wall squeezing the Darcy cells below a
     particle: every rank's pore-pressure step meets it at the same step; rank 0 reports it as
     one rank does (exit 70, the same error line on stderr and in run.log, status.json failed at
-    the same step and time with the same error, no longer "building"), and the others leave
-    the report to it."""
+    the same step and time with the same error and exit code, no longer "building"), and the
+    others leave the report to it."""
     (tmp_path / "case.toml").write_text(edit(DARCY_FOLLOWING, "[fluid]", DARCY_TOP_WALL))
     runs = {
         ranks: sphere("run", "case.toml", "-o", f"on{ranks}", "-q", ranks=ranks, cwd=tmp_path)
@@ -730,7 +730,11 @@ def test_a_fluid_step_failing_on_every_rank_is_reported_once_as_on_one_rank(tmp_
             if " ERROR " in line
         ]
         reported.append(
-            (errors, logged, {key: status.get(key) for key in ("state", "step", "time", "error", "activity")})
+            (
+                errors,
+                logged,
+                {key: status.get(key) for key in ("state", "step", "time", "error", "activity", "exit_code")},
+            )
         )
     assert reported[0] == reported[1] and reported[0][2]["step"] > 0, reported
 
@@ -768,7 +772,7 @@ else:
 def test_a_rank_that_fails_alone_records_its_error_before_every_rank_ends(tmp_path, failing, message):
     """An error only one rank sees (a bug, memory) ends every rank with exit 70, and the run
     directory says so as a one-rank run's would: the message in run.log, status.json failed with
-    the run's progress kept (sphere sweep reads it)."""
+    the run's progress kept and the exit code (sphere sweep reads them)."""
     (tmp_path / "script.py").write_text(FAILING_RANK)
     (tmp_path / "run").mkdir()
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
@@ -780,7 +784,7 @@ def test_a_rank_that_fails_alone_records_its_error_before_every_rank_ends(tmp_pa
     assert f"ERROR {message}" in log, log
     status = json.loads((tmp_path / "run" / "status.json").read_text())
     assert status["state"] == "failed" and status["error"].startswith(message), status
-    assert status["step"] == 40 and status["ranks"] == 2
+    assert status["step"] == 40 and status["ranks"] == 2 and status["exit_code"] == 70
 
 
 def test_what_does_not_run_split_is_refused_by_name(tmp_path):
