@@ -125,18 +125,24 @@ def parse_vary(text: str) -> Vary:
 
 
 def _toml_values(text: str) -> tuple | None:
-    """The values of `a,b,c` as TOML would read `[a,b,c]`; failing that, each bare item as a
-    string (`hertz,linear`). None if there is nothing usable."""
+    """The values of `a,b,c` as TOML would read `[a,b,c]`; failing that, item by item, each a
+    TOML value or else a bare word read as a string (`hertz,linear`; `auto,1e-6` is "auto" and
+    the number 1e-6). None if there is nothing usable."""
     if not text.strip():
         return None
     try:
         return tuple(tomli.loads(f"v = [{text}]")["v"])
     except tomli.TOMLDecodeError:
         pass
-    items = [item.strip() for item in text.split(",")]
-    if any(not _BARE_WORD.fullmatch(item) for item in items):
-        return None
-    return tuple(items)
+    values = []
+    for item in (item.strip() for item in text.split(",")):
+        try:
+            values.append(tomli.loads(f"v = {item}")["v"])
+        except tomli.TOMLDecodeError:
+            if not _BARE_WORD.fullmatch(item):
+                return None
+            values.append(item)
+    return tuple(values)
 
 
 def combinations(varies: list[Vary], zipped: bool) -> list[tuple]:

@@ -46,6 +46,10 @@ def test_vary_values_as_typed():
         [0, 0, -1.62],
     )
     assert sweeps.parse_vary("walls.0.velocity=[0,0,1]").parts == ("walls", 0, "velocity")
+    # a bare word beside numbers: the word is a string, the numbers stay numbers (the time step
+    # 1e-6 read as the string "1e-6" made that member fail its validation)
+    assert sweeps.parse_vary("simulation.dt=auto,1e-6").values == ("auto", 1e-6)
+    assert sweeps.parse_vary("walls.0.face=z+,2,true").values == ("z+", 2, True)
     for bad in ("particles.seed", "=1,2", "particles.seed=", "particles.seed=5..1", "a b=1", "x=1 2,(3)"):
         with pytest.raises(UsageError, match="--vary"):
             sweeps.parse_vary(bad)
