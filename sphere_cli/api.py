@@ -6,6 +6,7 @@ import dataclasses
 import json
 import sys
 import time as wallclock
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from .errors import (
     SphereError,
     StoppedEarly,
 )
+from .io.atomic import write_text_atomic
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
 from .io.progress import Progress
 from .io.provenance import provenance
@@ -352,10 +354,11 @@ def _resume_locked(
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
         fresh = _with_simulation(fresh, duration=until, device=device)
         note = start_threads(fresh.case, _placed(fresh))
-        _starting(rundir, show_progress)
-        scene = build_scene(fresh)
-        _log_note(log, note)
-        output = start_output(scene, rundir, fresh, log)
+        with _status_kept_unless_started(rundir, log):
+            _starting(rundir, show_progress)
+            scene = build_scene(fresh)
+            _log_note(log, note)
+            output = start_output(scene, rundir, fresh, log)
         return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
     if ck is None:
         raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
@@ -377,24 +380,48 @@ def _resume_locked(
             "the trajectory file holds the original fields. Restore them, or start a new run."
         )
     note = start_threads(loaded.case, _placed(loaded))
-    _starting(rundir, show_progress)
-    scene = build_scene(loaded, restart=ck)
-    log.info("resuming from %s (step %d)", ck.path.name, ck.step)
-    _log_note(log, note)
-    output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
-    output.last_checkpoint = ck.path
-    try:
-        output.trajectory.truncate_after(ck.step)
-    except OutputError as exc:
-        if not isinstance(exc, TrajectoryLost):
-            aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
-            rundir.trajectory_path.rename(aside)
-            exc = f"{exc}; moved it to {aside.name}"
-        log.warning("%s: a new trajectory file starts at %s", exc, ck.path.name)
-        output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
-        output.first(scene)
-    output.trajectory.record_resume(ck.step, provenance())
+    with _status_kept_unless_started(rundir, log):
+        _starting(rundir, show_progress)
+        scene = build_scene(loaded, restart=ck)
+        log.info("resuming from %s (step %d)", ck.path.name, ck.step)
+        _log_note(log, note)
+        output = RunOutput(rundir, scene, loaded.text, resolved, phash, log)
+        output.last_checkpoint = ck.path
+        try:
+            output.trajectory.truncate_after(ck.step)
+        except OutputError as exc:
+            if not isinstance(exc, TrajectoryLost):
+                aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
+                rundir.trajectory_path.rename(aside)
+                exc = f"{exc}; moved it to {aside.name}"
+            log.warning("%s: a new trajectory file starts at %s", exc, ck.path.name)
+            output.trajectory.create(scene, loaded.text, resolved, phash, provenance())
+            output.first(scene)
+        output.trajectory.record_resume(ck.step, provenance())
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+
+
+@contextmanager
+def _status_kept_unless_started(rundir: RunDirectory, log):
+    """A resume that stops before its first step (a device that cannot be used, a file the case
+    reads gone, Ctrl-C while it compiles) changed nothing of the run: status.json gets back what
+    it said before ("done", "stopped", ...) instead of staying "starting" for good, and run.log
+    says why the resume did not start. Best effort: the error is on stderr."""
+    try:
+        before = rundir.status_path.read_text(encoding="utf-8")
+    except OSError:
+        before = None
+    try:
+        yield
+    except BaseException as exc:
+        if isinstance(exc, SphereError):
+            log.error("the resume stopped before its first step: %s", exc)
+        if before is not None:
+            try:
+                write_text_atomic(rundir.status_path, before)
+            except OSError:
+                pass
+        raise
 
 
 def _changed_keys(old, new, prefix: str = "") -> list[str]:

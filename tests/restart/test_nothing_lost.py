@@ -634,3 +634,35 @@ def test_a_fault_of_the_program_mid_run_is_recorded_and_the_run_resumes(case, wh
     monkeypatch.setattr(simulation, "advance", real)
     api.resume(run_dir)
     assert_same_state(final_state(run_dir), final_state(whole))
+
+
+@pytest.mark.parametrize("stop", ["refused", "interrupted"])
+def test_a_resume_that_stops_before_its_first_step_leaves_the_status_as_it_was(
+    whole, tmp_path, monkeypatch, stop
+):
+    """`sphere resume RUN --device cuda` where no GPU can be used is refused while the scene is
+    built, and Ctrl-C may come while its kernels compile: nothing of the run changed, so
+    status.json says again what it said ("done" at the last step), not "starting" for good,
+    and run.log says why the resume did not start."""
+    from sphere_cli import api as api_module
+    from sphere_cli.errors import UsageError
+
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = (run / "status.json").read_text()
+    assert json.loads(before)["state"] == "done"
+    error = UsageError("no GPU can be used here") if stop == "refused" else KeyboardInterrupt()
+
+    def build_fails(*args, **kwargs):
+        assert json.loads((run / "status.json").read_text())["state"] == "starting"
+        raise error
+
+    monkeypatch.setattr(api_module, "build_scene", build_fails)
+    with pytest.raises(type(error)):
+        api.resume(run, until=2 * json.loads(before)["time"])
+    assert (run / "status.json").read_text() == before
+    if stop == "refused":
+        assert (
+            "the resume stopped before its first step: no GPU can be used here"
+            in (run / "run.log").read_text()
+        )
