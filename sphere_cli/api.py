@@ -28,7 +28,7 @@ from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_sta
 from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
-from .io.trajectory import TrajectoryLost
+from .io.trajectory import TrajectoryBusy, TrajectoryLost
 from .runtime import (
     StopFlag,
     refuse_many_ranks,
@@ -390,6 +390,8 @@ def _resume_locked(
         try:
             output.trajectory.truncate_after(ck.step)
         except OutputError as exc:
+            if isinstance(exc, TrajectoryBusy):  # not damaged: another program has it open to write
+                raise
             if not isinstance(exc, TrajectoryLost):
                 aside = rundir.trajectory_path.with_name(f"trajectory.unreadable-{int(wallclock.time())}.h5")
                 rundir.trajectory_path.rename(aside)

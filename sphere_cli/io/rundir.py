@@ -37,7 +37,7 @@ from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
-from .trajectory import Trajectory, frame_clock, is_grid_field, open_as_writer
+from .trajectory import Trajectory, TrajectoryBusy, frame_clock, is_grid_field, open_as_writer
 from .xdmf import frame_grid, write_xdmf
 
 MARKER = ".sphere-run"
@@ -81,6 +81,7 @@ class RunDirectory:
         self.status_path = self.path / "status.json"
         self.log_path = self.path / "run.log"
         self._lock_fd: int | None = None
+        self._trajectory_fd: int | None = None  # the shared lock held on trajectory.h5 (hold_trajectory)
         # the old run moved aside by --overwrite, kept until the new run's first checkpoint
         self.replaced: Path | None = None
         self.created = False  # prepare_new made the directory itself
@@ -306,9 +307,46 @@ class RunDirectory:
         return False
 
     def unlock(self) -> None:
+        if self._trajectory_fd is not None:
+            os.close(self._trajectory_fd)
+            self._trajectory_fd = None
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # closing releases the flock
             self._lock_fd = None
+
+    def hold_trajectory(self) -> None:
+        """A shared lock on trajectory.h5, as HDF5 takes its locks (flock), held from the run's
+        first write to it until unlock(). Readers take the same shared lock (h5py's default,
+        ParaView) and open the file as before, but a program opening it to write (h5py's modes
+        "r+", "a" and "w": HDF5's exclusive lock) is refused while the run goes on; and a run
+        or resume finding it held so stops (TrajectoryBusy) instead of writing beside it: two
+        processes writing an HDF5 file corrupt it for good (a notebook's h5py.File(path, "r+"),
+        closed after a resume had appended frames, left the whole trajectory unreadable). Taken
+        again when the file at the path is another (a trajectory begun anew); nothing is held on
+        a file system without locks (run.log says so: `lock`)."""
+        if self._trajectory_fd is not None:
+            if _same_file(self._trajectory_fd, self.trajectory_path):
+                return
+            os.close(self._trajectory_fd)
+            self._trajectory_fd = None
+        try:
+            fd = os.open(self.trajectory_path, os.O_RDONLY)
+        except OSError:
+            return  # the write that follows reports what is wrong with the file
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in NO_LOCKS:
+                return
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise TrajectoryBusy(
+                    f'{self.trajectory_path}: open for writing in another program (h5py\'s mode "r+", '
+                    '"a" or "w", an HDF5 editor); two programs writing an HDF5 file corrupt it: close it '
+                    f'there (reading it, mode "r", is fine), then `sphere resume {self.path}`'
+                ) from None
+            raise OutputError(f"{self.trajectory_path}: cannot lock the trajectory ({exc})") from None
+        self._trajectory_fd = fd
 
     def logger(self) -> logging.Logger:
         log = logging.getLogger(f"sphere.run.{self.path.resolve()}")
@@ -425,7 +463,7 @@ class RunOutput:
         self.log = log
         self.fields = list(scene.case.output.fields)
         self.trajectory = Trajectory(
-            rundir.trajectory_path, self.fields, log, scene.state.particles.count > 0
+            rundir.trajectory_path, self.fields, log, scene.state.particles.count > 0, rundir.hold_trajectory
         )
         self.keep = scene.case.output.checkpoints.keep
         self.last_checkpoint: Path | None = None

@@ -71,8 +71,9 @@ HDF5_WRITE_ERRORS = (OSError, RuntimeError)
 
 def open_as_writer(path: Path, mode: str) -> h5py.File:
     """The trajectory opened by the run that writes it (in any mode). HDF5's lock is off: a
-    reader's lock (h5py's default) would otherwise make the writer fail, and the run directory's
-    lock already keeps any second writer out."""
+    reader's lock (h5py's default) would otherwise make the writer fail; the run directory's lock
+    keeps a second sphere out, and the shared lock the run holds on the file (RunDirectory.
+    hold_trajectory) any other program opening it to write."""
     return h5py.File(path, mode, locking=False)
 
 
@@ -81,7 +82,7 @@ def open_to_read(path: Path) -> h5py.File:
     the read does not fail where the lock cannot be taken (a file system without locks, NFS
     without its lock service; a file another program holds open for writing), which made a valid
     checkpoint look corrupt and a resume start from an older one. Checkpoints are never written
-    in place and the trajectory's writer takes no lock either, so the lock guarded nothing."""
+    in place and the trajectory's writer takes no exclusive lock, so the lock guarded nothing."""
     return h5py.File(path, "r", locking=False)
 
 
@@ -181,11 +182,14 @@ def frame_clock(f: h5py.File) -> h5py.Group:
 
 
 class Trajectory:
-    def __init__(self, path: Path, fields: list[str], log=None, particles: bool = True):
-        """`particles` False: a scene without particles, whose frames hold no particle field."""
+    def __init__(self, path: Path, fields: list[str], log=None, particles: bool = True, hold=None):
+        """`particles` False: a scene without particles, whose frames hold no particle field.
+        `hold`: called before each write to the file once it exists (the run directory's
+        hold_trajectory: raises TrajectoryBusy where another program has it open to write)."""
         self.path = path
         self.fields = ["position", *fields] if particles else []
         self.log = log  # where failed tries are reported (the run's log), or None
+        self.hold = hold if hold is not None else lambda: None
 
     def create(self, scene, case_text: str, resolved: dict, physics_hash: str, provenance: dict) -> None:
         state = scene.state
@@ -234,6 +238,7 @@ class Trajectory:
                     prov.attrs[key] = value
         except HDF5_WRITE_ERRORS as exc:
             raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
+        self.hold()
 
     def append(self, scene) -> None:
         state = scene.state
@@ -270,6 +275,7 @@ class Trajectory:
                 for series, values in shown:
                     _create_view(f, values, frame, xdmf_view(series, frame))
 
+        self.hold()
         self._with_retries(f"the frame of step {step}", "cannot append a frame", write)
 
     def append_observables(self, scene, observables: dict[str, tuple]) -> None:
@@ -289,6 +295,7 @@ class Trajectory:
                         _time_series(obs, name, value.shape, np.float64, unit)
                     _append(obs[name], clock.step, clock.time, value, once=True)
 
+        self.hold()
         self._with_retries(f"the observables of step {clock.step}", "cannot append observables", write)
 
     def _with_retries(self, what: str, failure: str, write) -> None:
@@ -323,6 +330,7 @@ class Trajectory:
         OutputError when it is damaged (readers holding it open are no obstacle)."""
         if not self.path.is_file() or self.path.stat().st_size == 0:
             raise TrajectoryLost(f"{self.path}: missing or empty")
+        self.hold()
         try:
             with open_as_writer(self.path, "a") as f:
                 _cut_frames(f, step)
@@ -339,6 +347,7 @@ class Trajectory:
 
     def record_resume(self, step: int, provenance: dict) -> None:
         """Keep the provenance of every resume (host, job id, threads may differ each time)."""
+        self.hold()
         try:
             require_free_space(self.path, 0)
             with open_as_writer(self.path, "a") as f:
@@ -353,6 +362,10 @@ class Trajectory:
 
 class TrajectoryLost(OutputError):
     """The trajectory file is missing or empty: a resume starts a new one."""
+
+
+class TrajectoryBusy(OutputError):
+    """Another program has the trajectory file open to write: sphere does not write beside it."""
 
 
 def complete_samples(group: h5py.Group) -> int:

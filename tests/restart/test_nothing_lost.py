@@ -348,7 +348,9 @@ def test_a_checkpoint_whose_lock_cannot_be_taken_is_read_as_it_is(whole, tmp_pat
     """HDF5 locks a file it opens (h5py's default); where that fails (NFS without its lock
     service, a program holding the file open for writing: here an exclusive lock held by this
     test), sphere read the newest checkpoint as corrupt and resumed from the one before. Its
-    reads take no lock: the checkpoint verifies, inspect lists it valid, and resume starts there."""
+    reads take no lock: the checkpoint verifies, inspect lists it valid (the trajectory locked
+    too), and resume starts there (the trajectory then free: one held open to write stops a
+    resume, test_a_trajectory_open_to_write_elsewhere_stops_a_resume_before_it_writes)."""
     run = tmp_path / "run"
     shutil.copytree(whole, run)
     newest = list_checkpoints(run / "checkpoints")[-1]
@@ -361,6 +363,7 @@ def test_a_checkpoint_whose_lock_cannot_be_taken_is_read_as_it_is(whole, tmp_pat
         assert read_checkpoint(newest).step == END
         listed = api.inspect(run)["checkpoints"]
         assert [(c["step"], c["valid"]) for c in listed][-1] == (END, True), listed
+        os.close(held.pop())  # the trajectory's
         api.resume(run, until=(END + 20) * read_checkpoint(newest).dt)
     finally:
         for fd in held:
@@ -666,3 +669,53 @@ def test_a_resume_that_stops_before_its_first_step_leaves_the_status_as_it_was(
             "the resume stopped before its first step: no GPU can be used here"
             in (run / "run.log").read_text()
         )
+
+
+def test_a_trajectory_open_to_write_elsewhere_stops_a_resume_before_it_writes(whole, tmp_path):
+    """A notebook holds trajectory.h5 open in h5py's "r+" (HDF5's exclusive lock): the resume
+    used to append its frames beside it, and the notebook's close then left the whole file
+    unreadable (addr overflow). Now the resume stops before its first step, exit 74, naming the
+    file and what to do, the file and status.json untouched; once the notebook closes it, the
+    resume goes on and the trajectory reads to its end."""
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    before = {name: (run / name).read_bytes() for name in ("trajectory.h5", "status.json")}
+    end = 2 * json.loads(before["status.json"])["time"]
+    with h5py.File(run / "trajectory.h5", "r+"):
+        result = _sphere("resume", run, "--until", repr(end), "-q", cwd=tmp_path)
+        assert result.returncode == 74, result.stderr
+        assert "open for writing in another program" in result.stderr and "Traceback" not in result.stderr
+    assert {name: (run / name).read_bytes() for name in before} == before
+    result = _sphere("resume", run, "--until", repr(end), "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    steps = frames(run)
+    assert max(steps) == json.loads((run / "status.json").read_text())["step"] > max(frames(whole))
+
+
+def test_a_program_opening_the_trajectory_to_write_is_refused_while_the_run_goes_on(tmp_path):
+    """While a run writes trajectory.h5, another program's h5py.File(path, "r+") fails at once
+    ("unable to lock file": the run holds a shared lock, as readers do) instead of opening the
+    file to write beside the run; the run ends with every frame, readable."""
+    probe = tmp_path / "probe.toml"
+    probe.write_text(textwrap.dedent(CASE.format(duration=1.0)))
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE.format(duration=repr(LONG * END * step_dt(probe)))))
+    run = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "sphere_cli.cli", "run", case, "-o", run, "-q"])
+    opening = f"import h5py; h5py.File({str(run / 'trajectory.h5')!r}, 'r+')"
+    writers = []
+    try:
+        while proc.poll() is None and not writers:
+            if list_checkpoints(run / "checkpoints"):  # the trajectory has its first frame
+                writers.append(
+                    subprocess.run(
+                        [sys.executable, "-c", opening], capture_output=True, text=True, timeout=60
+                    )
+                )
+        proc.wait(timeout=600)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0
+    assert writers, "the run ended before a writer could try to open its trajectory"
+    assert writers[0].returncode != 0 and "unable to lock file" in writers[0].stderr, writers[0].stderr
+    assert sorted(frames(run)) == list(range(0, LONG * END + 1, 50))
