@@ -37,7 +37,8 @@ from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
-from .trajectory import Trajectory, TrajectoryBusy, frame_clock, is_grid_field, open_as_writer
+from .provenance import provenance
+from .trajectory import Trajectory, TrajectoryBusy, TrajectoryLost, frame_clock, is_grid_field, open_as_writer
 from .xdmf import frame_grid, write_xdmf
 
 MARKER = ".sphere-run"
@@ -477,7 +478,11 @@ class RunOutput:
         """A frame, its observables if they follow the frames, and the sidecar: rewritten with
         `last` (the run's end frame) or when it is XDMF_REFRESH_SECONDS old."""
         self.appending = True  # an interruption now may leave a frame without its views
-        self.trajectory.append(scene)
+        try:
+            self.trajectory.append(scene)
+        except TrajectoryLost as lost:
+            self._trajectory_again(scene, lost)
+            self.trajectory.append(scene)
         self.appending = False
         self.xdmf_behind = True
         if last or self.xdmf_written is None or time.monotonic() - self.xdmf_written >= XDMF_REFRESH_SECONDS:
@@ -504,7 +509,21 @@ class RunOutput:
 
     def observe(self, scene) -> None:
         """One sample of the observables (on their schedule: computed only now)."""
-        self.trajectory.append_observables(scene, scene.observer.sample())
+        sample = scene.observer.sample()
+        try:
+            self.trajectory.append_observables(scene, sample)
+        except TrajectoryLost as lost:
+            self._trajectory_again(scene, lost)
+            self.trajectory.append_observables(scene, sample)
+
+    def _trajectory_again(self, scene, lost: TrajectoryLost) -> None:
+        """trajectory.h5 deleted or emptied while the run goes on: a new one begins at this step,
+        as `resume` begins one at its checkpoint, and run.log says so; the frames before went with
+        the file (the checkpoints keep the state). The run goes on: the file is its output, not
+        its state."""
+        self.log.warning("%s; a new trajectory file begins at step %d", lost, scene.state.clock.step)
+        self.trajectory.create(scene, self.case_text, self.resolved, self.physics_hash, provenance())
+        self.xdmf_grids = []
 
     def _refresh_xdmf(self, scene) -> None:
         """Add the grids of the frames not yet in the sidecar (all of them after a resume) and

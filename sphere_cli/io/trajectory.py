@@ -240,6 +240,16 @@ class Trajectory:
             raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
         self.hold()
 
+    def _still_there(self) -> None:
+        """TrajectoryLost if the file was deleted or emptied while the run writes it (a scratch
+        purge, a clean-up): HDF5's append mode would make a new, empty file and fail inside it."""
+        try:
+            present = self.path.stat().st_size > 0
+        except OSError:
+            present = False
+        if not present:
+            raise TrajectoryLost(f"{self.path}: deleted or emptied while the run writes it")
+
     def append(self, scene) -> None:
         state = scene.state
         step, time = state.clock.step, state.clock.time
@@ -275,6 +285,7 @@ class Trajectory:
                 for series, values in shown:
                     _create_view(f, values, frame, xdmf_view(series, frame))
 
+        self._still_there()
         self.hold()
         self._with_retries(f"the frame of step {step}", "cannot append a frame", write)
 
@@ -295,6 +306,7 @@ class Trajectory:
                         _time_series(obs, name, value.shape, np.float64, unit)
                     _append(obs[name], clock.step, clock.time, value, once=True)
 
+        self._still_there()
         self.hold()
         self._with_retries(f"the observables of step {clock.step}", "cannot append observables", write)
 

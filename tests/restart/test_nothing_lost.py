@@ -719,3 +719,36 @@ def test_a_program_opening_the_trajectory_to_write_is_refused_while_the_run_goes
     assert writers, "the run ended before a writer could try to open its trajectory"
     assert writers[0].returncode != 0 and "unable to lock file" in writers[0].stderr, writers[0].stderr
     assert sorted(frames(run)) == list(range(0, LONG * END + 1, 50))
+
+
+@pytest.mark.parametrize("how", ["deleted", "emptied"])
+def test_a_trajectory_deleted_during_the_run_begins_again_and_the_run_goes_on(case, whole, tmp_path, how):
+    """A scratch purge or a clean-up deletes (or empties) trajectory.h5 while the run writes it:
+    the next frame's append made a new empty HDF5 file and failed inside it (KeyError, a
+    traceback, exit 1). Now a new trajectory begins at that frame's step, run.log says so, and
+    the run ends as the uninterrupted one (the file is its output, not its state)."""
+    from sphere_cli.io.rundir import RunOutput
+
+    run = tmp_path / "run"
+    real = RunOutput.frame
+
+    def frame(self, scene, last=False):
+        if scene.state.clock.step == 250:
+            if how == "deleted":
+                self.rundir.trajectory_path.unlink()
+            else:
+                self.rundir.trajectory_path.write_bytes(b"")
+        return real(self, scene, last)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(RunOutput, "frame", frame)
+        api.run(case, run)
+    assert (
+        "deleted or emptied while the run writes it; a new trajectory file begins at step 250"
+        in (run / "run.log").read_text()
+    )
+    assert sorted(frames(run)) == list(range(250, END + 1, 50))
+    assert_same_state(final_state(whole), final_state(run))
+    kept = frames(whole)
+    for step, value in frames(run).items():
+        np.testing.assert_array_equal(value, kept[step])
