@@ -96,6 +96,28 @@ def test_simple_cubic_fraction_and_coordination(mu):
     assert obs["rattler_fraction"] == pytest.approx(1 / 48, rel=1e-12)
 
 
+def test_a_sample_too_thin_for_its_interior_says_so_once(caplog):
+    """One layer of the cubic lattice (2R thick between the walls) under interior_margin = 0.5
+    largest diameters (R) from the floor and the lid: no interior, so the interior fraction and
+    the coordination numbers are NaN, and the run is told why once, not a silent NaN a plot
+    shows as nothing."""
+    scene = _scene(16, 8 * R, 8 * R, 2 * R, BOTH)
+    _place(scene, _cubic()[::4])  # the 16 centres at z = R
+    with caplog.at_level("WARNING", logger="sphere.observables"):
+        first, second = _sample(scene), _sample(scene)
+    for obs in (first, second):
+        assert obs["packing_fraction"] == pytest.approx(math.pi / 6, rel=1e-12)
+        for name in (
+            "packing_fraction_interior",
+            "coordination",
+            "coordination_no_rattlers",
+            "rattler_fraction",
+        ):
+            assert math.isnan(obs[name]), name
+    warned = [r.getMessage() for r in caplog.records if r.name == "sphere.observables"]
+    assert len(warned) == 1 and "0.002 m thick along z" in warned[0] and "interior_margin = 0.5" in warned[0]
+
+
 def test_resting_column_stress_is_its_weight():
     """Three spheres resting in a column on the floor: the contact virial gives, with
     compression positive, sigma_zz V = sum_i m_i g (z_i - z_floor) (virial theorem for a body in

@@ -20,6 +20,8 @@ stages the index of the current one; with `energy_budget` among the quantities, 
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ...state import State
@@ -45,6 +47,25 @@ class Observer(Module):
         # sample height at the first sample of the run or of the current stage [m] (nan: not
         # measured yet), and that stage's index
         self.reference_height = np.array([np.nan, -1.0])
+        self.warned_no_interior = False
+
+    def _warn_if_no_interior(self, sample, interior) -> None:
+        """Once a run: a sample too thin for its interior (a shallow bed under the default margin
+        of 2 largest diameters at the floor and at the free surface) gives NaN for the interior
+        packing fraction and the coordination numbers, which a plot shows as nothing."""
+        if self.warned_no_interior or interior.volume > 0.0 or sample.volume == 0.0:
+            return
+        self.warned_no_interior = True
+        extent = sample.upper - sample.lower
+        thin = int(np.argmin(np.where(sample.bounded > 0, extent, np.inf)))
+        logging.getLogger("sphere.observables").warning(
+            "observables at t = %.6g s: the sample is %.4g m thick along %s, and "
+            "output.observables.interior_margin = %g largest diameters (%.4g m) from each of its "
+            "bounded faces leaves no interior: packing_fraction_interior, coordination, "
+            "coordination_no_rattlers and rattler_fraction are NaN while it is so; a smaller "
+            "interior_margin measures them",
+            self.scene.state.clock.time, extent[thin], "xyz"[thin], self.config.interior_margin, self.margin,
+        )  # fmt: skip
 
     @property
     def name(self) -> str:
@@ -68,6 +89,8 @@ class Observer(Module):
                 out[name] = (value, energy.UNITS[name])
         sample = structure.sample_region(state)
         interior = sample.shrunk(self.margin)
+        if groups & {"packing_fraction", "coordination"}:
+            self._warn_if_no_interior(sample, interior)
         if "packing_fraction" in groups:
             for name, value in structure.packing_fractions(state, sample, interior).items():
                 out[name] = (value, structure.UNITS[name])
