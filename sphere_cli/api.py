@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import time as wallclock
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from . import KERNEL_CACHE_NOTE, ranks
 from .config.load import LoadedCase, load_case, parse_case, physics_hash, resolved_dict, run_record
@@ -25,6 +22,7 @@ from .errors import (
 )
 from .io.atomic import write_text_atomic
 from .io.checkpoint import list_checkpoints, newest_valid_checkpoint, remove_stale_temporaries
+from .io.json_text import json_text
 from .io.progress import Progress
 from .io.provenance import provenance
 from .io.rundir import RunDirectory, RunOutput
@@ -469,11 +467,5 @@ def plot(run_dir: str | Path, out_dir: str | Path | None = None) -> list[Path]:
 
 
 def to_json(data) -> str:
-    def default(obj):
-        if isinstance(obj, np.generic):
-            return obj.item()
-        if isinstance(obj, Path):
-            return str(obj)
-        raise TypeError(type(obj))
-
-    return json.dumps(data, indent=2, default=default)
+    """Strict JSON (io/json_text.py: a value NaN or infinite is null)."""
+    return json_text(data)

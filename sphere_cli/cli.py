@@ -19,6 +19,7 @@ import typer
 from . import api
 from .errors import SphereError, StoppedEarly, UsageError
 from .io.console import guard_console
+from .io.json_text import json_text
 from .runtime import StopFlag, parse_wall_time, signal_handlers, usable_cores
 
 app = typer.Typer(
@@ -646,7 +647,7 @@ def sweep_summary(
     except SphereError as exc:
         _fail(exc)
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        typer.echo(json_text(rows))
         return
     states = {}
     for row in rows:

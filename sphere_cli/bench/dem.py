@@ -21,7 +21,6 @@ short runs and their best approach what an idle machine gives).
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 import statistics
@@ -33,6 +32,7 @@ import numpy as np
 
 from ..config.load import parse_case
 from ..io.checkpoint import FORMAT, newest_valid_checkpoint
+from ..io.json_text import json_text
 from ..runtime import shared_cores_note
 from ..scene.builder import build_scene
 from ..simulation import advance
@@ -293,7 +293,7 @@ def run_benchmark(
     if fixed_cost_sizes:
         results["fixed_cost"] = _fixed_cost(fixed_cost_sizes, log)
     results["sparse"] = _sparse_row(log)
-    (out_dir / "bench.json").write_text(json.dumps(results, indent=2))
+    (out_dir / "bench.json").write_text(json_text(results))
     log(f"results written to {out_dir / 'bench.json'}")
     return results
 

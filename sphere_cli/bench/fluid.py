@@ -24,7 +24,6 @@ iterations, time and residual.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import statistics
@@ -35,6 +34,7 @@ import numba
 import numpy as np
 
 from ..config.load import parse_case
+from ..io.json_text import json_text
 from ..physics.fluid.poisson import PoissonSolver
 from ..scene.builder import build_scene
 from . import Stopwatch, machine, timed_steps
@@ -244,7 +244,7 @@ def run_fluid_benchmark(
     numba.set_num_threads(max_threads)
     results["jacobi_limits"] = {"max_iterations": jacobi_max_iterations, "seconds": jacobi_seconds}
     results["load_average_after"] = list(os.getloadavg())
-    (out_dir / "bench-fluid.json").write_text(json.dumps(results, indent=2))
+    (out_dir / "bench-fluid.json").write_text(json_text(results))
     log(
         f"load average {results['load_average_after'][0]:.2f} at the end; "
         f"results written to {out_dir / 'bench-fluid.json'}"

@@ -22,13 +22,13 @@ porosity and mean particle velocity on the device and the pore pressure's step t
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 import time
 from pathlib import Path
 
 from ..config.load import parse_case
+from ..io.json_text import json_text
 from ..scene.builder import build_scene
 from ..simulation import advance
 from . import machine
@@ -119,7 +119,7 @@ def run_gpu_benchmark(
                 f"{copy * 1e3:.1f} ms (once per {steps} steps: "
                 f"{row['particle_steps_per_second_with_output'] / 1e6:.1f} M particle-steps/s); {shares}"
             )
-    (out_dir / "bench-gpu.json").write_text(json.dumps(results, indent=2))
+    (out_dir / "bench-gpu.json").write_text(json_text(results))
     log(f"results written to {out_dir / 'bench-gpu.json'}")
     return results
 

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from ..errors import MissingInputError
+from ..io.json_text import json_text
 from . import machine
 from .dem import settled_scene
 
@@ -125,5 +126,5 @@ def run_ranks_benchmark(
                 f"({min(speedups):.2f}-{max(speedups):.2f}, round by round); the state to rank 0 for "
                 f"an output: {row['gather_seconds'] * 1e3:.0f} ms"
             )
-    (out_dir / "ranks.json").write_text(json.dumps(results, indent=2) + "\n")
+    (out_dir / "ranks.json").write_text(json_text(results) + "\n")
     return results

@@ -37,6 +37,7 @@ from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .atomic import write_text_atomic
 from .checkpoint import NAME as CHECKPOINT_NAME
 from .checkpoint import remove_stale_temporaries, write_checkpoint
+from .json_text import json_text
 from .provenance import provenance
 from .trajectory import Trajectory, TrajectoryBusy, TrajectoryLost, frame_clock, is_grid_field, open_as_writer
 from .xdmf import frame_grid, write_xdmf
@@ -376,7 +377,7 @@ class RunDirectory:
     def write_status(self, info: dict) -> None:
         info = {**info, "ranks": ranks.count(), "updated": datetime.now(UTC).isoformat(timespec="seconds")}
         try:
-            write_text_atomic(self.status_path, json.dumps(info, indent=2) + "\n")
+            write_text_atomic(self.status_path, json_text(info) + "\n")
         except OSError as exc:
             raise OutputError(f"{self.status_path}: cannot write status ({exc})") from None
 

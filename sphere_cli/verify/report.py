@@ -4,26 +4,20 @@ slopes, error vs wall time) when matplotlib is installed (`pip install sphere-cl
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from ..io.json_text import json_text
+
 PLOT_HINT = "plots need matplotlib: pip install 'sphere-cli[plot]' (tables and verify.json are written)"
 SCHEMA = "sphere-verify/1"
 
 
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"cannot write {type(obj).__name__} to JSON")
-
-
 def write_json(report: dict, path: Path) -> None:
-    path.write_text(json.dumps(report, indent=2, default=_json_default) + "\n", encoding="utf-8")
+    """verify.json, strict JSON (a value NaN or infinite is null: io/json_text.py)."""
+    path.write_text(json_text(report) + "\n", encoding="utf-8")
 
 
 def fmt(value, digits: int = 3) -> str:

@@ -129,3 +129,26 @@ def test_bad_observables_keys(tmp_path, new, key, fragment):
     marker = new.split(" =")[0]
     result = sphere_inproc("validate", case)
     assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker + ' =')}:", fragment)
+
+
+def test_inspect_json_is_strict_json_where_an_observable_has_no_value(tmp_path):
+    """An interior margin wider than the sample leaves the interior observables NaN (the run
+    warns once): `sphere inspect --json` wrote them as the bare token NaN, which strict JSON
+    parsers (JavaScript's JSON.parse, Go's, serde_json) refuse for the whole report; they are
+    null now, and status.json too is strict JSON."""
+    import json
+
+    (tmp_path / "case.toml").write_text(OBSERVED.replace("layers = 4", "layers = 4\ninterior_margin = 100.0"))
+    api.run(tmp_path / "case.toml", tmp_path / "run")
+    assert "leaves no interior" in (tmp_path / "run" / "run.log").read_text()
+    result = sphere_inproc("inspect", tmp_path / "run", "--json")
+    assert result.code == 0, result.stderr
+
+    def refuse(token):
+        raise ValueError(f"{token} is not JSON")
+
+    shown = json.loads(result.stdout, parse_constant=refuse)
+    last = shown["trajectory"]["last_observables"]
+    assert last["coordination"] is None and last["packing_fraction_interior"] is None
+    assert last["packing_fraction"] > 0.0
+    json.loads((tmp_path / "run" / "status.json").read_text(), parse_constant=refuse)
