@@ -411,12 +411,18 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
 
 def check_placement(loaded: LoadedCase) -> None:
     """What `sphere validate` can check of the placement without building the scene: a lattice
-    that cannot hold the particles (their radii drawn as the build draws them, from the seed).
-    Random insertion is only known by doing it, and placement files are read by `run`."""
+    that cannot hold the particles (their radii drawn as the build draws them, from the seed);
+    a placement file read as the build reads it (there, readable, with known columns and finite
+    values, its particles inside the box and the box wide enough for them), so that a batch job
+    validated before it is queued does not fail at its start for its input. Random insertion is
+    only known by doing it, and the particles' overlaps are found by `run`."""
     spec = loaded.case.particles
     if isinstance(spec.placement, LatticePlacement) and loaded.case.has_particles:
         radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
         lattice_sites(spec.placement, loaded.case, radius)
+    if isinstance(spec.placement, FilePlacement):
+        pos, radius, *_ = _file_particles(loaded, np.random.default_rng(spec.seed))
+        _check_inside(loaded, _box(loaded.case), pos, radius)
 
 
 def _initial_particles(loaded: LoadedCase, rng):
@@ -424,16 +430,7 @@ def _initial_particles(loaded: LoadedCase, rng):
     spec = loaded.case.particles
     velocity = angular_velocity = file = None
     if isinstance(spec.placement, FilePlacement):
-        file = read_particle_file(spec.placement, loaded.base_dir)
-        pos, radius, velocity, angular_velocity = file.pos, file.radius, file.velocity, file.angular_velocity
-        if radius is None:
-            radius = draw_radii(spec.radius, pos.shape[0], rng)
-        # only now are the particles known: the case alone was checked without them
-        loc = ("particles", "placement", "path")
-        problems = box_problems(loaded.case, 2.0 * float(radius.max()))
-        problems += memory_problems(loaded.case, radius.size, float(radius.max()), loc)
-        if problems:
-            raise loaded.error(*problems[0])
+        pos, radius, velocity, angular_velocity, file = _file_particles(loaded, rng)
     else:
         radius = draw_radii(spec.radius, spec.count, rng)
         if isinstance(spec.placement, LatticePlacement):
@@ -453,6 +450,21 @@ def _initial_particles(loaded: LoadedCase, rng):
         np.ascontiguousarray(angular_velocity, dtype=np.float64),
         file,
     )
+
+
+def _file_particles(loaded: LoadedCase, rng):
+    """(pos, radius, velocity, angular velocity, the file) of a placement file, radii drawn
+    where it has none, checked against the box and the memory they need."""
+    spec = loaded.case.particles
+    file = read_particle_file(spec.placement, loaded.base_dir)
+    radius = file.radius if file.radius is not None else draw_radii(spec.radius, file.pos.shape[0], rng)
+    # only now are the particles known: the case alone was checked without them
+    loc = ("particles", "placement", "path")
+    problems = box_problems(loaded.case, 2.0 * float(radius.max()))
+    problems += memory_problems(loaded.case, radius.size, float(radius.max()), loc)
+    if problems:
+        raise loaded.error(*problems[0])
+    return file.pos, radius, file.velocity, file.angular_velocity, file
 
 
 def _file_materials(loaded: LoadedCase, tables: ContactTables, file) -> np.ndarray | None:

@@ -96,6 +96,8 @@ class ParticleFile:
 
 
 VECTORS = {"velocity": ("vx", "vy", "vz"), "angular_velocity": ("wx", "wy", "wz")}
+# the columns a CSV particle file may have (any other is refused: its data would be dropped)
+CSV_COLUMNS = ("x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz", "material", "group", "fixed")
 FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
 
 
@@ -159,6 +161,19 @@ def _read_csv(path: Path) -> ParticleFile:
             f"{path}: the CSV header must name columns x, y, z (and optionally r, vx, vy, vz, wx, wy, wz, "
             f"material, group, fixed); got {tuple(names)}"
         )
+    for name in names:  # a column read by no one (radius for r, an id) would drop its data silently
+        if name not in CSV_COLUMNS:
+            hint = " (the radius column is r)" if name.lower() in ("radius", "radii", "rad") else ""
+            raise CaseError(
+                f"{path}:{rows[0][0]}: unknown column {name!r}{hint}; the columns are x, y, z and "
+                "optionally r, vx, vy, vz, wx, wy, wz, material, group, fixed"
+            )
+    for triple in VECTORS.values():
+        given = [c for c in triple if c in names]
+        if 0 < len(given) < 3:
+            raise CaseError(
+                f"{path}:{rows[0][0]}: columns {', '.join(given)} without the rest of {', '.join(triple)}"
+            )
     rows = rows[1:]
     for number, fields in rows:
         if len(fields) != len(names):

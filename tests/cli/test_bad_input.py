@@ -356,15 +356,16 @@ def test_initial_overlap_within_tolerance_runs(tmp_path):
 
 def test_particle_outside_the_box_from_file(tmp_path):
     _file_case(tmp_path, "x,y,z,r\n0.005,0.005,0.005,0.001\n0.02,0.005,0.005,0.001\n")
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(
-        result,
-        65,
-        "particles.placement",
-        f"case.toml:{line_of(FROM_FILE, 'placement =')}:",
-        "particle 1",
-        "outside the box along x",
-    )
+    for command in (("run", "case.toml", "-o", "out", "-q"), ("validate", "case.toml")):
+        result = sphere_inproc(*command, cwd=tmp_path)
+        assert_clean_error(
+            result,
+            65,
+            "particles.placement",
+            f"case.toml:{line_of(FROM_FILE, 'placement =')}:",
+            "particle 1",
+            "outside the box along x",
+        )
 
 
 def test_missing_placement_file(tmp_path):
@@ -379,6 +380,9 @@ def test_missing_placement_file(tmp_path):
         "not found",
     )
     assert not (tmp_path / "out").exists()
+    # validate, before a batch job is queued, finds it missing too (it read no placement file)
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert_clean_error(result, 66, "particles.placement.path", "spheres.csv", "not found")
 
 
 @pytest.mark.parametrize(
@@ -395,6 +399,15 @@ def test_missing_placement_file(tmp_path):
         ("x,y,z,r\n0.005,0.005,0.005,-0.001\n", "radii must be > 0"),
         ("", "must name columns x, y, z"),  # empty file
         (b"x,y,z,r\n\xff\xfe,0,0,0\n", "not a readable CSV"),  # not UTF-8
+        # a column no one reads dropped its data without a word (every radius the case's default)
+        (
+            "x,y,z,radius\n0.005,0.005,0.005,0.001\n",
+            "spheres.csv:1: unknown column 'radius' (the radius column is r)",
+        ),
+        (
+            "x,y,z,r,vx,vz\n0.005,0.005,0.005,0.001,1,0\n",
+            "spheres.csv:1: columns vx, vz without the rest of vx, vy, vz",
+        ),
     ],
     ids=[
         "ragged-row",
@@ -405,16 +418,21 @@ def test_missing_placement_file(tmp_path):
         "negative-radius",
         "empty-file",
         "not-utf8",
+        "unknown-column",
+        "part-of-a-vector",
     ],
 )
 def test_malformed_csv_names_the_file(tmp_path, csv, fragment):
+    """`run` refuses the file, and so does `validate` (which read no placement file: a batch job
+    validated before it was queued failed at its start)."""
     _file_case(tmp_path, None)
     if isinstance(csv, bytes):
         (tmp_path / "spheres.csv").write_bytes(csv)
     else:
         (tmp_path / "spheres.csv").write_text(csv)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "spheres.csv", fragment)
+    for command in (("run", "case.toml", "-o", "out", "-q"), ("validate", "case.toml")):
+        result = sphere_inproc(*command, cwd=tmp_path)
+        assert_clean_error(result, 65, "spheres.csv", fragment)
 
 
 def test_placement_hdf5_that_is_not_hdf5(tmp_path):
