@@ -111,8 +111,9 @@ def load_case(path: str | Path) -> LoadedCase:
             "(the particles of a large scene come from particles.placement.path)"
         )
     try:
-        # decoded as read_text would, universal newlines included
-        text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8").read()
+        # decoded as read_text would, universal newlines included; a byte-order mark (Windows
+        # editors write one) is dropped, as TOML readers do
+        text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig").read()
     except UnicodeDecodeError as exc:
         raise CaseError(f"{path}: a case file must be UTF-8 text ({exc})") from None
     return parse_case(text, path)

@@ -140,9 +140,13 @@ class GuardedStream:
         except (OSError, ValueError):
             pass  # no descriptor of its own (a test's capture): the flag alone keeps it quiet
         reason = type(exc).__name__ if not str(exc) else f"{type(exc).__name__}: {exc}"
-        logging.getLogger("sphere").warning(
-            "%s is gone (%s): nothing more is printed there; run.log keeps the record", self._name, reason
-        )
+        log = logging.getLogger("sphere")
+        # said where a log keeps it (a run's run.log); a command without one (`sphere validate |
+        # head`, `sphere schema | less` quit early) ends as other tools do, without a word
+        if log.hasHandlers():
+            log.warning(
+                "%s is gone (%s): nothing more is printed there; run.log keeps the record", self._name, reason
+            )
 
 
 def guard_console() -> None:

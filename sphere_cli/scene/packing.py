@@ -117,7 +117,7 @@ def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
 
             with open_to_read(path) as f:
                 return int(f["position"].shape[0])
-        with path.open(encoding="utf-8") as lines:
+        with path.open(encoding="utf-8-sig") as lines:
             return max(0, sum(1 for line in lines if _content(line).strip()) - 1)  # the header
     except (OSError, ValueError, KeyError, TypeError, IndexError):
         return None
@@ -144,7 +144,7 @@ def _read_csv(path: Path) -> ParticleFile:
     """Comma-separated, a header of column names first; blank lines and text after # are skipped.
     A field that is not what its column needs is refused by its line and column."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # Excel's "CSV UTF-8" begins with a byte-order mark
     except (ValueError, OSError) as exc:  # UnicodeDecodeError is a ValueError
         raise CaseError(f"{path}: not a readable CSV particle file ({exc})") from None
     rows = [

@@ -287,6 +287,18 @@ def test_case_file_not_utf8(tmp_path):
     assert_clean_error(sphere_inproc("validate", case), 65, "case.toml", "UTF-8")
 
 
+def test_a_byte_order_mark_is_read_past(tmp_path):
+    """Windows editors and Excel's "CSV UTF-8" begin a file with a byte-order mark: the case
+    was "not valid TOML: Invalid statement (column 1)" and the placement file's header began
+    with "\ufeffx", "must name columns x, y, z"; both read as without it now."""
+    text = 'title = "caf\u00e9"\n' + FROM_FILE
+    (tmp_path / "case.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    (tmp_path / "spheres.csv").write_bytes(b"\xef\xbb\xbfx,y,z,r\n0.005,0.005,0.005,0.001\n")
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    assert 'title = "caf\u00e9"' in result.stdout
+
+
 # --- errors found while building the scene --------------------------------------------------------
 
 

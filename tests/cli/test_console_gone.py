@@ -38,6 +38,19 @@ def _run(case_dir, out: str, closed: bool) -> int:
     return proc.returncode
 
 
+def test_a_command_whose_reader_leaves_early_ends_without_a_word():
+    """`sphere schema | head -1`: the reader leaves after a line; a command without a run log
+    ends as other tools do, saying nothing (it said that run.log kept the record)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sphere_cli.cli", "schema"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    assert proc.stdout.readline().strip() == b"{"
+    proc.stdout.close()
+    stderr = proc.stderr.read()
+    assert proc.wait(timeout=60) == 0
+    assert stderr == b"", stderr
+
+
 def test_a_run_whose_console_is_gone_ends_as_one_with_its_console(tmp_path):
     (tmp_path / "case.toml").write_text(TINY)
     assert _run(tmp_path, "gone", closed=True) == 0
