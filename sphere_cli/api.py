@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import sys
 import time as wallclock
 from contextlib import contextmanager
@@ -130,6 +131,7 @@ def _drive(
             f"where the run is, t = {clock.time:.6g} s (step {start_step}): nothing is stepped; give a "
             "later --until",
         )
+    _warn(log, _disk_note(rundir, output, scene, loop.frames.every_steps, end_step - start_step))
     log.info("threads: %s", _threads_line(scene))
     gpu = getattr(scene.step.compiled, "device_name", None)
     if gpu is not None:
@@ -188,6 +190,38 @@ def _drive(
     finally:
         progress.close()
         rundir.close_logger()
+
+
+def _disk_note(
+    rundir: RunDirectory, output: RunOutput, scene, every_steps: int | None, steps: int
+) -> str | None:
+    """A warning where the frames still to write will not fit the run directory's file system as
+    it is now (a frame schedule meant in ms given in us, a file system nearly full): said at the
+    start, not found hours later when the run stops on a full disk (exit 74)."""
+    if every_steps is None or steps <= 0:
+        return None
+    frames = steps // every_steps + 1
+    need = frames * output.trajectory.frame_bytes(scene)
+    try:
+        free = shutil.disk_usage(rundir.path).free
+    except OSError:
+        return None
+    if need <= free:
+        return None
+    return (
+        f"the {frames} frames still to write (output.frames: every {every_steps} steps) take about "
+        f"{_size(need)} and {rundir.path}'s file system has {_size(free)} free: the "
+        "run will stop when it is full (exit 74, its checkpoints kept); fewer frames (output.frames) "
+        "or fields (output.fields), or more room, let it finish"
+    )
+
+
+def _size(nbytes: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if nbytes < 1024.0:
+            return f"{nbytes:.3g} {unit}"
+        nbytes /= 1024.0
+    return f"{nbytes:.3g} TiB"
 
 
 def _record_failure(rundir: RunDirectory, clock, error: str, exit_code: int | None = None) -> None:

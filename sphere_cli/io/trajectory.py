@@ -250,12 +250,19 @@ class Trajectory:
         if not present:
             raise TrajectoryLost(f"{self.path}: deleted or emptied while the run writes it")
 
+    def frame_bytes(self, scene, fluid: dict | None = None) -> int:
+        """The bytes of one frame's values: the particles' fields and the fluid's (`fluid`:
+        its output_fields, where already made)."""
+        if fluid is None:
+            fluid = scene.fluid.output_fields(scene.state) if scene.fluid is not None else {}
+        particles = len(self.fields) * scene.state.particles.pos.nbytes
+        return particles + sum(np.asarray(value).nbytes for value, _ in fluid.values())
+
     def append(self, scene) -> None:
         state = scene.state
         step, time = state.clock.step, state.clock.time
         fluid = scene.fluid.output_fields(state) if scene.fluid is not None else {}
-        frame_bytes = len(self.fields) * state.particles.pos.nbytes
-        frame_bytes += sum(np.asarray(value).nbytes for value, _ in fluid.values())
+        frame_bytes = self.frame_bytes(scene, fluid)
 
         def write(retry: bool) -> None:
             require_free_space(self.path, frame_bytes)

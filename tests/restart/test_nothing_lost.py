@@ -594,6 +594,8 @@ def test_a_full_disk_stops_cleanly_and_resumes_bitwise(tmp_path, small_disk, sch
     run = small_disk / "run"
     result = _sphere_without_waits("run", case, "-o", run, "-q", cwd=tmp_path, unseen=schedule == "unseen")
     _clean_error(result, 74, "No space left on device", f"{len(trajectory.WRITE_RETRY_DELAYS) + 1} tries")
+    if schedule != "checkpoints":  # frames that cannot fit are said at the start
+        assert "sphere: warning: the " in result.stderr and "frames still to write" in result.stderr
     # a batch job's monitor reads that it failed, where and why (status.json is small: it fits)
     status = json.loads((run / "status.json").read_text())
     assert status["state"] == "failed" and "No space left on device" in status["error"], status
