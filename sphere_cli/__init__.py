@@ -3,12 +3,31 @@
 import hashlib
 import os
 import stat
+import sys
 import tempfile
 from pathlib import Path
 
-import numba
 
-from . import compile_lock
+def _refuse_bad_thread_count() -> None:
+    """NUMBA_NUM_THREADS=0 (a batch script's arithmetic, an empty allocation) makes `import
+    numba` itself fail with a traceback, so no command could say what is wrong: said here, before
+    Numba is imported, with exit 2 (a setting of the command's environment, like a bad option).
+    A value that is no number Numba ignores with a warning and uses every core."""
+    value = os.environ.get("NUMBA_NUM_THREADS", "").strip()
+    if value and value.lstrip("+-").isdigit() and int(value) < 1:
+        print(
+            f"sphere: error: NUMBA_NUM_THREADS = {value!r}: expected a whole number of threads of at "
+            "least 1; unset it to use every core this process may run on",
+            file=sys.stderr,
+        )
+        raise SystemExit(2)
+
+
+_refuse_bad_thread_count()
+
+import numba  # noqa: E402  (after the check above: with NUMBA_NUM_THREADS=0 it fails to import)
+
+from . import compile_lock  # noqa: E402
 
 # OpenMP first: measured faster than TBB and workqueue at 2 threads (docs/performance.md).
 # An explicit NUMBA_THREADING_LAYER in the environment still wins.

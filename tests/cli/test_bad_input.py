@@ -8,6 +8,7 @@ run the real CLI in a subprocess.
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -749,3 +750,23 @@ def test_initial_angular_velocity_from_the_case_and_from_a_file(tmp_path):
     _file_case(tmp_path, "x,y,z,r,wx,wy,wz\n0.007,0.005,0.005,0.001,0,1,nan\n", text)
     result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
     assert_clean_error(result, 65, "spheres.csv:2: column wz (column 7) = 'nan': not a finite number")
+
+
+@pytest.mark.parametrize("value", ["0", "-2"])
+def test_a_thread_count_of_zero_in_the_environment_is_refused_by_name(tmp_path, value):
+    """NUMBA_NUM_THREADS=0 (a batch script's arithmetic on an empty allocation) made `import
+    numba` fail: every command ended in a traceback. It is refused by name, exit 2."""
+    (tmp_path / "case.toml").write_text(TINY)
+    result = subprocess.run(
+        [sys.executable, "-m", "sphere_cli.cli", "validate", "case.toml"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "NUMBA_NUM_THREADS": value},
+    )
+    assert result.returncode == 2, result.stderr
+    assert result.stderr == (
+        f"sphere: error: NUMBA_NUM_THREADS = '{value}': expected a whole number of threads of at least 1; "
+        "unset it to use every core this process may run on\n"
+    )
