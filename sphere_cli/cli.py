@@ -257,10 +257,30 @@ OUTPUT_OPTION = typer.Option(
 
 
 def _numbers(text: str, option: str = "--threads") -> tuple[int, ...]:
+    """Counts (particles, threads, ranks, cells): comma-separated whole numbers of at least 1
+    (0 divided by zero in the rates, or ran as one thread or rank under another name)."""
     try:
-        return tuple(int(x) for x in text.split(",") if x.strip())
+        counts = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise typer.BadParameter(f"{option} {text!r}: expected comma-separated integers") from None
+    if any(count < 1 for count in counts):
+        raise typer.BadParameter(f"{option} {text!r}: expected counts of at least 1")
+    return counts
+
+
+def _thread_counts(text: str) -> tuple[int, ...]:
+    """--threads: counts of at least 1 and at most what Numba may start here (a larger one was
+    skipped without a word by some benchmarks and ended others in a traceback)."""
+    import numba
+
+    counts = _numbers(text)
+    most = numba.config.NUMBA_NUM_THREADS
+    if any(count > most for count in counts):
+        raise typer.BadParameter(
+            f"--threads {text!r}: at most {most} here (NUMBA_NUM_THREADS, by default the cores this "
+            "process may run on)"
+        )
+    return counts
 
 
 def _lids(walls: str) -> tuple[str, ...]:
@@ -302,7 +322,7 @@ def bench_dem(
     fixed = _numbers(fixed_cost_sizes, "--fixed-cost-sizes")
     if len(fixed) == 1:
         raise typer.BadParameter(f"--fixed-cost-sizes {fixed_cost_sizes!r}: a line needs two sizes or more")
-    counts = _numbers(sizes, "--sizes"), _numbers(threads)
+    counts = _numbers(sizes, "--sizes"), _thread_counts(threads)
     _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output, fixed_cost_sizes=fixed))
 
 
@@ -395,7 +415,7 @@ def bench_fluid(
     time per coupled step, pressure-solve time of the fast solver and of Jacobi."""
     from .bench.fluid import run_fluid_benchmark
 
-    counts = _numbers(threads)
+    counts = _thread_counts(threads)
     _bench(
         lambda: run_fluid_benchmark(
             cells, particles, counts, steps, jacobi_max_iterations, jacobi_seconds, output
@@ -414,7 +434,7 @@ def bench_darcy(
     """The Darcy model coupled to the DEM: one coupled step and its parts, with the solve's iterations."""
     from .bench.darcy import run_darcy_benchmark
 
-    counts = _numbers(threads)
+    counts = _thread_counts(threads)
     _bench(lambda: run_darcy_benchmark(cells, particles, counts, steps, tolerance))
 
 
@@ -427,7 +447,7 @@ def bench_vans1d(
     """The 1D VANS bedload case: wall time per simulated second and the fluid's share of it."""
     from .bench.vans1d import run_vans1d_benchmark
 
-    counts = _numbers(threads)
+    counts = _thread_counts(threads)
     _bench(lambda: run_vans1d_benchmark(case, counts, simulated))
 
 
@@ -456,7 +476,7 @@ def bench_grid(
     """The fluids' shared plumbing: the pressure solvers (iterations, time) or the porosity estimate."""
     from .bench.grid import METHODS, porosity_benchmark, solver_benchmark
 
-    counts = _numbers(threads)
+    counts = _thread_counts(threads)
     if porosity:
         _bench(lambda: porosity_benchmark(counts))
         return

@@ -47,6 +47,21 @@ def test_grid_bench_refuses_an_unknown_solver():
     assert_clean_error(result, 2, "--methods", "pcg-multigrid, pcg-jacobi, jacobi")
 
 
+def test_counts_below_one_and_threads_beyond_the_machine_are_refused_by_option():
+    """--sizes 0 divided by zero, --threads 0 or more threads than Numba may start ended in a
+    traceback (or were skipped without a word), --ranks 0 ran one rank under the name 0."""
+    most = numba.config.NUMBA_NUM_THREADS
+    for command, option, fragment in (
+        (("dem", "--sizes", "0"), "--sizes", "at least 1"),
+        (("dem", "--threads", "0"), "--threads", "at least 1"),
+        (("ranks", "--ranks", "1,0"), "--ranks", "at least 1"),
+        (("darcy", "--threads", str(most + 1)), "--threads", f"at most {most} here"),
+        (("dem", "--threads", f"1,{most + 1}"), "--threads", f"at most {most} here"),
+        (("vans1d", "--threads", str(most + 1)), "--threads", f"at most {most} here"),
+    ):
+        assert_clean_error(sphere_inproc("bench", *command), 2, option, fragment)
+
+
 def test_vans1d_bench_reports_time_per_simulated_second_and_shares():
     result = sphere_inproc("bench", "vans1d", "--case", BEDLOAD, "--threads", "1", "--time", "0.002")
     assert result.code == 0, result.stdout + result.stderr
