@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import tempfile
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
@@ -17,7 +18,7 @@ from pathlib import Path
 import typer
 
 from . import api
-from .errors import SphereError, StoppedEarly, UsageError
+from .errors import OutputError, SphereError, StoppedEarly, UsageError
 from .io.console import guard_console
 from .io.json_text import json_text
 from .runtime import StopFlag, parse_wall_time, signal_handlers, usable_cores
@@ -291,11 +292,25 @@ def _lids(walls: str) -> tuple[str, ...]:
     return lids
 
 
-def _bench(run) -> None:
+def _bench(run, output: Path | None = None) -> None:
+    """Run a benchmark; one that writes its results into `output` first makes sure it can (a
+    folder that cannot be made or written ended the benchmark in a traceback, after its runs)."""
     try:
+        if output is not None:
+            _results_folder(output)
         run()
     except SphereError as exc:
         _fail(exc)
+
+
+def _results_folder(output: Path) -> None:
+    """Make the folder results go to, and check that a file can be written there (OutputError)."""
+    try:
+        output.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=output):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{output}: cannot write the results there ({exc.strerror or exc})") from None
 
 
 @bench_app.command("dem")
@@ -323,7 +338,7 @@ def bench_dem(
     if len(fixed) == 1:
         raise typer.BadParameter(f"--fixed-cost-sizes {fixed_cost_sizes!r}: a line needs two sizes or more")
     counts = _numbers(sizes, "--sizes"), _thread_counts(threads)
-    _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output, fixed_cost_sizes=fixed))
+    _bench(lambda: run_benchmark(*counts, steps, repeats, chosen, output, fixed_cost_sizes=fixed), output)
 
 
 @bench_app.command("gpu")
@@ -356,7 +371,9 @@ def bench_gpu(
     if not media or not set(media) <= {"none", "navier-stokes", "darcy"}:
         raise typer.BadParameter(f"--fluids {fluids!r}: expected none, navier-stokes and/or darcy")
     counts = _numbers(sizes, "--sizes")
-    _bench(lambda: run_gpu_benchmark(counts, steps, repeats, chosen, output, walls=lids, fluids=media))
+    _bench(
+        lambda: run_gpu_benchmark(counts, steps, repeats, chosen, output, walls=lids, fluids=media), output
+    )
 
 
 @bench_app.command("ranks")
@@ -386,7 +403,7 @@ def bench_ranks(
 
     counts, lids = _numbers(rank_counts, "--ranks"), _lids(walls)
     sized = _numbers(sizes, "--sizes")
-    _bench(lambda: run_ranks_benchmark(sized, counts, steps, repeats, rounds, output, walls=lids))
+    _bench(lambda: run_ranks_benchmark(sized, counts, steps, repeats, rounds, output, walls=lids), output)
 
 
 @bench_app.command("ranks-member", hidden=True)
@@ -419,7 +436,8 @@ def bench_fluid(
     _bench(
         lambda: run_fluid_benchmark(
             cells, particles, counts, steps, jacobi_max_iterations, jacobi_seconds, output
-        )
+        ),
+        output,
     )
 
 
@@ -510,6 +528,7 @@ def verify(
             typer.echo(f"{name:36s} {title}")
         return
     try:
+        _results_folder(output)
         report = run_verification(
             names, quick=quick, out_dir=output, repeats=repeats, log=lambda msg: typer.echo(msg, err=True)
         )

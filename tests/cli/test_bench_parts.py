@@ -47,6 +47,17 @@ def test_grid_bench_refuses_an_unknown_solver():
     assert_clean_error(result, 2, "--methods", "pcg-multigrid, pcg-jacobi, jacobi")
 
 
+def test_a_results_folder_that_cannot_be_written_is_refused_before_the_runs(tmp_path):
+    """`-o` under a plain file: sphere verify ran every case and then ended in a traceback
+    (FileNotFoundError) when it wrote verify.json; the benchmarks likewise. Now exit 74 at once,
+    naming the folder."""
+    (tmp_path / "file").write_text("")
+    folder = tmp_path / "file" / "results"
+    for command in (("verify", "a4-free-fall", "--quick"), ("bench", "dem", "--sizes", "100")):
+        result = sphere_inproc(*command, "-o", folder)
+        assert_clean_error(result, 74, str(folder), "cannot write the results there")
+
+
 def test_counts_below_one_and_threads_beyond_the_machine_are_refused_by_option():
     """--sizes 0 divided by zero, --threads 0 or more threads than Numba may start ended in a
     traceback (or were skipped without a word), --ranks 0 ran one rank under the name 0."""
