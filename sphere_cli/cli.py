@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
-import tempfile
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
@@ -304,13 +304,18 @@ def _bench(run, output: Path | None = None) -> None:
 
 
 def _results_folder(output: Path) -> None:
-    """Make the folder results go to, and check that a file can be written there (OutputError)."""
-    try:
-        output.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=output):
-            pass
-    except OSError as exc:
-        raise OutputError(f"{output}: cannot write the results there ({exc.strerror or exc})") from None
+    """OutputError unless the folder results go to can be written, or made where it is missing
+    (nothing is made here: a command refused for another reason leaves no folder behind)."""
+    existing = output
+    while not existing.exists() and existing.parent != existing:
+        existing = existing.parent
+    if not existing.is_dir():
+        why = f"{existing} is not a folder"
+    elif not os.access(existing, os.W_OK | os.X_OK):
+        why = f"{existing} cannot be written"
+    else:
+        return
+    raise OutputError(f"{output}: cannot write the results there ({why})")
 
 
 @bench_app.command("dem")
@@ -534,6 +539,8 @@ def verify(
         )
     except SphereError as exc:
         _fail(exc)
+    except OSError as exc:  # the folder failed between the check and the writes
+        _fail(OutputError(f"{output}: cannot write the results there ({exc.strerror or exc})"))
     for record in report["cases"]:
         orders = ", ".join(
             f"{m} {record['orders'][m]:.2f}"

@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import csv
 import ctypes
+import dataclasses
 import hashlib
 import io
 import itertools
@@ -295,7 +296,7 @@ def create(
         )
         try:
             loaded = parse_case(text, sweep.case_path(name), show_warnings=False)
-            check_placement(loaded)
+            check_placement(dataclasses.replace(loaded, origin=base_path))  # its files: the base's
         except CaseError as exc:
             raise CaseError(f"sweep member {name} ({setting}): {exc}") from None
         for loc, message in case_warnings(loaded.case):

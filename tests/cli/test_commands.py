@@ -49,7 +49,8 @@ def test_what_validate_prints_runs_as_the_same_case(tmp_path, name):
     assert_clean_error(result, 0)
     saved = tmp_path / f"{name}.toml"
     saved.write_text(result.stdout)
-    shutil.copy(CONFIGS / "bedload-bed.csv", tmp_path)  # the bedload bed, beside the case
+    for bed in CONFIGS.glob("*.csv"):  # the placement files (bedload beds), beside the case
+        shutil.copy(bed, tmp_path)
     again = sphere_inproc("validate", saved, "--json")
     assert_clean_error(again, 0)
     assert json.loads(again.stdout) == api.validate(source)
@@ -97,16 +98,17 @@ def test_validate_fills_in_the_default_tags(tmp_path):
     assert resolved["particles"]["placement"]["spacing"] == 1.5
 
 
-def test_validate_does_not_build_the_scene(tmp_path):
-    """A missing placement file is a build-time check: `validate` reads only the case file, and
-    writes nothing."""
+def test_validate_reads_the_placement_file_and_writes_nothing(tmp_path):
+    """`validate` reads the placement file as `run` would (a missing one is reported, exit 66,
+    before a batch job is queued), builds no scene and writes nothing."""
     case = tmp_path / "case.toml"
     case.write_text(FROM_FILE)
+    assert_clean_error(sphere("validate", case, "--json", cwd=tmp_path), 66, "spheres.csv", "not found")
+    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.005,0.005,0.005,0.001\n")
     result = sphere("validate", case, "--json", cwd=tmp_path)
     assert_clean_error(result, 0)
     assert json.loads(result.stdout)["particles"]["placement"]["path"] == "spheres.csv"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.toml"]
-    assert_clean_error(sphere("run", case, "-q", cwd=tmp_path), 66, "spheres.csv")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.toml", "spheres.csv"]
 
 
 def test_every_example_config_validates():

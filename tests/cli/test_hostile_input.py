@@ -162,9 +162,9 @@ def test_particles_from_a_file_are_counted_once_read(tmp_path, monkeypatch):
     (tmp_path / "case.toml").write_text(FROM_FILE)
     (tmp_path / "spheres.csv").write_text(TWO_SPHERES_CSV)
     monkeypatch.setenv("SPHERE_MEMORY_GIB", str(1e3 / 2**30))  # less than two particles' 2 kB
-    assert sphere_inproc("validate", "case.toml", cwd=tmp_path).code == 0  # the file is not read
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "particles.placement.path", "2 particles", "GiB of memory")
+    for command in (("validate", "case.toml"), ("run", "case.toml", "-o", "out", "-q")):  # both read it
+        result = sphere_inproc(*command, cwd=tmp_path)
+        assert_clean_error(result, 65, "particles.placement.path", "2 particles", "GiB of memory")
     assert not (tmp_path / "out").exists()
 
 
