@@ -220,7 +220,11 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         fluid_limit = fluid.dt_limit()
         limits = [min(limit, fluid_limit, key=lambda item: item[0]) for limit in limits]
     (dt_limit, dt_reason), bound = limits
-    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit, bound)
+    # not a stability limit (no safety share of it is taken), the most a step may be
+    motion = _moving_wall_limit(case, float(radius.min()) if n else math.inf)
+    state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit, bound, motion)
+    if state.clock.dt == motion[0]:
+        dt_limit, dt_reason = motion  # what the run reports as setting its step
     if case.stages:
         stages = Stages(case, walls_state, scales, contact)
     elif walls_state is not None:
@@ -383,6 +387,38 @@ def _driven_wall_limit(
                 f"stress-driven {spec.face} wall ({where}): mass {scales.mass(spec, float(area[k])):.4g} kg "
                 f"against one layer of contacts{also}, 2/omega (its damping is implicit)"
             )
+    return limit, reason
+
+
+# A wall moved at a prescribed velocity (normal or shear) moves at most this share of the
+# smallest radius in a step: the run stops a particle that moves half its radius in one, and a
+# wall faster than that drags its particles past it (a velocity typed in m/s for mm/s, or 1e9)
+WALL_STEP_SHARE = 0.1
+
+
+def _moving_wall_limit(case: Case, smallest_radius: float) -> tuple[float, str]:
+    """The longest step [s] in which every wall of the case (and of its stages) moved at a
+    prescribed velocity covers at most WALL_STEP_SHARE of the smallest radius, with what sets it
+    (inf, "" without such walls)."""
+    limit, reason = math.inf, ""
+    specs = [(w, f"walls[{k}]") for k, w in enumerate(case.walls)]
+    specs += [
+        (w, f"stages[{i}].walls[{k}]") for i, s in enumerate(case.stages) for k, w in enumerate(s.walls)
+    ]
+    for spec, where in specs:
+        motions = [("shear_velocity", spec.shear_velocity)]
+        if spec.mode == "velocity":
+            motions.append(("velocity", spec.velocity))
+        for key, speed in motions:
+            if not speed:
+                continue
+            value = WALL_STEP_SHARE * smallest_radius / abs(speed)
+            if value < limit:
+                limit = value
+                reason = (
+                    f"the {spec.face} wall, moved at {where}.{key} = {speed:g} m/s, covers "
+                    f"{WALL_STEP_SHARE:g} of the smallest radius ({smallest_radius:.3g} m)"
+                )
     return limit, reason
 
 
@@ -559,12 +595,24 @@ def _check_overlaps(loaded: LoadedCase, state: State) -> None:
 
 
 def _resolve_dt(
-    loaded: LoadedCase, dt_limit: float, reason: str, solid_limit: float, bound: tuple[float, str]
+    loaded: LoadedCase,
+    dt_limit: float,
+    reason: str,
+    solid_limit: float,
+    bound: tuple[float, str],
+    motion: tuple[float, str] = (math.inf, ""),
 ) -> float:
     """dt of the case, given the stability limit of one contact or a fluid process (and what
-    sets it), that of the particles and walls alone, and the stability bound with many contacts
-    at a sphere (and what sets it) [s]."""
+    sets it), that of the particles and walls alone, the stability bound with many contacts
+    at a sphere (and what sets it), and the longest step the walls' prescribed motion allows
+    (and what sets it: _moving_wall_limit) [s]."""
     sim = loaded.case.simulation
+    if sim.dt != "auto" and sim.dt > motion[0]:
+        raise loaded.error(
+            ("simulation", "dt"),
+            f"longer than the {motion[0]:.4g} s in which {motion[1]}; "
+            f'use dt <= {motion[0]:.4g} s or dt = "auto"',
+        )
     if sim.dt == "auto":
         if not math.isfinite(dt_limit):
             raise loaded.error(
@@ -575,6 +623,8 @@ def _resolve_dt(
         dt = sim.dt_safety * dt_limit
         if dt > AUTO_SHARE * bound[0]:
             dt, reason = AUTO_SHARE * bound[0], f"{AUTO_SHARE:g} x the bound for {bound[1]}"
+        if dt > motion[0]:
+            dt, reason = motion
         _check_steps(loaded, dt, f'"auto" gives {dt:.3g} s ({reason}): ')
         steps = sim.duration / dt
         if math.isfinite(solid_limit) and dt_limit * FLUID_LIMIT_RATIO < solid_limit:

@@ -218,3 +218,33 @@ def test_coordination_and_the_damped_limit():
     zeta, omega = 0.3, 5.0
     f = 2 * (math.sqrt(1 + 4 * zeta**2) - 2 * zeta)
     assert damped_limit(omega**2, 2 * zeta * omega) == pytest.approx(f / omega, rel=1e-12)
+
+
+def test_a_wall_moved_faster_than_a_tenth_of_the_smallest_radius_a_step_limits_dt(tmp_path):
+    """configs/direct-shear.toml with its shear at 1e3 m/s instead of 0.1 (a unit typed wrong):
+    the run went on at the contacts' dt, the wall crossing 10^3 of a radius a step, until the
+    particles it dragged tripped the run's check. Now the wall's speed caps the step: "auto"
+    takes at most the step in which it covers 0.1 of the smallest radius, a given dt above that
+    is refused naming the wall's key; at 0.1 m/s the contacts still set it."""
+    from pathlib import Path
+
+    from sphere_cli.config.load import parse_case
+    from sphere_cli.scene.builder import build_scene
+
+    text = (Path(__file__).parents[2] / "configs" / "direct-shear.toml").read_text()
+    assert text.count("shear_velocity = 0.1 ") == 1
+    fast = text.replace("shear_velocity = 0.1 ", "shear_velocity = 1e3 ")
+    as_given = build_scene(parse_case(text, tmp_path / "case.toml"))
+    assert "wall" not in as_given.dt_limit_reason
+    scene = build_scene(parse_case(fast, tmp_path / "case.toml"))
+    smallest = float(scene.state.particles.radius.min())
+    assert scene.dt_limit == pytest.approx(0.1 * smallest / 1e3, rel=1e-12)
+    assert "stages[2].walls[0].shear_velocity = 1000 m/s" in scene.dt_limit_reason
+    assert scene.state.clock.dt == scene.dt_limit  # the most a step may be: no safety share of it
+    given = fast.replace('dt = "auto"', f"dt = {2 * scene.dt_limit!r}", 1)
+    assert given != fast
+    with pytest.raises(
+        CaseError,
+        match=r"simulation\.dt = .*longer than the .* s in which the z\+ wall, moved at .*= 1000 m/s",
+    ):
+        build_scene(parse_case(given, tmp_path / "case.toml"))
