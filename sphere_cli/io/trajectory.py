@@ -240,14 +240,18 @@ class Trajectory:
             raise OutputError(f"{self.path}: cannot create the trajectory file ({exc})") from None
         self.hold()
 
+    def _present(self) -> bool:
+        """Whether the file is there and not empty (HDF5's append mode would make a missing one
+        anew, empty, and fail inside it)."""
+        try:
+            return self.path.is_file() and self.path.stat().st_size > 0
+        except OSError:
+            return False
+
     def _still_there(self) -> None:
         """TrajectoryLost if the file was deleted or emptied while the run writes it (a scratch
-        purge, a clean-up): HDF5's append mode would make a new, empty file and fail inside it."""
-        try:
-            present = self.path.stat().st_size > 0
-        except OSError:
-            present = False
-        if not present:
+        purge, a clean-up)."""
+        if not self._present():
             raise TrajectoryLost(f"{self.path}: deleted or emptied while the run writes it")
 
     def frame_bytes(self, scene, fluid: dict | None = None) -> int:
@@ -347,7 +351,7 @@ class Trajectory:
         datasets of unequal length); the particle and fluid frames, written together, keep the
         frames they all have. Raises TrajectoryLost when the file is missing or empty,
         OutputError when it is damaged (readers holding it open are no obstacle)."""
-        if not self.path.is_file() or self.path.stat().st_size == 0:
+        if not self._present():
             raise TrajectoryLost(f"{self.path}: missing or empty")
         self.hold()
         try:
