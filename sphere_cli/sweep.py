@@ -284,6 +284,7 @@ def create(
     sweep = Sweep(out, base_path, digest, varies, zipped, names, values)
     shown = {(loc, message) for loc, message in case_warnings(base.case)}
     texts = {}
+    files: dict = {}  # the placement files read so far: the members share them, read once
     for name, member_values in zip(names, values, strict=True):
         member = copy.deepcopy(data)
         for vary, value in zip(varies, member_values, strict=True):
@@ -296,7 +297,7 @@ def create(
         )
         try:
             loaded = parse_case(text, sweep.case_path(name), show_warnings=False)
-            check_placement(dataclasses.replace(loaded, origin=base_path))  # its files: the base's
+            check_placement(dataclasses.replace(loaded, origin=base_path), files)  # the base's files
         except CaseError as exc:
             raise CaseError(f"sweep member {name} ({setting}): {exc}") from None
         for loc, message in case_warnings(loaded.case):

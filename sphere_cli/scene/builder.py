@@ -32,7 +32,13 @@ from ..physics.stages import Stages
 from ..physics.walls import PlaneWallForces, WallMotion, WallScales, apply_modes
 from ..state import Box, Clock, Particles, State
 from .groups import apply_groups
-from .packing import lattice_positions, lattice_sites, random_positions, read_particle_file
+from .packing import (
+    lattice_positions,
+    lattice_sites,
+    particle_file_path,
+    random_positions,
+    read_particle_file,
+)
 from .radii import draw_radii
 from .walls import allocate_walls, rough_layers
 
@@ -445,19 +451,27 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
         module.start()
 
 
-def check_placement(loaded: LoadedCase) -> None:
+def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     """What `sphere validate` can check of the placement without building the scene: a lattice
     that cannot hold the particles (their radii drawn as the build draws them, from the seed);
     a placement file read as the build reads it (there, readable, with known columns and finite
     values, its particles inside the box and the box wide enough for them), so that a batch job
     validated before it is queued does not fail at its start for its input. Random insertion is
-    only known by doing it, and the particles' overlaps are found by `run`."""
+    only known by doing it, and the particles' overlaps are found by `run`. `files`: the files
+    read so far, by path, for a caller checking many cases that share one (sphere sweep's
+    members: a file of 10^6 particles takes seconds to read), read and not changed here."""
     spec = loaded.case.particles
     if isinstance(spec.placement, LatticePlacement) and loaded.case.has_particles:
         radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
         lattice_sites(spec.placement, loaded.case, radius)
     if isinstance(spec.placement, FilePlacement):
-        pos, radius, *_ = _file_particles(loaded, np.random.default_rng(spec.seed))
+        file = None
+        if files is not None:
+            path = particle_file_path(spec.placement, loaded.base_dir).resolve()
+            if path not in files:
+                files[path] = read_particle_file(spec.placement, loaded.base_dir)
+            file = files[path]
+        pos, radius, *_ = _file_particles(loaded, np.random.default_rng(spec.seed), file)
         _check_inside(loaded, _box(loaded.case), pos, radius)
 
 
@@ -488,11 +502,13 @@ def _initial_particles(loaded: LoadedCase, rng):
     )
 
 
-def _file_particles(loaded: LoadedCase, rng):
-    """(pos, radius, velocity, angular velocity, the file) of a placement file, radii drawn
-    where it has none, checked against the box and the memory they need."""
+def _file_particles(loaded: LoadedCase, rng, file=None):
+    """(pos, radius, velocity, angular velocity, the file) of a placement file (`file`, where
+    read already), radii drawn where it has none, checked against the box and the memory they
+    need."""
     spec = loaded.case.particles
-    file = read_particle_file(spec.placement, loaded.base_dir)
+    if file is None:
+        file = read_particle_file(spec.placement, loaded.base_dir)
     radius = file.radius if file.radius is not None else draw_radii(spec.radius, file.pos.shape[0], rng)
     # only now are the particles known: the case alone was checked without them
     loc = ("particles", "placement", "path")

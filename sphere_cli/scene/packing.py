@@ -101,7 +101,7 @@ CSV_COLUMNS = ("x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz", "material
 FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
 
 
-def _particle_file_path(placement: FilePlacement, base_dir: Path) -> Path:
+def particle_file_path(placement: FilePlacement, base_dir: Path) -> Path:
     path = Path(placement.path)
     return path if path.is_absolute() else base_dir / path
 
@@ -110,7 +110,7 @@ def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
     """How many particles a placement file holds, counted without reading them (the CSV's data
     lines, the HDF5 file's rows of 'position'), to size the run's threads before the scene is
     built; None where it cannot tell (the build then reports what is wrong with the file)."""
-    path = _particle_file_path(placement, base_dir)
+    path = particle_file_path(placement, base_dir)
     try:
         if path.suffix.lower() in (".h5", ".hdf5"):
             from ..io.trajectory import open_to_read
@@ -124,7 +124,7 @@ def placed_count(placement: FilePlacement, base_dir: Path) -> int | None:
 
 
 def read_particle_file(placement: FilePlacement, base_dir: Path) -> ParticleFile:
-    path = _particle_file_path(placement, base_dir)
+    path = particle_file_path(placement, base_dir)
     if not path.is_file():
         raise case_error(
             placement, ("particles", "placement", "path"), f"file not found ({path})", MissingInputError
