@@ -379,8 +379,7 @@ def _driven_wall_limit(
     area = np.zeros(len(walls.faces))
     wall_areas(walls.axis, walls.sign, walls.coord, box.lower, box.upper, area)
     index = {w.face: k for k, w in enumerate(case.walls)}
-    specs = [(w, "walls") for w in case.walls] + [(w, "stages") for s in case.stages for w in s.walls]
-    for spec, where in specs:
+    for spec, where in _wall_specs(case):
         if not spec.driven:
             continue
         k = index[spec.face]
@@ -396,6 +395,14 @@ def _driven_wall_limit(
     return limit, reason
 
 
+def _wall_specs(case: Case) -> list[tuple]:
+    """(spec, its key: walls[k] or stages[i].walls[k]) of every wall of the case and its stages."""
+    specs = [(w, f"walls[{k}]") for k, w in enumerate(case.walls)]
+    return specs + [
+        (w, f"stages[{i}].walls[{k}]") for i, s in enumerate(case.stages) for k, w in enumerate(s.walls)
+    ]
+
+
 # A wall moved at a prescribed velocity (normal or shear) moves at most this share of the
 # smallest radius in a step: the run stops a particle that moves half its radius in one, and a
 # wall faster than that drags its particles past it (a velocity typed in m/s for mm/s, or 1e9)
@@ -407,11 +414,7 @@ def _moving_wall_limit(case: Case, smallest_radius: float) -> tuple[float, str]:
     prescribed velocity covers at most WALL_STEP_SHARE of the smallest radius, with what sets it
     (inf, "" without such walls)."""
     limit, reason = math.inf, ""
-    specs = [(w, f"walls[{k}]") for k, w in enumerate(case.walls)]
-    specs += [
-        (w, f"stages[{i}].walls[{k}]") for i, s in enumerate(case.stages) for k, w in enumerate(s.walls)
-    ]
-    for spec, where in specs:
+    for spec, where in _wall_specs(case):
         motions = [("shear_velocity", spec.shear_velocity)]
         if spec.mode == "velocity":
             motions.append(("velocity", spec.velocity))
