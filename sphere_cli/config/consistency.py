@@ -2,7 +2,8 @@
 
 Checked on the case alone (no scene is built): walls against periodic axes, the box against
 the particles, placements against the box, materials against the contact law and the names
-that refer to them, schedules that can never fire, and sizes that cannot fit: more spheres than
+that refer to them, what a fluid model requires of the rest of the case (each fluid table's
+`case_problems`), schedules that can never fire, and sizes that cannot fit: more spheres than
 the region holds, more memory than the machine has (memory.py), more steps than the clock counts.
 Also the warnings of `case_warnings`: allowed, but probably not meant.
 """
@@ -26,6 +27,9 @@ MAX_STEPS = 2**53
 MANY_STEPS = 1e9
 # lognormal radii outside [min, max] are redrawn (scene/radii.py): at most this many draws
 MAX_RADIUS_DRAWS = 1e9
+# the cells along one axis of a fluid grid whose centres the fluid's rules look at before the build
+# (more: the build looks at them)
+MAX_CHECKED_CELLS = 2**22
 
 
 def check_consistency(case: Case) -> list[tuple[tuple, str]]:
@@ -33,7 +37,6 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
         return _fluid_only_problems(case)
     problems: list[tuple[tuple, str]] = []
     dom = case.domain
-    extent = [hi - lo for lo, hi in zip(dom.lower, dom.upper, strict=True)]
     diameter = 2.0 * case.particles.radius.largest
 
     seen: dict[str, int] = {}
@@ -102,7 +105,10 @@ def check_consistency(case: Case) -> list[tuple[tuple, str]]:
         problems.append((("contact",), "required key is missing (the particles need a contact law)"))
     else:
         problems += _material_problems(case)
-    problems += _fluid_grid_problems(case, extent, diameter)
+    from_file = isinstance(placement, FilePlacement)
+    problems += fluid_problems(
+        case, None if from_file else diameter, None if from_file else case.particles.count
+    )
     problems += _path_problems(case)
     problems += _step_problems(case)
     problems += _frame_problems(case)
@@ -184,6 +190,7 @@ def _fluid_only_problems(case: Case) -> list[tuple[tuple, str]]:
                 f'{_NO_PARTICLES}; give it, or a constant permeability (model = "constant")',
             )
         )
+    problems += fluid_problems(case, 0.0, 0)
     problems += memory_problems(case, 0, None)  # the fluid alone
     problems += _step_problems(case)
     problems += _frame_problems(case)
@@ -216,14 +223,26 @@ def box_problems(case: Case, diameter: float) -> list[tuple[tuple, str]]:
     return problems
 
 
-def _fluid_grid_problems(case: Case, extent: list[float], diameter: float) -> list[tuple[tuple, str]]:
-    """The fluid grid against the largest particle the radius distribution can make (radii
-    read from a placement file are checked when the scene is built)."""
-    grid = getattr(case.fluid, "grid", None)
-    if grid is None or isinstance(case.particles.placement, FilePlacement):
+def fluid_problems(case: Case, diameter: float | None, count: int | None) -> list[tuple[tuple, str]]:
+    """The fluid grid against the largest particle `diameter` [m] (its cells at least that
+    wide, for the porosity estimate), and what the fluid model requires of the rest of the case
+    (each model's `case_problems`), so that `sphere validate` refuses them too. diameter and the
+    particles' `count`: None where a placement file has them and is not read here (the grid's
+    cells are then known only where the case sets them; scene/builder.py check_placement asks
+    again with the file's)."""
+    fluid = case.fluid
+    if fluid is None:
         return []
-    _, key, problem = grid_cells(grid, extent, diameter)
-    return [] if problem is None else [(("fluid", "grid", key), problem)]
+    if fluid.model == "vans1d":
+        return fluid.case_problems(case, list(particle_materials(case)), count)
+    grid, dom = fluid.grid, case.domain
+    if grid.cells is None and grid.cell_size is None and not diameter:
+        return fluid.case_problems(case, None)
+    extent = [hi - lo for lo, hi in zip(dom.lower, dom.upper, strict=True)]
+    shape, key, problem = grid_cells(grid, extent, diameter or 0.0)
+    if problem is not None:
+        return [(("fluid", "grid", key), problem)]
+    return fluid.case_problems(case, shape if max(shape) <= MAX_CHECKED_CELLS else None)
 
 
 def _size_problems(case: Case, lower, upper) -> list[tuple[tuple, str]]:

@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 
 from .base import Count, Real, Strict, Vec3, _default_tag
 from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary, RankSplitCells
-from .fluid_grid import FluidGridConfig
+from .fluid_grid import FluidGridConfig, follow_problems, grid_centres
 
 DarcyBoundary = Annotated[PressureBoundary | NoFlowBoundary, Field(discriminator="type")]
 
@@ -168,3 +168,69 @@ class DarcyFluid(Strict):
                 f"porosity_min ({self.porosity_min}) must be below porosity_max ({self.porosity_max})"
             )
         return self
+
+    def case_problems(self, case, shape) -> list[tuple[tuple, str]]:
+        """What this fluid requires of the rest of the case (config/consistency.py): z bounded; a
+        top wall to follow, then neither fixed-pressure regions nor the explicit scheme; a cell
+        in every fixed-pressure region. shape: the grid's cells, None where they depend on radii
+        read from a placement file (the build checks the regions then)."""
+        problems = follow_problems(self.grid, [wall.face for wall in case.walls])
+        if case.domain.periodic[2]:
+            problems.append(
+                (
+                    ("domain", "periodic"),
+                    "the Darcy model needs a bounded z axis (its top and bottom boundaries); make z "
+                    "non-periodic",
+                )
+            )
+        if self.time_scheme == "explicit":
+            for key, given in (
+                ("fixed_pressure", self.fixed_pressure),
+                ("grid.follow_top_wall", self.grid.follow_top_wall),
+            ):
+                if given:
+                    problems.append(
+                        (
+                            ("fluid", "time_scheme"),
+                            f'"explicit" cannot be combined with fluid.{key}: the explicit scheme is '
+                            'there to compare with; use time_scheme = "implicit"',
+                        )
+                    )
+        if self.grid.follow_top_wall and self.fixed_pressure:
+            problems.append(
+                (
+                    ("fluid", "fixed_pressure"),
+                    "cannot be combined with fluid.grid.follow_top_wall = true: the cells move with the "
+                    "wall, and a region of them would not stay where it was given",
+                )
+            )
+        elif shape is not None:
+            centres = grid_centres(case.domain.lower, case.domain.upper, shape)
+            problems += [
+                (("fluid", "fixed_pressure", r), empty_region_problem(shape, centres))
+                for r in regions_without_cells(self.fixed_pressure, centres)
+            ]
+        return problems
+
+
+def regions_without_cells(regions: list[FixedPressureRegion], centres) -> list[int]:
+    """Indices of the fixed-pressure `regions` that hold no cell centre; centres: the centres'
+    coordinates along x, y and z [m]."""
+    return [
+        r
+        for r, region in enumerate(regions)
+        if not all(
+            ((c >= lo) & (c <= hi)).any()
+            for c, lo, hi in zip(centres, region.lower, region.upper, strict=True)
+        )
+    ]
+
+
+def empty_region_problem(shape, centres) -> str:
+    """The message of a fixed-pressure region that holds no cell centre of the grid."""
+    nx, ny, nz = shape
+    span = ", ".join(f"{'xyz'[a]} = {c[0]:.6g} .. {c[-1]:.6g}" for a, c in enumerate(centres))
+    return (
+        f"holds no cell centre of the fluid grid ({nx} x {ny} x {nz} cells, centres at {span} m); "
+        "widen the region"
+    )

@@ -3,17 +3,18 @@
 
 The grid spans the whole box: cell edge along an axis = box length / cells along it; with
 `follow_top_wall` its top is instead the "z+" wall wherever that wall is, and its nz cells
-stretch uniformly between the box bottom and the wall. What the
-porosity estimate needs (physics/fluid/porosity.py) is checked when the scene is built, against the
-particles actually made (physics/fluid/grid.py): the smallest cell edge must be at least the
-largest particle diameter, so that the spherical sampling volume of a cell (diameter = the
-smallest cell edge) is never smaller than a particle.
+stretch uniformly between the box bottom and the wall. What the porosity estimate needs
+(physics/fluid/porosity.py), the smallest cell edge at least the largest particle diameter so
+that the spherical sampling volume of a cell (diameter = the smallest cell edge) is never smaller
+than a particle, is checked before the scene is built (config/consistency.py fluid_problems,
+against a placement file's radii once read) and again when it is built (physics/fluid/grid.py).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from .base import Count, Flag, Real, Strict
@@ -90,3 +91,30 @@ def grid_cells(
             f"long (at most {math.floor(float(length[ax]) / diameter)} cells along {'xyz'[ax]})"
         )
     return shape, key, problem
+
+
+def centres_along(origin: float, spacing: float, n: int) -> np.ndarray:
+    """Coordinates of the n cell centres along one axis of a grid starting at `origin` with cells
+    `spacing` long [m] (the grid's own, physics/fluid/grid.py FluidGrid.centres)."""
+    return origin + (np.arange(n) + 0.5) * spacing
+
+
+def grid_centres(lower, upper, shape) -> list[np.ndarray]:
+    """The cell centres along x, y and z [m] of a grid of `shape` cells spanning the box from
+    `lower` to `upper` (the grid's own spacing: box length / cells, in float64)."""
+    origin = np.asarray(lower, dtype=np.float64)
+    spacing = (np.asarray(upper, dtype=np.float64) - origin) / np.array(shape, dtype=np.float64)
+    return [centres_along(origin[a], spacing[a], shape[a]) for a in range(3)]
+
+
+def follow_problems(config: FluidGridConfig, faces: list[str]) -> list[tuple[tuple, str]]:
+    """A grid following the top wall against the case's walls (their faces): it needs a "z+" wall."""
+    if not config.follow_top_wall or "z+" in faces:
+        return []
+    return [
+        (
+            ("fluid", "grid", "follow_top_wall"),
+            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+            f"{', '.join(faces) or 'none'})",
+        )
+    ]

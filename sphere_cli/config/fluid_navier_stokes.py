@@ -9,13 +9,14 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from .base import Count, Flag, Real, Strict, _default_tag
 from .drag import DragConfig
 from .expression import ExpressionText
 from .fluid_common import CouplingConfig, NoFlowBoundary, PressureBoundary, RankSplitCells
-from .fluid_grid import FluidGridConfig
+from .fluid_grid import FluidGridConfig, follow_problems, grid_centres
 
 
 class NoSlipNoFlow(NoFlowBoundary):
@@ -211,6 +212,11 @@ class FixedBed(Strict):
         return self
 
 
+def z_cells_problem(shape) -> str | None:
+    """What is wrong with a grid of `shape` cells for this fluid (None: nothing)."""
+    return "the fluid grid needs at least 2 cells along z" if shape[2] < 2 else None
+
+
 class NavierStokesFluid(Strict):
     """A Newtonian fluid filling the pores: porous Navier-Stokes on the fluid grid, x and y
     periodic, z bounded by the bottom and top boundaries."""
@@ -290,3 +296,45 @@ class NavierStokesFluid(Strict):
                 "faces closed or prescribed, the flow in need not match the flow out"
             )
         return self
+
+    def case_problems(self, case, shape) -> list[tuple[tuple, str]]:
+        """What this fluid requires of the rest of the case (config/consistency.py): x and y
+        periodic, z bounded; a top wall to follow, through an open top; a bed's rows of cells.
+        shape: the grid's cells, None where they depend on radii read from a placement file (the
+        build checks the grid then)."""
+        problems = follow_problems(self.grid, [wall.face for wall in case.walls])
+        periodic = case.domain.periodic
+        if not (periodic[0] and periodic[1]) or periodic[2]:
+            problems.append(
+                (
+                    ("domain", "periodic"),
+                    "the Navier-Stokes fluid needs x and y periodic and z not periodic (its bottom and "
+                    "top boundaries are the box's z faces): periodic = [true, true, false]",
+                )
+            )
+        if self.grid.follow_top_wall and not isinstance(self.top, PressureBoundary):
+            problems.append(
+                (
+                    ("fluid", "top", "type"),
+                    f'"{self.top.type}" cannot be used with fluid.grid.follow_top_wall = true: the fluid '
+                    'must be free to leave or enter through the moving top; use type = "pressure"',
+                )
+            )
+        if shape is None:
+            return problems
+        if problem := z_cells_problem(shape):
+            problems.append((("fluid", "grid"), problem))
+        bed = self.bed
+        if bed is not None:
+            z = grid_centres(case.domain.lower, case.domain.upper, shape)[2]
+            above = z >= bed.lower if bed.lower is not None else True
+            below = z <= bed.upper if bed.upper is not None else True
+            if not np.logical_and(above, below).any():
+                problems.append(
+                    (
+                        ("fluid", "bed"),
+                        f"no cell centre lies between lower and upper (centres at z = {z[0]:.6g} .. "
+                        f"{z[-1]:.6g} m, {shape[2]} along z)",
+                    )
+                )
+        return problems

@@ -301,3 +301,60 @@ class Vans1dFluid(Strict):
         if ids is not None and not 0 <= ids[0] <= ids[1]:
             raise ValueError(f"{list(ids)}: expected [first, last] with 0 <= first <= last")
         return ids
+
+    def case_problems(self, case, materials: list[str], count: int | None) -> list[tuple[tuple, str]]:
+        """What this fluid requires of the rest of the case (config/consistency.py): a laterally
+        periodic cell, gravity in the x-z plane, the surface inside the box, materials that
+        particles are made of (`materials`, the case's names), particle ids below `count` (None
+        where a placement file counts them: the build checks them then)."""
+        problems = []
+        periodic = case.domain.periodic
+        if not (periodic[0] and periodic[1]) or periodic[2]:
+            problems.append(
+                (
+                    ("domain", "periodic"),
+                    "the vans1d fluid is a vertical profile of a laterally periodic cell: it needs "
+                    "periodic = [true, true, false]",
+                )
+            )
+        if case.domain.gravity[1] != 0.0:
+            problems.append(
+                (
+                    ("domain", "gravity"),
+                    "the vans1d fluid flows along x: gravity must have no y component (tilt it in x-z)",
+                )
+            )
+        bottom, top = case.domain.lower[2], case.domain.upper[2]
+        if not bottom < self.surface <= top:
+            problems.append(
+                (
+                    ("fluid", "surface"),
+                    f"the fluid surface must lie inside the box, above its bottom z = {bottom:g} m and at "
+                    f"most at its top z = {top:g} m",
+                )
+            )
+        unknown = [name for name in self.materials if name not in materials]
+        if unknown:
+            problems.append(
+                (
+                    ("fluid", "materials"),
+                    f"{unknown}: no particle is made of it (particles.material names {materials or 'none'})",
+                )
+            )
+        if self.fluctuations is not None and not isinstance(self.flow, SolvedFlow):
+            problems.append(
+                (
+                    ("fluid", "fluctuations"),
+                    'need flow.kind = "solved": their magnitude is the solved profile\'s Reynolds stress',
+                )
+            )
+        if count is not None and (problem := self.ids_problem(count)):
+            problems.append((("fluid", "ids"), problem))
+        return problems
+
+    def ids_problem(self, count: int) -> str | None:
+        """What is wrong with fluid.ids for a scene of `count` particles (None: nothing)."""
+        if self.ids is None or self.ids[1] < count:
+            return None
+        first, last = self.ids
+        return f"[{first}, {last}]: the scene has {count} particles (0 .. {count - 1})"

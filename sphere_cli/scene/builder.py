@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import compile_ahead, ranks
-from ..config.consistency import MANY_STEPS, box_problems, step_problem
+from ..config.consistency import MANY_STEPS, box_problems, fluid_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
@@ -458,9 +458,10 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     """What `sphere validate` can check of the placement without building the scene: a lattice
     that cannot hold the particles (their radii drawn as the build draws them, from the seed);
     a placement file read as the build reads it (there, readable, with known columns and finite
-    values, its particles inside the box and the box wide enough for them), so that a batch job
-    validated before it is queued does not fail at its start for its input. Random insertion is
-    only known by doing it, and the particles' overlaps are found by `run`. `files`: the files
+    values, its particles inside the box and the box wide enough for them, the fluid's grid and
+    rules against its radii and count), so that a batch job validated before it is queued does
+    not fail at its start for its input. Random insertion is only known by doing it, and the
+    particles' overlaps are found by `run`. `files`: the files
     read so far, by path, for a caller checking many cases that share one (sphere sweep's
     members: a file of 10^6 particles takes seconds to read), read and not changed here."""
     spec = loaded.case.particles
@@ -476,6 +477,10 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
             file = files[path]
         pos, radius, *_ = _file_particles(loaded, np.random.default_rng(spec.seed), file)
         _check_inside(loaded, _box(loaded.case), pos, radius)
+        diameter = 2.0 * float(radius.max()) if radius.size else 0.0
+        problems = fluid_problems(loaded.case, diameter, int(radius.size))  # the grid by the file's radii
+        if problems:
+            raise loaded.error(*problems[0])
 
 
 def _initial_particles(loaded: LoadedCase, rng):

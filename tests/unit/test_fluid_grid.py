@@ -72,19 +72,23 @@ def test_cells_smaller_than_a_particle_are_refused_naming_the_key():
 
 
 def test_case_check_applies_the_same_rule_before_anything_is_built():
-    """config/consistency.py refuses the grid from the radius distribution's largest radius
-    (what `sphere validate` reports); radii from a placement file wait for the builder."""
-    from sphere_cli.config.consistency import _fluid_grid_problems
-    from sphere_cli.config.schema import FilePlacement, LatticePlacement
+    """config/consistency.py refuses the grid for the largest particle diameter it is given
+    (the radius distribution's, or a placement file's once `sphere validate` has read it); with
+    the file not read (None), only what the case's own keys decide."""
+    from sphere_cli.config.consistency import fluid_problems
+    from sphere_cli.config.schema import Case
 
-    extent = [0.04, 0.02, 0.06]
-    case = SimpleNamespace(
-        fluid=SimpleNamespace(grid=FluidGridConfig(cells=(8, 10, 12))),
-        particles=SimpleNamespace(placement=LatticePlacement()),
+    case = Case.model_validate(
+        {
+            "simulation": {"duration": 0.01},
+            "domain": {"upper": [0.04, 0.02, 0.06]},
+            "particles": {"count": 10, "density": 2500.0},
+            "contact": {"normal_stiffness": 1e4},
+            "fluid": {"model": "darcy", "grid": {"cells": [8, 10, 12]}},
+        }
     )
-    [(key, message)] = _fluid_grid_problems(case, extent, 0.003)
+    [(key, message)] = fluid_problems(case, 0.003, 10)
     assert key == ("fluid", "grid", "cells") and "smaller than the largest particle diameter" in message
-    assert _fluid_grid_problems(case, extent, 0.002) == []
-    case.particles.placement = FilePlacement(method="file", path="beads.csv")
-    assert _fluid_grid_problems(case, extent, 0.003) == []
-    assert _fluid_grid_problems(SimpleNamespace(fluid=None, particles=case.particles), extent, 0.003) == []
+    assert fluid_problems(case, 0.002, 10) == []
+    assert fluid_problems(case, None, None) == []
+    assert fluid_problems(case.model_copy(update={"fluid": None}), 0.003, 10) == []

@@ -19,7 +19,7 @@ import types
 
 import numpy as np
 
-from ...config.fluid_darcy import DarcyFluid
+from ...config.fluid_darcy import DarcyFluid, empty_region_problem
 from ...errors import NumericalError
 from ...kernels.fluid.darcy import add_pressure_forces, push_wall
 from ...kernels.fluid.pore_pressure import backward_euler_system
@@ -56,36 +56,15 @@ class Darcy(FluidModule):
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
         config: DarcyFluid = loaded.case.fluid
+        # what the fluid requires of the rest of the case is refused before the scene is built
+        # (config/fluid_darcy.py case_problems); here what depends on the particles made
         box, particles = state.box, state.particles
-        if box.periodic[2]:
-            raise loaded.error(
-                ("domain", "periodic"),
-                "the Darcy model needs a bounded z axis (its top and bottom boundaries); make z non-periodic",
-            )
-        if config.time_scheme == "explicit":
-            for key, given in (
-                ("fixed_pressure", config.fixed_pressure),
-                ("grid", config.grid.follow_top_wall),
-            ):
-                if given:
-                    raise loaded.error(
-                        ("fluid", "time_scheme"),
-                        f'"explicit" cannot be combined with fluid.{key}'
-                        f"{'.follow_top_wall' if key == 'grid' else ''}: the explicit scheme is there "
-                        'to compare with; use time_scheme = "implicit"',
-                    )
         grid = fluid_grid(config.grid, box, particles.radius, loaded)
         # a grid that follows the top wall: the wall bounds the pore fluid (physics/fluid/grid.py)
         self.top_wall = None
         self.diameter = 2.0 * float(particles.radius.max()) if particles.count else 0.0
         if config.grid.follow_top_wall:
-            self.top_wall = top_wall_index(loaded, state)
-            if config.fixed_pressure:
-                raise loaded.error(
-                    ("fluid", "fixed_pressure"),
-                    "cannot be combined with fluid.grid.follow_top_wall = true: the cells move with the "
-                    "wall, and a region of them would not stay where it was given",
-                )
+            self.top_wall = top_wall_index(state)
             height = self._wall_height(state, grid)
             if not height / grid.shape[2] >= self.diameter:
                 raise loaded.error(
@@ -96,10 +75,10 @@ class Darcy(FluidModule):
                 )
             grid.set_height(height)
         _, _, empty = fixed_pressure_cells(config, grid)
-        if empty:
+        if empty:  # cells set by a placement file's radii
+            centres = [grid.centres(a) for a in range(3)]
             raise loaded.error(
-                ("fluid", "fixed_pressure", empty[0]),
-                f"holds no cell centre of the fluid grid ({grid.describe()}); widen the region",
+                ("fluid", "fixed_pressure", empty[0]), empty_region_problem(grid.shape, centres)
             )
         # a scene without particles (fluid only): the porosity of open fluid clamped, porosity_max,
         # that never changes, and no coupling; the Kozeny-Carman coefficient is then given

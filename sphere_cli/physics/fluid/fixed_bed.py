@@ -34,13 +34,11 @@ class FixedBed:
         else:
             phi = np.full(shape, float(config.porosity))
         z = grid.centres(2).reshape(1, 1, -1)
-        inside = np.ones(shape, dtype=bool)
+        inside = np.ones(shape, dtype=bool)  # none empty: config/fluid_navier_stokes.py case_problems
         if config.lower is not None:
             inside &= z >= config.lower
         if config.upper is not None:
             inside &= z <= config.upper
-        if not inside.any():
-            raise loaded.error(key, f"no cell centre lies between lower and upper ({grid.describe()})")
         self.porosity = np.where(inside, phi, 1.0)
         floor = float(drag_config.porosity_floor)
         bad = ~((self.porosity >= floor) & (self.porosity <= 1.0))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config.fluid_grid import FluidGridConfig, grid_cells
+from ...config.fluid_grid import FluidGridConfig, centres_along, grid_cells
 from ...errors import NumericalError
 
 
@@ -58,8 +58,7 @@ class FluidGrid:
 
     def centres(self, axis: int) -> np.ndarray:
         """Coordinates of the cell centres along one axis (0, 1, 2) [m]."""
-        n = self.shape[axis]
-        return self.origin[axis] + (np.arange(n) + 0.5) * self.spacing[axis]
+        return centres_along(self.origin[axis], self.spacing[axis], self.shape[axis])
 
     def describe(self) -> str:
         nx, ny, nz = self.shape
@@ -90,17 +89,10 @@ def fluid_grid(config: FluidGridConfig, box, radius: np.ndarray, loaded=None) ->
     )
 
 
-def top_wall_index(loaded, state) -> int:
-    """Index of the "z+" wall that a grid with `[fluid.grid] follow_top_wall` follows; a case
-    without one is refused naming the key (exit 65)."""
-    faces = state.walls.faces if state.walls is not None else []
-    if "z+" not in faces:
-        raise loaded.error(
-            ("fluid", "grid", "follow_top_wall"),
-            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
-            f"{', '.join(faces) or 'none'})",
-        )
-    return faces.index("z+")
+def top_wall_index(state) -> int:
+    """Index of the "z+" wall that a grid with `[fluid.grid] follow_top_wall` follows (a case
+    without one is refused before the scene is built: config/fluid_grid.py follow_problems)."""
+    return state.walls.faces.index("z+")
 
 
 def wall_cells(state, wall: int, nz: int, height: float, diameter: float) -> str:

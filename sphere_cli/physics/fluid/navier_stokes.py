@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config.fluid_common import NoFlowBoundary, PressureBoundary
-from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity
+from ...config.fluid_navier_stokes import NavierStokesFluid, NoSlipVelocity, z_cells_problem
 from ...errors import NumericalError
 from ...kernels.fluid import navier_stokes as navier_stokes_kernels
 from ...kernels.fluid.drag import drag_steps, drag_steps_serial, rank_drag_steps, rank_drag_steps_serial
@@ -473,21 +473,15 @@ class NavierStokes(FluidModule):
     def __init__(self, loaded, state):
         super().__init__(loaded, state)
         cfg = loaded.case.fluid
-        box = state.box
-        if not (box.periodic[0] and box.periodic[1]) or box.periodic[2]:
-            raise loaded.error(
-                ("domain", "periodic"),
-                "the Navier-Stokes fluid needs x and y periodic and z not periodic (its bottom and "
-                "top boundaries are the box's z faces): periodic = [true, true, false]",
-            )
+        box = state.box  # x and y periodic, z bounded (config/fluid_navier_stokes.py case_problems)
         self.config = cfg
         self._grid = fluid_grid(cfg.grid, box, state.particles.radius, loaded)
         self.share_threads_by_cells(self._grid.cell_count)
-        if self._grid.shape[2] < 2:
-            raise loaded.error(("fluid", "grid"), "the fluid grid needs at least 2 cells along z")
+        if problem := z_cells_problem(self._grid.shape):  # cells set by a placement file's radii
+            raise loaded.error(("fluid", "grid"), problem)
         self.top_wall = None  # index of the wall the grid's top follows
         if cfg.grid.follow_top_wall:
-            self.top_wall = _top_wall(loaded, state)
+            self.top_wall = top_wall_index(state)
         self.diameter = 2.0 * float(state.particles.radius.max()) if state.particles.count else 0.0
         # a scene without particles (a fluid alone): never split across MPI ranks, where a rank's
         # step may take none of them and must still meet the others in the porosity's and the
@@ -885,16 +879,3 @@ class NavierStokes(FluidModule):
         steps = self.coupling_steps
         facts["fluid coupling"] = f"one fluid step of {self.fluid_dt:.4g} s every {steps} DEM step(s)"
         return facts
-
-
-def _top_wall(loaded, state) -> int:
-    """Index of the "z+" wall that the grid's top follows; refuses a case where it cannot."""
-    cfg = loaded.case.fluid
-    wall = top_wall_index(loaded, state)
-    if not isinstance(cfg.top, PressureBoundary):
-        raise loaded.error(
-            ("fluid", "top", "type"),
-            f'"{cfg.top.type}" cannot be used with fluid.grid.follow_top_wall = true: the fluid must be '
-            'free to leave or enter through the moving top; use type = "pressure"',
-        )
-    return wall

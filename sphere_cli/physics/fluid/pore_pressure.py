@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...config.fluid_common import PressureBoundary
-from ...config.fluid_darcy import ConstantPermeability, DarcyFluid
+from ...config.fluid_darcy import ConstantPermeability, DarcyFluid, regions_without_cells
 from ...kernels.fluid import pore_pressure as pore_pressure_kernels
 from ...kernels.fluid.pore_pressure import first_bad_cell
 from .grid import FluidGrid
@@ -42,17 +42,14 @@ def fixed_pressure_cells(config: DarcyFluid, grid: FluidGrid) -> tuple[np.ndarra
     region; a later region wins), and the indices of the regions that hold no cell centre."""
     fixed = np.zeros(grid.shape, dtype=np.uint8)
     value = np.zeros(grid.shape)
-    empty = []
     centres = [grid.centres(a) for a in range(3)]
-    for r, region in enumerate(config.fixed_pressure):
+    for region in config.fixed_pressure:
         bounds = zip(centres, region.lower, region.upper, strict=True)
         inside = [(c >= lo) & (c <= hi) for c, lo, hi in bounds]
         mask = inside[0][:, None, None] & inside[1][None, :, None] & inside[2][None, None, :]
-        if not mask.any():
-            empty.append(r)
         fixed[mask] = 1
         value[mask] = region.pressure
-    return fixed, value, empty
+    return fixed, value, regions_without_cells(config.fixed_pressure, centres)
 
 
 # the fields a step reads of the state, and those it writes there (the rest is scratch)

@@ -130,20 +130,16 @@ class Vans1d(FluidModule):
         self.layer_comm = None  # on MPI ranks the grid's communicator (split_grid): layers shared out
         cfg = loaded.case.fluid
         self.cfg = cfg
-        box = state.box
-        self._check(loaded, box)
+        box = state.box  # what the fluid requires of the case: config/fluid_vans1d.py case_problems
         p = state.particles
         selected = np.ones(p.count, dtype=np.uint8)
         if cfg.materials:
             names = list(particle_materials(loaded.case))  # material id k is the k-th name
             selected[:] = np.isin(p.material, [names.index(name) for name in cfg.materials])
         if cfg.ids is not None:
+            if problem := cfg.ids_problem(p.count):  # particles counted from a placement file
+                raise loaded.error(("fluid", "ids"), problem)
             first, last = cfg.ids
-            if last >= p.count:
-                raise loaded.error(
-                    ("fluid", "ids"),
-                    f"[{first}, {last}]: the scene has {p.count} particles (0 .. {p.count - 1})",
-                )
             selected[:first] = 0
             selected[last + 1 :] = 0
         selected &= (p.inv_mass > 0).astype(np.uint8)
@@ -187,11 +183,11 @@ class Vans1d(FluidModule):
         self.diameter = 2.0 * float(p.radius[selected == 1].mean()) if selected.any() else 0.0
         self.particle_density = float(density.mean()) if density.size else 0.0
         self._dt_limit = self._drag_relaxation_limit(p, selected)
-        self._allocate_fluctuations(loaded, p.count, cfg.cells)
+        self._allocate_fluctuations(p.count, cfg.cells)
         self.fluid_steps = 1
         self.substep_dt = 0.0  # the fluid's own implicit steps within a fluid step [s]
 
-    def _allocate_fluctuations(self, loaded, count: int, cells: int) -> None:
+    def _allocate_fluctuations(self, count: int, cells: int) -> None:
         """The per-particle state of [fluid.fluctuations] (kernels/fluid/turbulent_fluctuations.py):
         the fluctuation, its remaining lifetime and the number of draws so far, and the Reynolds
         stress they are drawn from; a (1, 3) placeholder without them."""
@@ -200,11 +196,6 @@ class Vans1d(FluidModule):
         if not self.fluctuating:
             self.fluct = np.zeros((1, 3))
             return
-        if not self.solved:
-            raise loaded.error(
-                ("fluid", "fluctuations"),
-                'need flow.kind = "solved": their magnitude is the solved profile\'s Reynolds stress',
-            )
         self.fluct = np.zeros((count, 3))  # [m/s]
         self.fluct_lifetime = np.zeros(count)  # [s] left; <= 0: draw at the next coupling
         self.fluct_draws = np.zeros(count, dtype=np.uint64)
@@ -227,35 +218,7 @@ class Vans1d(FluidModule):
             spec.correlated, elapsed, self.fluct, self.fluct_lifetime, self.fluct_draws,
         )  # fmt: skip
 
-    # ---------------------------------------------------------------- checks and schedule
-
-    def _check(self, loaded, box) -> None:
-        cfg = self.cfg
-        if not (box.periodic[0] and box.periodic[1]) or box.periodic[2]:
-            raise loaded.error(
-                ("domain", "periodic"),
-                "the vans1d fluid is a vertical profile of a laterally periodic cell: it needs "
-                "periodic = [true, true, false]",
-            )
-        if abs(box.body_acc[1]) > 0.0:
-            raise loaded.error(
-                ("domain", "gravity"),
-                "the vans1d fluid flows along x: gravity must have no y component (tilt it in x-z)",
-            )
-        bottom, top = float(box.lower[2]), float(box.upper[2])
-        if not bottom < cfg.surface <= top:
-            raise loaded.error(
-                ("fluid", "surface"),
-                f"the fluid surface must lie inside the box, above its bottom z = {bottom:g} m and at "
-                f"most at its top z = {top:g} m",
-            )
-        names = list(particle_materials(loaded.case))
-        unknown = [name for name in cfg.materials if name not in names]
-        if unknown:
-            raise loaded.error(
-                ("fluid", "materials"),
-                f"{unknown}: no particle is made of it (particles.material names {names or 'none'})",
-            )
+    # ---------------------------------------------------------------- schedule
 
     @staticmethod
     def _sublayer_height(cfg, box) -> float:
