@@ -458,12 +458,13 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     """What `sphere validate` can check of the placement without building the scene: a lattice
     that cannot hold the particles (their radii drawn as the build draws them, from the seed);
     a placement file read as the build reads it (there, readable, with known columns and finite
-    values, its particles inside the box and the box wide enough for them, the fluid's grid and
-    rules against its radii and count), so that a batch job validated before it is queued does
-    not fail at its start for its input. Random insertion is only known by doing it, and the
-    particles' overlaps are found by `run`. `files`: the files
-    read so far, by path, for a caller checking many cases that share one (sphere sweep's
-    members: a file of 10^6 particles takes seconds to read), read and not changed here."""
+    values, its particles inside the box and the box wide enough for them, its material and
+    group columns naming the case's, the fluid's grid and rules against its radii and count), so
+    that a batch job validated before it is queued does not fail at its start for its input.
+    Random insertion is only known by doing it, and the particles' overlaps are found by `run`.
+    `files`: the files read so far, by path, for a caller checking many cases that share one
+    (sphere sweep's members: a file of 10^6 particles takes seconds to read), read and not
+    changed here."""
     spec = loaded.case.particles
     if isinstance(spec.placement, LatticePlacement) and loaded.case.has_particles:
         radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
@@ -475,8 +476,10 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
             if path not in files:
                 files[path] = read_particle_file(spec.placement, loaded.base_dir)
             file = files[path]
-        pos, radius, *_ = _file_particles(loaded, np.random.default_rng(spec.seed), file)
+        pos, radius, _, _, file = _file_particles(loaded, np.random.default_rng(spec.seed), file)
         _check_inside(loaded, _box(loaded.case), pos, radius)
+        _file_materials(loaded, contact_tables(loaded.case), file)
+        _file_groups(loaded, file)
         diameter = 2.0 * float(radius.max()) if radius.size else 0.0
         problems = fluid_problems(loaded.case, diameter, int(radius.size))  # the grid by the file's radii
         if problems:

@@ -111,9 +111,13 @@ def test_hdf5_file_gives_material_group_and_fixed(tmp_path):
         "twice",
     ],
 )
-def test_mistakes_in_the_columns_are_refused_by_name(tmp_path, case, csv, fragments):
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_mistakes_in_the_columns_are_refused_by_name(tmp_path, case, csv, fragments, command):
+    """By `sphere validate` too, which reads the file as the build does (a batch job validated
+    before it is queued does not fail at its start)."""
     _write(tmp_path, case, csv)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    args = ("run", "case.toml", "-o", "out", "-q") if command == "run" else ("validate", "case.toml")
+    result = sphere_inproc(*args, cwd=tmp_path)
     assert_clean_error(result, 65, *fragments)
     assert not (tmp_path / "out").exists()
 
