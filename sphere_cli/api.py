@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 import sys
 import time as wallclock
@@ -381,6 +382,7 @@ def _resume_locked(
     log = rundir.logger()
     ck = newest_valid_checkpoint(rundir.checkpoints, log=log.warning)
     if ck is None and not list_checkpoints(rundir.checkpoints):
+        _refuse_lost_checkpoints(rundir, log)
         # stopped before its first checkpoint: nothing was computed that a new start would not redo
         log.warning("no checkpoint yet (stopped before the first one): starting again from step 0")
         fresh = parse_case(loaded.text, rundir.case_origin() or rundir.case)
@@ -394,6 +396,7 @@ def _resume_locked(
         return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
     if ck is None:
         raise MissingInputError(f"{rundir.checkpoints}: no checkpoint that verifies; cannot resume")
+    rundir.checkpoint = ck.path.name
     if device is None:  # the device the run was on (a --device given to sphere run is not in case.toml)
         loaded = _with_simulation(loaded, device=ck.resolved.get("simulation", {}).get("device"))
     resolved = run_record(loaded)
@@ -433,6 +436,26 @@ def _resume_locked(
             output.first(scene)
         output.trajectory.record_resume(ck.step, provenance())
     return _drive(scene, rundir, output, log, max_wall_time, handle_signals, show_progress)
+
+
+def _refuse_lost_checkpoints(rundir: RunDirectory, log) -> None:
+    """A run whose checkpoints are gone after it wrote some (deleted to free space, a scratch
+    purge) is not resumed from step 0: that would rewrite its trajectory, whose frames may be
+    all that is left of days of running, from the start. status.json names the newest checkpoint
+    written (absent: the run stopped before its first, and starts again)."""
+    try:
+        written = json.loads(rundir.status_path.read_text(encoding="utf-8")).get("checkpoint")
+    except (OSError, ValueError, AttributeError):
+        written = None
+    if written is None:
+        return
+    message = (
+        f"{rundir.checkpoints}: holds no checkpoint, but the run wrote {written} (status.json); a resume "
+        f"would start again from step 0 and rewrite {rundir.trajectory_path.name}. Put the checkpoints "
+        f"back, or start the run again: sphere run CASE -o {rundir.path} --overwrite"
+    )
+    log.error("%s", message)
+    raise MissingInputError(message)
 
 
 @contextmanager

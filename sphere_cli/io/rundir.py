@@ -87,6 +87,9 @@ class RunDirectory:
         # the old run moved aside by --overwrite, kept until the new run's first checkpoint
         self.replaced: Path | None = None
         self.created = False  # prepare_new made the directory itself
+        # the newest checkpoint written or resumed from, named in status.json (a resume finding
+        # checkpoints/ emptied then knows the run had some: api.py _resume_locked)
+        self.checkpoint: str | None = None
         self._echo: _WarningsToLog | None = None
         # why the writer lock could not be taken where the file system has no locks (else None)
         self.lock_note: str | None = None
@@ -188,8 +191,10 @@ class RunDirectory:
             raise OutputError(f"{p}: cannot create the run directory ({exc})") from None
         remove_stale_temporaries(self.checkpoints)
 
-    def first_checkpoint_written(self) -> None:
-        """The new run can be resumed on its own: the old run moved aside is no longer needed."""
+    def checkpoint_written(self, name: str) -> None:
+        """A checkpoint of this run exists (status.json names the newest from now on): the new run
+        can be resumed on its own, and the old run moved aside is no longer needed."""
+        self.checkpoint = name
         if self.replaced is not None:
             shutil.rmtree(self.replaced, ignore_errors=True)
             self.replaced = None
@@ -375,6 +380,8 @@ class RunDirectory:
             log.removeHandler(handler)
 
     def write_status(self, info: dict) -> None:
+        if self.checkpoint is not None:
+            info = {**info, "checkpoint": self.checkpoint}
         info = {**info, "ranks": ranks.count(), "updated": datetime.now(UTC).isoformat(timespec="seconds")}
         try:
             write_text_atomic(self.status_path, json_text(info) + "\n")
@@ -560,7 +567,7 @@ class RunOutput:
         self.last_checkpoint = write_checkpoint(
             self.rundir.checkpoints, scene, self.case_text, self.resolved, self.physics_hash, self.keep
         )
-        self.rundir.first_checkpoint_written()
+        self.rundir.checkpoint_written(self.last_checkpoint.name)
         self.log.info("checkpoint %s (t = %.6g s)", self.last_checkpoint.name, scene.state.clock.time)
 
 

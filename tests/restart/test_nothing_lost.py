@@ -152,6 +152,25 @@ def test_kill_before_the_first_checkpoint_resumes_from_step_0(case, whole, tmp_p
     _assert_same_trajectory(whole, run)
 
 
+@pytest.mark.parametrize("gone", ["emptied", "deleted"])
+def test_a_resume_without_the_checkpoints_the_run_wrote_is_refused(whole, tmp_path, gone):
+    """Checkpoints deleted after the run wrote some (to free space, a scratch purge): resuming
+    from step 0 would rewrite the trajectory, whose frames may be all that is left of a long run.
+    Refused (exit 66) naming the newest checkpoint status.json recorded, trajectory and status
+    untouched; run.log says why."""
+    run = tmp_path / "run"
+    shutil.copytree(whole, run)
+    assert json.loads((run / "status.json").read_text())["checkpoint"] == "ckpt-000000000400.h5"
+    shutil.rmtree(run / "checkpoints")
+    if gone == "emptied":
+        (run / "checkpoints").mkdir()
+    kept = {name: (run / name).read_bytes() for name in ("trajectory.h5", "status.json")}
+    result = _sphere("resume", run, "-q", cwd=tmp_path)
+    _clean_error(result, 66, "holds no checkpoint", "wrote ckpt-000000000400.h5", "--overwrite")
+    assert {name: (run / name).read_bytes() for name in kept} == kept
+    assert "holds no checkpoint" in (run / "run.log").read_text()
+
+
 def test_kill_before_the_case_is_written_leaves_a_directory_run_accepts(case, whole, tmp_path):
     """What a batch script does when RUN_DIR has no case.toml: `sphere run` again, no --overwrite."""
     run = tmp_path / "killed"
