@@ -174,7 +174,7 @@ class DarcyFluid(Strict):
         top wall to follow, then neither fixed-pressure regions nor the explicit scheme; a cell
         in every fixed-pressure region. shape: the grid's cells, None where they depend on radii
         read from a placement file (the build checks the regions then)."""
-        problems = follow_problems(self.grid, [wall.face for wall in case.walls])
+        problems = follow_problems(self.grid, case)
         if case.domain.periodic[2]:
             problems.append(
                 (

@@ -107,14 +107,31 @@ def grid_centres(lower, upper, shape) -> list[np.ndarray]:
     return [centres_along(origin[a], spacing[a], shape[a]) for a in range(3)]
 
 
-def follow_problems(config: FluidGridConfig, faces: list[str]) -> list[tuple[tuple, str]]:
-    """A grid following the top wall against the case's walls (their faces): it needs a "z+" wall."""
-    if not config.follow_top_wall or "z+" in faces:
+def follow_problems(config: FluidGridConfig, case) -> list[tuple[tuple, str]]:
+    """A grid following the top wall against the case's walls and stages: it needs a "z+" wall,
+    and no stage's `approach` on it, which moves the wall at once (the grid follows a wall that
+    moves less than half a cell a fluid step: its porosity rate, and a Darcy fluid's undrained
+    push on the wall, are those of a small move), found otherwise when the stage begins."""
+    if not config.follow_top_wall:
         return []
+    faces = [wall.face for wall in case.walls]
+    if "z+" not in faces:
+        return [
+            (
+                ("fluid", "grid", "follow_top_wall"),
+                'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+                f"{', '.join(faces) or 'none'})",
+            )
+        ]
     return [
         (
-            ("fluid", "grid", "follow_top_wall"),
-            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
-            f"{', '.join(faces) or 'none'})",
+            ("stages", k, "walls", j, "approach"),
+            "moves the z+ wall onto the particles at once, and the fluid grid follows that wall "
+            "(fluid.grid.follow_top_wall) only as it moves less than half a cell a fluid step; "
+            "remove it: a stress-driven wall moves down to the particles by itself (a box whose "
+            "top lies near the bed's shortens its way)",
         )
+        for k, stage in enumerate(case.stages)
+        for j, spec in enumerate(stage.walls)
+        if spec.face == "z+" and spec.approach
     ]

@@ -302,7 +302,7 @@ class NavierStokesFluid(Strict):
         periodic, z bounded; a top wall to follow, through an open top; a bed's rows of cells.
         shape: the grid's cells, None where they depend on radii read from a placement file (the
         build checks the grid then)."""
-        problems = follow_problems(self.grid, [wall.face for wall in case.walls])
+        problems = follow_problems(self.grid, case)
         periodic = case.domain.periodic
         if not (periodic[0] and periodic[1]) or periodic[2]:
             problems.append(

@@ -122,6 +122,16 @@ RULES = [
         ['face = "z+"'],
     ),
     (
+        "darcy-follows-a-wall-a-stage-moves-at-once",
+        DARCY.replace('[[walls]]\nface = "z-"\n', '[[walls]]\nface = "z-"\n' + TOP_WALL),
+        'model = "darcy"',
+        'model = "darcy"\ngrid = { follow_top_wall = true }\n[[stages]]\nduration = 0.001\n'
+        '[[stages.walls]]\nface = "z+"\nmode = "stress"\nstress = 100.0\napproach = true',
+        "stages[0].walls[0].approach",
+        "approach = true",
+        ["moves the z+ wall onto the particles at once", "remove it"],
+    ),
+    (
         "darcy-fixed-pressure-on-a-moving-grid",
         DARCY.replace('[[walls]]\nface = "z-"\n', '[[walls]]\nface = "z-"\n' + TOP_WALL),
         'model = "darcy"',
