@@ -320,13 +320,17 @@ class Darcy(FluidModule):
                 # solid's own rate then advects phi with v_p - w (pore_pressure.py)
                 np.multiply(self.cell_heights, grid_speed, out=self.grid_velocity)
                 s.particle_velocity[..., 2] -= self.grid_velocity
-        # in a grid bounded by the top wall the solid stays inside: the skeleton's divergence
-        # integrates to the grid's change of volume, A dH/dt (its mean: dH/dt / H). The lens
-        # estimate of the porosity, sampled in a sphere of each cell, holds that only roughly
-        # (on a lattice aligned with the grid, to a few per cent at rest and not at all while
-        # the cells change faster than the grains follow), and the pore pressure of an undrained
-        # bed is that integral: it is imposed.
-        mean_source = grid_speed / self.pore.grid.height if self.top_wall is not None else None
+        # under an impermeable top wall (and floor) the fluid stays in the grid: the grid's change
+        # of volume, A dH/dt, is all the pore fluid's (the solid's is conserved), so the
+        # skeleton's divergence integrates to it (its mean: dH/dt / H). The lens estimate of the
+        # porosity, sampled in a sphere of each cell, holds that only roughly (on a lattice
+        # aligned with the grid, to a few per cent at rest and not at all while the cells change
+        # faster than the grains follow), and the pore pressure of an undrained bed is that
+        # integral: it is imposed. Not under a permeable wall, which the fluid crosses: there
+        # the skeleton's divergence integrates to the change of the bed's own volume, which is
+        # the grid's only while the bed touches the wall (a wall moving through the water above
+        # a bed at rest imposed a compaction of the bed, pore pressures above its buoyant weight)
+        mean_source = grid_speed / self.pore.grid.height if self.pushes_wall else None
         try:
             self.pore.advance(self.fluid_dt, clock.time, mean_source)
         except ArithmeticError as exc:
