@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import os
 
-from .fluid_grid import grid_cells
+from .fluid_grid import follow_warnings, grid_cells
 from .memory import memory_problems
 from .schema import LAW_KEYS, Case, FilePlacement, LognormalRadius
 
@@ -336,14 +336,18 @@ def case_warnings(case: Case) -> list[tuple[tuple, str]]:
     """Values that are allowed but probably not meant, each against its key (dt = "auto" is
     judged when the scene is built and its limits are known)."""
     sim = case.simulation
+    warnings = []
     if sim.dt != "auto" and sim.duration / sim.dt > MANY_STEPS:
-        return [
+        warnings.append(
             (
                 ("simulation", "dt"),
                 f"the run takes {sim.duration / sim.dt:.3g} steps to reach duration = {sim.duration:g} s",
             )
-        ]
-    return []
+        )
+    grid = getattr(case.fluid, "grid", None)
+    if grid is not None and case.has_particles:
+        warnings += follow_warnings(grid, case)
+    return warnings
 
 
 def particle_materials(case: Case) -> dict[str, float]:

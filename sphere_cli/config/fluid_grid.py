@@ -108,28 +108,33 @@ def grid_centres(lower, upper, shape) -> list[np.ndarray]:
 
 
 def follow_problems(config: FluidGridConfig, case) -> list[tuple[tuple, str]]:
-    """A grid following the top wall against the case's walls and stages: it needs a "z+" wall,
-    and no stage's `approach` on it, which moves the wall at once (the grid follows a wall that
-    moves less than half a cell a fluid step: its porosity rate, and a Darcy fluid's undrained
-    push on the wall, are those of a small move), found otherwise when the stage begins."""
+    """A grid following the top wall against the case's walls: it needs a "z+" wall."""
+    faces = [wall.face for wall in case.walls]
+    if not config.follow_top_wall or "z+" in faces:
+        return []
+    return [
+        (
+            ("fluid", "grid", "follow_top_wall"),
+            'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
+            f"{', '.join(faces) or 'none'})",
+        )
+    ]
+
+
+def follow_warnings(config: FluidGridConfig, case) -> list[tuple[tuple, str]]:
+    """A stage's `approach` on the wall a grid follows moves it at once, and the grid follows a
+    wall only as it moves less than half a cell a fluid step (its porosity rate, and a Darcy
+    fluid's undrained push, are those of a small move): the run stops (exit 70) where the
+    approach is longer, which is known only when the stage begins."""
     if not config.follow_top_wall:
         return []
-    faces = [wall.face for wall in case.walls]
-    if "z+" not in faces:
-        return [
-            (
-                ("fluid", "grid", "follow_top_wall"),
-                'true needs a top wall to follow: add a [[walls]] entry with face = "z+" (walls now: '
-                f"{', '.join(faces) or 'none'})",
-            )
-        ]
     return [
         (
             ("stages", k, "walls", j, "approach"),
             "moves the z+ wall onto the particles at once, and the fluid grid follows that wall "
-            "(fluid.grid.follow_top_wall) only as it moves less than half a cell a fluid step; "
-            "remove it: a stress-driven wall moves down to the particles by itself (a box whose "
-            "top lies near the bed's shortens its way)",
+            "(fluid.grid.follow_top_wall) only by less than half a cell a fluid step: the run stops "
+            "(exit 70) when the stage begins if the wall is further from the bed; a stress-driven "
+            "wall moves down to the bed by itself",
         )
         for k, stage in enumerate(case.stages)
         for j, spec in enumerate(stage.walls)

@@ -122,16 +122,6 @@ RULES = [
         ['face = "z+"'],
     ),
     (
-        "darcy-follows-a-wall-a-stage-moves-at-once",
-        DARCY.replace('[[walls]]\nface = "z-"\n', '[[walls]]\nface = "z-"\n' + TOP_WALL),
-        'model = "darcy"',
-        'model = "darcy"\ngrid = { follow_top_wall = true }\n[[stages]]\nduration = 0.001\n'
-        '[[stages.walls]]\nface = "z+"\nmode = "stress"\nstress = 100.0\napproach = true',
-        "stages[0].walls[0].approach",
-        "approach = true",
-        ["moves the z+ wall onto the particles at once", "remove it"],
-    ),
-    (
         "darcy-fixed-pressure-on-a-moving-grid",
         DARCY.replace('[[walls]]\nface = "z-"\n', '[[walls]]\nface = "z-"\n' + TOP_WALL),
         'model = "darcy"',
@@ -301,3 +291,21 @@ def test_a_placement_file_is_checked_against_the_fluid(tmp_path, command, table,
     result = sphere_inproc(*args, cwd=tmp_path)
     assert_clean_error(result, 65, key, *fragments)
     assert not (tmp_path / "out").exists()
+
+
+def test_an_approach_of_the_wall_a_grid_follows_is_warned_of_before_the_run(tmp_path):
+    """A stage's `approach` moves the top wall at once, which a grid following it takes only
+    below half a cell (else exit 70 when the stage begins, hours into a run): `validate` warns,
+    naming the key and its line, and the case stays valid (an approach from near the bed is
+    fine: tests/unit/test_cuda_dem.py runs one)."""
+    text = edit(
+        DARCY.replace('[[walls]]\nface = "z-"\n', '[[walls]]\nface = "z-"\n' + TOP_WALL),
+        'model = "darcy"',
+        'model = "darcy"\ngrid = { follow_top_wall = true }\n[[stages]]\nduration = 0.001\n'
+        '[[stages.walls]]\nface = "z+"\nmode = "stress"\nstress = 100.0\napproach = true',
+    )
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    warning = f"sphere: warning: case.toml:{line_of(text, 'approach = true')}: stages[0].walls[0].approach"
+    assert warning in result.stderr and "the run stops (exit 70)" in result.stderr
