@@ -231,18 +231,18 @@ def fluid_problems(case: Case, diameter: float | None, count: int | None) -> lis
     cells are then known only where the case sets them; scene/builder.py check_placement asks
     again with the file's)."""
     fluid = case.fluid
-    if fluid is None:
+    rules = getattr(fluid, "case_problems", None)  # a fluid table without rules has none
+    if fluid is None or rules is None:
         return []
-    if fluid.model == "vans1d":
-        return fluid.case_problems(case, list(particle_materials(case)), count)
-    grid, dom = fluid.grid, case.domain
-    if grid.cells is None and grid.cell_size is None and not diameter:
-        return fluid.case_problems(case, None)
-    extent = [hi - lo for lo, hi in zip(dom.lower, dom.upper, strict=True)]
-    shape, key, problem = grid_cells(grid, extent, diameter or 0.0)
-    if problem is not None:
-        return [(("fluid", "grid", key), problem)]
-    return fluid.case_problems(case, shape if max(shape) <= MAX_CHECKED_CELLS else None)
+    grid, shape = getattr(fluid, "grid", None), None  # (the 1D VANS column has no grid)
+    if grid is not None and (grid.cells is not None or grid.cell_size is not None or diameter):
+        dom = case.domain
+        extent = [hi - lo for lo, hi in zip(dom.lower, dom.upper, strict=True)]
+        cells, key, problem = grid_cells(grid, extent, diameter or 0.0)
+        if problem is not None:
+            return [(("fluid", "grid", key), problem)]
+        shape = cells if max(cells) <= MAX_CHECKED_CELLS else None
+    return rules(case, shape, count)
 
 
 def _size_problems(case: Case, lower, upper) -> list[tuple[tuple, str]]:

@@ -169,11 +169,12 @@ class DarcyFluid(Strict):
             )
         return self
 
-    def case_problems(self, case, shape) -> list[tuple[tuple, str]]:
+    def case_problems(self, case, shape, count: int | None) -> list[tuple[tuple, str]]:
         """What this fluid requires of the rest of the case (config/consistency.py): z bounded; a
         top wall to follow, then neither fixed-pressure regions nor the explicit scheme; a cell
         in every fixed-pressure region. shape: the grid's cells, None where they depend on radii
-        read from a placement file (the build checks the regions then)."""
+        read from a placement file (the build checks the regions then); count: the particles'
+        (unused)."""
         problems = follow_problems(self.grid, case)
         if case.domain.periodic[2]:
             problems.append(

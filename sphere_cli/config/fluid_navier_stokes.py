@@ -297,11 +297,11 @@ class NavierStokesFluid(Strict):
             )
         return self
 
-    def case_problems(self, case, shape) -> list[tuple[tuple, str]]:
+    def case_problems(self, case, shape, count: int | None) -> list[tuple[tuple, str]]:
         """What this fluid requires of the rest of the case (config/consistency.py): x and y
         periodic, z bounded; a top wall to follow, through an open top; a bed's rows of cells.
         shape: the grid's cells, None where they depend on radii read from a placement file (the
-        build checks the grid then)."""
+        build checks the grid then); count: the particles' (unused)."""
         problems = follow_problems(self.grid, case)
         periodic = case.domain.periodic
         if not (periodic[0] and periodic[1]) or periodic[2]:

@@ -302,11 +302,14 @@ class Vans1dFluid(Strict):
             raise ValueError(f"{list(ids)}: expected [first, last] with 0 <= first <= last")
         return ids
 
-    def case_problems(self, case, materials: list[str], count: int | None) -> list[tuple[tuple, str]]:
+    def case_problems(self, case, shape, count: int | None) -> list[tuple[tuple, str]]:
         """What this fluid requires of the rest of the case (config/consistency.py): a laterally
         periodic cell, gravity in the x-z plane, the surface inside the box, materials that
-        particles are made of (`materials`, the case's names), particle ids below `count` (None
-        where a placement file counts them: the build checks them then)."""
+        particles are made of, particle ids below `count` (None where a placement file counts
+        them: the build checks them then). shape: no grid (None)."""
+        from .consistency import particle_materials  # (which imports the schema, and so this)
+
+        materials = list(particle_materials(case))
         problems = []
         periodic = case.domain.periodic
         if not (periodic[0] and periodic[1]) or periodic[2]:
