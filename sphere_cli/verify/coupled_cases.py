@@ -7,6 +7,8 @@
   sizes.
 - Fluidization: the example bed (configs/fluidized-bed.toml) above minimum fluidization, whose
   pressure drop levels off at its buoyant weight per area, at several driving pressures.
+- Darcy coupling (physics/fluid/darcy.py): an oedometer of sand loaded through a top wall that
+  the grid follows, undrained (Skempton's B) and drained (Terzaghi's consolidation).
 """
 
 from __future__ import annotations
@@ -20,10 +22,13 @@ import numpy as np
 
 from ..api import run_in_memory
 from ..config.drag import DragConfig
+from ..config.load import parse_case
 from ..kernels.fluid.drag import GIDASPOW, drag_rate
 from ..physics.fluid.drag import FluidParticleDrag
+from ..scene.builder import build_scene
 from ..simulation import advance
-from .registry import Outcome, Tolerance, VerificationCase, register
+from .darcy_reference import terzaghi_consolidation, terzaghi_pressure
+from .registry import Outcome, Stepper, Tolerance, VerificationCase, register
 from .scenes import linear_contact, particle_scene, toml_table
 
 G = 9.81
@@ -508,6 +513,179 @@ register(
                 source="the band of the two laws, the spread of published data, for steady transport "
                 "(averaged over 1 s or more after the first second)",
             ),
+        ),
+        repeats=1,
+    )
+)
+
+
+# ---------------------------------------------------------------------------------- Darcy coupling
+
+OEDOMETER = """
+[simulation]
+duration = 1.0
+dt = 1.5e-6
+stability = "contact"
+[domain]
+upper = [0.004, 0.004, 0.008]
+periodic = [true, true, false]
+gravity = [0.0, 0.0, 0.0]
+[particles]
+count = 128
+density = 2650.0
+radius = {{ distribution = "fixed", value = 0.0005 }}
+placement = {{ method = "lattice", spacing = 1.0 }}
+[contact]
+model = "linear"
+normal_stiffness = 1.0e3
+restitution = 0.2
+friction = 0.5
+[[walls]]
+face = "z-"
+[[walls]]
+face = "z+"
+mode = "stress"
+stress = {stress}
+[fluid]
+model = "darcy"
+grid = {{ cells = [2, 2, 4], follow_top_wall = true }}
+permeability = {{ model = "constant", value = 7.2e-12 }}
+porosity_max = 0.6
+compressibility = {compressibility}
+top = {top}
+bottom = {{ type = "no-flow" }}
+"""
+# The oedometer: 8 touching layers of 1 mm spheres (no gravity) between a floor and a top wall
+# held at SIGMA from t = 0; the fluid grid follows the wall. Dry, each column is 9 contacts in
+# series, so the skeleton's constrained modulus is M = H k_n / (9 d^2) = 8.9e5 Pa.
+SIGMA, HEIGHT, K_N, GRAIN = 2000.0, 0.008, 1.0e3, 1.0e-3  # [Pa, m, N/m, m]
+MODULUS = HEIGHT * K_N / (9 * GRAIN**2)  # [Pa]
+OEDOMETER_DT, PERMEABILITY, WATER = 1.5e-6, 7.2e-12, 4.5e-10  # [s, m^2, 1/Pa]
+
+
+def oedometer(top: str, compressibility: float = WATER):
+    """The oedometer's scene with the fluid's `top` boundary (a TOML table), and the index of
+    its top wall."""
+    text = OEDOMETER.format(stress=SIGMA, compressibility=compressibility, top=top)
+    scene = build_scene(parse_case(text))
+    return scene, list(scene.state.walls.faces).index("z+")
+
+
+def undrained_loading(compressibility: float) -> Outcome:
+    """The oedometer sealed (impermeable top wall and floor), 2000 steps (3 ms, the wall's
+    transient over): the mean pore pressure against Skempton's B sigma, its spread, and the
+    skeleton's share M eps against (1 - B) sigma, each over sigma."""
+    scene, top = oedometer('{ type = "no-flow" }', compressibility)
+    start = scene.state.walls.coord[top]
+    stepper = Stepper(scene)
+    stepper.advance(2000)
+    s = scene.fluid.pore.state
+    phi = float(s.porosity_used.mean())
+    skempton = 1.0 / (1.0 + phi * compressibility * MODULUS)
+    strain = (start - scene.state.walls.coord[top]) / HEIGHT
+    return Outcome(
+        dt=OEDOMETER_DT, steps=stepper.steps, particles=scene.state.particles.count,
+        errors={
+            "pressure": abs(float(s.pressure.mean()) / SIGMA - skempton),
+            "spread": float(np.ptp(s.pressure)) / SIGMA,
+            "skeleton": abs(MODULUS * strain / SIGMA - (1.0 - skempton)),
+        },
+        values={"skempton_b": skempton, "p_over_sigma": float(s.pressure.mean()) / SIGMA, "porosity": phi},
+        step_seconds=stepper.seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d5-darcy-undrained-skempton",
+        title="D5 Darcy coupling: undrained oedometric loading, Skempton's B",
+        model="darcy",
+        reference=(
+            "no fluid leaves, so the load step is shared as sigma = p + M eps with the fluid's storage "
+            "beta_f phi p = eps: p / sigma = B = 1 / (1 + phi beta_f M), Skempton's B for incompressible "
+            "grains in a constrained step (phi: the model's mean porosity)"
+        ),
+        description=(
+            "128 spheres of 1 mm, 8 touching layers (no gravity, k_n = 1e3 N/m: M = 8.9e5 Pa) between "
+            "an impermeable floor and top wall held at 2 kPa from t = 0; a Darcy grid of 2 x 2 x 4 "
+            "cells following the wall, k = 7.2e-12 m^2; read after 2000 steps of 1.5 us"
+        ),
+        run=undrained_loading,
+        ladder=(1e-6, 1e-7, 1e-8, WATER),
+        quick_ladder=(1e-6, 1e-7, 1e-8, WATER),
+        resolution="fluid compressibility beta_f [1/Pa]",
+        error_labels={
+            "pressure": "|mean pore pressure / sigma - B|",
+            "spread": "(max - min of the pore pressure) / sigma",
+            "skeleton": "|M eps / sigma - (1 - B)|",
+        },
+        order_note="not a convergence case: B from 0.740 (the softest fluid) to 0.99984 (water)",
+        tolerances=(
+            Tolerance("pressure", 1e-3, source="the wall's transient, slowest for the softest fluid"),
+            Tolerance("spread", 1e-3, source="a uniform pressure once the transient is over"),
+            Tolerance("skeleton", 2e-3, source="the wall's settlement, 4e-4 at the softest fluid"),
+        ),
+    )
+)
+
+
+def drained_consolidation(end: float) -> Outcome:
+    """The oedometer under a permeable top wall (0 Pa): the water first carries the load, then
+    drains through the top. At dimensionless times T = c_v t / H^2 from 0.3 to `end`
+    (c_v = k / (mu (1/M + phi beta_f))) the base pressure against Terzaghi's series (over sigma)
+    and the settlement, as a fraction of the dry one 9 sigma d^2 / k_n, against the average
+    degree of consolidation U(T); the largest of each."""
+    scene, top = oedometer("{ pressure = 0.0 }")
+    start = scene.state.walls.coord[top]
+    final = 9 * SIGMA * GRAIN**2 / K_N
+    rate = PERMEABILITY / (1.0e-3 * (1.0 / MODULUS + 0.4 * WATER)) / HEIGHT**2  # c_v / H^2 [1/s]
+    stepper = Stepper(scene)
+    base = settlement = 0.0
+    for target in (T for T in (0.3, 0.45, 0.6, 0.8, 1.0, 1.2) if T <= end):
+        stepper.advance(round(target / rate / OEDOMETER_DT) - stepper.steps)
+        T = rate * stepper.steps * OEDOMETER_DT
+        pressure = float(scene.fluid.pore.state.pressure[:, :, 0].mean())
+        expected = float(terzaghi_pressure(np.array([HEIGHT]), T, SIGMA, HEIGHT)[0])
+        base = max(base, abs(pressure - expected) / SIGMA)
+        settled = (start - scene.state.walls.coord[top]) / final
+        settlement = max(settlement, abs(settled - terzaghi_consolidation(T)))
+    return Outcome(
+        dt=OEDOMETER_DT, steps=stepper.steps, particles=scene.state.particles.count,
+        errors={"base_pressure": base, "settlement": settlement}, values={"T": T},
+        step_seconds=stepper.seconds,
+    )  # fmt: skip
+
+
+register(
+    VerificationCase(
+        name="d5-darcy-drained-terzaghi",
+        title="D5 Darcy coupling: drained oedometric consolidation against Terzaghi",
+        model="darcy",
+        reference=(
+            "Terzaghi's one-dimensional consolidation of a layer drained at the top: the base "
+            "pressure's series and the average degree of consolidation U(T), T = c_v t / H^2, "
+            "c_v = k / (mu (1/M + phi beta_f))"
+        ),
+        description=(
+            "the undrained case's oedometer with a permeable top wall (0 Pa), water; the base "
+            "pressure and the settlement at T = 0.3, 0.45, 0.6, 0.8, 1.0, 1.2 up to the rung's end"
+        ),
+        run=drained_consolidation,
+        ladder=(0.6, 1.2),
+        quick_ladder=(1.2,),
+        resolution="consolidation time T reached",
+        error_labels={
+            "base_pressure": "largest |base pressure - Terzaghi| / sigma",
+            "settlement": "largest |settlement / dry settlement - U(T)|",
+        },
+        order_note=(
+            "not a convergence case; why not closer: the wall takes about 0.5 ms (T ~ 0.05) to load "
+            "the bed, and the seepage force on the grains is -V grad p/(1 - phi) with the lens porosity "
+            "0.397 of this lattice against its true 0.476"
+        ),
+        tolerances=(
+            Tolerance("base_pressure", 0.05, source="measured 0.037"),
+            Tolerance("settlement", 0.04, source="measured 0.035"),
         ),
         repeats=1,
     )

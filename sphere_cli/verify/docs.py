@@ -30,7 +30,8 @@ GROUPS = {
     "A4": "single-particle mechanics: free fall, bouncing, sliding to rolling, oblique impact, energy",
     "B": "packings: frictionless random close packing and poured packings with friction",
     "C": "each fluid model alone against analytic solutions of its equations",
-    "D": "fluid-particle drag: settling, the Ergun pressure drop of a fixed bed, momentum exchange",
+    "D": "fluid-particle coupling: settling, the Ergun pressure drop of a fixed bed, momentum exchange, "
+    "the Darcy pore pressure of a loaded bed (Skempton's B, Terzaghi's consolidation)",
     "E": "stability on stiff and extreme input: time-step limits, refusals, blow-up detection",
 }
 

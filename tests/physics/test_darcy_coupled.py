@@ -1,6 +1,8 @@
 """The Darcy fluid coupled to particles (physics/fluid/darcy.py): a bed under an upward seepage
-gradient, consolidation under a wall drained and undrained, bitwise resume, and scenes without
-it left alone.
+gradient, walls the pore pressure pushes or not, bitwise resume, and scenes without it left
+alone. Consolidation under a wall, drained (Terzaghi) and undrained (Skempton's B), are
+verification cases (sphere_cli/verify/coupled_cases.py, d5-darcy-*), which
+tests/verify/test_verify_quick.py runs.
 
 Critical gradient (Terzaghi): the fluid pushes the grains with the seepage force -grad p per
 unit volume of the mixture, -V grad p / (1 - phi) on a particle of volume V (kernels/fluid/darcy.py),
@@ -28,7 +30,7 @@ from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
 from sphere_cli.kernels.fluid.darcy import add_pressure_forces
 from sphere_cli.scene.builder import build_scene
 from sphere_cli.simulation import advance
-from sphere_cli.verify.darcy_reference import terzaghi_consolidation, terzaghi_pressure
+from sphere_cli.verify.coupled_cases import HEIGHT, oedometer
 
 RHO_S, RHO_F, G = 2650.0, 1000.0, 9.81
 D = 1.0e-3
@@ -195,104 +197,6 @@ def test_scenes_without_darcy_do_not_load_it(tmp_path: Path):
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["[]"] * 3
-
-
-OEDOMETER = """
-[simulation]
-duration = 1.0
-dt = 1.5e-6
-stability = "contact"
-[domain]
-upper = [0.004, 0.004, 0.008]
-periodic = [true, true, false]
-gravity = [0.0, 0.0, 0.0]
-[particles]
-count = 128
-density = 2650.0
-radius = {{ distribution = "fixed", value = 0.0005 }}
-placement = {{ method = "lattice", spacing = 1.0 }}
-[contact]
-model = "linear"
-normal_stiffness = 1.0e3
-restitution = 0.2
-friction = 0.5
-[[walls]]
-face = "z-"
-[[walls]]
-face = "z+"
-mode = "stress"
-stress = {stress}
-[fluid]
-model = "darcy"
-grid = {{ cells = [2, 2, 4], follow_top_wall = true }}
-permeability = {{ model = "constant", value = 7.2e-12 }}
-porosity_max = 0.6
-compressibility = {compressibility}
-top = {top}
-bottom = {{ type = "no-flow" }}
-"""
-# The oedometer: 8 touching layers of 1 mm spheres (no gravity) between a floor and a top wall
-# held at SIGMA from t = 0; the fluid grid follows the wall. Dry, each column is 9 contacts in
-# series, so the skeleton's constrained modulus is M = H k_n / (9 d^2) = 8.9e5 Pa.
-SIGMA, HEIGHT, K_N = 2000.0, 0.008, 1.0e3
-MODULUS = HEIGHT * K_N / (9 * D**2)
-
-
-def oedometer(top: str, compressibility: float = 4.5e-10):
-    scene = build_scene(parse_case(OEDOMETER.format(stress=SIGMA, compressibility=compressibility, top=top)))
-    walls = scene.state.walls
-    return scene, list(walls.faces).index("z+")
-
-
-@pytest.mark.parametrize("compressibility", [1e-6, 1e-7, 1e-8, 4.5e-10])
-def test_undrained_loading_raises_the_pore_pressure_as_skempton(compressibility):
-    """An impermeable top wall and floor: no fluid leaves, so the load step is shared between
-    the pore pressure and the skeleton, sigma = p + M eps, with the fluid's storage
-    beta_f phi p = eps (the pore volume lost, all of it from the fluid's compression):
-    p / sigma = B = 1 / (1 + phi beta_f M), Skempton's B for incompressible grains in a
-    constrained (oedometric) step, with phi the mean porosity the model measures (0.397: the
-    lens estimate of this lattice; the true one is 0.476). B -> 1 as beta_f -> 0: 0.740, 0.966,
-    0.9965 and, for water, 0.99984. After 3 ms (the wall's transient has died out) the pressure
-    is uniform and matches B within 1e-3 of sigma, and the wall's settlement carries the rest,
-    M eps = (1 - B) sigma, within 2e-3 of sigma (measured: 4e-4 and 2e-4 at beta_f = 1e-6, the
-    softest fluid, whose transient is the slowest; 3e-6 and below for the others)."""
-    scene, top = oedometer('{ type = "no-flow" }', compressibility)
-    start = scene.state.walls.coord[top]
-    advance(scene, 2000)
-    s = scene.fluid.pore.state
-    phi = float(s.porosity_used.mean())
-    skempton = 1.0 / (1.0 + phi * compressibility * MODULUS)
-    assert s.pressure.mean() / SIGMA == pytest.approx(skempton, abs=1e-3)
-    assert np.ptp(s.pressure) < 1e-3 * SIGMA
-    strain = (start - scene.state.walls.coord[top]) / HEIGHT
-    assert MODULUS * strain / SIGMA == pytest.approx(1.0 - skempton, abs=2e-3)
-
-
-def test_drained_consolidation_follows_terzaghi():
-    """The same step with a permeable top wall (type = "pressure", 0 Pa): the water first
-    carries the load, then drains through the top and hands it to the skeleton on Terzaghi's
-    time scale, T = c_v t / H^2 with c_v = k / (mu (1/M + phi beta_f)) = 6.4e-3 m^2/s. At
-    T = 0.3 ... 1.2 the base pressure matches the series within 0.05 sigma and the settlement,
-    as a fraction of the dry one 9 sigma d^2 / k_n, the average degree of consolidation U(T)
-    within 0.04. Measured: at most 0.046 sigma and 0.029. Why not closer: the wall takes about
-    0.5 ms (T ~ 0.05) to load the bed, and the seepage force on the grains is -V grad p/(1 - phi)
-    with the lens porosity 0.397 of this lattice against its true 0.476, so the skeleton takes
-    0.87 of the seepage force and the pressure decays about 1.2 times faster than the series'
-    slowest mode."""
-    scene, top = oedometer("{ pressure = 0.0 }")
-    start = scene.state.walls.coord[top]
-    final = 9 * SIGMA * D**2 / K_N
-    consolidation = 7.2e-12 / (1.0e-3 * (1.0 / MODULUS + 0.4 * 4.5e-10)) / HEIGHT**2  # c_v / H^2
-    steps = 0
-    for T in (0.3, 0.45, 0.6, 0.8, 1.0, 1.2):
-        advance(scene, round(T / consolidation / 1.5e-6) - steps)
-        steps = scene.state.clock.step
-        T_now = consolidation * steps * 1.5e-6
-        base = float(scene.fluid.pore.state.pressure[:, :, 0].mean())
-        expected = float(terzaghi_pressure(np.array([HEIGHT]), T_now, SIGMA, HEIGHT)[0])
-        assert base == pytest.approx(expected, abs=0.05 * SIGMA), f"T = {T_now:.3f}"
-        settled = (start - scene.state.walls.coord[top]) / final
-        assert settled == pytest.approx(terzaghi_consolidation(T_now), abs=0.04), f"T = {T_now:.3f}"
 
 
 def test_a_permeable_wall_moving_through_the_water_above_a_bed_does_not_lift_it():
