@@ -10,7 +10,6 @@ axis (an open cut axis, particles pressed against the end walls).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import shutil
@@ -28,6 +27,7 @@ from test_fluid_moving_grid_input import DARCY_FOLLOWING, DARCY_TOP_WALL
 from test_vans1d_bad_input import CASE as VANS_CASE
 
 from sphere_cli.io.checkpoint import list_checkpoints, newest_valid_checkpoint
+from sphere_cli.verify.coupled_cases import OEDOMETER
 
 MPIEXEC = Path(sys.executable).with_name("mpiexec")
 REPO = Path(__file__).resolve().parents[2]
@@ -411,15 +411,11 @@ def test_ranks_without_particles_step_from_python_beside_ranks_in_the_compiled_l
 
 
 def oedometer() -> str:
-    """tests/physics/test_darcy_coupled.py's undrained oedometer, 1.5 ms of it: 128 spheres in 8
-    touching layers between a floor and a top wall held at 2 kPa, the Darcy grid following the
-    wall, which the pore pressure under it pushes up (no gravity)."""
-    spec = importlib.util.spec_from_file_location(
-        "darcy_coupled", REPO / "tests/physics/test_darcy_coupled.py"
-    )
-    cases = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cases)
-    text = cases.OEDOMETER.format(stress=2000.0, compressibility=1e-7, top='{ type = "no-flow" }')
+    """The undrained oedometer of `sphere verify`'s d5-darcy-undrained-skempton
+    (sphere_cli/verify/coupled_cases.py), 1.5 ms of it: 128 spheres in 8 touching layers between
+    a floor and a top wall held at 2 kPa, the Darcy grid following the wall, which the pore
+    pressure under it pushes up (no gravity)."""
+    text = OEDOMETER.format(stress=2000.0, compressibility=1e-7, top='{ type = "no-flow" }')
     assert "duration = 1.0" in text
     outputs = "\n[output.frames]\nevery_time = 0.0005\n[output.checkpoints]\nevery_time = 0.0005\nkeep = 10\n"
     return (
