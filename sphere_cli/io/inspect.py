@@ -14,7 +14,7 @@ from ..errors import MissingInputError, OutputError, ResumeRefused
 from ..physics.fluid_plugin import MOVING_GRID_SPACING
 from .checkpoint import list_checkpoints, read_checkpoint
 from .rundir import RunDirectory
-from .trajectory import complete_samples, frame_clock, open_to_read
+from .trajectory import complete_samples, frame_clock, not_an_output, open_to_read
 
 
 def summarize(path: Path) -> dict:
@@ -26,7 +26,8 @@ def summarize(path: Path) -> dict:
         with open_to_read(path) as f:
             is_trajectory = "h5md" in f
     except Exception as exc:  # a damaged file can fail in any way inside h5py
-        raise OutputError(f"{path}: not a readable HDF5 file ({exc})") from None
+        reason = f"not a readable HDF5 file ({exc})"
+        raise not_an_output(path, reason, "a run directory, a trajectory.h5 or a checkpoint") from None
     return _trajectory(path) if is_trajectory else _checkpoint(path)
 
 

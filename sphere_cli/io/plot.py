@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 
 from ..errors import MissingDependency, MissingInputError, OutputError
-from .trajectory import open_to_read
+from .trajectory import not_an_output, open_to_read
 
 INSTALL_HINT = "pip install 'sphere-cli[plot]'"
 
@@ -91,7 +91,8 @@ def _read(trajectory: Path) -> tuple[dict, str, dict]:
             resolved = json.loads(f["parameters"].attrs["resolved_case"])
             fluid = _read_fluid(f)
     except (OSError, KeyError) as exc:
-        raise OutputError(f"{trajectory}: not a readable sphere trajectory ({exc})") from None
+        reason = f"not a readable sphere trajectory ({exc})"
+        raise not_an_output(trajectory, reason, "a run directory or its trajectory.h5") from None
     shear = resolved.get("output", {}).get("observables", {}).get("shear_direction", "x")
     if "stress" in series:
         t, sigma, unit = series["stress"]

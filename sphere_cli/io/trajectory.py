@@ -38,7 +38,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import OutputError
+from ..errors import MissingInputError, OutputError
 from .atomic import require_free_space
 
 FIELD_UNITS = {
@@ -84,6 +84,20 @@ def open_to_read(path: Path) -> h5py.File:
     checkpoint look corrupt and a resume start from an older one. Checkpoints are never written
     in place and the trajectory's writer takes no exclusive lock, so the lock guarded nothing."""
     return h5py.File(path, "r", locking=False)
+
+
+def not_an_output(path: Path, reason: str, takes: str) -> MissingInputError:
+    """The error for a file given to a command that reads what a run writes (`takes`: what it
+    reads), which is not one: exit 66 (a file holding nothing usable), with the reader's
+    `reason` and, where the file's name says what it is, the file to give instead."""
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        hint = "it looks like a case file, which `sphere validate` checks"
+    elif suffix == ".xmf":
+        hint = f"it is the XDMF description ParaView opens: give {path.with_suffix('.h5').name} beside it"
+    else:
+        hint = f"this command reads {takes}"
+    return MissingInputError(f"{path}: {reason}; {hint}")
 
 
 # A unit string of the H5MD units module: factors separated by single spaces, an optional number

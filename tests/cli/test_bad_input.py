@@ -676,9 +676,29 @@ def test_inspect_missing_path(tmp_path):
 
 
 def test_inspect_a_file_that_is_not_hdf5(tmp_path):
+    """A file holding nothing usable is missing input (66), not an I/O failure (74, which a
+    batch script may retry), and the message says what the command reads."""
     path = tmp_path / "notes.h5"
     path.write_text("hello\n")
-    assert_clean_error(sphere("inspect", path), 74, "notes.h5", "not a readable HDF5 file")
+    assert_clean_error(
+        sphere("inspect", path), 66, "notes.h5", "not a readable HDF5 file", "reads a run directory"
+    )
+
+
+@pytest.mark.parametrize("command", ["inspect", "plot"])
+@pytest.mark.parametrize(
+    ("name", "hint"),
+    [
+        ("case.toml", "it looks like a case file, which `sphere validate` checks"),
+        ("trajectory.xmf", "it is the XDMF description ParaView opens: give trajectory.h5 beside it"),
+    ],
+)
+def test_inspect_and_plot_of_a_file_a_run_does_not_write_say_what_it_is(tmp_path, command, name, hint):
+    """The case file or ParaView's sidecar given where a run's output is read (exit 66): the
+    message names what the file looks like and what to give instead."""
+    path = tmp_path / name
+    path.write_text('title = "x"\n' if name.endswith(".toml") else "<Xdmf/>\n")
+    assert_clean_error(sphere_inproc(command, path), 66, name, hint)
 
 
 def test_inspect_a_directory_that_is_not_a_run(tmp_path):
