@@ -245,9 +245,16 @@ class Sweep:
                 names,
                 values,
             )
-        except FileNotFoundError:
-            raise MissingInputError(f"{path}: not a sweep directory (no {SWEEP_FILE})") from None
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+        except (FileNotFoundError, NotADirectoryError):
+            what = (
+                "a file, not the folder `sphere sweep` makes" if Path(path).is_file() else f"no {SWEEP_FILE}"
+            )
+            raise MissingInputError(f"{path}: not a sweep directory ({what})") from None
+        except (ValueError, KeyError, TypeError) as exc:  # a file holding nothing usable (66)
+            raise MissingInputError(
+                f"{file}: not a sweep description sphere wrote ({type(exc).__name__}: {exc})"
+            ) from None
+        except OSError as exc:
             raise OutputError(f"{file}: unreadable ({type(exc).__name__}: {exc})") from None
 
 

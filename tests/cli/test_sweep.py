@@ -131,6 +131,20 @@ def test_sweep_folder_given_again_with_vary_is_a_usage_error(base, tmp_path):
     assert_clean_error(sphere_inproc("sweep-summary", tmp_path), 66, "not a sweep directory")
 
 
+def test_a_case_file_or_a_damaged_description_given_as_a_sweep_is_missing_input(base, tmp_path):
+    """The base case given to sweep-summary, or a sweep.json that is not one sphere wrote: missing
+    input (66, a file holding nothing usable), not an I/O failure (74, which a batch script may
+    retry), saying which."""
+    out = tmp_path / "sw"
+    assert sphere_inproc("sweep", base, "--vary", "particles.seed=1,2", "-o", out).code == 0
+    assert_clean_error(
+        sphere_inproc("sweep-summary", base), 66, "a file, not the folder `sphere sweep` makes"
+    )
+    (out / "sweep.json").write_text("{ half a sweep")
+    for command in ("sweep-summary", "sweep"):
+        assert_clean_error(sphere_inproc(command, out), 66, "not a sweep description sphere wrote")
+
+
 def test_members_read_relative_files_from_the_base_case_folder(tmp_path):
     """A placement file next to the base case is found by a member, though the members' cases
     live in the sweep's folder, and its run records the base case as the folder a resume resolves
