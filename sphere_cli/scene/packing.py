@@ -98,6 +98,9 @@ class ParticleFile:
 VECTORS = {"velocity": ("vx", "vy", "vz"), "angular_velocity": ("wx", "wy", "wz")}
 # the columns a CSV particle file may have (any other is refused: its data would be dropped)
 CSV_COLUMNS = ("x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz", "material", "group", "fixed")
+# the datasets an HDF5 particle file may have at its root (likewise; groups and attributes are
+# not read, and may hold anything)
+HDF5_DATASETS = ("position", "radius", "velocity", "angular_velocity", "material", "group", "fixed")
 FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
 
 
@@ -217,12 +220,21 @@ def _field(path: Path, line: int, column: int, name: str, field: str):
 
 
 def _read_hdf5(path: Path) -> ParticleFile:
+    import h5py
+
     from ..io.trajectory import open_to_read
 
     try:
         with open_to_read(path) as f:
             if "position" not in f:
                 raise CaseError(f"{path}: the HDF5 particle file needs a dataset 'position' (N,3)")
+            for name, item in f.items():  # a dataset read by no one (radii for radius) would be dropped
+                if isinstance(item, h5py.Dataset) and name not in HDF5_DATASETS:
+                    hint = " (the radii are in radius)" if name.lower() in ("radii", "r", "rad") else ""
+                    raise CaseError(
+                        f"{path}: unknown dataset {name!r}{hint}; the datasets are position and "
+                        f"optionally {', '.join(HDF5_DATASETS[1:])} (groups and attributes are not read)"
+                    )
 
             def numbers(name):
                 return np.asarray(f[name], dtype=np.float64) if name in f else None

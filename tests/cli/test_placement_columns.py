@@ -72,6 +72,25 @@ def test_hdf5_file_gives_material_group_and_fixed(tmp_path):
     assert p.inv_mass[0] > 0.0 and p.inv_mass[1] == 0.0 and p.inv_mass[2] == 0.0
 
 
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_an_unknown_hdf5_dataset_is_refused_by_name(tmp_path, command):
+    """As a CSV's unknown column: radii under another name would leave every particle the
+    particles.radius of the case (1 mm here, against the file's 0.5 mm), a plausible wrong scene.
+    Groups and attributes are not read and may hold anything."""
+    with h5py.File(tmp_path / "spheres.h5", "w") as f:
+        f["position"] = [[0.002, 0.005, 0.005], [0.008, 0.005, 0.005]]
+        f["radii"] = [0.0005, 0.0005]
+        f.create_group("provenance").attrs["made_by"] = "a notebook"
+    (tmp_path / "case.toml").write_text(edit(FROM_FILE, "spheres.csv", "spheres.h5"))
+    args = ("run", "case.toml", "-o", "out", "-q") if command == "run" else ("validate", "case.toml")
+    result = sphere_inproc(*args, cwd=tmp_path)
+    assert_clean_error(result, 65, "spheres.h5", "unknown dataset 'radii' (the radii are in radius)")
+    assert not (tmp_path / "out").exists()
+    with h5py.File(tmp_path / "spheres.h5", "a") as f:
+        f.move("radii", "radius")
+    assert sphere_inproc(*args, cwd=tmp_path).code == 0
+
+
 @pytest.mark.parametrize(
     ("case", "csv", "fragments"),
     [
