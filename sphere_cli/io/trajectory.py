@@ -38,7 +38,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import MissingInputError, OutputError
+from ..errors import MissingInputError, OutputError, SphereError
 from .atomic import require_free_space
 
 FIELD_UNITS = {
@@ -86,11 +86,14 @@ def open_to_read(path: Path) -> h5py.File:
     return h5py.File(path, "r", locking=False)
 
 
-def not_an_output(path: Path, reason: str, takes: str) -> MissingInputError:
+def not_an_output(path: Path, reason: str, takes: str) -> SphereError:
     """The error for a file given to a command that reads what a run writes (`takes`: what it
-    reads), which is not one: exit 66 (a file holding nothing usable), with the reader's
-    `reason` and, where the file's name says what it is, the file to give instead."""
+    reads), which cannot be read as one, with the reader's `reason`: an HDF5 file's name, a
+    damaged output (exit 74, as a checkpoint that fails its verification); any other, a file
+    holding nothing usable here (exit 66), saying what it looks like where its name tells."""
     suffix = path.suffix.lower()
+    if suffix in (".h5", ".hdf5"):
+        return OutputError(f"{path}: {reason}; damaged (cut short, overwritten), or not a file sphere wrote")
     if suffix == ".toml":
         hint = "it looks like a case file, which `sphere validate` checks"
     elif suffix == ".xmf":

@@ -676,12 +676,15 @@ def test_inspect_missing_path(tmp_path):
 
 
 def test_inspect_a_file_that_is_not_hdf5(tmp_path):
-    """A file holding nothing usable is missing input (66), not an I/O failure (74, which a
-    batch script may retry), and the message says what the command reads."""
+    """An .h5 file that is not HDF5 reads as a damaged output (74, as a checkpoint failing its
+    verification); any other file holding nothing usable is missing input (66), the message
+    saying what the command reads."""
     path = tmp_path / "notes.h5"
     path.write_text("hello\n")
+    assert_clean_error(sphere("inspect", path), 74, "notes.h5", "not a readable HDF5 file", "damaged")
+    path = path.rename(tmp_path / "notes.txt")
     assert_clean_error(
-        sphere("inspect", path), 66, "notes.h5", "not a readable HDF5 file", "reads a run directory"
+        sphere_inproc("inspect", path), 66, "notes.txt", "not a readable HDF5 file", "reads a run directory"
     )
 
 
