@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import shutil
 import sys
 import time as wallclock
@@ -443,10 +442,7 @@ def _refuse_lost_checkpoints(rundir: RunDirectory, log) -> None:
     purge) is not resumed from step 0: that would rewrite its trajectory, whose frames may be
     all that is left of days of running, from the start. status.json names the newest checkpoint
     written (absent: the run stopped before its first, and starts again)."""
-    try:
-        written = json.loads(rundir.status_path.read_text(encoding="utf-8")).get("checkpoint")
-    except (OSError, ValueError, AttributeError):
-        written = None
+    written = rundir.read_status().get("checkpoint")
     if written is None:
         return
     message = (

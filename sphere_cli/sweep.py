@@ -422,10 +422,7 @@ def member_state(sweep: Sweep, name: str) -> tuple[str, dict]:
     # the lock first: a member that ends between the two readings is then seen running, not
     # (from its last status while running) interrupted
     running = rundir.busy()
-    try:
-        status = json.loads(rundir.status_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        status = {}
+    status = rundir.read_status()
     if running:
         return RUNNING, status
     state = status.get("state")

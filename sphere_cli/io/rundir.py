@@ -379,6 +379,14 @@ class RunDirectory:
             handler.close()
             log.removeHandler(handler)
 
+    def read_status(self) -> dict:
+        """status.json as written, or {} where it is missing or not a status (damaged)."""
+        try:
+            status = json.loads(self.status_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return {}
+        return status if isinstance(status, dict) else {}
+
     def write_status(self, info: dict) -> None:
         if self.checkpoint is not None:
             info = {**info, "checkpoint": self.checkpoint}
@@ -394,10 +402,7 @@ class RunDirectory:
         every rank ends with (74, the files could not be written, tells a sweep to resume it, as
         on one rank), its progress kept, or `progress` (step, time) where given (no rank writes
         again). Best effort: the message is on stderr already."""
-        try:
-            status = json.loads(self.status_path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            status = {}
+        status = self.read_status()
         status.pop("activity", None)  # the start's ("building the scene"), over with the run
         try:
             self.logger().log(logging.ERROR if state == "failed" else logging.WARNING, "%s", message)
