@@ -54,12 +54,14 @@ class RunResult:
 
 
 def validate(path: str | Path) -> dict:
-    """Validate a case file without building the scene (a lattice placement's capacity is
-    checked, as `run` would); returns the resolved case."""
-    from .scene.builder import check_placement
+    """Validate a case file as `run` would before its first step: the placement (a lattice's
+    capacity, a placement file's contents) and the time step against the limits of the
+    particles, walls and fluid as built (no kernel compiled); returns the resolved case."""
+    from .scene.builder import check_placement, check_time_step
 
     loaded = load_case(path)
     check_placement(loaded)
+    check_time_step(loaded)
     return resolved_dict(loaded.case)
 
 

@@ -125,11 +125,83 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     case = loaded.case
     if not case.has_particles:
         return _build_fluid_only(loaded, restart)
+    made = _bodies(loaded, restart)
+    state, walls_state, scales, fluid = made.state, made.walls_state, made.scales, made.fluid
+    contact = PairContactForces(made.tables)
+    walls = PlaneWallForces(contact) if walls_state is not None else None
+    wall_motion = WallMotion() if walls_state is not None and _walls_move(case) else None
+    stages = None
+    if case.stages:
+        stages = Stages(case, walls_state, scales, contact)
+    elif walls_state is not None:
+        apply_modes(walls_state, dict(enumerate(case.walls)), scales, state.box, 0.0, walls_state.coord)
+    neighbors = NeighborSearch(state, made.tables.frictional)
+    scene = Scene(
+        case=case,
+        state=state,
+        motion=Motion(),
+        neighbors=neighbors,
+        contact=contact,
+        walls=walls,
+        dt_limit=made.dt_limit[0],
+        dt_limit_reason=made.dt_limit[1],
+        dt_bound=made.dt_bound[0],
+        dt_bound_reason=made.dt_bound[1],
+        fluid=fluid,
+        wall_motion=wall_motion,
+        stages=stages,
+    )
+    if fluid is not None:
+        fluid.start(state)
+    observed = case.output.observables
+    scene.observer = Observer(scene, observed)
+    if "energy_budget" in observed.quantities:
+        scene.budget = EnergyBudget(scene)
+    scene.order_modules()
+    if restart is None:
+        helper = compile_ahead.start(scene)
+        try:
+            if stages is not None:
+                stages.begin(state, 0)
+            neighbors.rebuild(state)
+            _check_overlaps(loaded, state)
+            if fluid is not None:
+                fluid.initialize(state)
+        except BaseException:
+            compile_ahead.stop(helper)  # a refused packing, an interrupt: nothing to wait for
+            raise
+        compile_ahead.finish(helper)
+        scene.compute_initial_forces()
+        if scene.budget is not None:
+            scene.budget.start()
+    else:
+        _restore(loaded, scene, restart)
+    return scene
+
+
+@dataclass
+class _Bodies:
+    """What the time step depends on: the particles, walls and fluid of a case, before any
+    kernel runs (so `sphere validate` can take the same dt as `run`, check_time_step)."""
+
+    state: State  # its clock's dt resolved
+    tables: ContactTables
+    walls_state: object  # scene/walls.py WallState, None without walls
+    scales: WallScales | None
+    fluid: FluidModule | None
+    dt_limit: tuple[float, str]  # (smallest limit of one contact alone or a fluid process [s], what sets it)
+    dt_bound: tuple[float, str]  # (stability bound with many contacts at a sphere [s], what sets it)
+
+
+def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bodies:
+    """The particles (placed and grouped, or from `restart`), walls and fluid of a case with
+    particles, and its time step; `files` as check_placement's."""
+    case = loaded.case
     rng = np.random.default_rng(case.particles.seed)
     tables = contact_tables(case)
     n_placed = None
     if restart is None:
-        pos, radius, vel, angvel, placement_file = _initial_particles(loaded, rng)
+        pos, radius, vel, angvel, placement_file = _initial_particles(loaded, rng, files)
         material = _file_materials(loaded, tables, placement_file)
         if material is None:
             material = assign_materials(tables.fractions, radius.size, rng)
@@ -186,22 +258,15 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
         particles.inv_inertia[n_placed:] = 0.0
         particles.vel_pred[:] = vel
 
-    contact = PairContactForces(tables)
     walls_state = None
-    walls = None
-    wall_motion = None
-    stages = None
     scales = None
     if case.walls:
-        moving = any(w.moves for w in case.walls) or any(w.moves for s in case.stages for w in s.walls)
         walls_state = allocate_walls(
-            case.walls, n, box.lower, box.upper, tables.wall_table, moving, tables.frictional
+            case.walls, n, box.lower, box.upper, tables.wall_table, _walls_move(case), tables.frictional
         )
         if restart is None and n > n_placed:
             walls_state.attached = np.arange(n_placed, n, dtype=np.int64)
             walls_state.attached_wall = rough_wall
-        walls = PlaneWallForces(contact)
-        wall_motion = WallMotion() if moving else None
         scales = WallScales(case, tables, radius, mass, particles.inv_mass)
     skin = case.simulation.neighbor_skin * float(radius.max())
     state = State(
@@ -231,52 +296,12 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
     state.clock.dt = _resolve_dt(loaded, dt_limit, dt_reason, solid_limit, bound, motion)
     if state.clock.dt == motion[0]:
         dt_limit, dt_reason = motion  # what the run reports as setting its step
-    if case.stages:
-        stages = Stages(case, walls_state, scales, contact)
-    elif walls_state is not None:
-        apply_modes(walls_state, dict(enumerate(case.walls)), scales, box, 0.0, walls_state.coord)
-    neighbors = NeighborSearch(state, tables.frictional)
-    scene = Scene(
-        case=case,
-        state=state,
-        motion=Motion(),
-        neighbors=neighbors,
-        contact=contact,
-        walls=walls,
-        dt_limit=dt_limit,
-        dt_limit_reason=dt_reason,
-        dt_bound=bound[0],
-        dt_bound_reason=bound[1],
-        fluid=fluid,
-        wall_motion=wall_motion,
-        stages=stages,
-    )
-    if fluid is not None:
-        fluid.start(state)
-    observed = case.output.observables
-    scene.observer = Observer(scene, observed)
-    if "energy_budget" in observed.quantities:
-        scene.budget = EnergyBudget(scene)
-    scene.order_modules()
-    if restart is None:
-        helper = compile_ahead.start(scene)
-        try:
-            if stages is not None:
-                stages.begin(state, 0)
-            neighbors.rebuild(state)
-            _check_overlaps(loaded, state)
-            if fluid is not None:
-                fluid.initialize(state)
-        except BaseException:
-            compile_ahead.stop(helper)  # a refused packing, an interrupt: nothing to wait for
-            raise
-        compile_ahead.finish(helper)
-        scene.compute_initial_forces()
-        if scene.budget is not None:
-            scene.budget.start()
-    else:
-        _restore(loaded, scene, restart)
-    return scene
+    return _Bodies(state, tables, walls_state, scales, fluid, (dt_limit, dt_reason), bound)
+
+
+def _walls_move(case: Case) -> bool:
+    """Whether some wall of the case moves in some stage."""
+    return any(w.moves for w in case.walls) or any(w.moves for s in case.stages for w in s.walls)
 
 
 def _box(case: Case) -> Box:
@@ -295,17 +320,7 @@ def _build_fluid_only(loaded: LoadedCase, restart=None) -> Scene:
     ones (the fluid reads them), no motion, neighbour search or contacts, and dt from the
     fluid's limits (_fluid_only_dt)."""
     case = loaded.case
-    box = _box(case)
-    none3, none = np.zeros((0, 3)), np.zeros(0)
-    particles = Particles(
-        pos=none3, vel=none3, angvel=none3, force=none3, torque=none3, radius=none, mass=none,
-        inertia=none, inv_mass=none, inv_inertia=none, material=np.zeros(0, dtype=np.int32),
-        vel_pred=none3, angvel_pred=none3,
-    )  # fmt: skip
-    state = State(clock=Clock(dt=math.nan), box=box, particles=particles, neighbors=None)
-    fluid = build_fluid(loaded, state)
-    limit, reason = fluid.dt_limit()
-    state.clock.dt = _fluid_only_dt(loaded, fluid, limit, reason)
+    state, fluid, (limit, reason) = _fluid_alone(loaded)
     scene = Scene(
         case=case,
         state=state,
@@ -327,6 +342,34 @@ def _build_fluid_only(loaded: LoadedCase, restart=None) -> Scene:
     else:
         _restore(loaded, scene, restart)
     return scene
+
+
+def _fluid_alone(loaded: LoadedCase) -> tuple[State, FluidModule, tuple[float, str]]:
+    """The state (no particles, its clock's dt resolved) and fluid of a case without particles,
+    and the fluid's limit on dt with what sets it."""
+    none3, none = np.zeros((0, 3)), np.zeros(0)
+    particles = Particles(
+        pos=none3, vel=none3, angvel=none3, force=none3, torque=none3, radius=none, mass=none,
+        inertia=none, inv_mass=none, inv_inertia=none, material=np.zeros(0, dtype=np.int32),
+        vel_pred=none3, angvel_pred=none3,
+    )  # fmt: skip
+    state = State(clock=Clock(dt=math.nan), box=_box(loaded.case), particles=particles, neighbors=None)
+    fluid = build_fluid(loaded, state)
+    limit, reason = fluid.dt_limit()
+    state.clock.dt = _fluid_only_dt(loaded, fluid, limit, reason)
+    return state, fluid, (limit, reason)
+
+
+@np.errstate(all="ignore")  # as build_scene
+def check_time_step(loaded: LoadedCase, files: dict | None = None) -> None:
+    """What `sphere validate` checks of the time step: the particles, walls and fluid built as
+    `run` builds them, before any kernel runs, and the dt of the case resolved from their limits
+    (a given dt above them, or one giving too many steps, refused as `run` refuses it). `files`
+    as check_placement's."""
+    if loaded.case.has_particles:
+        _bodies(loaded, files=files)
+    else:
+        _fluid_alone(loaded)
 
 
 def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason: str) -> float:
@@ -461,7 +504,7 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     values, its particles inside the box and the box wide enough for them, its material and
     group columns naming the case's, the fluid's grid and rules against its radii and count), so
     that a batch job validated before it is queued does not fail at its start for its input.
-    Random insertion is only known by doing it, and the particles' overlaps are found by `run`.
+    Random insertion is done by check_time_step; the particles' overlaps are found by `run`.
     `files`: the files read so far, by path, for a caller checking many cases that share one
     (sphere sweep's members: a file of 10^6 particles takes seconds to read), read and not
     changed here."""
@@ -470,12 +513,7 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
         radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
         lattice_sites(spec.placement, loaded.case, radius)
     if isinstance(spec.placement, FilePlacement):
-        file = None
-        if files is not None:
-            path = particle_file_path(spec.placement, loaded.base_dir).resolve()
-            if path not in files:
-                files[path] = read_particle_file(spec.placement, loaded.base_dir)
-            file = files[path]
+        file = _read_once(loaded, files)
         pos, radius, _, _, file = _file_particles(loaded, np.random.default_rng(spec.seed), file)
         _check_inside(loaded, _box(loaded.case), pos, radius)
         _file_materials(loaded, contact_tables(loaded.case), file)
@@ -486,12 +524,27 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
             raise loaded.error(*problems[0])
 
 
-def _initial_particles(loaded: LoadedCase, rng):
-    """(pos, radius, velocity, angular velocity, the placement file or None)."""
+def _read_once(loaded: LoadedCase, files: dict | None):
+    """The case's placement file from `files` (by path; read into it the first time), or None
+    without `files` (then _file_particles reads it)."""
+    if files is None:
+        return None
+    placement = loaded.case.particles.placement
+    path = particle_file_path(placement, loaded.base_dir).resolve()
+    if path not in files:
+        files[path] = read_particle_file(placement, loaded.base_dir)
+    return files[path]
+
+
+def _initial_particles(loaded: LoadedCase, rng, files: dict | None = None):
+    """(pos, radius, velocity, angular velocity, the placement file or None); `files` as
+    check_placement's."""
     spec = loaded.case.particles
     velocity = angular_velocity = file = None
     if isinstance(spec.placement, FilePlacement):
-        pos, radius, velocity, angular_velocity, file = _file_particles(loaded, rng)
+        pos, radius, velocity, angular_velocity, file = _file_particles(
+            loaded, rng, _read_once(loaded, files)
+        )
     else:
         radius = draw_radii(spec.radius, spec.count, rng)
         if isinstance(spec.placement, LatticePlacement):

@@ -22,6 +22,7 @@ from cli_test_support import (
     FROM_FILE,
     TINY,
     TINY_END_STEP,
+    TWO_SPHERES_CSV,
     assert_clean_error,
     edit,
     line_of,
@@ -294,7 +295,7 @@ def test_a_byte_order_mark_is_read_past(tmp_path):
     with "\ufeffx", "must name columns x, y, z"; both read as without it now."""
     text = 'title = "caf\u00e9"\n' + FROM_FILE
     (tmp_path / "case.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
-    (tmp_path / "spheres.csv").write_bytes(b"\xef\xbb\xbfx,y,z,r\n0.005,0.005,0.005,0.001\n")
+    (tmp_path / "spheres.csv").write_bytes(b"\xef\xbb\xbf" + TWO_SPHERES_CSV.encode())
     result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
     assert result.code == 0, result.stderr
     assert 'title = "caf\u00e9"' in result.stdout

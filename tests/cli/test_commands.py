@@ -104,7 +104,7 @@ def test_validate_reads_the_placement_file_and_writes_nothing(tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(FROM_FILE)
     assert_clean_error(sphere("validate", case, "--json", cwd=tmp_path), 66, "spheres.csv", "not found")
-    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.005,0.005,0.005,0.001\n")
+    (tmp_path / "spheres.csv").write_text(TWO_SPHERES_CSV)
     result = sphere("validate", case, "--json", cwd=tmp_path)
     assert_clean_error(result, 0)
     assert json.loads(result.stdout)["particles"]["placement"]["path"] == "spheres.csv"
