@@ -418,12 +418,15 @@ class RunDirectory:
 class _WarningsToLog(logging.Handler):
     """While a run's log is open, every warning reaches run.log as well as stderr: Python
     warnings (warnings.warn, e.g. the drag's porosity floor) and the records of the library's
-    loggers (`sphere.*`, e.g. the porosity clamp), which otherwise print to stderr only."""
+    loggers (`sphere.*`, e.g. the porosity clamp), which otherwise print to stderr only; and the
+    library's notes (INFO, e.g. the porosity taken at porosity_max) to run.log alone."""
 
     def __init__(self, run_log: logging.Logger):
-        super().__init__(logging.WARNING)
+        super().__init__(logging.INFO)
         self.run_log = run_log
         self.library = logging.getLogger("sphere")
+        self.library_level = self.library.level
+        self.library.setLevel(logging.INFO)
         self.library.addHandler(self)
         self.case = logging.getLogger("sphere.case")  # (does not propagate to "sphere")
         self.case.addHandler(self)
@@ -432,7 +435,8 @@ class _WarningsToLog(logging.Handler):
 
     def emit(self, record) -> None:
         message = record.getMessage()
-        if not getattr(record, "printed", False):  # the case's warnings print themselves
+        # the case's warnings print themselves; notes go to run.log alone
+        if record.levelno >= logging.WARNING and not getattr(record, "printed", False):
             print(message, file=sys.stderr)
         self.run_log.log(record.levelno, "%s", message)
 
@@ -442,6 +446,7 @@ class _WarningsToLog(logging.Handler):
 
     def detach(self) -> None:
         self.library.removeHandler(self)
+        self.library.setLevel(self.library_level)
         self.case.removeHandler(self)
         if warnings.showwarning == self._show:
             warnings.showwarning = self.shown

@@ -428,16 +428,16 @@ def oedometer() -> str:
 def test_a_darcy_oedometer_with_the_pore_pressure_on_its_wall_is_one_ranks_on_two(tmp_path):
     """Every rank steps the pore pressure from the porosity of the whole bed, and each adds its
     push on the stress-controlled top wall (the wall's force observable included). The bed's
-    porosity, 0.397, is clamped at 0.39: the warning is logged once, by rank 0 (run.log and
+    porosity, 0.397, is clamped at 0.4: the warning is logged once, by rank 0 (run.log and
     the launcher's stderr), not once a rank. The pore pressure's solve is split (the grid's 2
     planes, one a rank)."""
     assert "porosity_max = 0.6" in oedometer()
-    text = oedometer().replace("porosity_max = 0.6", "porosity_max = 0.39")
+    text = oedometer().replace("porosity_max = 0.6", "porosity_min = 0.4\nporosity_max = 0.6")
     (tmp_path / "case.toml").write_text(text + "[fluid.solver]\nrank_split_cells = 1\n")
     run_ok(sphere("run", "case.toml", "-o", "one", "-q", cwd=tmp_path))
     split = sphere("run", "case.toml", "-o", "two", "-q", ranks=2, cwd=tmp_path)
     run_ok(split)
-    warning = "Darcy: porosity clamped to [0.1, 0.39]"
+    warning = "Darcy: porosity below fluid.porosity_min = 0.4"
     assert (tmp_path / "two" / "run.log").read_text().count(warning) == 1
     assert split.stderr.count(warning) == 1, split.stderr
     assert_runs_bitwise(tmp_path / "one", tmp_path / "two")

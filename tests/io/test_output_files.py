@@ -116,8 +116,9 @@ def test_status_and_log(run_dir: Path):
 
 def test_every_warning_of_a_run_reaches_run_log(tmp_path, capsys):
     """While a run's log is open, the library's logged warnings (e.g. the porosity clamp,
-    `sphere.fluid.*`) and Python warnings both reach run.log and stderr; closing the log detaches
-    both routes."""
+    `sphere.fluid.*`) and Python warnings both reach run.log and stderr, and its notes (INFO, the
+    Darcy porosity taken at porosity_max) run.log alone; closing the log detaches every route and
+    gives the library's logger its level back."""
     import logging
     import warnings
 
@@ -125,8 +126,10 @@ def test_every_warning_of_a_run_reaches_run_log(tmp_path, capsys):
 
     rundir = RunDirectory(tmp_path / "run")
     rundir.path.mkdir()
+    level = logging.getLogger("sphere").level
     rundir.logger()
     logging.getLogger("sphere.fluid.porosity").warning("porosity below 0 clamped to 0 in %d cells", 3)
+    logging.getLogger("sphere.fluid.darcy").info("porosity above porosity_max in %d cells", 5)
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         warnings.warn("the drag uses the floor there", RuntimeWarning, stacklevel=1)
@@ -135,8 +138,11 @@ def test_every_warning_of_a_run_reaches_run_log(tmp_path, capsys):
     log = rundir.log_path.read_text()
     assert "WARNING porosity below 0 clamped to 0 in 3 cells" in log
     assert "WARNING RuntimeWarning: the drag uses the floor there" in log
+    assert "INFO porosity above porosity_max in 5 cells" in log
     assert "after the run" not in log
-    assert "porosity below 0 clamped to 0 in 3 cells" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "porosity below 0 clamped to 0 in 3 cells" in err and "porosity_max" not in err
+    assert logging.getLogger("sphere").level == level
 
 
 def test_a_case_warning_prints_once_and_stays_out_of_the_root_logger(capsys):

@@ -307,3 +307,29 @@ def test_a_scene_run_in_memory_steps_its_grid_on_the_process_threads():
     from sphere_cli.bench.darcy import case_text
 
     assert api.run_in_memory(case_text(4, 27, 1e-8), 0).fluid.step_threads is None
+
+
+@pytest.mark.parametrize("porosity_min", [None, 0.5])
+def test_the_clamp_is_warned_of_below_porosity_min_and_logged_above_porosity_max(caplog, porosity_min):
+    """Cells above porosity_max are taken at it by design (the open water above the bed, 24 of
+    the grid's 40 cells of 2.5 mm; the 4 sparse cells of the bed's surface, 7.5-10 mm): one
+    line of run.log at INFO, no warning (every run with water above its bed warned at its first
+    step). A porosity_min above the simple cubic bed's 0.476 clamps its cells from below: one
+    warning, naming how many and the lowest porosity."""
+    case = bed_case(0.0)
+    if porosity_min is not None:
+        case = case.replace('model = "darcy"\n', f'model = "darcy"\nporosity_min = {porosity_min}\n')
+    scene = build_scene(parse_case(case))
+    with caplog.at_level("INFO", logger="sphere.fluid.darcy"):
+        advance(scene, 3)
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    logged = [
+        r.getMessage() for r in caplog.records if r.levelname == "INFO" and "porosity_max" in r.getMessage()
+    ]
+    above = "above fluid.porosity_max = 0.9 taken as 0.9 in 28 of 40 fluid cells at step 1"
+    assert logged == [f"Darcy: porosity {above} (24 of them open water)"]
+    if porosity_min is None:
+        assert warned == []
+    else:  # the 12 cells of the 3 layers inside the bed, lens estimate 0.472
+        assert len(warned) == 1, warned
+        assert "below fluid.porosity_min = 0.5 in 12 of 40 fluid cells at step 1 (lowest 0.472)" in warned[0]

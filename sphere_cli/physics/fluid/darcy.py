@@ -94,7 +94,8 @@ class Darcy(FluidModule):
         self.porosity = Porosity(grid, particles.count)
         self.porosity_previous = np.zeros(grid.shape)  # phi at the last fluid step [-]
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
-        self.warned_clamp = False
+        self.warned_below_min = False  # of cells below porosity_min
+        self.logged_above_max = False  # of cells above porosity_max (run.log)
         # with the particles on a GPU and a grid that keeps its cells: the porosity and mean
         # particle velocity measured there at the end of each step before a fluid step
         # (gpu_steps), and the (1,) count of cells it clamped at 0
@@ -342,14 +343,36 @@ class Darcy(FluidModule):
         if self.pushes_wall:
             self.wall_stiffness = self._undrained_stiffness()
             self._warn_stiffer_wall(clock.step)
-        if s.clamped_cells and not self.warned_clamp:
-            self.warned_clamp = True
-            config = self.pore.config
-            logging.getLogger("sphere.fluid.darcy").warning(
-                "Darcy: porosity clamped to [%g, %g] (fluid.porosity_min, fluid.porosity_max) in %d of %d "
-                "fluid cells at step %d; the observable darcy_clamped_cells counts them every frame",
-                config.porosity_min, config.porosity_max, s.clamped_cells, self.pore.grid.cell_count,
-                clock.step,
+        if s.clamped_cells and not (self.warned_below_min and self.logged_above_max):
+            self._warn_clamped(clock.step)
+
+    def _warn_clamped(self, step: int) -> None:
+        """Once a run, the first cells whose porosity the equations clamp (the user guide's
+        "Porosity clamps"): a warning for cells below porosity_min (grains packed denser than the
+        equations take, from overlaps or cells about a grain wide); a line of run.log for cells
+        above porosity_max, which are by design (open water, porosity 1, and the sparse cells
+        at a bed's surface: their resistance is negligible beside the bed's), or every run with
+        water above its bed would warn at its first step."""
+        s, config = self.pore.state, self.pore.config
+        log = logging.getLogger("sphere.fluid.darcy")
+        dense = int(np.count_nonzero(s.porosity < config.porosity_min))
+        if dense and not self.warned_below_min:
+            self.warned_below_min = True
+            log.warning(
+                "Darcy: porosity below fluid.porosity_min = %g in %d of %d fluid cells at step %d (lowest "
+                "%.3g), taken as %g: the grains overlap or pack denser than the equations take; the "
+                "observable darcy_clamped_cells counts the clamped cells every frame",
+                config.porosity_min, dense, self.pore.grid.cell_count, step, float(s.porosity.min()),
+                config.porosity_min,
+            )  # fmt: skip
+        if s.clamped_cells > dense and not self.logged_above_max:
+            self.logged_above_max = True
+            open_water = int(np.count_nonzero(s.porosity >= 1.0))
+            log.info(
+                "Darcy: porosity above fluid.porosity_max = %g taken as %g in %d of %d fluid cells at "
+                "step %d (%d of them open water)",
+                config.porosity_max, config.porosity_max, s.clamped_cells - dense,
+                self.pore.grid.cell_count, step, open_water,
             )  # fmt: skip
 
     def _measure(self, particles) -> None:
