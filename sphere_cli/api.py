@@ -165,10 +165,10 @@ def _drive(
                 f"checkpoint was written: continue with `sphere resume {rundir.path}`",
             )
         compiling = progress.compiling_seconds()
+        timed = f"{steps_rate:.3g} steps/s, {rate:.3g} particle-steps/s (compiling left out)"
         log.info(
-            "done at step %d (t = %.6g s) in %.1f s, %.1f s of it compiling kernels; %.3g steps/s, "
-            "%.3g particle-steps/s (compiling left out)",
-            clock.step, clock.time, wall, compiling, steps_rate, rate,
+            "done at step %d (t = %.6g s) in %.1f s, %.1f s of it compiling kernels; %s",
+            clock.step, clock.time, wall, compiling, timed if steps_rate > 0.0 else "too few steps to time",
         )  # fmt: skip
         return RunResult(rundir.path, "done", clock.step, clock.time, wall, rate, steps_rate, compiling)
     except NumericalError as exc:

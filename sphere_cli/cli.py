@@ -714,8 +714,10 @@ def _interrupted() -> None:
 
 def _report(result: api.RunResult) -> None:
     rate = f"{result.particle_steps_per_second / 1e6:.2f} M particle-steps/s"
-    if result.particle_steps_per_second == 0.0:  # no particles (or a single step: no rate yet)
+    if result.particle_steps_per_second == 0.0:  # no particles
         rate = f"{result.steps_per_second:.3g} steps/s"
+    if result.steps_per_second == 0.0:  # the rate leaves the first step out (it compiles)
+        rate = "too few steps to time"
     sidecar = result.run_dir / "trajectory.xmf"  # none for a run with nothing to show in ParaView
     shown = f" (open {sidecar} in ParaView)" if sidecar.is_file() else ""
     # a first run of a case compiles its kernels: say so, or the run looks that slow

@@ -509,3 +509,16 @@ def test_the_time_spent_compiling_is_counted_once_and_in_full():
     again = seconds_compiling()
     caller(2.0)
     assert seconds_compiling() == again
+
+
+def test_a_run_too_short_to_time_says_so_rather_than_a_rate_of_zero(tmp_path):
+    """The rate leaves out the first step (it compiles the kernels): a run of one step printed
+    "0 steps/s" (and run.log "0 steps/s, 0 particle-steps/s"), which reads as a hung run."""
+    (tmp_path / "case.toml").write_text(TINY)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "--until", "1e-9", cwd=tmp_path)
+    assert_clean_error(result, 0)
+    assert "(step 1)" in result.stdout and "too few steps to time" in result.stdout, result.stdout
+    assert "steps/s" not in result.stdout
+    assert "too few steps to time" in (tmp_path / "out" / "run.log").read_text()
+    longer = sphere_inproc("run", "case.toml", "-o", "longer", "--until", "1e-4", cwd=tmp_path)
+    assert re.search(r"\(step \d+\) in [0-9.]+ s, [0-9.]+ M particle-steps/s", longer.stdout), longer.stdout
