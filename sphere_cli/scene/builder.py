@@ -364,12 +364,16 @@ def _fluid_alone(loaded: LoadedCase) -> tuple[State, FluidModule, tuple[float, s
 def check_time_step(loaded: LoadedCase, files: dict | None = None) -> None:
     """What `sphere validate` checks of the time step: the particles, walls and fluid built as
     `run` builds them, before any kernel runs, and the dt of the case resolved from their limits
-    (a given dt above them, or one giving too many steps, refused as `run` refuses it). `files`
-    as check_placement's."""
+    (a given dt above them, or one giving too many steps, refused as `run` refuses it), and the
+    fluid's coupling to it (its interval against its limit, its boundary modulations against its
+    step). `files` as check_placement's."""
     if loaded.case.has_particles:
-        _bodies(loaded, files=files)
+        made = _bodies(loaded, files=files)
+        state, fluid = made.state, made.fluid
     else:
-        _fluid_alone(loaded)
+        state, fluid, _ = _fluid_alone(loaded)
+    if fluid is not None:
+        fluid.start(state)
 
 
 def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason: str) -> float:

@@ -124,24 +124,28 @@ def test_the_explicit_scheme_is_refused_with_fixed_pressure_regions(tmp_path):
     assert_clean_error(result, 65, "fluid.time_scheme", "fluid.fixed_pressure", 'time_scheme = "implicit"')
 
 
-def test_dt_above_the_explicit_diffusion_limit_names_it(tmp_path):
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_dt_above_the_explicit_diffusion_limit_names_it(tmp_path, command):
     """time_scheme = "explicit" with Kozeny-Carman (k_c = d^2/180, d = 1.8 mm): D = k/(beta_f phi mu)
     peaks at porosity_max = 0.9, about 3e4 m^2/s, so the limit is nanoseconds on 2.5 mm cells: the
     default contact time step is refused naming it."""
     text = edit(DARCY, 'model = "darcy"', 'model = "darcy"\ntime_scheme = "explicit"')
     text = edit(text, 'dt = "auto"', "dt = 1e-6")
     (tmp_path / "case.toml").write_text(text)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    args = ("validate",) if command == "validate" else ("run", "-o", "out", "-q")
+    result = sphere_inproc(args[0], "case.toml", *args[1:], cwd=tmp_path)
     assert_clean_error(result, 65, "simulation.dt", 'time_scheme = "explicit"', "diffusion limit")
 
 
-def test_dt_above_the_coupling_limit_names_it(tmp_path):
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_dt_above_the_coupling_limit_names_it(tmp_path, command):
     """k = 1e-14 m^2: the coupling's limit 0.2 rho_s k (1 - porosity_max) / mu = 0.2 x 2500 x
     1e-14 x 0.1 / 1e-3 = 5e-10 s is below the contact limit; a dt of 1e-6 s is refused naming it."""
     law = 'permeability = { model = "constant", value = 1e-14 }'
     text = edit(edit(DARCY, 'model = "darcy"', f'model = "darcy"\n{law}'), 'dt = "auto"', "dt = 1e-6")
     (tmp_path / "case.toml").write_text(text)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    args = ("validate",) if command == "validate" else ("run", "-o", "out", "-q")
+    result = sphere_inproc(args[0], "case.toml", *args[1:], cwd=tmp_path)
     assert_clean_error(result, 65, "simulation.dt", "explicit Darcy coupling", "limit 5e-10 s")
 
 
@@ -154,11 +158,13 @@ def _modulated(tmp_path, period: float):
     return text
 
 
-def test_a_modulation_faster_than_the_fluid_step_is_refused(tmp_path):
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_a_modulation_faster_than_the_fluid_step_is_refused(tmp_path, command):
     """A period of 1.5 fluid steps, sampled at the steps, would alias into a slower modulation (a
     plausible wrong answer): refused before the run, naming the key, its line and the bounds."""
     text = _modulated(tmp_path, 1.7e-6)
-    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    args = ("validate",) if command == "validate" else ("run", "-o", "out", "-q")
+    result = sphere_inproc(args[0], "case.toml", *args[1:], cwd=tmp_path)
     assert_clean_error(
         result, 65, "fluid.top.period", f"case.toml:{line_of(text, 'top =')}:", "alias", "2 steps a period"
     )
