@@ -124,6 +124,11 @@ class FluidModule(Module):
     def initialize(self, state) -> None:
         """New runs only, after start(): the initial fluid state."""
 
+    def read_inputs(self) -> None:
+        """What initialize() reads of the case's input (an initial field's file or expressions),
+        read and checked without running a kernel: `sphere validate` calls it. Nothing by
+        default."""
+
     # its action on the particles runs on a GPU (gpu_steps), the rest of it on the host between
     # coupling steps (physics/device_steps.py); a model whose action cannot is refused there
     on_gpu = False

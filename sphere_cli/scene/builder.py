@@ -182,7 +182,7 @@ def build_scene(loaded: LoadedCase, restart=None) -> Scene:
 @dataclass
 class _Bodies:
     """What the time step depends on: the particles, walls and fluid of a case, before any
-    kernel runs (so `sphere validate` can take the same dt as `run`, check_time_step)."""
+    kernel runs (so `sphere validate` can take the same dt as `run`, check_build)."""
 
     state: State  # its clock's dt resolved
     tables: ContactTables
@@ -361,12 +361,12 @@ def _fluid_alone(loaded: LoadedCase) -> tuple[State, FluidModule, tuple[float, s
 
 
 @np.errstate(all="ignore")  # as build_scene
-def check_time_step(loaded: LoadedCase, files: dict | None = None) -> None:
-    """What `sphere validate` checks of the time step: the particles, walls and fluid built as
-    `run` builds them, before any kernel runs, and the dt of the case resolved from their limits
-    (a given dt above them, or one giving too many steps, refused as `run` refuses it), and the
-    fluid's coupling to it (its interval against its limit, its boundary modulations against its
-    step). `files` as check_placement's."""
+def check_build(loaded: LoadedCase, files: dict | None = None) -> None:
+    """What `sphere validate` checks of the build: the particles, walls and fluid built as `run`
+    builds them, before any kernel runs; the dt of the case resolved from their limits (a given
+    dt above them, or one giving too many steps, refused as `run` refuses it); the fluid's
+    coupling to it (its interval against its limit, its boundary modulations against its step);
+    and the fluid's initial fields read (read_inputs). `files` as check_placement's."""
     if loaded.case.has_particles:
         made = _bodies(loaded, files=files)
         state, fluid = made.state, made.fluid
@@ -374,6 +374,7 @@ def check_time_step(loaded: LoadedCase, files: dict | None = None) -> None:
         state, fluid, _ = _fluid_alone(loaded)
     if fluid is not None:
         fluid.start(state)
+        fluid.read_inputs()
 
 
 def _fluid_only_dt(loaded: LoadedCase, fluid: FluidModule, limit: float, reason: str) -> float:
@@ -508,7 +509,7 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     values, its particles inside the box and the box wide enough for them, its material and
     group columns naming the case's, the fluid's grid and rules against its radii and count), so
     that a batch job validated before it is queued does not fail at its start for its input.
-    Random insertion is done by check_time_step; the particles' overlaps are found by `run`.
+    Random insertion is done by check_build; the particles' overlaps are found by `run`.
     `files`: the files read so far, by path, for a caller checking many cases that share one
     (sphere sweep's members: a file of 10^6 particles takes seconds to read), read and not
     changed here."""

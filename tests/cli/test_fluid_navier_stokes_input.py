@@ -119,8 +119,11 @@ def test_fluid_schema_error_names_key_and_line(tmp_path, old, new, key, marker, 
     assert_clean_error(result, 65, key, f"case.toml:{line_of(text, marker)}:", *fragments)
 
 
-def _run(tmp_path, text):
+def _run(tmp_path, text, command: str = "run"):
+    """`sphere run` (or `sphere validate`) of the case `text`."""
     (tmp_path / "case.toml").write_text(text)
+    if command == "validate":
+        return sphere_inproc("validate", "case.toml", cwd=tmp_path)
     return sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
 
 
@@ -215,18 +218,29 @@ def test_a_body_force_that_is_not_finite_is_refused_naming_the_point(tmp_path):
     assert_clean_error(result, 65, "fluid.body_force.acceleration[1]", "not finite", "x=")
 
 
-def test_an_initial_field_file_that_is_missing_or_misshapen_is_refused(tmp_path):
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_an_initial_field_file_that_is_missing_or_misshapen_is_refused(tmp_path, command):
     """fluid.initial.file: a missing file exits 66 naming the key; a dataset of another shape
-    than the grid's exits 65 naming the dataset and both shapes."""
+    than the grid's exits 65 naming the dataset and both shapes. `validate` reads it as `run`
+    does (it passed both before)."""
     import h5py
 
     text = edit(FLUID, "viscosity = 0.001", 'viscosity = 0.001\ninitial = { file = "fields.h5" }')
-    result = _run(tmp_path, text)
+    result = _run(tmp_path, text, command)
     assert_clean_error(result, 66, "fluid.initial.file", "file not found")
     with h5py.File(tmp_path / "fields.h5", "w") as f:
         f["velocity_z"] = [[[0.0] * 8] * 4] * 4  # the z faces are (4, 4, 9)
-    result = _run(tmp_path, text)
+    result = _run(tmp_path, text, command)
     assert_clean_error(result, 65, "fluid.initial.file", "'velocity_z'", "(4, 4, 8)", "(4, 4, 9)")
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_an_initial_velocity_that_is_not_finite_is_refused_naming_the_point(tmp_path, command):
+    """An initial velocity expression dividing by zero on the grid: exit 65 from both commands."""
+    initial = 'initial = { velocity = ["0", "0", "1/(z-z)"] }'
+    text = edit(FLUID, "viscosity = 0.001", f"viscosity = 0.001\n{initial}")
+    result = _run(tmp_path, text, command)
+    assert_clean_error(result, 65, "fluid.initial.velocity[2]", "not finite", "z=")
 
 
 @pytest.mark.parametrize(

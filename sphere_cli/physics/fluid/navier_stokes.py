@@ -592,6 +592,16 @@ class NavierStokes(FluidModule):
             self.drag.start_cell_means(state, fs.porosity)
         fs.porosity_rate[...] = 0.0
         self.solver.initial_pressure(fs, state.clock.time)
+        velocity, pressure = self._initial_fields()
+        if velocity is not None:
+            self.solver.set_velocity(fs, velocity)
+        if pressure is not None:
+            fs.p[...] = pressure
+            self.solver.update_pressure_gradient(fs, state.clock.time)
+
+    def _initial_fields(self) -> tuple[list | None, np.ndarray | None]:
+        """The face velocities and cell pressures of [fluid.initial] (None where it gives none),
+        from its file, then its expressions."""
         initial, key = self.config.initial, ("fluid", "initial")
         velocity, pressure = None, None
         if initial.file is not None:
@@ -605,11 +615,10 @@ class NavierStokes(FluidModule):
             velocity = face_expressions(self.solver, initial.velocity, (*key, "velocity"), self.loaded)
         if initial.pressure is not None:
             pressure = cell_expression(self.solver, initial.pressure, (*key, "pressure"), self.loaded)
-        if velocity is not None:
-            self.solver.set_velocity(fs, velocity)
-        if pressure is not None:
-            fs.p[...] = pressure
-            self.solver.update_pressure_gradient(fs, state.clock.time)
+        return velocity, pressure
+
+    def read_inputs(self) -> None:
+        self._initial_fields()
 
     def forces(self, state, spring_dt: float | None = None) -> None:
         self.drag.forces(state, self.fs, spring_dt)

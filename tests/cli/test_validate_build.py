@@ -1,7 +1,9 @@
 """`sphere validate` resolves the time step as `sphere run` does, from the particles, walls and
-fluid built as the run builds them (scene/builder.py check_time_step), so a dt the run refuses at
+fluid built as the run builds them (scene/builder.py check_build), so a dt the run refuses at
 its start is refused before a batch job is queued, with the same message; and a random placement
-that cannot be done is found by doing it."""
+that cannot be done is found by doing it. (The fluid's coupling and initial fields, also checked
+there, are tested beside their run's refusals: tests/cli/test_darcy_bad_input.py,
+test_fluid_navier_stokes_input.py.)"""
 
 from __future__ import annotations
 
