@@ -38,6 +38,7 @@ from .packing import (
     particle_file_path,
     random_positions,
     read_particle_file,
+    worst_overlap_of,
 )
 from .radii import draw_radii
 from .walls import allocate_walls, rough_layers
@@ -366,10 +367,13 @@ def check_build(loaded: LoadedCase, files: dict | None = None) -> None:
     builds them, before any kernel runs; the dt of the case resolved from their limits (a given
     dt above them, or one giving too many steps, refused as `run` refuses it); the fluid's
     coupling to it (its interval against its limit, its boundary modulations against its step);
-    and the fluid's initial fields read (read_inputs). `files` as check_placement's."""
+    the particles' overlaps; and the fluid's initial fields read (read_inputs). `files` as
+    check_placement's."""
     if loaded.case.has_particles:
         made = _bodies(loaded, files=files)
         state, fluid = made.state, made.fluid
+        p, box = state.particles, state.box
+        _refuse_overlap(loaded, *worst_overlap_of(p.pos, p.radius, box.lower, box.upper, box.periodic))
     else:
         state, fluid, _ = _fluid_alone(loaded)
     if fluid is not None:
@@ -509,7 +513,7 @@ def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
     values, its particles inside the box and the box wide enough for them, its material and
     group columns naming the case's, the fluid's grid and rules against its radii and count), so
     that a batch job validated before it is queued does not fail at its start for its input.
-    Random insertion is done by check_build; the particles' overlaps are found by `run`.
+    Random insertion and the particles' overlaps are checked by check_build.
     `files`: the files read so far, by path, for a caller checking many cases that share one
     (sphere sweep's members: a file of 10^6 particles takes seconds to read), read and not
     changed here."""
@@ -667,7 +671,12 @@ def _check_inside(loaded: LoadedCase, box: Box, pos: np.ndarray, radius: np.ndar
 
 def _check_overlaps(loaded: LoadedCase, state: State) -> None:
     p, box, nl = state.particles, state.box, state.neighbors
-    i, j, overlap = worst_overlap(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic)
+    _refuse_overlap(loaded, *worst_overlap(p.pos, p.radius, nl.nbr, nl.nbr_count, box.length, box.periodic))
+
+
+def _refuse_overlap(loaded: LoadedCase, i: int, j: int, overlap: float) -> None:
+    """Refuse particles i and j overlapping by `overlap` of the smaller radius beyond the
+    tolerance (run: from the neighbour list; validate: packing.py worst_overlap_of)."""
     tol = loaded.case.particles.overlap_tolerance
     if overlap > tol:
         placement = loaded.case.particles.placement

@@ -104,6 +104,58 @@ HDF5_DATASETS = ("position", "radius", "velocity", "angular_velocity", "material
 FLAGS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False, "": False}
 
 
+# particles whose candidate pairs are found at once by worst_overlap_of (bounds its memory)
+OVERLAP_BLOCK = 1 << 18
+
+
+def worst_overlap_of(pos, radius, lower, upper, periodic) -> tuple[int, int, float]:
+    """The pair with the largest overlap relative to the smaller radius, (i, j, overlap / min(r_i,
+    r_j)), (-1, -1, 0.0) when nothing touches: kernels/neighbors.py worst_overlap without a
+    neighbour list, in numpy (no kernel to compile: `sphere validate`). Candidates: the spheres
+    in the same or an adjacent cell of a grid of cells at least the largest diameter wide,
+    periodic where the box is (distances by the minimum image there)."""
+    n = radius.size
+    if n < 2:
+        return -1, -1, 0.0
+    length = upper - lower
+    ncell = np.maximum((length // (2.0 * float(radius.max()))).astype(np.int64), 1)
+    cell = np.floor((pos - lower) / length * ncell).astype(np.int64)
+    cell = np.where(periodic.astype(bool), cell % ncell, np.clip(cell, 0, ncell - 1))
+    key = (cell[:, 0] * ncell[1] + cell[:, 1]) * ncell[2] + cell[:, 2]
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    best = (-1, -1, 0.0)
+    offsets = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)])
+    for first in range(0, n, OVERLAP_BLOCK):
+        rows = np.arange(first, min(first + OVERLAP_BLOCK, n))
+        for offset in offsets:
+            near = cell[rows] + offset
+            inside = np.ones(rows.size, dtype=bool)
+            for a in range(3):
+                if periodic[a]:
+                    near[:, a] %= ncell[a]
+                else:
+                    inside &= (near[:, a] >= 0) & (near[:, a] < ncell[a])
+            near_key = (near[:, 0] * ncell[1] + near[:, 1]) * ncell[2] + near[:, 2]
+            start = np.searchsorted(sorted_key, near_key, "left")
+            count = np.where(inside, np.searchsorted(sorted_key, near_key, "right") - start, 0)
+            i = np.repeat(rows, count)
+            within = np.arange(i.size) - np.repeat(np.cumsum(count) - count, count)
+            j = order[np.repeat(start, count) + within]
+            i, j = i[j > i], j[j > i]
+            if not i.size:
+                continue
+            d = pos[j] - pos[i]
+            d -= np.where(periodic.astype(bool), length * np.round(d / length), 0.0)
+            overlap = (radius[i] + radius[j] - np.sqrt((d * d).sum(axis=1))) / np.minimum(
+                radius[i], radius[j]
+            )
+            k = int(np.argmax(overlap))
+            if overlap[k] > best[2]:
+                best = (int(i[k]), int(j[k]), float(overlap[k]))
+    return best
+
+
 def particle_file_path(placement: FilePlacement, base_dir: Path) -> Path:
     path = Path(placement.path)
     return path if path.is_absolute() else base_dir / path

@@ -8,7 +8,7 @@ test_fluid_navier_stokes_input.py.)"""
 from __future__ import annotations
 
 import pytest
-from cli_test_support import TINY, assert_clean_error, edit, line_of, sphere_inproc
+from cli_test_support import FROM_FILE, TINY, assert_clean_error, edit, line_of, sphere_inproc
 from test_validate_fluid_rules import FIXED_BED
 
 GIVEN_DT = edit(TINY, 'dt = "auto"', "dt = 1e-6")
@@ -97,3 +97,24 @@ def test_a_sweep_member_with_a_time_step_above_its_limit_is_refused(tmp_path):
     )
     assert_clean_error(result, 65, "sweep member", "contact.normal_stiffness = 10000000.0", "simulation.dt")
     assert not (tmp_path / "sw").exists()
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_overlapping_particles_of_a_placement_file_are_refused_by_validate(tmp_path, command):
+    """A file whose r column holds diameters (a classic of files exported from other codes):
+    spheres 4 mm apart with r = 3 mm overlap by 2/3 of a radius. `run` refused it at its build
+    (from the neighbour list); `validate` now finds it too, without compiling the list's kernels
+    (scene/packing.py worst_overlap_of), with the same message."""
+    (tmp_path / "case.toml").write_text(
+        FROM_FILE.replace("upper = [0.01, 0.01, 0.01]", "upper = [0.02, 0.01, 0.01]")
+    )
+    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.006,0.005,0.005,0.003\n0.010,0.005,0.005,0.003\n")
+    args = ("validate", "case.toml") if command == "validate" else ("run", "case.toml", "-o", "out", "-q")
+    result = sphere_inproc(*args, cwd=tmp_path)
+    assert_clean_error(
+        result,
+        65,
+        "particles.overlap_tolerance",
+        "particles 0 and 1 (from spheres.csv) start overlapping by 0.667",
+    )
+    assert not (tmp_path / "out").exists()
