@@ -57,10 +57,9 @@ def validate(path: str | Path) -> dict:
     """Validate a case file as `run` would before its first step: the placement (a lattice's
     capacity, a placement file's contents) and the time step against the limits of the
     particles, walls and fluid as built (no kernel compiled); returns the resolved case."""
-    from .scene.builder import check_build, check_placement
+    from .scene.builder import check_build
 
     loaded = load_case(path)
-    check_placement(loaded)
     check_build(loaded)
     return resolved_dict(loaded.case)
 

@@ -263,7 +263,7 @@ def create(
 ) -> Sweep:
     """Write the sweep's folder (or find the same sweep already there): every member's case is
     checked before anything is written."""
-    from .scene.builder import check_build, check_placement
+    from .scene.builder import check_build
 
     if not varies:
         raise UsageError("sphere sweep: give at least one --vary KEY=VALUES")
@@ -304,9 +304,7 @@ def create(
         )
         try:
             loaded = parse_case(text, sweep.case_path(name), show_warnings=False)
-            with_base = dataclasses.replace(loaded, origin=base_path)  # the base's files
-            check_placement(with_base, files)
-            check_build(with_base, files)
+            check_build(dataclasses.replace(loaded, origin=base_path), files)  # the base's files
         except CaseError as exc:
             raise CaseError(f"sweep member {name} ({setting}): {exc}") from None
         for loc, message in case_warnings(loaded.case):

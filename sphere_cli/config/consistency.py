@@ -228,8 +228,8 @@ def fluid_problems(case: Case, diameter: float | None, count: int | None) -> lis
     wide, for the porosity estimate), and what the fluid model requires of the rest of the case
     (each model's `case_problems`), so that `sphere validate` refuses them too. diameter and the
     particles' `count`: None where a placement file has them and is not read here (the grid's
-    cells are then known only where the case sets them; scene/builder.py check_placement asks
-    again with the file's)."""
+    cells are then known only where the case sets them; the fluid model checks them again at
+    its build, which `sphere validate` makes too: scene/builder.py check_build)."""
     fluid = case.fluid
     rules = getattr(fluid, "case_problems", None)  # a fluid table without rules has none
     if fluid is None or rules is None:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import compile_ahead, ranks
-from ..config.consistency import MANY_STEPS, box_problems, fluid_problems, step_problem
+from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
@@ -34,7 +34,6 @@ from ..state import Box, Clock, Particles, State
 from .groups import apply_groups
 from .packing import (
     lattice_positions,
-    lattice_sites,
     particle_file_path,
     random_positions,
     read_particle_file,
@@ -196,7 +195,7 @@ class _Bodies:
 
 def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bodies:
     """The particles (placed and grouped, or from `restart`), walls and fluid of a case with
-    particles, and its time step; `files` as check_placement's."""
+    particles, and its time step; `files` as check_build's."""
     case = loaded.case
     rng = np.random.default_rng(case.particles.seed)
     tables = contact_tables(case)
@@ -367,8 +366,14 @@ def check_build(loaded: LoadedCase, files: dict | None = None) -> None:
     builds them, before any kernel runs; the dt of the case resolved from their limits (a given
     dt above them, or one giving too many steps, refused as `run` refuses it); the fluid's
     coupling to it (its interval against its limit, its boundary modulations against its step);
-    the particles' overlaps; and the fluid's initial fields read (read_inputs). `files` as
-    check_placement's."""
+    the particles' overlaps; and the fluid's initial fields read (read_inputs). So a batch job
+    validated before it is queued does not fail at its start for its input: a lattice that
+    cannot hold the particles, a random insertion that cannot place them, a placement file
+    unreadable, with unknown columns or values, particles outside the box, materials or groups
+    the case does not name, a fluid's grid or rules against its radii and count.
+    `files`: the placement files read so far, by path, for a caller checking many cases that
+    share one (sphere sweep's members: a file of 10^6 particles takes seconds to read), read
+    into and not changed here."""
     if loaded.case.has_particles:
         made = _bodies(loaded, files=files)
         state, fluid = made.state, made.fluid
@@ -506,33 +511,6 @@ def _restore(loaded: LoadedCase, scene: Scene, restart) -> None:
         module.start()
 
 
-def check_placement(loaded: LoadedCase, files: dict | None = None) -> None:
-    """What `sphere validate` can check of the placement without building the scene: a lattice
-    that cannot hold the particles (their radii drawn as the build draws them, from the seed);
-    a placement file read as the build reads it (there, readable, with known columns and finite
-    values, its particles inside the box and the box wide enough for them, its material and
-    group columns naming the case's, the fluid's grid and rules against its radii and count), so
-    that a batch job validated before it is queued does not fail at its start for its input.
-    Random insertion and the particles' overlaps are checked by check_build.
-    `files`: the files read so far, by path, for a caller checking many cases that share one
-    (sphere sweep's members: a file of 10^6 particles takes seconds to read), read and not
-    changed here."""
-    spec = loaded.case.particles
-    if isinstance(spec.placement, LatticePlacement) and loaded.case.has_particles:
-        radius = draw_radii(spec.radius, spec.count, np.random.default_rng(spec.seed))
-        lattice_sites(spec.placement, loaded.case, radius)
-    if isinstance(spec.placement, FilePlacement):
-        file = _read_once(loaded, files)
-        pos, radius, _, _, file = _file_particles(loaded, np.random.default_rng(spec.seed), file)
-        _check_inside(loaded, _box(loaded.case), pos, radius)
-        _file_materials(loaded, contact_tables(loaded.case), file)
-        _file_groups(loaded, file)
-        diameter = 2.0 * float(radius.max()) if radius.size else 0.0
-        problems = fluid_problems(loaded.case, diameter, int(radius.size))  # the grid by the file's radii
-        if problems:
-            raise loaded.error(*problems[0])
-
-
 def _read_once(loaded: LoadedCase, files: dict | None):
     """The case's placement file from `files` (by path; read into it the first time), or None
     without `files` (then _file_particles reads it)."""
@@ -547,7 +525,7 @@ def _read_once(loaded: LoadedCase, files: dict | None):
 
 def _initial_particles(loaded: LoadedCase, rng, files: dict | None = None):
     """(pos, radius, velocity, angular velocity, the placement file or None); `files` as
-    check_placement's."""
+    check_build's."""
     spec = loaded.case.particles
     velocity = angular_velocity = file = None
     if isinstance(spec.placement, FilePlacement):

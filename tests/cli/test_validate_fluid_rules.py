@@ -225,7 +225,7 @@ def test_the_bases_of_these_cases_are_valid(tmp_path, case):
 
 
 # Particles from a file: what their radii and count decide is known once the file is read, which
-# `sphere validate` does as the build does (scene/builder.py check_placement).
+# `sphere validate` does as the build does (scene/builder.py check_build).
 FROM_FILE = """\
 [simulation]
 duration = 0.0005
