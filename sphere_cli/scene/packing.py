@@ -113,7 +113,9 @@ def worst_overlap_of(pos, radius, lower, upper, periodic) -> tuple[int, int, flo
     r_j)), (-1, -1, 0.0) when nothing touches: kernels/neighbors.py worst_overlap without a
     neighbour list, in numpy (no kernel to compile: `sphere validate`). Candidates: the spheres
     in the same or an adjacent cell of a grid of cells at least the largest diameter wide,
-    periodic where the box is (distances by the minimum image there)."""
+    periodic where the box is (distances by the minimum image there): a pair in one cell once
+    (j > i), a pair of cells once, from the cell whose neighbour lies ahead of it (half of the
+    26 directions)."""
     n = radius.size
     if n < 2:
         return -1, -1, 0.0
@@ -125,9 +127,10 @@ def worst_overlap_of(pos, radius, lower, upper, periodic) -> tuple[int, int, flo
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
     best = (-1, -1, 0.0)
-    offsets = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)])
+    every = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
+    offsets = np.array([o for o in every if o >= (0, 0, 0)])  # (0, 0, 0) first, then 13 ahead
     for first in range(0, n, OVERLAP_BLOCK):
-        rows = np.arange(first, min(first + OVERLAP_BLOCK, n))
+        rows = order[first : first + OVERLAP_BLOCK]  # by cell: the searches below run in order
         for offset in offsets:
             near = cell[rows] + offset
             inside = np.ones(rows.size, dtype=bool)
@@ -142,7 +145,10 @@ def worst_overlap_of(pos, radius, lower, upper, periodic) -> tuple[int, int, flo
             i = np.repeat(rows, count)
             within = np.arange(i.size) - np.repeat(np.cumsum(count) - count, count)
             j = order[np.repeat(start, count) + within]
-            i, j = i[j > i], j[j > i]
+            # in its own cell a pair once; a periodic axis of one or two cells wraps a neighbour
+            # onto the cell itself or one seen already: a pair may come twice, never i with i
+            pair = j > i if not offset.any() else j != i
+            i, j = i[pair], j[pair]
             if not i.size:
                 continue
             d = pos[j] - pos[i]
@@ -152,7 +158,7 @@ def worst_overlap_of(pos, radius, lower, upper, periodic) -> tuple[int, int, flo
             )
             k = int(np.argmax(overlap))
             if overlap[k] > best[2]:
-                best = (int(i[k]), int(j[k]), float(overlap[k]))
+                best = (int(min(i[k], j[k])), int(max(i[k], j[k])), float(overlap[k]))
     return best
 
 

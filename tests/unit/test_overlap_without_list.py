@@ -1,6 +1,7 @@
 """scene/packing.py worst_overlap_of, the overlap check `sphere validate` makes without the
 neighbour list (no kernel compiled), against every pair compared directly, in boxes walled and
-periodic, with radii spread over a factor of 4 and cells both many and few along an axis."""
+periodic, with radii spread over a factor of 4 and cells many, two or one along an axis (a
+periodic axis of one or two cells wraps a neighbour cell onto one seen already)."""
 
 from __future__ import annotations
 
@@ -22,7 +23,10 @@ def every_pair(pos, radius, length, periodic):
 
 
 @pytest.mark.parametrize("periodic", [(0, 0, 0), (1, 1, 0), (1, 1, 1)])
-@pytest.mark.parametrize(("count", "upper"), [(400, (0.02, 0.02, 0.02)), (60, (0.004, 0.03, 0.005))])
+@pytest.mark.parametrize(
+    ("count", "upper"),  # 2 mm cells: 10 a side; 2, 15 and 2; 1, 1 and 15
+    [(400, (0.02, 0.02, 0.02)), (60, (0.004, 0.03, 0.005)), (30, (0.003, 0.003, 0.03))],
+)
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_worst_overlap_is_that_of_every_pair(periodic, count, upper, seed):
     rng = np.random.default_rng(seed)
