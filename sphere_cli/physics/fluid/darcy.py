@@ -96,6 +96,7 @@ class Darcy(FluidModule):
         self.gravity = np.asarray(box.body_acc, dtype=np.float64)
         self.warned_below_min = False  # of cells below porosity_min
         self.logged_above_max = False  # of cells above porosity_max (run.log)
+        self.clamped_seen = 0  # the count of clamped cells _warn_clamped last looked at
         # with the particles on a GPU and a grid that keeps its cells: the porosity and mean
         # particle velocity measured there at the end of each step before a fluid step
         # (gpu_steps), and the (1,) count of cells it clamped at 0
@@ -343,7 +344,9 @@ class Darcy(FluidModule):
         if self.pushes_wall:
             self.wall_stiffness = self._undrained_stiffness()
             self._warn_stiffer_wall(clock.step)
-        if s.clamped_cells and not (self.warned_below_min and self.logged_above_max):
+        # looked at where the count changes (a cell crossing a bound), not every fluid step
+        if s.clamped_cells != self.clamped_seen and not (self.warned_below_min and self.logged_above_max):
+            self.clamped_seen = s.clamped_cells
             self._warn_clamped(clock.step)
 
     def _warn_clamped(self, step: int) -> None:
@@ -354,6 +357,8 @@ class Darcy(FluidModule):
         at a bed's surface: their resistance is negligible beside the bed's), or every run with
         water above its bed would warn at its first step."""
         s, config = self.pore.state, self.pore.config
+        if not s.clamped_cells:
+            return
         log = logging.getLogger("sphere.fluid.darcy")
         dense = int(np.count_nonzero(s.porosity < config.porosity_min))
         if dense and not self.warned_below_min:
