@@ -164,6 +164,14 @@ def _fluid_only_problems(case: Case) -> list[tuple[tuple, str]]:
         problems.append(
             (("output", "fields"), f"{_NO_PARTICLES}: there are no per-particle fields; remove this key")
         )
+    if case.simulation.device == "cuda":
+        problems.append(
+            (
+                ("simulation", "device"),
+                f"the GPU steps particles (a fluid's own step runs on the CPU) and {_NO_PARTICLES}; "
+                'use device = "cpu" (the default)',
+            )
+        )
     if case.output.observables.quantities:
         problems.append(
             (

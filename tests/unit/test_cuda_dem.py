@@ -29,6 +29,7 @@ import pytest
 from numba import config as numba_config
 from test_contact_blocks import HERTZ_MATERIALS
 
+from sphere_cli.api import _with_simulation
 from sphere_cli.config.load import parse_case
 from sphere_cli.errors import CaseError
 from sphere_cli.physics import device_steps
@@ -464,13 +465,14 @@ def _words_and_numbers(message: str) -> tuple[str, list[float]]:
 
 
 def test_what_the_gpu_does_not_run_is_refused_by_name():
-    """A fluid without particles (the GPU steps particles)."""
+    """A fluid without particles (the GPU steps particles): refused at load where the case says
+    device = "cuda" (config/consistency.py, so `sphere validate` too), and at the build where
+    `sphere run --device cuda` asks for it."""
     alone = textwrap.dedent(
         """
         [simulation]
         duration = 0.01
         dt = 0.001
-        device = "cuda"
         [domain]
         upper = [0.01, 0.01, 0.02]
         [fluid]
@@ -479,8 +481,10 @@ def test_what_the_gpu_does_not_run_is_refused_by_name():
         permeability = { model = "constant", value = 1e-10 }
         """
     )
+    with pytest.raises(CaseError, match=r'simulation.device = "cuda": the GPU steps particles'):
+        parse_case(alone.replace("dt = 0.001", 'dt = 0.001\ndevice = "cuda"'))
     with pytest.raises(CaseError, match=r'simulation.device = "cuda".*also has: no particles'):
-        build_scene(parse_case(alone))
+        build_scene(_with_simulation(parse_case(alone), device="cuda"))  # as `run --device cuda`
 
 
 BUDGET = '\n[output.observables]\nquantities = ["energy_budget"]\n'
