@@ -113,6 +113,19 @@ def launch_shape(items: int) -> tuple[int, int]:
     return math.ceil(max(items, 1) / threads), threads
 
 
+def search_grid_problem(neighbors: NeighborSearch, count: int) -> str | None:
+    """Why the GPU cannot search this box for its `count` particles (a box of more cells than the
+    CPU stores whole: it keeps the occupied ones, the GPU's search stores every cell), or None.
+    Asked by the build and by `sphere validate` (scene/builder.py check_build)."""
+    if neighbors.dense:
+        return None
+    return (
+        f'simulation.device = "cuda": the box holds {int(np.prod(neighbors.ncell))} search cells for '
+        f"{count} particles; the GPU's search stores every cell. Make the domain smaller around the "
+        'particles, or use device = "cpu".'
+    )
+
+
 def on_gpu_or_error(work):
     """Run `work` (host calls into numba.cuda); a CUDA error (out of memory above all) becomes a
     CaseError naming the key instead of a traceback."""
@@ -209,12 +222,9 @@ class DeviceSteps:
                 "case also has: "
                 f'{", ".join(extra) or "other step hooks"}. Run it with device = "cpu" (the default).'
             )
-        if not scene.neighbors.dense:
-            raise CaseError(
-                f'simulation.device = "cuda": the box holds {int(np.prod(scene.neighbors.ncell))} search '
-                f"cells for {scene.state.particles.count} particles; the GPU's search stores every "
-                'cell. Make the domain smaller around the particles, or use device = "cpu".'
-            )
+        problem = search_grid_problem(scene.neighbors, scene.state.particles.count)
+        if problem is not None:
+            raise CaseError(problem)
         return cls(scene, *_cuda())
 
     # --- host <-> device ------------------------------------------------------------------

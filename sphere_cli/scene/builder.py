@@ -17,7 +17,7 @@ from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
 from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
-from ..errors import ResumeRefused
+from ..errors import CaseError, ResumeRefused
 from ..kernels.neighbors import worst_overlap
 from ..physics.compiled_steps import CompiledSteps
 from ..physics.contact import PairContactForces, one_contact_limit, stability_limit
@@ -379,6 +379,12 @@ def check_build(loaded: LoadedCase, files: dict | None = None) -> None:
         state, fluid = made.state, made.fluid
         p, box = state.particles, state.box
         _refuse_overlap(loaded, *worst_overlap_of(p.pos, p.radius, box.lower, box.upper, box.periodic))
+        if loaded.case.simulation.device == "cuda":  # what the GPU cannot run, wherever validate runs
+            from ..physics.device_steps import search_grid_problem
+
+            problem = search_grid_problem(NeighborSearch(state, made.tables.frictional), p.count)
+            if problem is not None:
+                raise CaseError(problem)
     else:
         state, fluid, _ = _fluid_alone(loaded)
     if fluid is not None:

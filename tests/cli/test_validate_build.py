@@ -118,3 +118,18 @@ def test_overlapping_particles_of_a_placement_file_are_refused_by_validate(tmp_p
         "particles 0 and 1 (from spheres.csv) start overlapping by 0.667",
     )
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_a_box_the_gpu_cannot_search_is_refused_by_validate(tmp_path, command):
+    """TINY's 20 spheres in a box of 0.5 m: 12 167 000 search cells, which the CPU lists sparsely
+    and the GPU's search would store whole. run refused it at its build (before looking for a
+    GPU: physics/device_steps.py); validate, on a login node without a GPU, now does too."""
+    case = edit(TINY, "upper = [0.01, 0.01, 0.02]", "upper = [0.5, 0.5, 0.5]")
+    (tmp_path / "case.toml").write_text(edit(case, 'dt = "auto"', 'dt = "auto"\ndevice = "cuda"'))
+    args = ("validate", "case.toml") if command == "validate" else ("run", "case.toml", "-o", "out", "-q")
+    result = sphere_inproc(*args, cwd=tmp_path)
+    assert_clean_error(result, 65, 'simulation.device = "cuda": the box holds 12167000 search cells for 20')
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "case.toml").write_text(case)  # on the CPU: valid
+    assert sphere_inproc("validate", "case.toml", cwd=tmp_path).code == 0
