@@ -631,7 +631,7 @@ register(
 
 def drained_consolidation(end: float) -> Outcome:
     """The oedometer under a permeable top wall (0 Pa): the water first carries the load, then
-    drains through the top. At dimensionless times T = c_v t / H^2 from 0.3 to `end`
+    drains through the top. At dimensionless times T = c_v t / H^2 from 0.05 to `end`
     (c_v = k / (mu (1/M + phi beta_f))) the base pressure against Terzaghi's series (over sigma)
     and the settlement, as a fraction of the dry one 9 sigma d^2 / k_n, against the average
     degree of consolidation U(T); the largest of each."""
@@ -641,7 +641,7 @@ def drained_consolidation(end: float) -> Outcome:
     rate = PERMEABILITY / (1.0e-3 * (1.0 / MODULUS + 0.4 * WATER)) / HEIGHT**2  # c_v / H^2 [1/s]
     stepper = Stepper(scene)
     base = settlement = 0.0
-    for target in (T for T in (0.3, 0.45, 0.6, 0.8, 1.0, 1.2) if T <= end):
+    for target in (T for T in (0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0, 1.2) if T <= end):
         stepper.advance(round(target / rate / OEDOMETER_DT) - stepper.steps)
         T = rate * stepper.steps * OEDOMETER_DT
         pressure = float(scene.fluid.pore.state.pressure[:, :, 0].mean())
@@ -668,7 +668,8 @@ register(
         ),
         description=(
             "the undrained case's oedometer with a permeable top wall (0 Pa), water; the base "
-            "pressure and the settlement at T = 0.3, 0.45, 0.6, 0.8, 1.0, 1.2 up to the rung's end"
+            "pressure and the settlement at T = 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0, 1.2 up to the "
+            "rung's end (from the end of the wall's loading, T ~ 0.05)"
         ),
         run=drained_consolidation,
         ladder=(0.6, 1.2),
@@ -680,12 +681,19 @@ register(
         },
         order_note=(
             "not a convergence case; why not closer: the wall takes about 0.5 ms (T ~ 0.05) to load "
-            "the bed, and the seepage force on the grains is -V grad p/(1 - phi) with the lens porosity "
-            "0.397 of this lattice against its true 0.476"
+            "the bed, overshooting the load by 10 % and settling 4 % of the dry settlement more than "
+            "Terzaghi's instant load by T = 0.05, an offset the consolidation keeps; and the seepage "
+            "force on the grains is -V grad p/(1 - phi) with the lens porosity 0.397 of this lattice "
+            "against its true 0.476"
         ),
         tolerances=(
-            Tolerance("base_pressure", 0.05, source="measured 0.037"),
-            Tolerance("settlement", 0.04, source="measured 0.035"),
+            Tolerance(
+                "base_pressure",
+                0.07,
+                source="measured 0.064 at T = 0.45, the wall's loading offset; until 2026-12-07 "
+                "0.037 from T = 0.3 on, but 0.94 at T = 0.05 (the rate of the moving cells)",
+            ),
+            Tolerance("settlement", 0.07, source="measured 0.061 at T = 0.3, the same offset"),
         ),
         repeats=1,
     )

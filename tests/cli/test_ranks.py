@@ -537,7 +537,7 @@ NAVIER_STOKES_LID = (
         "[fluid]\n", '[[walls]]\nface = "z+"\nmode = "stress"\nstress = 4000.0\n\n[fluid]\n'
     )
     .replace("count = 200", "count = 300")
-    .replace("upper = [0.016, 0.004, 0.012]", "upper = [0.016, 0.004, 0.003]")
+    .replace("upper = [0.016, 0.004, 0.012]", "upper = [0.016, 0.004, 0.0029]")
     .replace("grid = { cells = [8, 2, 6] }", "grid = { cells = [8, 2, 2], follow_top_wall = true }")
     .replace("rank_split_cells = 1", "rank_split_cells = 4096")
     .replace('self_induced = "keep"', 'averaging = "cell"')

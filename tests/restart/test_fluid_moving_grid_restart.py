@@ -3,7 +3,7 @@
 step's block of DEM steps, so the grid height of the last fluid step is not the wall's): it ends
 bitwise in the state of an uninterrupted run. The same run shows the moving grid in the output
 (per-frame spacing in trajectory.h5 and the XDMF sidecar, the height in `inspect`) and conserves
-the fluid: the pore volume lost equals the volume that left through the moving top."""
+the fluid: the pore volume the grid lost is the volume that left through the moving top."""
 
 from __future__ import annotations
 
@@ -77,19 +77,26 @@ def test_resume_while_the_wall_moves_is_bitwise_identical(runs):
 
 
 def test_fluid_leaving_through_the_moving_top_is_the_pore_volume_lost(runs):
-    """Every frame: pore volume at the start - pore volume now = volume out through the top
-    (relative to the moving wall). The discrete continuity makes this an identity of the
-    pressure solve (tolerance 1e-10 relative residual per step) and round-off: 1e-9 of the
-    volume the wall swept is allowed (measured: 1.4e-14). The wall sweeps A * 0.8 mm; the
-    particles fall and change the porosity as well, so the pore volume is not simply A H - solids."""
+    """Every frame: the volume out through the top (relative to the moving wall) is the pore
+    volume the grid lost, A |dH|: the grains (24, below 4.6 mm) stay inside the grid, so their
+    volume in it does not change. The continuity takes the porosity rate in a frame moving
+    with the grains, so the fluid crossing the top absolutely is the lens estimate's error in
+    the solid's volume change while the grains settle (its sampling spheres do not count a
+    grain's volume the same wherever it lies): measured 0.16 % of A |dH|, allowed 0.5 %. (The
+    rate of the moving cells, used until 2026-12-07, made the outflow equal the lens estimate's
+    pore volume sum(phi V) lost instead, 2.8 % below A |dH|; that sum is the observable
+    fluid_pore_volume, within 3 % here.)"""
     whole, _, _ = runs
     with h5py.File(whole / "trajectory.h5") as f:
         pore = f["observables/fluid_pore_volume/value"][...]
         out = f["observables/fluid_top_outflow_volume/value"][...]
         height = f["observables/fluid_grid_height/value"][...]
-    swept = 1e-4 * (HEIGHT - height[-1])
-    assert swept > 7e-8
-    np.testing.assert_allclose(pore[0] - pore, out, rtol=0, atol=1e-9 * swept)
+        top = f["particles/trajectory/position/value"][:, :, 2].max()
+    assert top < height[-1] - 0.01
+    swept = 1e-4 * (HEIGHT - height)
+    assert swept[-1] > 7e-8
+    np.testing.assert_allclose(out, swept, rtol=0.005, atol=0)
+    np.testing.assert_allclose(pore[0] - pore, swept, rtol=0.03, atol=0)
 
 
 def test_the_output_shows_the_moving_grid(runs):

@@ -68,7 +68,12 @@ so that (`add_grid_source`, `add_grid_motion`):
                     control volume spans zeta_dn .. zeta_up (k .. k+1 for x and y faces, k-1/2 ..
                     k+1/2 for z faces), v_up, v_dn upwind of the flux relative to the grid.
 A uniform phi and v stay so; summed over a column, the pore volume changes by exactly the
-relative flux through the top face, which must be open (prescribed pressure).
+relative flux through the top face, which must be open (prescribed pressure). With particles,
+dphi is not the rate of two measures of the moving cells (those do not cancel the porosity the
+moving faces carry where cells slide past grains at rest): the module measures the rate at
+points fixed in space, `moving_cell_rate` gives the dphi that makes the pressure source that
+rate, and kernels/fluid/porosity.py `rate_in_grains_frame` takes each cell's between that and
+the cells' own by the grains' motion.
 
 Arguments: v_face, v_star, mobility, acceleration (nx,ny,nz+1,3) [m/s, m/s, -, m/s^2] on the
 faces; edges (nx,ny,nz+1,3) [-] the edge porosities of `edge_porosity`; normal (nx,ny,nz+2,3)
@@ -697,6 +702,21 @@ def add_grid_source_column(phi, dphi, rho, dt, stretch, rhs, i, j):
             (k + 1) * _phi_face(phi, i, j, k + 1, 2) - k * _phi_face(phi, i, j, k, 2)
         )
         rhs[i, j, k] -= rho / dt * source
+
+
+@njit(cache=True, parallel=True)
+def moving_cell_rate(phi, rate, dt, stretch):
+    """rate (nx,ny,nz) [1/s], given the porosity rate at points fixed in space, becomes in place
+    the rate of the moving cells that makes the source of `add_grid_source` that rate:
+      dphi + (phi - dt dphi) s - s (phi_(k+1) (k+1) - phi_k k) = rate_fixed,
+    so that grains at rest give no source whatever the lens estimate of the moving cells."""
+    nx, ny, nz = phi.shape
+    for ii in prange(nx):
+        i = np.int64(ii)
+        for j in range(ny):
+            for k in range(nz):
+                faces = (k + 1) * _phi_face(phi, i, j, k + 1, 2) - k * _phi_face(phi, i, j, k, 2)
+                rate[i, j, k] = (rate[i, j, k] - stretch * (phi[i, j, k] - faces)) / (1.0 - dt * stretch)
 
 
 @njit(cache=True)

@@ -295,3 +295,28 @@ def sample_at(
         mean_velocity[i, j, k, 2] = sums[3] * w
         mean_diameter[i, j, k] = sums[4] * w
     return clamped
+
+
+@njit(cache=True, parallel=True)
+def rate_in_grains_frame(fixed_rate, cell_rate, mean_velocity, top_speed, shift_velocity, grid_frame):
+    """On a grid whose top moved at top_speed [m/s] over the fluid step (its cell centres at
+    w = top_speed (k + 1/2)/nz), cell_rate (nx,ny,nz) [1/s], the rate of the lens estimate of
+    the cells moving with the grid, becomes in place the rate in a frame moving with the grains:
+    (1 - a) fixed_rate + a cell_rate, fixed_rate the rate at points fixed in space and
+    a = mean_velocity_z / w clipped to [0, 1] (1 everywhere with grid_frame). The lens estimate
+    follows the solid's volume change best where its sampling sphere moves with the grains (a
+    bed at rest under a moving grid: a = 0; a bed the grid compresses with it: a = 1). With
+    shift_velocity, the mean velocity's z component becomes relative to that frame (less a w),
+    as the advection of the porosity in that frame takes it."""
+    nx, ny, nz = cell_rate.shape
+    for ii in prange(nx):
+        i = np.int64(ii)
+        for j in range(ny):
+            for k in range(nz):
+                w = top_speed * (k + 0.5) / nz
+                a = 1.0
+                if not grid_frame:
+                    a = min(max(mean_velocity[i, j, k, 2] / w, 0.0), 1.0) if w != 0.0 else 0.0
+                cell_rate[i, j, k] = (1.0 - a) * fixed_rate[i, j, k] + a * cell_rate[i, j, k]
+                if shift_velocity:
+                    mean_velocity[i, j, k, 2] -= a * w

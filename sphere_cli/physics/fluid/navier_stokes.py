@@ -31,10 +31,12 @@ from ...kernels.fluid.navier_stokes import (
     continuity_error,
     first_unstable,
     max_courant,
+    moving_cell_rate,
     predict,
     pressure_gradient,
     top_outflow,
 )
+from ...kernels.fluid.porosity import rate_in_grains_frame
 from ..fluid_plugin import GRID_ON_GPU, MOVING_GRID_SPACING, FluidModule, GpuSteps
 from .drag import FluidParticleDrag
 from .fields import cell_expression, face_expressions, face_shape, read_face_fields, read_grid_file
@@ -233,6 +235,11 @@ class NavierStokesSolver:
         self.grid.set_height(self.height)
         self.poisson.update_spacing()
 
+    def stretch(self, fs: NavierStokesState, dt: float) -> float:
+        """(V_new - V_old) / (V_new dt) [1/s] of every cell of a grid following the top wall over
+        the fluid step from fs.height to the height of the last `resize`; 0 on a fixed grid."""
+        return (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
+
     def boundary_pressure(self, time: float, out: np.ndarray) -> np.ndarray:
         """Pressures of the bottom and top boundaries at `time` (0 where no-flow) [Pa]."""
         for row, b in enumerate(self.boundaries):
@@ -270,8 +277,7 @@ class NavierStokesSolver:
             on.small(a) for a in (self.spacing, self.bc_sign, self.p_kind, self.inflow)
         )
         work = on.fields(fs)  # fs, or its fields on the GPU
-        # (V_new - V_old) / (V_new dt) of every cell of a grid following the top wall
-        stretch = (self.height - fs.height) / (self.height * dt) if self.follows else 0.0
+        stretch = self.stretch(fs, dt)
         k.edge_porosity(work.porosity, work.edges)
         # split across MPI ranks with the pressure solve (its slabs of x planes), the prediction
         # takes the rank's planes, from the stresses and fluxes of those and the plane either side
@@ -445,7 +451,8 @@ class NavierStokesSolver:
 def rehearse_grid_step(config: NavierStokesFluid, grid: FluidGrid, gravity, dt: float) -> None:
     """One step of a copy of `grid` alone (NavierStokes.grid_step_rehearsal): the fluid at rest
     under its hydrostatic pressure, stirred a little so that the pressure solve iterates, and
-    on a grid following the top wall stretched so that the moving grid's terms are taken."""
+    on a grid following the top wall stretched so that the moving grid's terms are taken (and
+    the moving cells' porosity rate, which a step with particles takes)."""
     grid = copy.deepcopy(grid)
     solver = NavierStokesSolver(config, grid, gravity)
     fs = solver.allocate()
@@ -453,6 +460,7 @@ def rehearse_grid_step(config: NavierStokesFluid, grid: FluidGrid, gravity, dt: 
     fs.v_face += np.random.default_rng(0).uniform(-1e-9, 1e-9, fs.v_face.shape)
     if solver.follows:
         solver.resize(1.001 * solver.height)
+        moving_cell_rate(fs.porosity, fs.porosity_rate, dt, solver.stretch(fs, dt))
     solver.step(fs, 0.0, dt)
     solver.first_unstable(fs, dt)
 
@@ -498,6 +506,7 @@ class NavierStokes(FluidModule):
             cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
         )
         self.drag.stretches = self.top_wall is not None
+        self.earlier = None  # of a grid following the top wall: _earlier
         self.fs = self.solver.allocate()
         state.fluid = self.fs
         self.loaded = loaded
@@ -753,11 +762,26 @@ class NavierStokes(FluidModule):
             self._follow_wall(state)
         if not self.alone:  # without particles the porosity stays 1 and nothing is exchanged
             self.drag.report_below(state, fs)
-            # d phi/dt by backward difference over the fluid step (of each cell, moving with the grid)
+            # d phi/dt by backward difference over the fluid step (of each cell, moving with the
+            # grid); on a grid that moved, in a frame moving with the grains, as Darcy's
+            # (rate_in_grains_frame), fed to the solver as the moving cells' rate that makes its
+            # source that (moving_cell_rate)
+            stretch = self.solver.stretch(fs, self.fluid_dt)
+            if stretch:
+                earlier, velocity = self._earlier()
+                largest = 0.5 * self.diameter
+                self.porosity.measure_earlier(state.particles, self.fluid_dt, earlier, largest, velocity)
+                np.maximum(earlier, self.floor, out=earlier)
             np.copyto(fs.porosity_rate, fs.porosity)
             self._measure_porosity(state)
             np.subtract(fs.porosity, fs.porosity_rate, out=fs.porosity_rate)
             fs.porosity_rate *= 1.0 / self.fluid_dt
+            if stretch:
+                np.subtract(fs.porosity, earlier, out=earlier)
+                earlier *= 1.0 / self.fluid_dt
+                moving_cell_rate(fs.porosity, earlier, self.fluid_dt, stretch)
+                top_speed = (self.solver.height - fs.height) / self.fluid_dt
+                rate_in_grains_frame(earlier, fs.porosity_rate, velocity, top_speed, False, False)
             self.drag.fluid_forcing(state, fs, self.fluid_dt, self.porosity.slabs)
         elif self.bed is not None:
             self.bed.forcing(fs)
@@ -789,6 +813,14 @@ class NavierStokes(FluidModule):
                 f"{where}, where the fluid step {self.fluid_dt:.4g} s exceeds the viscous limit "
                 f"dx^2/(8 nu) {limit:.4g} s; use a smaller dt or fluid.coupling.steps"
             )
+
+    def _earlier(self) -> tuple[np.ndarray, np.ndarray]:
+        """The porosity of the grains a fluid step back and their mean velocity per cell, of a
+        grid following the top wall (made when it first moves)."""
+        if self.earlier is None:
+            shape = self.fs.porosity.shape
+            self.earlier = (np.zeros(shape), np.zeros((*shape, 3)))
+        return self.earlier
 
     def _measure_porosity(self, state) -> None:
         """fs.porosity from the particles where they are now, floored at fluid.drag.porosity_floor:

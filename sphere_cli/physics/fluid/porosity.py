@@ -13,13 +13,15 @@ cell-centred sampling sphere of radius half the smallest cell edge).
 phi is clamped to [0, 1]: below 0 only where overlapping particles put more solid in a sampling
 sphere than it holds; the first clamp is logged as a warning, and measure() returns the number
 of cells clamped. The rate dphi/dt is the backward difference (phi - phi_previous) / dt_fluid,
-which each model takes over its own fluid step. No array is allocated after construction except
-the counting sort's small cursor array.
+which each model takes over its own fluid step; on a grid that moved since, also against
+measure_earlier's (the grains a fluid step back, on the cells now). No array is allocated
+after construction except the counting sort's small cursor array.
 """
 
 from __future__ import annotations
 
 import logging
+import types
 
 import numpy as np
 
@@ -84,6 +86,23 @@ class Porosity:
                 slabs.gather(field)
             clamped = slabs.total(int(clamped))
         return self.report_clamped(int(clamped))
+
+    def measure_earlier(self, particles, dt: float, porosity, largest=None, mean_velocity=None) -> int:
+        """`measure` of the particles dt [s] earlier, taken back along their velocities now, on
+        the grid's cells now: (phi - this)/dt is the rate at points fixed in space, which a grid
+        that moved since its last measure cannot take from two measures of its cells (the lens
+        estimate of cells that slid past grains at rest changes). Exact for grains at rest or
+        in uniform motion, first order in dt otherwise. With mean_velocity, also the grains'
+        mean velocity per cell. Call it before `measure`, whose bins (cell_of) the drag reads."""
+        pos, vel = particles.pos, particles.vel
+        back = self._spare.get("earlier")
+        if back is None or back.shape[0] < pos.shape[0]:
+            back = self._spare["earlier"] = np.zeros_like(pos)
+        back = back[: pos.shape[0]]
+        np.multiply(vel, -dt, out=back)
+        back += pos
+        earlier = types.SimpleNamespace(pos=back, vel=vel, radius=particles.radius)
+        return self.measure(earlier, porosity, mean_velocity, largest=largest)
 
     def _sampled(self, radius, mean_velocity, mean_diameter, largest=None) -> tuple:
         """The reach of the sampling spheres into the bins, now (largest: the largest radius of
