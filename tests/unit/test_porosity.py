@@ -1,6 +1,7 @@
 """Porosity of the fluid cells from the particles (physics/fluid/porosity.py, kernels/fluid/porosity.py):
 exact lens volumes with a cell-centred sampling sphere of radius R = half the smallest cell edge
-("Porosity estimation" in the documentation of the original sphere)."""
+("Porosity estimation" in the documentation of the original sphere), stacked along the long
+axes of an elongated cell."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ import pytest
 from sphere_cli.kernels.fluid.porosity import lens_volume
 from sphere_cli.physics.fluid.grid import FluidGrid
 from sphere_cli.physics.fluid.poisson import Slabs
-from sphere_cli.physics.fluid.porosity import Porosity, particle_cells
+from sphere_cli.physics.fluid.porosity import Porosity, particle_cells, sampling_parts
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -210,6 +211,41 @@ def test_simple_cubic_lattice_gives_its_solid_fraction():
         bound = aliasing_bound(a, m, grid.sampling_radius, r)
         assert np.abs(solid.mean(axis=0) - s).max() <= bound, (m, np.abs(solid.mean(axis=0) - s).max(), bound)
     assert bound < 2e-4
+
+
+def test_an_elongated_cell_is_sampled_along_its_length():
+    """A cell 2.67 times as tall as wide is sampled in three spheres of half its width, stacked
+    along its height (physics/fluid/porosity.py sampling_parts): a grain in its lower third,
+    which one sphere at the cell's centre (2.67 mm away, beyond R + r = 2.5 mm) did not see,
+    counts once in a third of the sampled volume. A cubic cell keeps its one sphere."""
+    tall = FluidGrid(np.zeros(3), np.array([3e-3, 3e-3, 8e-3]), (2, 2, 2), np.array([True, True, False]))
+    assert sampling_parts(tall).tolist() == [1, 1, 3]
+    assert sampling_parts(make_grid((2, 2, 2), 3e-3)).tolist() == [1, 1, 1]
+    por, phi = Porosity(tall, 1), np.zeros(tall.shape)
+    por.measure(particles([1.5e-3, 1.5e-3, 8e-3 / 6], 1e-3), phi)
+    assert phi[0, 0, 0] == pytest.approx(1.0 - sphere_volume(1e-3) / (3 * sphere_volume(1.5e-3)), rel=1e-14)
+    assert (phi.ravel()[1:] == 1.0).all()
+
+
+def test_an_elongated_cell_gives_a_lattice_its_solid_fraction():
+    """The lattice of test_simple_cubic_lattice_gives_its_solid_fraction in cells of 3 x 3 x 6
+    mm, each sampled in two spheres of R = 1.5 mm: averaged over 4^3 offsets of the lattice
+    the middle layer's cells hold its solid fraction within the same Poisson-summation bound
+    (each sphere's error is within it, so their mean is): the sampled volume is the parts'
+    together (a cell taking one sphere's volume for its two would be off by a factor 2)."""
+    a, r = 1e-3, 0.4e-3
+    s = sphere_volume(r) / a**3
+    grid = FluidGrid(np.zeros(3), np.array([3e-3, 3e-3, 6e-3]), (4, 4, 3), np.array([True, True, False]))
+    assert sampling_parts(grid).tolist() == [1, 1, 2]
+    sites = np.arange(12) * a
+    base = np.array(list(itertools.product(sites, sites, np.arange(18) * a)))
+    por, phi = Porosity(grid, len(base)), np.zeros(grid.shape)
+    solid = []
+    for offset in itertools.product(*[(np.arange(4) + 0.5) / 4 * a] * 3):
+        por.measure(particles(base + offset, r), phi)
+        solid.append(1.0 - phi[:, :, 1])
+    worst = np.abs(np.mean(solid, axis=0) - s).max()
+    assert worst <= aliasing_bound(a, 4, grid.sampling_radius, r), worst
 
 
 def random_bed(rng, count=400):

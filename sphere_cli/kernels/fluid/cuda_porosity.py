@@ -147,13 +147,13 @@ def sort_cells(cell_start, cell_order, cell_count):
 
 @cuda.jit
 def sample_cells(
-    wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach, cell_start,
-    order, want_means, porosity, mean_velocity, mean_diameter, clamped,
+    wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, subdivisions, largest, reach,
+    cell_start, order, want_means, porosity, mean_velocity, mean_diameter, clamped,
 ):  # fmt: skip
     """porosity.py sample_cells for cell c, the clamped cells counted in clamped[0]."""
     for c in range(cuda.grid(1), porosity.size, cuda.gridsize(1)):
         if sample_cell(
-            c, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
-            cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+            c, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, subdivisions, largest,
+            reach, cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
         ):  # fmt: skip
             cuda.atomic.add(clamped, 0, 1)

@@ -3,7 +3,11 @@
 
 Each cell i samples the solid in a sphere of radius R centred on the cell centre (R = half the
 smallest cell edge, the reference's choice): V_s,i = sum over particles j of the exact volume
-common to that sphere and particle j (`lens_volume`), and phi_i = 1 - V_s,i / (4/3 pi R^3).
+common to that sphere and particle j (`lens_volume`), and phi_i = 1 - V_s,i / (4/3 pi R^3). A
+cell longer along an axis than 2R is cut along it into equal parts (subdivisions (3,) int64,
+the edge over 2R rounded; physics/fluid/porosity.py sampling_parts), each sampled by such a
+sphere at its centre, V_s,i their sum over parts x 4/3 pi R^3: one sphere sees only the middle
+of an elongated cell.
 A lens volume is a continuous function of the centre distance, so phi is continuous in time as
 particles move. The same lens volumes weight the per-cell mean particle velocity and diameter.
 
@@ -204,6 +208,7 @@ def sample_cells(
     shape,
     periodic,
     sampling_radius,
+    subdivisions,
     largest,
     reach,
     cell_start,
@@ -229,38 +234,39 @@ def sample_cells(
         i, j = column // ny, column % ny
         for k in range(nz):
             clamped += sample_at(
-                i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest,
-                reach, cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+                i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius,
+                subdivisions, largest, reach, cell_start, order, want_means, porosity, mean_velocity,
+                mean_diameter,
             )  # fmt: skip
     return clamped
 
 
 @njit(cache=True, inline="always")
 def sample_cell(
-    cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach, cell_start,
-    order, want_means, porosity, mean_velocity, mean_diameter,
+    cell, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, subdivisions, largest,
+    reach, cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
 ):  # fmt: skip
     """sample_cells for one cell (also the GPU's, kernels/fluid/cuda_porosity.py): 1 if its
     porosity was clamped at 0, else 0."""
     ny, nz = shape[1], shape[2]
     return sample_at(
         cell // (ny * nz), (cell // nz) % ny, cell % nz, wrapped, vel, radius, origin, spacing, shape,
-        periodic, sampling_radius, largest, reach, cell_start, order, want_means, porosity, mean_velocity,
-        mean_diameter,
+        periodic, sampling_radius, subdivisions, largest, reach, cell_start, order, want_means, porosity,
+        mean_velocity, mean_diameter,
     )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
 def sample_at(
-    i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, largest, reach,
-    cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
+    i, j, k, wrapped, vel, radius, origin, spacing, shape, periodic, sampling_radius, subdivisions, largest,
+    reach, cell_start, order, want_means, porosity, mean_velocity, mean_diameter,
 ):  # fmt: skip
-    """sample_cell for the cell (i, j, k)."""
+    """sample_cell for the cell (i, j, k): in each of its subdivisions[0] x [1] x [2] equal
+    parts a sphere of radius sampling_radius centred on the part (one for a cubic cell; module
+    docstring)."""
     big_r = sampling_radius
-    sample_volume = 4.0 / 3.0 * math.pi * big_r * big_r * big_r
-    cx = origin[0] + (i + 0.5) * spacing[0]
-    cy = origin[1] + (j + 0.5) * spacing[1]
-    cz = origin[2] + (k + 0.5) * spacing[2]
+    parts = subdivisions[0] * subdivisions[1] * subdivisions[2]
+    sample_volume = parts * 4.0 / 3.0 * math.pi * big_r * big_r * big_r
     # a bin farther from the centre than the sampling radius and the largest particle radius
     # holds no particle that reaches the sphere (its lens volume is exactly 0, never added): it
     # is skipped, so the sums are those of every bin, bit for bit. Widened by a relative 1e-9
@@ -272,15 +278,27 @@ def sample_at(
         far = max(reach[a] - 0.5, 0.0) * spacing[a]
         corner2 += far * far
     trim = corner2 > wide2
-    if trim:  # one loop for each, so that the narrow cells' loop does no test at all
-        sums = _bins(
-            i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2, True,
-            reach, cell_start, order, want_means,
-        )  # fmt: skip
-    else:
-        sums = _bins(
-            i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2, False,
-            reach, cell_start, order, want_means,
+    sums = (0.0, 0.0, 0.0, 0.0, 0.0)
+    for part in range(parts):
+        mx = part // (subdivisions[1] * subdivisions[2])
+        my = (part // subdivisions[2]) % subdivisions[1]
+        mz = part % subdivisions[2]
+        cx = origin[0] + (i + (mx + 0.5) / subdivisions[0]) * spacing[0]
+        cy = origin[1] + (j + (my + 0.5) / subdivisions[1]) * spacing[1]
+        cz = origin[2] + (k + (mz + 0.5) / subdivisions[2]) * spacing[2]
+        if trim:  # one loop for each, so that the narrow cells' loop does no test at all
+            part_sums = _bins(
+                i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2,
+                True, reach, cell_start, order, want_means,
+            )  # fmt: skip
+        else:
+            part_sums = _bins(
+                i, j, k, cx, cy, cz, wrapped, vel, radius, origin, spacing, shape, periodic, big_r, wide2,
+                False, reach, cell_start, order, want_means,
+            )  # fmt: skip
+        sums = (
+            sums[0] + part_sums[0], sums[1] + part_sums[1], sums[2] + part_sums[2], sums[3] + part_sums[3],
+            sums[4] + part_sums[4],
         )  # fmt: skip
     phi = 1.0 - sums[0] / sample_volume
     clamped = 0

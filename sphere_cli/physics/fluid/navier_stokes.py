@@ -499,9 +499,11 @@ class NavierStokes(FluidModule):
         # the smallest cell side of the case's grid [m] (before a grid following the top wall is
         # fitted to it, so that dt = "auto" is the same on a resume)
         self.cell = float(self._grid.spacing.min())
+        # (its sampling parts from the case's cells, before the grid is fitted to the wall: the
+        # same on a resume)
+        self.porosity = Porosity(self._grid, state.particles.count)
         if self.top_wall is not None:
             self.solver.resize(self._wall_height(state))
-        self.porosity = Porosity(self._grid, state.particles.count)
         self.drag = FluidParticleDrag(
             cfg.drag, cfg.density, cfg.viscosity, self._grid, state.particles.count, cfg.formulation == "B"
         )
