@@ -78,6 +78,30 @@ def bed_case(
     )
 
 
+def bed_at_rest_case(model: str, top: float, nz: int, wall_speed: float | None = None) -> str:
+    """Four layers of the bed above (100 spheres) at rest on a closed floor under water up to
+    `top` [m], fluid `model` on 2 x 2 x nz cells; with wall_speed [m/s], a drained top wall
+    moving at it (into the box) that the grid follows."""
+    text = bed_case(0.0)
+    follows = ", follow_top_wall = true" if wall_speed is not None else ""
+    grid = f"grid = {{ cells = [2, 2, {nz}]{follows} }}"
+    edits = [
+        ("bottom = { pressure = 0.0 }", 'bottom = { type = "no-flow" }'),
+        ("count = 200", "count = 100"),
+        ("0.005, 0.0085]", "0.005, 0.0042]"),
+        ("upper = [0.005, 0.005, 0.025]", f"upper = [0.005, 0.005, {top}]"),
+        ('model = "darcy"', f'model = "{model}"'),
+        ("grid = { cells = [2, 2, 10] }", grid),
+    ]
+    if wall_speed is not None:
+        wall = f'[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = {wall_speed}\n'
+        edits.append(("[fluid]", wall + "[fluid]"))
+    for old, new in edits:
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    return text
+
+
 def upward_force(scene) -> float:
     """Total upward seepage force of the fluid on the particles, without the buoyancy [N]."""
     p, fluid = scene.state.particles, scene.fluid
@@ -214,15 +238,7 @@ def test_a_permeable_wall_moving_through_the_water_above_a_bed_does_not_lift_it(
     pore pressure (allowed 0.01 Pa, against the bed's buoyant weight of 34 Pa per area)."""
     tops = []
     for speed in (0.0, 0.2):
-        text = bed_case(0.0).replace("bottom = { pressure = 0.0 }", 'bottom = { type = "no-flow" }')
-        text = text.replace("count = 200", "count = 100").replace("0.005, 0.0085]", "0.005, 0.0042]")
-        text = text.replace(
-            "grid = { cells = [2, 2, 10] }", "grid = { cells = [2, 2, 4], follow_top_wall = true }"
-        )
-        text = text.replace(
-            "[fluid]", f'[[walls]]\nface = "z+"\nmode = "velocity"\nvelocity = {speed}\n[fluid]'
-        )
-        scene = build_scene(parse_case(text))
+        scene = build_scene(parse_case(bed_at_rest_case("darcy", 0.025, 4, speed)))
         advance(scene, 5000)
         assert scene.state.walls.coord[1] > 0.0209  # still 17 mm above the bed
         assert np.abs(scene.fluid.pore.state.pressure).max() < 0.01
