@@ -156,3 +156,19 @@ def test_grains_at_rest_far_below_a_moving_top_see_no_flow(speed):
     assert np.abs(fs.v_face).max() < 1e-5
     hydrostatic = RHO * G * (fs.height - (grid.centres(2) - grid.origin[2]))
     assert np.abs(fs.p - hydrostatic[None, None, :]).max() < 1e-3
+
+
+@pytest.mark.parametrize("model", ["navier-stokes", "darcy"])
+def test_cells_stretched_past_their_sampling_parts_are_warned_of_once(model, caplog):
+    """A grid following a rising wall keeps the sampling parts counted from the case's cells
+    (physics/fluid/porosity.py sampling_parts: 6.225 mm over the 2.5 mm sphere, 2.49: two
+    spheres a cell); once the cells are stretched to where three would be taken (2.5 at 6.25
+    mm), the run warns once, naming the cells and both counts."""
+    scene = build_scene(parse_case(bed_at_rest_case(model, 0.0249, 4, -0.2)))
+    with caplog.at_level("WARNING", logger="sphere"):
+        advance(scene, 100)  # 0.08 mm: cells of 6.245 mm, 2.498
+        assert not [r for r in caplog.records if "sampled in" in r.getMessage()]
+        advance(scene, 400)  # 0.4 mm in all: 6.325 mm, 2.53
+    told = [r.getMessage() for r in caplog.records if "sampled in" in r.getMessage()]
+    assert len(told) == 1, told
+    assert "1 x 1 x 3 parts" in told[0] and "the 1 x 1 x 2 counted" in told[0], told[0]

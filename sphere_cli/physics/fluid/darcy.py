@@ -180,6 +180,7 @@ class Darcy(FluidModule):
         wall_cells(state, self.top_wall, grid.shape[2], height, self.diameter)
         grid.set_height(height)
         self.pore.update_spacing()
+        self.porosity.warn_if_outgrown(state.clock.step)
 
     def _follow_wall(self, state) -> float:
         """Stretch the grid to the top wall (_fit_grid); returns the speed of its top over the

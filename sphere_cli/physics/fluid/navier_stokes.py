@@ -809,6 +809,7 @@ class NavierStokes(FluidModule):
                 "the moving grid's explicit flux; use a smaller dt or fluid.coupling.steps"
             )
         self.solver.resize(height)
+        self.porosity.warn_if_outgrown(state.clock.step)
         limit = self.solver.viscous_limit()
         if self.fluid_dt > limit:
             raise NumericalError(

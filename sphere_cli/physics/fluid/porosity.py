@@ -55,6 +55,7 @@ class Porosity:
         self._spare: dict[str, np.ndarray] = {}
         self.clamped_cells = 0
         self._warned = False
+        self._warned_parts = False
         self.gpu_sort = None  # on a GPU: its counts, starts, next places, order and clamped count
         # split across MPI ranks: the slabs of x planes whose cells this rank samples (the fluid's
         # pressure solve's, set by its split_grid), the rest gathered from the other ranks
@@ -204,6 +205,27 @@ class Porosity:
                 self.grid.cell_count,
             )
         return self.clamped_cells
+
+    def warn_if_outgrown(self, step: int) -> None:
+        """Once a run, where a grid following the top wall has stretched its cells so far that
+        they would now be sampled in another count of parts than the one kept from the case's
+        cells (sampling_parts): too few spheres leave grains no cell counts, which can make the
+        coupling unstable (user guide, "How the porosity is measured")."""
+        if self._warned_parts:
+            return
+        now = sampling_parts(self.grid)
+        if np.array_equal(now, self.subdivisions):
+            return
+        self._warned_parts = True
+        log.warning(
+            "step %d: the fluid cells, following the top wall, are now %s m; they would be sampled in "
+            "%s parts, and the porosity keeps the %s counted from the case's cells (a count that "
+            "changed would make it jump). Elongated cells sampled in too few spheres leave grains no "
+            "cell counts, which can make the coupling unstable: start from cells about as tall as "
+            "they will be",
+            step, " x ".join(f"{x:.4g}" for x in self.spacing), " x ".join(str(n) for n in now),
+            " x ".join(str(n) for n in self.subdivisions),
+        )  # fmt: skip
 
     def _scratch(self, name: str, shape: tuple) -> np.ndarray:
         """A full-size array for the mean the caller did not ask for (made on first need)."""
