@@ -171,7 +171,8 @@ class Porosity:
         """(ranks, n) bool: which ranks of a split run sample cells that can reach each of these
         particles (pos (n, 3) [m]): those whose slab of x planes, widened by the reach of the
         largest sampling sphere the grid can have (half its smaller x or y edge: the z edge of
-        a grid following the top wall changes), holds the particle's bin. Whole bins are taken,
+        a grid following the top wall changes) from its part farthest along x (sampling_parts),
+        holds the particle's bin. Whole bins are taken,
         so a rank gets every particle of each bin its cells visit."""
         bins = np.empty(pos.shape[0], dtype=np.int64)
         bin_in_cells(pos, self.origin, self.spacing, self.shape, self.periodic, bins, np.empty_like(pos))
