@@ -58,8 +58,16 @@ def lattice_positions(placement: LatticePlacement, case, radius, rng) -> np.ndar
 
 def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarray:
     lower, upper = _region(placement, case)
-    lo = lower + radius[:, None, None]
-    hi = upper - radius[:, None, None]
+    # a periodic axis the region fills is drawn whole: spheres may straddle its boundary, so the
+    # packing has no seam (elsewhere each centre keeps a radius from the region's faces)
+    wrap = (
+        np.asarray(case.domain.periodic, dtype=bool)
+        & (lower == np.asarray(case.domain.lower))
+        & (upper == np.asarray(case.domain.upper))
+    )
+    inset = np.where(wrap, 0.0, 1.0) * radius[:, None, None]
+    lo = lower + inset
+    hi = upper - inset
     cand = lo + (hi - lo) * rng.random((radius.size, placement.max_attempts, 3))
     # cells of one largest diameter, coarser where that would be more than a few per particle
     # (uniform candidates fill them evenly, so a coarser cell only costs a few more checks)
@@ -68,7 +76,8 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
     pos = np.zeros((radius.size, 3))
     # large spheres first: they are the hardest to fit
     order = np.argsort(-radius, kind="stable")
-    placed = insert_random(radius[order], cand[order], lower, cell, ncell, pos)
+    wrapped = wrap.astype(np.uint8)
+    placed = insert_random(radius[order], cand[order], lower, cell, ncell, upper - lower, wrapped, pos)
     if placed < radius.size:
         raise case_error(
             case,
