@@ -120,7 +120,7 @@ def _cell_run(cell_start, cell_key, used, first, last):
 
 
 @njit(cache=True)
-def _axis_offsets(n, periodic):
+def axis_offsets(n, periodic):
     """Distinct neighbouring cell offsets along one axis (fewer than 3 cells: no duplicates)."""
     if n == 1:
         return np.array([0], dtype=np.int64)
@@ -164,8 +164,8 @@ def build_lists(
     n = pos.shape[0]
     cap = nbr.shape[1]
     nz = ncell[2]
-    offx = _axis_offsets(ncell[0], periodic[0])
-    offy = _axis_offsets(ncell[1], periodic[1])
+    offx = axis_offsets(ncell[0], periodic[0])
+    offy = axis_offsets(ncell[1], periodic[1])
     x = flat(pos)
     # scalars, read once: the row stores could alias the arrays, which would be reloaded
     lx, ly, lz = length[0], length[1], length[2]
