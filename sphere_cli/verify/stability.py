@@ -780,6 +780,7 @@ def nan_guard(quick: bool) -> dict:
             blowup_check_every=every,
         )
         # what api.run does, with the contact module wrapped by the fault
+        began = api._began()
         loaded = load_case(path)
         scene = build_scene(loaded)
         scene.contact = _PoisonedForces(scene.contact, poison_step, index)
@@ -790,7 +791,7 @@ def nan_guard(quick: bool) -> dict:
         output = api.start_output(scene, rundir, loaded, log)
         error = None
         try:
-            api._drive(scene, rundir, output, log, None, False, False)
+            api._drive(scene, rundir, output, log, None, False, False, began)
         except SphereError as exc:
             error = exc
         finally:
