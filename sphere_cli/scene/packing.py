@@ -76,8 +76,9 @@ def random_positions(placement: RandomPlacement, case, radius, rng) -> np.ndarra
     pos = np.zeros((radius.size, 3))
     # large spheres first: they are the hardest to fit
     order = np.argsort(-radius, kind="stable")
-    wrapped = wrap.astype(np.uint8)
-    placed = insert_random(radius[order], cand[order], lower, cell, ncell, upper - lower, wrapped, pos)
+    placed = insert_random(
+        radius[order], cand[order], lower, cell, ncell, upper - lower, wrap.astype(np.uint8), pos
+    )
     if placed < radius.size:
         raise case_error(
             case,
