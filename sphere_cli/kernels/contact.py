@@ -69,7 +69,7 @@ from .laws import (
 )
 from .layout import U1, U2, U3, flat, prefetch_particle
 from .neighbors import minimum_image
-from .serial import positions, serial_twin
+from .serial import positions, serial_kernel
 
 # Rows of a block (module docstring). 64 contacts: the block's 48 rows (24 KB) stay in L1.
 BLOCK = 64
@@ -462,8 +462,8 @@ def _flush_to_slots(buf, ids, count, law, rolling, single, table, spring_dt, ste
             slots[s, 8] = from_block(buf, B_M2, c)
 
 
-@njit(cache=True, parallel=True)
-def cross_chunk_pairs(
+@serial_kernel(distinct=True)
+def cross_chunk_pairs_serial(
     pos,
     vel,
     angvel,
@@ -493,14 +493,15 @@ def cross_chunk_pairs(
     """Every listed pair whose partner lies in a later chunk, into its slot s = start[i] + k
     (the index of its spring): slots[s, 0:3] the force on i, [3:6] n x F_t, [6:9] the rolling
     torque on i (with rolling); zero for a pair that does not touch. cross_rows (R,2) int64:
-    each row holding such pairs and the end of its chunk; cross_bounds (T+1,) int64: piece c of those rows,
-    cross_bounds[c] <= r < cross_bounds[c+1], for thread c (any cut gives the same slots)."""
+    each row holding such pairs and the end of its chunk; cross_bounds (T+1,) int64: piece c
+    of those rows, cross_bounds[c] <= r < cross_bounds[c+1] (any cut gives the same slots),
+    swept one after the other here and each on a thread of its own by cross_chunk_pairs."""
     pos, vel, angvel, hist = flat(pos), flat(vel), flat(angvel), flat(hist)
     vel_pred, angvel_pred = flat(vel_pred), flat(angvel_pred)
     cap = nbr.shape[1]
     single = table.shape[0] == 1
     box = box_axes(length, periodic)
-    for c in prange(cross_bounds.shape[0] - 1):
+    for c in range(cross_bounds.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
         filled = ZERO
@@ -535,6 +536,37 @@ def cross_chunk_pairs(
                 )  # fmt: skip
                 filled += 1
         _flush_to_slots(buf, ids, filled, law, rolling, single, table, spring_dt, step_dt, hist, slots)
+
+
+# where cross_chunk_pairs takes the pieces of its rows and a piece's scratch
+CROSS_BOUNDS, CROSS_SLOTS, CROSS_BLOCKS, CROSS_BLOCK_IDS = positions(
+    cross_chunk_pairs_serial, "cross_bounds", "slots", "blocks", "block_ids"
+)
+
+
+@njit(cache=True)
+def one_cross_piece(cross, c):
+    """cross_chunk_pairs's arguments `cross` for its piece c alone (its bounds and its rows of
+    the scratch; the slots every piece's)."""
+    bounds, blocks, ids = cross[CROSS_BOUNDS], cross[CROSS_BLOCKS], cross[CROSS_BLOCK_IDS]
+    return cross[:CROSS_BOUNDS] + (bounds[c : c + 2], cross[CROSS_SLOTS], blocks[c : c + 1], ids[c : c + 1])
+
+
+@njit(cache=True, parallel=True)
+def cross_chunk_pairs(
+    pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia, material, nbr, nbr_count,
+    start, hist, table, law, rolling, length, periodic, spring_dt, step_dt, cross_rows, cross_bounds,
+    slots, blocks, block_ids,
+):  # fmt: skip
+    """cross_chunk_pairs_serial on several threads, piece c of the rows on one of them (each
+    pair's slot is its own: any cut gives the same slots)."""
+    cross = (
+        pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia, material, nbr, nbr_count,
+        start, hist, table, law, rolling, length, periodic, spring_dt, step_dt, cross_rows, cross_bounds,
+        slots, blocks, block_ids,
+    )  # fmt: skip
+    for c in prange(cross_bounds.shape[0] - 1):
+        cross_chunk_pairs_serial(*one_cross_piece(cross, c))
 
 
 @njit(cache=True)
@@ -623,8 +655,8 @@ def _flush_to_forces(
     return ZERO, ZERO
 
 
-@njit(cache=True, parallel=True)
-def chunk_pair_forces(
+@serial_kernel(distinct=True)
+def chunk_pair_forces_serial(
     pos,
     vel,
     angvel,
@@ -665,7 +697,8 @@ def chunk_pair_forces(
     ascending j), then a sweep in ascending i applying the pairs inside the chunk to both
     members, block by block, and adding the row's pairs beyond the chunk from their slots
     (cross_chunk_pairs must have run). Each particle's terms come in ascending partner index
-    (module docstring)."""
+    (module docstring). The chunks one after the other: one thread's kernel, which
+    chunk_pair_forces calls for each chunk on its thread (kernels/serial.py serial_kernel)."""
     pos, vel, angvel, hist = flat(pos), flat(vel), flat(angvel), flat(hist)
     bits = hist.view(np.uint64)
     vel_pred, angvel_pred = flat(vel_pred), flat(angvel_pred)
@@ -678,7 +711,7 @@ def chunk_pair_forces(
     rcap = rev.shape[1]
     single = table.shape[0] == 1
     box = box_axes(length, periodic)
-    for c in prange(bounds.shape[0] - 1):
+    for c in range(bounds.shape[0] - 1):
         begin = bounds[c]
         end = bounds[c + 1]
         buf = blocks[c]
@@ -766,22 +799,36 @@ def chunk_pair_forces(
         )  # fmt: skip
 
 
-# one thread: the sweep without a parallel region (kernels/serial.py); its arrays are the
-# particles', the list's and this kernel's scratch (physics/contact.py), none a view of another
-chunk_pair_forces_serial = serial_twin(chunk_pair_forces, distinct=True)
-
 # where chunk_pair_forces takes the chunks' bounds, the slots and its scratch of a chunk each
 BOUNDS, SLOTS, BLOCKS, BLOCK_IDS, BLOCK_ROWS = positions(
-    chunk_pair_forces, "bounds", "slots", "blocks", "block_ids", "block_rows"
+    chunk_pair_forces_serial, "bounds", "slots", "blocks", "block_ids", "block_rows"
 )
 AFTER_SCRATCH = BLOCK_ROWS + 1
+
+
+@njit(cache=True, parallel=True)
+def chunk_pair_forces(
+    pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia, material, nbr, nbr_count,
+    start, hist, table, law, rolling, length, periodic, spring_dt, step_dt, rev, rev_count, pair_row,
+    pair_partner, warm, body_acc, mass, bounds, slots, blocks, block_ids, block_rows, force, torque,
+):  # fmt: skip
+    """chunk_pair_forces_serial's sweep on several threads, chunk c on one of them: each chunk's
+    rows and scratch are its own, and the slots it reads were filled by cross_chunk_pairs
+    before."""
+    pairs = (
+        pos, vel, angvel, vel_pred, angvel_pred, radius, inv_mass, inv_inertia, material, nbr, nbr_count,
+        start, hist, table, law, rolling, length, periodic, spring_dt, step_dt, rev, rev_count, pair_row,
+        pair_partner, warm, body_acc, mass, bounds, slots, blocks, block_ids, block_rows, force, torque,
+    )  # fmt: skip
+    for c in prange(bounds.shape[0] - 1):
+        chunk_pair_forces_serial(*one_chunk(pairs, c))
 
 
 @njit(cache=True)
 def one_chunk(pairs, c):
     """chunk_pair_forces's arguments `pairs` for its chunk c alone (its bounds and its rows of the
-    scratch; the slots every chunk's), which its serial twin sweeps as that kernel sweeps it
-    (kernels/steps.py chunk_steps_end)."""
+    scratch; the slots every chunk's), which chunk_pair_forces_serial sweeps on its own
+    (chunk_pair_forces, kernels/steps.py chunk_steps_end)."""
     bounds, blocks, ids, rows = pairs[BOUNDS], pairs[BLOCKS], pairs[BLOCK_IDS], pairs[BLOCK_ROWS]
     chunk = (bounds[c : c + 2], pairs[SLOTS], blocks[c : c + 1], ids[c : c + 1], rows[c : c + 1])
     return pairs[:BOUNDS] + chunk + pairs[AFTER_SCRATCH:]

@@ -25,7 +25,15 @@ many (the kernels are written so that their results do not depend on the thread 
 guide 3), so its results are bitwise the same. It is a copy of the kernel's Python function
 under another qualified name: Numba's cache files machine code by module and qualified name,
 not by compile options, so a twin of the same name would overwrite the parallel kernel's entry.
-`callees` gives the kernels the twin calls in place of the parallel ones (their own twins)."""
+`callees` gives the kernels the twin calls in place of the parallel ones (their own twins).
+
+The three sweeps of a step's contacts (the pair sweep, the pairs across chunks and the plane
+walls: kernels/contact.py, walls.py) are written the other way round: the sweep of one chunk,
+or of several one after the other, is a kernel compiled as a twin is (`serial_kernel`), which
+one thread runs, and the parallel kernel is a prange over the chunks calling it for each (as
+kernels/steps.py chunk_steps_end does). Numba's parallel passes then see a few lines rather
+than the whole sweep, and the sweep compiles once for both: the first run of the demo on two
+threads compiled for 39-40 s instead of 47 s (docs/performance.md, "Compile time")."""
 
 import inspect
 import types
@@ -65,6 +73,16 @@ def variant(kernel, suffix: str, **callees):
     return numba.jit(**kernel.targetoptions, cache=True)(_copy(kernel.py_func, suffix, callees))
 
 
+def _serial_options(options: dict, distinct: bool) -> dict:
+    """Numba's options for a kernel compiled as a twin is: without reference counting, with
+    `distinct` its arrays declared not to overlap, and cached like every kernel here (caching is
+    not among a dispatcher's target options)."""
+    options = {**options, "_nrt": False, "cache": True}
+    if distinct:
+        options["pipeline_class"] = _DistinctArrays
+    return options
+
+
 def serial_twin(kernel, distinct: bool = False, **callees):
     if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT: a plain function, threads or none
         return kernel
@@ -72,11 +90,18 @@ def serial_twin(kernel, distinct: bool = False, **callees):
     options = {**kernel.targetoptions, "parallel": False}
     if kernel.targetoptions.get("parallel"):
         options["error_model"] = "numpy"  # as Numba compiles a parallel loop's body
-    options["_nrt"] = False
-    if distinct:
-        options["pipeline_class"] = _DistinctArrays
-    # cached like every kernel here (caching is not among a dispatcher's target options)
-    return numba.jit(**options, cache=True)(twin)
+    return numba.jit(**_serial_options(options, distinct))(twin)
+
+
+def serial_kernel(distinct: bool = False):
+    """Decorator: a chunk's kernel compiled as a serial twin is (no reference counting; with
+    `distinct`, no array argument overlapping another, the promise `serial_twin` describes),
+    which a parallel kernel calls for each of its chunks in a prange over them, and one thread
+    calls for the one chunk. Its parallel caller is then a few lines for Numba's parallel passes
+    rather than the whole sweep (which took them 6 to 10 s to compile a kernel), and the sweep's
+    code is compiled once for any thread count."""
+    options = _serial_options({"nopython": True, "error_model": "numpy"}, distinct)
+    return numba.jit(**options)
 
 
 def positions(kernel, *names: str) -> tuple[int, ...]:

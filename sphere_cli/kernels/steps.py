@@ -61,14 +61,15 @@ def contacts(cross, pairs, walls):
 @njit(cache=True, parallel=True)
 def chunk_steps_end(pairs, walls, drift):
     """A step's pair sweep and walls and the next step's kick-drift with this step's kick, in
-    one parallel region, chunk by chunk: in chunk c the serial twins of chunk_pair_forces (its
-    chunk c), of wall_forces (its piece c: `walls` cut at the chunks' bounds) and of kick_drift
-    (the chunk's particles). A chunk's sweep reads and writes only its own particles and the
-    slots cross_chunk_pairs filled before, so its particles' forces are whole once it ends, and
-    their walls and kick-drift follow at once, while other threads sweep their chunks; each
-    particle's sums and steps are those of contacts and kick_drift one after the other. Where
-    threads sleep between regions (OMP_WAIT_POLICY=PASSIVE), each region first wakes them:
-    two regions a step fewer. Returns the largest squared displacement (kick_drift's)."""
+    one parallel region, chunk by chunk: in chunk c chunk_pair_forces_serial (its chunk c),
+    wall_forces_serial (its piece c: `walls` cut at the chunks' bounds) and kick_drift's serial
+    twin (the chunk's particles), as chunk_pair_forces and wall_forces call the first two. A
+    chunk's sweep reads and writes only its own particles and the slots cross_chunk_pairs filled
+    before, so its particles' forces are whole once it ends, and their walls and kick-drift
+    follow at once, while other threads sweep their chunks; each particle's sums and steps are
+    those of contacts and kick_drift one after the other. Where threads sleep between regions
+    (OMP_WAIT_POLICY=PASSIVE), each region first wakes them: two regions a step fewer. Returns
+    the largest squared displacement (kick_drift's)."""
     bounds = pairs[BOUNDS]
     worst = 0.0
     for c in prange(bounds.shape[0] - 1):

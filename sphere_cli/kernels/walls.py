@@ -81,7 +81,7 @@ from .contact_probe import wall_normal
 from .exact_sum import WORDS, add_exact, exact_value
 from .laws import COLUMNS
 from .layout import U1, U2, U3, flat, prefetch, prefetch_particle
-from .serial import positions, serial_twin
+from .serial import positions, serial_kernel
 
 FIXED = 0
 VELOCITY = 1
@@ -169,8 +169,8 @@ def _flush_walls(
         torque[i3 + U2] += t2
 
 
-@njit(cache=True, parallel=True)
-def wall_forces(
+@serial_kernel(distinct=True)
+def wall_forces_serial(
     pos,
     vel,
     angvel,
@@ -213,7 +213,9 @@ def wall_forces(
     contact.py): pieces (T+1,) int64 cut `near` into one piece per thread, blocks (T,
     FIELDS*BLOCK) and block_ids (T, 2*BLOCK) uint64 (particle, wall) are their scratch. warm:
     prefetch the lines of the particle WALL_PREFETCH_AHEAD places on in `near` (a hint: no value
-    changes), on a bed beyond the cache (physics/contact.py beyond_cache)."""
+    changes), on a bed beyond the cache (physics/contact.py beyond_cache). The pieces one after
+    the other: one thread's kernel, which wall_forces calls for each piece on its thread
+    (kernels/serial.py serial_kernel)."""
     nw = wall_axis.shape[0]
     single = wall_table.shape[1] == 1
     vel, angvel, vel_pred, angvel_pred = flat(vel), flat(angvel), flat(vel_pred), flat(angvel_pred)
@@ -222,7 +224,7 @@ def wall_forces(
     recording = False
     for w in range(nw):
         recording = recording or record[w] != 0
-    for c in prange(pieces.shape[0] - 1):
+    for c in range(pieces.shape[0] - 1):
         buf = blocks[c]
         ids = block_ids[c]
         filled = ZERO
@@ -525,20 +527,35 @@ def wall_kick(wall_axis, wall_sign, mode, control, wall_force, area, vel, acc, t
             acc[w, t] = (drive - control[w, C_DAMPING] * vel[w, t]) / mass
 
 
-# one thread: the same kernel without parallel regions (kernels/serial.py); every array argument
-# is an array of its own (physics/walls.py PlaneWallForces._arguments)
-wall_forces_serial = serial_twin(wall_forces, distinct=True)
-
 # where wall_forces takes the particles near the walls, its pieces of them and their scratch
-NEAR, PIECES, WALL_BLOCKS, WALL_BLOCK_IDS = positions(wall_forces, "near", "pieces", "blocks", "block_ids")
+NEAR, PIECES, WALL_BLOCKS, WALL_BLOCK_IDS = positions(
+    wall_forces_serial, "near", "pieces", "blocks", "block_ids"
+)
 AFTER_WALL_SCRATCH = WALL_BLOCK_IDS + 1
 
 
 @njit(cache=True)
 def one_piece(walls, c):
     """wall_forces's arguments `walls` for its piece c alone (its bounds in `near` and its rows
-    of the scratch), which its serial twin takes as that kernel takes it (kernels/steps.py
+    of the scratch), which wall_forces_serial takes on its own (wall_forces, kernels/steps.py
     chunk_steps_end)."""
     pieces, blocks, ids = walls[PIECES], walls[WALL_BLOCKS], walls[WALL_BLOCK_IDS]
     piece = (pieces[c : c + 2], blocks[c : c + 1], ids[c : c + 1])
     return walls[:PIECES] + piece + walls[AFTER_WALL_SCRATCH:]
+
+
+@njit(cache=True, parallel=True)
+def wall_forces(
+    pos, vel, angvel, vel_pred, angvel_pred, radius, mass, inertia, inv_mass, material, wall_axis,
+    wall_sign, wall_coord, wall_vel, wall_vel_pred, wall_table, wall_hist, law, rolling, spring_dt,
+    step_dt, force, torque, record, pforce, springs, near, reach, pieces, blocks, block_ids, warm,
+):  # fmt: skip
+    """wall_forces_serial on several threads, piece c of `near` on one of them (a particle is
+    listed once: each piece's particles and scratch are its own)."""
+    walls = (
+        pos, vel, angvel, vel_pred, angvel_pred, radius, mass, inertia, inv_mass, material, wall_axis,
+        wall_sign, wall_coord, wall_vel, wall_vel_pred, wall_table, wall_hist, law, rolling, spring_dt,
+        step_dt, force, torque, record, pforce, springs, near, reach, pieces, blocks, block_ids, warm,
+    )  # fmt: skip
+    for c in prange(pieces.shape[0] - 1):
+        wall_forces_serial(*one_piece(walls, c))

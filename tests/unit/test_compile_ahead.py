@@ -108,9 +108,9 @@ def test_a_cold_run_loads_what_its_helper_compiled(tmp_path):
     report = json.loads(done.stdout.strip().splitlines()[-1])
     assert report["started"] and report["helper_exit"] == 0, report
     # each of the helper's kernels came from the cache here, the pair sweep was compiled here
-    assert set(report["loaded"]) == {"build_lists", "kick_drift", "kick", "wall_forces"}
+    assert set(report["loaded"]) == {"build_lists", "kick_drift", "kick", "wall_forces_serial"}
     assert all(hits == 1 for hits in report["loaded"].values()), report
-    assert report["compiled"] == {"chunk_pair_forces": 1}
+    assert report["compiled"] == {"chunk_pair_forces_serial": 1}
 
 
 def test_a_refused_packing_stops_the_helper_at_once(monkeypatch, tmp_path):
