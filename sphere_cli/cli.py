@@ -477,12 +477,14 @@ def bench_vans1d(
 @bench_app.command("compile")
 def bench_compile(
     repeats: int = typer.Option(1, "--repeats", min=1, help="Fresh caches timed."),
+    threads: str = THREADS_OPTION,
 ) -> None:
     """Seconds a dry scene waits for its kernels before the first step: cold (empty Numba cache)
-    and cached, each in a fresh process."""
+    and cached, each in a fresh process, on each thread count."""
     from .bench.compile import run_compile_benchmark
 
-    _bench(lambda: run_compile_benchmark(repeats))
+    counts = _thread_counts(threads)
+    _bench(lambda: run_compile_benchmark(repeats, counts))
 
 
 @bench_app.command("grid")

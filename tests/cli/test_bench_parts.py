@@ -1,4 +1,4 @@
-"""`sphere bench darcy|vans1d|grid` at tiny sizes: each runs through the command line and
+"""`sphere bench darcy|vans1d|grid|compile` at tiny sizes: each runs through the command line and
 reports its rows; no timing is asserted (a shared machine makes any bound loose or flaky)."""
 
 from __future__ import annotations
@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import statistics
+import subprocess
 from pathlib import Path
 
 import numba
@@ -69,6 +70,7 @@ def test_counts_below_one_and_threads_beyond_the_machine_are_refused_by_option()
         (("darcy", "--threads", str(most + 1)), "--threads", f"at most {most} here"),
         (("dem", "--threads", f"1,{most + 1}"), "--threads", f"at most {most} here"),
         (("vans1d", "--threads", str(most + 1)), "--threads", f"at most {most} here"),
+        (("compile", "--threads", f"1,{most + 1}"), "--threads", f"at most {most} here"),
     ):
         assert_clean_error(sphere_inproc("bench", *command), 2, option, fragment)
 
@@ -81,8 +83,34 @@ def test_vans1d_bench_reports_time_per_simulated_second_and_shares():
         assert re.search(rf"{part} [0-9.]+ %", result.stdout), part
 
 
+def test_compile_bench_times_each_thread_count_cold_then_cached(monkeypatch):
+    """Each round times a fresh cache on each count, alternating: the child (the scene's first
+    steps) runs on that many threads, once on the empty cache, then on the one it filled. The
+    child is replaced by one that says what it was given (a cold compile takes 15-40 s)."""
+    from sphere_cli.bench import compile as bench_compile
+
+    calls = []
+
+    def child(command, env, **kwargs):
+        calls.append((env["NUMBA_NUM_THREADS"], env["NUMBA_CACHE_DIR"]))
+        seconds = 10.0 * int(env["NUMBA_NUM_THREADS"]) + len(calls)
+        return subprocess.CompletedProcess(command, 0, stdout=json.dumps({"seconds": seconds}) + "\n")
+
+    monkeypatch.setattr(bench_compile.subprocess, "run", child)
+    lines = []
+    results = bench_compile.run_compile_benchmark(2, (1, 2), log=lines.append)
+    assert [threads for threads, _ in calls] == ["1", "1", "2", "2"] * 2
+    caches = [cache for _, cache in calls]
+    assert caches[0] == caches[1] and len(set(caches[::2])) == 4  # cached after cold, then a new one
+    assert results == {
+        1: {"cold_seconds": [11.0, 15.0], "cached_seconds": [12.0, 16.0]},
+        2: {"cold_seconds": [23.0, 27.0], "cached_seconds": [24.0, 28.0]},
+    }
+    assert "on 2 threads: cold 23.0 s, cached 24.00 s" in lines[1]
+
+
 def test_help_of_every_benchmark():
-    for name in ("dem", "fluid", "darcy", "vans1d", "grid"):
+    for name in ("dem", "fluid", "darcy", "vans1d", "grid", "compile"):
         result = sphere_inproc("bench", name, "--help")
         assert result.code == 0 and "Usage" in result.stdout, name
 
