@@ -3,19 +3,20 @@
 A dry scene's first run waited 23-26 s for Numba to compile its kernels, one after the other:
 Numba compiles one at a time in a process. Where the cache does not hold the pair sweep yet and
 a core is spare, `start` hands the neighbour build (first: the run needs it next), the
-kick-drift, the kick and the plane walls' contacts to `python -m sphere_cli.compile_ahead`,
-which compiles them into the same cache, while this process compiles the pair sweep; `finish`
-waits for the helper's line saying those are done before the first forces, and the run loads
-its kernels from the cache. A fluid's own grid step compiles at its first fluid step (about
-25 s of a cold Navier-Stokes run, 10 s of a Darcy run): where those kernels are not cached
-either, the helper then takes one step of a copy of the grid alone (FluidModule.
-grid_step_rehearsal) while the run compiles the porosity, the drag and its compiled steps, and
-goes on after `finish`; the run waits for a kernel the helper is compiling (compile_lock.py)
-and loads it. The helper compiles the code the run would, so results do not change; a helper
-that fails leaves the compiles to the run, as before, and one still compiling when the run's
-process ends is stopped. Only a new run (not a resumed one) on the CPU and one rank does this,
-whether its steps run in the compiled loop or through the hooks: docs/performance.md,
-"Compiled in two processes".
+kick-drift, the kick and the plane walls' contacts (and on several threads the dry compiled
+loop's parallel region of a step's end, kernels/steps.py chunk_steps_end) to `python -m
+sphere_cli.compile_ahead`, which compiles them into the same cache, while this process compiles
+the pair sweep; `finish` waits for the helper's line saying those are done before the first
+forces, and the run loads its kernels from the cache. A fluid's own grid step compiles at its
+first fluid step (about 25 s of a cold Navier-Stokes run, 10 s of a Darcy run): where those
+kernels are not cached either, the helper then takes one step of a copy of the grid alone
+(FluidModule.grid_step_rehearsal) while the run compiles the porosity, the drag and its
+compiled steps, and goes on after `finish`; the run waits for a kernel the helper is compiling
+(compile_lock.py) and loads it. The helper compiles the code the run would, so results do not
+change; a helper that fails leaves the compiles to the run, as before, and one still compiling
+when the run's process ends is stopped. Only a new run (not a resumed one) on the CPU and one
+rank does this, whether its steps run in the compiled loop or through the hooks:
+docs/performance.md, "Compiled in two processes".
 """
 
 from __future__ import annotations
@@ -62,11 +63,16 @@ def _signature(kernel, arguments: tuple) -> tuple:
 
 def helper_jobs(scene) -> list[tuple]:
     """(kernel, example arguments) of the kernels the helper compiles: the neighbour build, the
-    kick-drift, the kick and the plane walls' contacts, those the scene's step calls."""
+    kick-drift, the kick and the plane walls' contacts, those the scene's step calls; on several
+    threads, where the steps run in the dry compiled loop, also its one parallel region of a
+    step's end (kernels/steps.py chunk_steps_end, about 10 s), which the loop's compile then
+    loads."""
     from .kernels.motion import kick, kick_drift, kick_drift_serial, kick_serial
     from .kernels.neighbors import build_lists
     from .kernels.serial import use_serial
+    from .kernels.steps import chunk_steps_end
     from .kernels.walls import wall_forces, wall_forces_serial
+    from .physics.compiled_steps import CompiledSteps
     from .physics.motion import Motion
 
     state = scene.state
@@ -76,8 +82,14 @@ def helper_jobs(scene) -> list[tuple]:
         (kick_drift_serial if serial else kick_drift, (*Motion.drift_arguments(state), False)),
         (kick_serial if serial else kick, Motion.kick_arguments(state)),
     ]
-    if scene.walls is not None:
-        jobs.append((wall_forces_serial if serial else wall_forces, scene.walls.argument_example(state)))
+    walls = None if scene.walls is None else scene.walls.argument_example(state)
+    if walls is not None:
+        jobs.append((wall_forces_serial if serial else wall_forces, walls))
+    loop = scene.step.compiled
+    if not serial and type(loop) is CompiledSteps and loop.extra is None and loop.fluid is None:
+        cross, pairs = scene.contact.kernel_arguments(state)
+        if cross is not None:  # several chunks (CompiledSteps.run: the walls cut at them, same types)
+            jobs.append((chunk_steps_end, (pairs, walls, Motion.drift_arguments(state))))
     return jobs
 
 

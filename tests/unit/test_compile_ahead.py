@@ -26,8 +26,13 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 @pytest.mark.parametrize("n", [64, 256])  # the serial twins below 200 particles on one thread
 def test_the_jobs_are_the_kernels_the_run_compiles(n):
+    """Each job's kernel is compiled for the signature its arguments give when the steps call it
+    (chunk_steps_end, which only the compiled loop calls, has a test of its own below)."""
+    from sphere_cli.kernels.steps import chunk_steps_end
+
     scene = build_scene(parse_case(canonical_case(n)))
     jobs = compile_ahead.helper_jobs(scene) + compile_ahead.own_jobs(scene)
+    jobs = [(kernel, arguments) for kernel, arguments in jobs if kernel is not chunk_steps_end]
     scene.step.compiled = None  # the hooks call each kernel itself (a cached loop calls its own copies)
     advance(scene, 30)
     assert len(jobs) >= 5  # the build, the kick-drift, the kick, the walls, the pair sweep
@@ -57,6 +62,46 @@ def test_on_one_thread_the_serial_twins_are_compiled_not_the_parallel_kernels(mo
             assert compile_ahead.own_jobs(scene)[-1][0] is chunk_pair_forces
             with pytest.raises(AssertionError, match="parallel wall kernel"):
                 scene.walls.measure(scene.state)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread runs the serial loop")
+@pytest.mark.parametrize("walls", [True, False])
+def test_on_several_threads_the_helper_compiles_the_loops_region_for_the_runs_arguments(monkeypatch, walls):
+    """On two threads the helper also compiles kernels/steps.py chunk_steps_end, which the dry
+    compiled loop calls: with the types of the pairs, the walls cut at the chunks (or None) and
+    the kick-drift's arguments that CompiledSteps.run gives the loop (else the loop's compile
+    would not find it in the cache and compile it again). The loop itself is replaced by one
+    that keeps its arguments, the helper by the jobs it would be given."""
+    from sphere_cli.kernels.steps import chunk_steps_end
+    from sphere_cli.physics import compiled_steps
+    from sphere_cli.runtime import threads_set_to
+
+    text = canonical_case(256)
+    if not walls:  # no wall: a box periodic on every axis
+        for face in ("x-", "x+", "y-", "y+", "z-", "z+"):
+            text = text.replace(f'[[walls]]\nface = "{face}"\n', "")
+        text = text.replace("[domain]\n", "[domain]\nperiodic = [true, true, true]\n")
+        assert "[[walls]]" not in text and "periodic" in text
+    calls = []
+
+    def loop(*arguments):
+        calls.append(arguments)
+        return 0, 0.0, False
+
+    seen = []  # the helper's jobs as the scene's build hands them out, before the list is built
+    monkeypatch.setattr(compile_ahead, "start", lambda scene: seen.extend(compile_ahead.helper_jobs(scene)))
+    with threads_set_to(2):
+        scene = build_scene(parse_case(text))
+        jobs = [arguments for kernel, arguments in seen if kernel is chunk_steps_end]
+        monkeypatch.setattr(compiled_steps, "dem_steps", loop)
+        scene.step.compiled.run(scene.state, 5)
+    assert len(jobs) == 1 and len(calls) == 1
+    drift, pairs, chunked = calls[0][2], calls[0][4], calls[0][10]
+    assert (chunked is not None) == walls
+    signature = compile_ahead._signature(chunk_steps_end, jobs[0])
+    assert signature == compile_ahead._signature(chunk_steps_end, (pairs, chunked, drift))
+    with threads_set_to(1):  # one thread: the serial loop, no region to compile
+        assert chunk_steps_end not in [kernel for kernel, _ in compile_ahead.helper_jobs(scene)]
 
 
 def test_nothing_starts_on_a_filled_cache():
