@@ -462,6 +462,8 @@ def _flush_to_slots(buf, ids, count, law, rolling, single, table, spring_dt, ste
             slots[s, 8] = from_block(buf, B_M2, c)
 
 
+# its arrays are the particles', the list's, the slots and this kernel's scratch
+# (physics/contact.py), none a view of another
 @serial_kernel(distinct=True)
 def cross_chunk_pairs_serial(
     pos,
@@ -655,6 +657,8 @@ def _flush_to_forces(
     return ZERO, ZERO
 
 
+# its arrays are the particles', the list's and this kernel's scratch (physics/contact.py),
+# none a view of another
 @serial_kernel(distinct=True)
 def chunk_pair_forces_serial(
     pos,

@@ -33,7 +33,8 @@ or of several one after the other, is a kernel compiled as a twin is (`serial_ke
 one thread runs, and the parallel kernel is a prange over the chunks calling it for each (as
 kernels/steps.py chunk_steps_end does). Numba's parallel passes then see a few lines rather
 than the whole sweep, and the sweep compiles once for both: the first run of the demo on two
-threads compiled for 39-40 s instead of 47 s (docs/performance.md, "Compile time")."""
+threads compiled for 39-40 s instead of 47 s (docs/performance.md, "The contacts' sweeps
+compiled once for any thread count")."""
 
 import inspect
 import types

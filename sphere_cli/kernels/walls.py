@@ -169,6 +169,7 @@ def _flush_walls(
         torque[i3 + U2] += t2
 
 
+# every array argument is an array of its own (physics/walls.py PlaneWallForces._arguments)
 @serial_kernel(distinct=True)
 def wall_forces_serial(
     pos,
