@@ -1,5 +1,6 @@
-"""`sphere bench darcy|vans1d|grid|compile` at tiny sizes: each runs through the command line and
-reports its rows; no timing is asserted (a shared machine makes any bound loose or flaky)."""
+"""`sphere bench darcy|vans1d|grid` at tiny sizes: each runs through the command line and
+reports its rows; `sphere bench compile` with its timed child replaced (a cold compile takes
+15-40 s). No timing is asserted (a shared machine makes any bound loose or flaky)."""
 
 from __future__ import annotations
 
