@@ -28,7 +28,8 @@ not by compile options, so a twin of the same name would overwrite the parallel 
 `callees` gives the kernels the twin calls in place of the parallel ones (their own twins).
 
 The three sweeps of a step's contacts (the pair sweep, the pairs across chunks and the plane
-walls: kernels/contact.py, walls.py) are written the other way round: the sweep of one chunk,
+walls: kernels/contact.py, walls.py) and the energy budget's booking (kernels/observe/
+energy_budget.py book_particles) are written the other way round: the sweep of one chunk,
 or of several one after the other, is a kernel compiled as a twin is (`serial_kernel`), which
 one thread runs, and the parallel kernel is a prange over the chunks calling it for each (as
 kernels/steps.py chunk_steps_end does). Numba's parallel passes then see a few lines rather

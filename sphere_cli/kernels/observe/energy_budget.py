@@ -65,7 +65,7 @@ from ..laws import (
     tangential_force,
 )
 from ..layout import flat
-from ..serial import serial_twin
+from ..serial import serial_kernel, serial_twin
 
 GRAVITY = 0
 WALLS = 1
@@ -98,7 +98,8 @@ def keep_half_step(hist, kept_hist, wall_hist, kept_wall_hist, wall_vel, kept_wa
 # Called, not inlined: with the whole booking inlined into the parallel loop, Numba took 42 s to
 # compile accumulate_budget; with the laws of scalars and _tangential called, 14 s, the booking
 # as fast (8 000 spheres). book_particle stays inlined: called, it ran 2.6 x slower, its array
-# loads no longer known apart from the stores (only a parallel loop's body tells LLVM so).
+# loads no longer known apart from the stores (only a parallel loop's body, or a kernel whose
+# arrays are declared distinct, book_particles, tells LLVM so).
 @njit(cache=True)
 def _normal(kn, kt, dn, dtan, law, delta, r_eff, root_m, un, travel, grow):
     """normal_law, compiled once as a function of scalars rather than inlined at its four calls."""
@@ -150,6 +151,11 @@ def _tangential(
     return weight * g0, weight * g1, weight * g2, damping, 0.0
 
 
+# the particles a task of accumulate_budget books (each particle's share is its own: the shares do
+# not depend on how the particles are cut into tasks)
+BOOKING_CHUNK = 256
+
+
 @njit(cache=True, parallel=True)
 def accumulate_budget(
     pos,
@@ -193,21 +199,40 @@ def accumulate_budget(
     no_spring (3,) zeros: the spring of every contact when none has friction (read only);
     walls_to_book (N,) uint64: the bit mask of the walls to book for each particle (physics/
     walls.py walls_to_book); the others neither touch it nor hold a spring of it, now or at the
-    last step, so they would add zeros."""
+    last step, so they would add zeros. The particles in chunks of BOOKING_CHUNK, each chunk
+    booked by book_particles on one thread."""
+    particles = (
+        pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel, radius, mass, inertia,
+        inv_mass, inv_inertia, material,
+    )  # fmt: skip
+    wall_arrays = (
+        wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel, wall_table, wall_hist,
+    )  # fmt: skip
+    n = pos.shape[0]
+    for c in prange((n + BOOKING_CHUNK - 1) // BOOKING_CHUNK):
+        first = np.int64(c) * BOOKING_CHUNK  # the prange index is unsigned
+        book_particles(
+            first, min(first + BOOKING_CHUNK, n), particles, wall_arrays, nbr, nbr_count, start, hist,
+            table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring, walls_to_book,
+        )  # fmt: skip
+
+
+# Numba's parallel passes see the few lines above, not the booking: accumulate_budget compiled in
+# 14 s with the booking inlined in its prange, and the booking compiles once for any thread count
+# (kernels/serial.py serial_kernel). The arrays are the particles', the list's, the walls' and
+# the budget's own; it writes only scratch and booked, which share memory with no other.
+@serial_kernel(distinct=True)
+def book_particles(
+    first, last, particles, wall_arrays, nbr, nbr_count, start, hist, table, law, rolling, body_acc,
+    length, periodic, dt, scratch, booked, no_spring, walls_to_book,
+):  # fmt: skip
+    """accumulate_budget for the particles first .. last - 1, one after the other."""
     cap = nbr.shape[1]
     pair_springs = hist.shape[0] > 0
-    wall_springs = wall_hist.shape[0] > 0
-    for i in prange(pos.shape[0]):
-        particles = (
-            pos, vel_half, angvel_half, vel_pred, angvel_pred, vel, angvel, radius, mass, inertia,
-            inv_mass, inv_inertia, material,
-        )  # fmt: skip
-        wall_arrays = (
-            wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel, wall_table,
-            wall_hist, wall_springs,
-        )  # fmt: skip
+    walls = wall_arrays + (wall_arrays[7].shape[0] > 0,)  # whether the walls hold springs
+    for i in range(first, last):
         book_particle(
-            i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, wall_arrays,
+            i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, walls,
             table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring, walls_to_book[i],
         )  # fmt: skip
 
