@@ -200,3 +200,31 @@ def test_a_spring_parting_by_a_jump_beyond_reach_is_booked(tmp_path, monkeypatch
     monkeypatch.setattr(PlaneWallForces, "walls_to_book", lambda self: np.zeros(0, dtype=np.uint64))
     every, _ = jump()  # no mask: every wall booked for every particle
     assert np.array_equal(masked.view(np.uint64), every.view(np.uint64))
+
+
+def test_the_shares_are_booked_alike_on_one_thread_and_on_two_in_chunks():
+    """The booking goes by chunks of particles (kernels/observe/energy_budget.py BOOKING_CHUNK),
+    one chunk after another on one thread (the serial twin) and spread over the threads on two:
+    600 poured spheres, two chunks and a part, every one of them booked (each falls: its gravity
+    share is not 0), contacts in each chunk, bitwise the same on one thread and on two."""
+    import numba
+
+    from sphere_cli.kernels.observe.energy_budget import BOOKING_CHUNK
+
+    text = POUR.format(friction=0.5, rolling=0.05, restitution=0.5)
+    text = text.replace("count = 48", "count = 600").replace("[0.008, 0.008, 0.03]", "[0.02, 0.02, 0.04]")
+    booked = []
+    for threads in (1, 2):
+        numba.set_num_threads(threads)
+        try:
+            scene = run_in_memory(text, 0)
+            scene.step.compiled = None  # the hooks: the booking called on its own, each step
+            advance(scene, 8000)  # the lowest layer reaches the floor, the others fall onto it
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        booked.append(scene.budget.booked.copy())
+    assert booked[0].shape == (600, 5) and 600 > 2 * BOOKING_CHUNK and 600 % BOOKING_CHUNK
+    assert booked[0][:, 0].all()  # every particle's share booked, the last chunk's too
+    for first in range(0, 600, BOOKING_CHUNK):  # contacts in every chunk: their damping booked
+        assert np.count_nonzero(booked[0][first : first + BOOKING_CHUNK, 2]) > 5
+    assert np.array_equal(booked[0].view(np.uint64), booked[1].view(np.uint64))
