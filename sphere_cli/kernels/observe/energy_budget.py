@@ -207,6 +207,7 @@ def accumulate_budget(
     )  # fmt: skip
     wall_arrays = (
         wall_axis, wall_sign, wall_coord, wall_vel_half, wall_vel_pred, wall_vel, wall_table, wall_hist,
+        wall_hist.shape[0] > 0,
     )  # fmt: skip
     n = pos.shape[0]
     for c in prange((n + BOOKING_CHUNK - 1) // BOOKING_CHUNK):
@@ -229,10 +230,9 @@ def book_particles(
     """accumulate_budget for the particles first .. last - 1, one after the other."""
     cap = nbr.shape[1]
     pair_springs = hist.shape[0] > 0
-    walls = wall_arrays + (wall_arrays[7].shape[0] > 0,)  # whether the walls hold springs
     for i in range(first, last):
         book_particle(
-            i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, walls,
+            i, 0, nbr[i], min(nbr_count[i], cap), hist[start[i] :], pair_springs, particles, wall_arrays,
             table, law, rolling, body_acc, length, periodic, dt, scratch, booked, no_spring, walls_to_book[i],
         )  # fmt: skip
 
