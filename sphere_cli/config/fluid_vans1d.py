@@ -241,9 +241,11 @@ class Vans1dFluid(Strict):
     drag_exponent: Real = Field(
         3.1,
         ge=0,
+        le=10,
         description=(
             "Richardson-Zaki exponent n of the hindrance (1 - c)^-n in the drag coefficient "
-            "C_d = (0.44 + 24/Re_p)(1 - c)^-n, c the solid fraction [-]."
+            "C_d = (0.44 + 24/Re_p)(1 - c)^-n, c the solid fraction; measured ones lie between "
+            "2.4 (inertial) and 4.65 (viscous) [-]."
         ),
     )
     packed_solid_fraction: Real = Field(

@@ -97,6 +97,15 @@ ERRORS = [
         ["sand"],
     ),
     ("few-cells", "cells = 20", "cells = 1", "fluid.cells", "cells", ["greater than or equal to 2"]),
+    (
+        # (1 - c)^-n overflowed a float in the drag's relaxation limit: a traceback, not an error
+        "drag-exponent-beyond-any-measured",
+        "cells = 20",
+        "cells = 20\ndrag_exponent = 1e300",
+        "fluid.drag_exponent",
+        "drag_exponent",
+        ["less than or equal to 10"],
+    ),
     ("ids-reversed", "cells = 20", "cells = 20\nids = [5, 2]", "fluid.ids", "ids", ["first <= last"]),
     (
         "solid-fraction-of-one",
