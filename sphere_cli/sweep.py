@@ -28,6 +28,7 @@ import hashlib
 import io
 import itertools
 import json
+import math
 import os
 import re
 import shlex
@@ -63,6 +64,10 @@ FORMAT = 1
 # script submitted in parts with SWEEP_OFFSET
 SLURM_ARRAY_LIMIT = 1001
 ARRAY_PART = 1000  # members per submission of a larger sweep
+# Each member is a case file and a run directory, and the members' cases are checked in memory
+# before any is written: a sweep larger than this (a range typed with extra zeros, the product
+# of several long --vary) is refused before anything is expanded or written.
+MAX_MEMBERS = 100_000
 # characters a sweep folder's path may not hold: #SBATCH lines cannot quote them
 UNSAFE_PATH_CHARACTERS = '"\\\n#'
 # what an interrupted `sphere sweep` may have left before its sweep.json: it may go on there
@@ -115,6 +120,11 @@ def parse_vary(text: str) -> Vary:
         first, last = int(span.group(1)), int(span.group(2))
         if last < first:
             raise UsageError(f"{where}: the range {first}..{last} is empty (expected first <= last)")
+        if last - first + 1 > MAX_MEMBERS:
+            raise UsageError(
+                f"{where}: the range {first}..{last} has {last - first + 1} values; a sweep has at "
+                f"most {MAX_MEMBERS} members"
+            )
         return Vary(key, tuple(range(first, last + 1)))
     parsed = _toml_values(values)
     if parsed is None:
@@ -155,6 +165,10 @@ def combinations(varies: list[Vary], zipped: bool) -> list[tuple]:
             counts = ", ".join(f"{v.key}: {len(v.values)}" for v in varies)
             raise UsageError(f"--zip needs as many values for every --vary ({counts})")
         return list(zip(*(v.values for v in varies), strict=True))
+    count = math.prod(len(v.values) for v in varies)
+    if count > MAX_MEMBERS:
+        counts = " x ".join(f"{len(v.values)} ({v.key})" for v in varies)
+        raise UsageError(f"--vary: {counts} = {count} members; a sweep has at most {MAX_MEMBERS}")
     return list(itertools.product(*(v.values for v in varies)))
 
 

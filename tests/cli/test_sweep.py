@@ -114,12 +114,24 @@ def test_sweep_folder_and_member_cases(base, tmp_path):
         ("walls.3.face=z+", 2, ["walls has 1 entries", "index 3"]),
         ("particles.count.value=3", 2, ["particles.count is a value"]),
         ("contact.friction", 2, ["--vary 'contact.friction'", "KEY=VALUES"]),
+        # a range typed with extra zeros: refused before its values are made (a hundred million
+        # members were being checked in memory, for minutes, before a file was written)
+        ("particles.seed=1..100000000", 2, ["100000000 values", "at most 100000 members"]),
     ],
 )
 def test_bad_sweep_is_refused_before_anything_is_written(base, tmp_path, vary, code, fragments):
     out = tmp_path / "sw"
     result = sphere_inproc("sweep", base, "--vary", vary, "-o", out)
     assert_clean_error(result, code, *fragments)
+    assert not out.exists()
+
+
+def test_a_product_of_ranges_beyond_the_members_limit_is_refused(base, tmp_path):
+    out = tmp_path / "sw"
+    result = sphere_inproc(
+        "sweep", base, "--vary", "particles.seed=1..1000", "--vary", "particles.count=100..200", "-o", out
+    )
+    assert_clean_error(result, 2, "1000 (particles.seed) x 101 (particles.count) = 101000 members")
     assert not out.exists()
 
 
