@@ -148,12 +148,34 @@ def check_stable(scene) -> None:
     i, reason = scene.motion.first_unstable(scene.state)
     if i >= 0:
         p = scene.state.particles
+        what, hint = REASONS[reason]
+        face = _face_left(scene, i) if reason == 3 else None
+        if face is not None and any(w.face == face for w in scene.case.walls):
+            what = f"it passed through the wall on face {face} and left the box"
+            hint = (
+                "the wall's contact is too soft for the particle's weight and speed: stiffen it (or, "
+                'with dt given in seconds, try dt = "auto")'
+            )
         raise NumericalError(
             f"numerical failure at step {clock.step} (t = {clock.time:.6g} s): particle {i} at "
             f"{tuple(float(x) for x in p.pos[i])} m with velocity {tuple(float(x) for x in p.vel[i])} "
-            f"m/s: {REASONS[reason][0]}. The newest checkpoint before this step is intact; "
-            f"{REASONS[reason][1]}."
+            f"m/s: {what}. The newest checkpoint before this step is intact; {hint}."
         )
+
+
+def _face_left(scene, i: int) -> str | None:
+    """The face of the box ("z-", ...) that particle i is beyond by more than its radius, on an
+    axis that is not periodic; None if none."""
+    box, p = scene.state.box, scene.state.particles
+    r = float(p.radius[i])
+    for a in range(3):
+        if box.periodic[a]:
+            continue
+        if p.pos[i, a] < box.lower[a] - r:
+            return f"{'xyz'[a]}-"
+        if p.pos[i, a] > box.upper[a] + r:
+            return f"{'xyz'[a]}+"
+    return None
 
 
 # The loop takes steps in bursts of about this much wall time [s] (at most MAX_BURST steps)

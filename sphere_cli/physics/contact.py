@@ -368,6 +368,59 @@ def stability_limit(
     return float(value), what
 
 
+# a particle's overlap under its own weight beyond this share of its radius is warned of: the
+# particles below it carry more, and overlaps of tens of per cent of a radius are outside what a
+# soft-sphere contact law describes (they let spheres pass through one another and through walls)
+WEIGHT_OVERLAP = 0.1
+
+
+def weight_overlaps(
+    tables: ContactTables,
+    radius: np.ndarray,
+    mass: np.ndarray,
+    material: np.ndarray,
+    wall_faces: list[str],
+    gravity: float,
+    fluid_density: float = 0.0,
+) -> list[tuple[int, float, str]]:
+    """(material, overlap / radius, what) for each material whose heaviest particle, resting
+    under its weight (less its buoyancy in a fluid of `fluid_density` [kg/m^3]; gravity [m/s^2])
+    on the stiffest support it can have (any wall, or the largest particle of any material),
+    overlaps it by more than WEIGHT_OVERLAP x its radius: contacts too soft for the load."""
+    law = tables.law
+    found = []
+    for a in range(len(tables.names)):
+        members = np.flatnonzero(material == a)
+        if members.size == 0:
+            continue
+        i = int(members[np.argmax(mass[members])])
+        r, m = float(radius[i]), float(mass[i])
+        weight = m * gravity * (1.0 - fluid_density / (m / (4.0 / 3.0 * math.pi * r**3)))
+        if not weight > 0.0:
+            continue
+        supports = []
+        for w, face in enumerate(wall_faces):
+            supports.append((law.static_overlap(tables.wall_table[w, a], r, weight), f"the {face} wall"))
+        for b in range(len(tables.names)):
+            partners = np.flatnonzero(material == b)
+            if partners.size > (1 if b == a else 0):
+                r_b = float(radius[partners].max())
+                overlap = law.static_overlap(tables.table[a, b], r * r_b / (r + r_b), weight)
+                supports.append((overlap, f"a particle of {tables.label(b)} (r = {r_b:.4g} m)"))
+        if not supports:
+            continue
+        overlap, support = min(supports, key=lambda item: item[0])
+        if overlap > WEIGHT_OVERLAP * r:
+            what = (
+                f"the heaviest particle{'' if tables.names[a] == '' else ' of ' + tables.label(a)} "
+                f"(r = {r:.4g} m, m = {m:.4g} kg) resting on "
+                f"{support} overlaps it by {overlap:.3g} m, {overlap / r:.3g} x its radius, under its own "
+                f"weight ({law.label} contact)"
+            )
+            found.append((a, overlap / r, what))
+    return found
+
+
 def one_contact_limit(
     tables: ContactTables,
     radius: np.ndarray,

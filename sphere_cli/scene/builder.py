@@ -16,11 +16,11 @@ from .. import compile_ahead, ranks
 from ..config.consistency import MANY_STEPS, box_problems, step_problem
 from ..config.load import LoadedCase, warn
 from ..config.memory import memory_problems
-from ..config.schema import Case, FilePlacement, LatticePlacement, RandomPlacement
+from ..config.schema import LAW_KEYS, Case, FilePlacement, LatticePlacement, RandomPlacement
 from ..errors import CaseError, ResumeRefused
 from ..kernels.neighbors import worst_overlap
 from ..physics.compiled_steps import CompiledSteps
-from ..physics.contact import PairContactForces, one_contact_limit, stability_limit
+from ..physics.contact import PairContactForces, one_contact_limit, stability_limit, weight_overlaps
 from ..physics.fluid_plugin import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.module import Step, order_problems
@@ -283,6 +283,7 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     faces = [w.face for w in case.walls]
     contacts = (tables, radius, mass, material, case.particles.overlap_tolerance, faces)
     limits = [one_contact_limit(*contacts), stability_limit(*contacts)]
+    _warn_soft_contacts(loaded, contacts, getattr(case.fluid, "density", 0.0))
     if walls_state is not None:
         pushed = fluid.wall_stiffness_limit(state) if fluid is not None else {}
         limits = [_driven_wall_limit(case, walls_state, scales, box, *limit, pushed) for limit in limits]
@@ -297,6 +298,28 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     if state.clock.dt == motion[0]:
         dt_limit, dt_reason = motion  # what the run reports as setting its step
     return _Bodies(state, tables, walls_state, scales, fluid, (dt_limit, dt_reason), bound)
+
+
+def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, fluid_density: float) -> None:
+    """Warn, naming the stiffness key, of each material whose heaviest particle would overlap its
+    stiffest support by more than a tenth of its radius under its own weight
+    (physics/contact.py weight_overlaps): the run may go on, but beds that deep in one
+    another are not what the contact law describes, and spheres may pass through walls."""
+    tables, radius, mass, material, _, faces = contacts
+    case = loaded.case
+    gravity = math.hypot(*case.domain.gravity)
+    key = LAW_KEYS[case.contact.model][0]
+    for a, _ratio, what in weight_overlaps(tables, radius, mass, material, faces, gravity, fluid_density):
+        name = tables.names[a]
+        own = [i for i, m in enumerate(case.materials) if m.name == name and getattr(m, key) is not None]
+        loc = ("materials", own[0], key) if own else ("contact", key)
+        warn(
+            loaded.describe(
+                loc,
+                f"{what}: contacts this soft for the load let spheres pass through one "
+                "another and through walls: stiffen the contact (or lighten the particle)",
+            )
+        )
 
 
 def _walls_move(case: Case) -> bool:

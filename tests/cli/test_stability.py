@@ -12,7 +12,7 @@ from pathlib import Path
 
 import h5py
 import pytest
-from cli_test_support import assert_clean_error, line_of, sphere
+from cli_test_support import TINY, assert_clean_error, line_of, sphere, sphere_inproc
 
 from sphere_cli.config.load import load_case, parse_case
 from sphere_cli.io.checkpoint import list_checkpoints, read_checkpoint
@@ -185,3 +185,59 @@ def test_blow_up_exits_70_and_the_last_checkpoint_resumes(tmp_path: Path):
     done = sphere("resume", "run", "--until", repr(target * dt), "-q", cwd=tmp_path)
     assert_clean_error(done, 0)
     assert json.loads((tmp_path / "run" / "status.json").read_text())["step"] == target
+
+
+# --- contacts too soft for the particles' weight ----------------------------------------------
+
+
+def _soft(model: str) -> str:
+    contact = (
+        "normal_stiffness = 1.0e4"
+        if model == "linear"
+        else 'model = "hertz-mindlin"\nyoungs_modulus = 2.0e3\npoisson_ratio = 0.3'
+    )
+    return TINY.replace('model = "linear"\nnormal_stiffness = 1.0e4', contact.replace("1.0e4", "0.01"))
+
+
+@pytest.mark.parametrize("model", ["linear", "hertz-mindlin"])
+def test_contacts_too_soft_for_the_weight_are_warned_of_with_the_overlap(tmp_path, model):
+    """The heaviest sphere (m) resting on the floor under its weight overlaps it by m g / k_n
+    (linear) or (m g / (4/3 E* sqrt(r)))^(2/3) with E* = E / (1 - nu^2) against a rigid wall
+    (Hertz, the stiffest support here: a pair of spheres has half its E* and R*): beyond a tenth
+    of its radius the case is warned of, naming the stiffness key and its line."""
+    text = _soft(model)
+    (tmp_path / "case.toml").write_text(text)
+    scene = build_scene(load_case(tmp_path / "case.toml"))
+    p = scene.state.particles
+    i = int(p.mass.argmax())
+    m, r, g = float(p.mass[i]), float(p.radius[i]), 9.81
+    if model == "linear":
+        key, expected = "contact.normal_stiffness", m * g / 0.01
+    else:
+        e_star = 2.0e3 / (1.0 - 0.3**2)
+        key, expected = "contact.youngs_modulus", (m * g / (4.0 / 3.0 * e_star * r**0.5)) ** (2.0 / 3.0)
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    line = next(x for x in result.stderr.splitlines() if "under its own weight" in x)
+    assert f"case.toml:{line_of(text, key.split('.')[1])}: {key} = " in line, line
+    assert "resting on the z- wall" in line, line
+    shown = float(re.search(r"overlaps it by ([0-9.e+-]+) m", line).group(1))
+    assert shown == pytest.approx(expected, rel=2e-3), line  # printed to 3 digits
+    assert expected > 0.1 * r
+
+
+def test_contacts_stiff_enough_for_the_weight_are_not_warned_of(tmp_path):
+    """TINY's spheres overlap the floor by m g / k_n = 1e-8 m under their weight, 1e-5 of a
+    radius: nothing to say."""
+    (tmp_path / "case.toml").write_text(TINY)
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0 and "under its own weight" not in result.stderr, result.stderr
+
+
+def test_a_sphere_fallen_through_the_floor_is_said_to_have_passed_through_the_wall(tmp_path):
+    """Contacts a thousand times too soft: the spheres sink through the z- wall and the run
+    stops (exit 70) saying so, not that they left through an open face."""
+    (tmp_path / "case.toml").write_text(_soft("linear").replace("duration = 0.002", "duration = 0.2"))
+    result = sphere("run", "case.toml", "-o", "run", "-q", cwd=tmp_path)
+    assert_clean_error(result, 70, "passed through the wall on face z-", "too soft", "stiffen it")
+    assert "open face" not in result.stderr

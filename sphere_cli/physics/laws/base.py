@@ -43,6 +43,10 @@ class ContactLaw(ABC):
         """The tangent normal stiffness dF_n/d delta [N/m] of a table row."""
         return row[K_N]
 
+    def static_overlap(self, row: np.ndarray, r_eff: float, force: float) -> float:
+        """The overlap [m] at which a table row's elastic normal force is `force` [N]."""
+        return force / row[K_N]
+
     def damping_ratio(self, row: np.ndarray) -> float:
         """The damping ratio of the normal dashpot of a table row (independent of the overlap)."""
         return row[D_N] / (2.0 * math.sqrt(row[K_N]))

@@ -54,6 +54,10 @@ class HertzMindlin(ContactLaw):
         # dF/d delta of K_N sqrt(R*) delta^{3/2}
         return 1.5 * row[K_N] * math.sqrt(r_eff * delta)
 
+    def static_overlap(self, row: np.ndarray, r_eff: float, force: float) -> float:
+        # F = K_N sqrt(R*) delta^{3/2} solved for delta
+        return (force / (row[K_N] * math.sqrt(r_eff))) ** (2.0 / 3.0)
+
     def damping_ratio(self, row: np.ndarray) -> float:
         return row[D_N] / (2.0 * math.sqrt(1.5 * row[K_N]))  # c_h/sqrt6
 
