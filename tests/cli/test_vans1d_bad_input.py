@@ -248,6 +248,18 @@ def test_warnings_reach_stderr_and_run_log_in_a_real_run(tmp_path):
     assert "RuntimeWarning: " in (tmp_path / "run" / "run.log").read_text()
 
 
+def test_a_steady_start_that_diverges_is_refused_naming_the_key(tmp_path):
+    """A driving beyond any flow (gravity along the slope of 1e300 m/s^2): the implicit steady
+    start's profile goes to inf and nan (a pivot of its solve then divides by zero, which was a
+    traceback); refused with exit 65 naming fluid.flow.initial and what drives it."""
+    text = edit(CASE, "gravity = [0.5, 0.0, -9.8]", "gravity = [1e300, 0.0, -9.8]")
+    flow = 'mixing_length = "li-sawamoto"'
+    text = edit(text, f"{flow} }}", f'{flow}, initial = "steady" }}')
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
+    assert_clean_error(result, 65, "fluid.flow.initial", "went non-finite", "domain.gravity")
+
+
 def test_an_id_range_beyond_the_particles_is_refused(tmp_path):
     """fluid.ids past the last particle is refused when the scene is built, naming the key and the
     number of particles."""

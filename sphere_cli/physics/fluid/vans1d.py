@@ -411,16 +411,24 @@ class Vans1d(FluidModule):
         f = state.fluid
         col = f.column
         dt = 100.0 * self.cfg.flow.dt
-        for _ in range(max_rounds):
+        for rounds in range(1, max_rounds + 1):
             before = col.u.copy()
             prof = f.profiles
-            col.advance(prof.solid_fraction, prof.vel, prof.exchange_coefficient, self.source, dt, 100)
-            self._average(state)
-            change = float(np.abs(col.u - before).max())
+            try:
+                col.advance(prof.solid_fraction, prof.vel, prof.exchange_coefficient, self.source, dt, 100)
+                self._average(state)
+                change = float(np.abs(col.u - before).max())
+            except ZeroDivisionError:  # the profile went to inf and nan: a pivot of its solve was 0
+                change = math.nan
+            if not math.isfinite(change):
+                raise self.loaded.error(
+                    ("fluid", "flow", "initial"),
+                    "the fluid profile over the initial particles went non-finite after "
+                    f"{rounds * 100 * dt:g} s of fluid time: check the driving (domain.gravity) and the "
+                    "fluid's parameters",
+                )
             if change <= tol * max(float(np.abs(col.u).max()), 1e-30):
                 return
-            if not math.isfinite(change):
-                break
         raise self.loaded.error(
             ("fluid", "flow", "initial"),
             f"no steady fluid profile over the initial particles after {max_rounds * 100 * dt:g} s of "
