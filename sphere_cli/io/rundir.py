@@ -441,7 +441,10 @@ class _WarningsToLog(logging.Handler):
         self.run_log.log(record.levelno, "%s", message)
 
     def _show(self, message, category, filename, lineno, file=None, line=None) -> None:
-        self.shown(message, category, filename, lineno, file, line)
+        if self.shown is warnings._showwarning_orig:  # Python's own: as the case's warnings print
+            print(f"sphere: warning: {message}", file=sys.stderr if file is None else file)
+        else:  # a display the caller set up (a test runner, a notebook's) keeps its own form
+            self.shown(message, category, filename, lineno, file, line)
         self.run_log.warning("%s: %s", category.__name__, message)
 
     def detach(self) -> None:

@@ -239,12 +239,15 @@ def test_a_smooth_floor_without_a_sublayer_treatment_is_warned(tmp_path, extra, 
 
 
 def test_warnings_reach_stderr_and_run_log_in_a_real_run(tmp_path):
-    """The real CLI in its own interpreter: the warning is printed on stderr and written to
-    run.log."""
+    """The real CLI in its own interpreter: the warning is printed on stderr as the case's
+    warnings are (`sphere: warning: ...`, not Python's file:line form with a line of sphere's
+    source) and written to run.log."""
     (tmp_path / "case.toml").write_text(CLEAR_WATER.format(extra=""))
     result = sphere("run", tmp_path / "case.toml", "--output", tmp_path / "run")
     assert result.code == 0, result.stderr
+    assert "sphere: warning: fluid.flow.mixing_length" in result.stderr, result.stderr
     assert "has no viscous-sublayer treatment" in result.stderr
+    assert ".py:" not in result.stderr and "RuntimeWarning" not in result.stderr, result.stderr
     assert "RuntimeWarning: " in (tmp_path / "run" / "run.log").read_text()
 
 
