@@ -223,6 +223,8 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     density = np.array([m.density for m in tables.materials])[material]
     mass = density * 4.0 / 3.0 * np.pi * radius**3
     inertia = 0.4 * mass * radius**2
+    if restart is None:
+        _check_masses(loaded, radius, density, mass, inertia, placement_file)
     particles = Particles(
         pos=pos,
         vel=vel,
@@ -298,6 +300,35 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     if state.clock.dt == motion[0]:
         dt_limit, dt_reason = motion  # what the run reports as setting its step
     return _Bodies(state, tables, walls_state, scales, fluid, (dt_limit, dt_reason), bound)
+
+
+# below this radius [m] (well below an atom's) an unusable mass is the radius's fault, above it
+# the density's (_check_masses)
+TINIEST_RADIUS = 1e-20
+
+
+def _check_masses(loaded: LoadedCase, radius, density, mass, inertia, placement_file) -> None:
+    """Refuse particles whose mass or moment of inertia float64 cannot hold with its inverse
+    (a radius of 1e-120 m: r^3 and m r^2 underflow to 0, and the steps would divide by them),
+    naming the key that sets the radii."""
+    held = (mass > 0.0) & (inertia > 0.0) & np.isfinite(1.0 / mass) & np.isfinite(1.0 / inertia)
+    if held.all():
+        return
+    i = int(np.argmin(held))
+    if radius[i] > TINIEST_RADIUS:  # a radius of any size a grain can have: the density is at fault
+        named = [k for k, m in enumerate(loaded.case.materials) if m.density == density[i]]
+        key = ("materials", named[0], "density") if named else ("particles", "density")
+        what = "densities this small"
+    else:
+        from_file = placement_file is not None and placement_file.radius is not None
+        key = ("particles", "placement", "path") if from_file else ("particles", "radius")
+        what = "radii this small (give them in metres)"
+    raise loaded.error(
+        key,
+        f"particle {i} (r = {radius[i]:.4g} m, density {density[i]:.4g} kg/m^3) has a mass of "
+        f"{mass[i]:.4g} kg and a moment of inertia of {inertia[i]:.4g} kg m^2, whose inverses "
+        f"overflow float64: {what} cannot be simulated",
+    )
 
 
 def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, fluid_density: float) -> None:

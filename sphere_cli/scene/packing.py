@@ -27,13 +27,16 @@ def lattice_sites(placement: LatticePlacement, case, radius) -> tuple[np.ndarray
     rmax = radius.max()
     spacing = placement.spacing * 2.0 * rmax
     lower, upper = _region(placement, case)
-    sites = np.floor((upper - lower - 2.0 * rmax) / spacing + 1e-9).astype(np.int64) + 1
-    capacity = int(np.prod(sites))
+    # counted in floats and held to the particles' number per axis (more are never used: the
+    # sites fill x first, then y, then z), so that a tiny spacing cannot overflow int64
+    along = np.floor((upper - lower - 2.0 * rmax) / spacing + 1e-9) + 1.0
+    sites = np.minimum(along, float(radius.size)).astype(np.int64)
+    capacity = float(np.prod(along))
     if capacity < radius.size:
         raise case_error(
             case,
             ("particles", "count"),
-            f"the lattice (particles.placement) holds only {capacity} sites ({sites[0]} x {sites[1]} x "
+            f"the lattice (particles.placement) holds only {capacity:.0f} sites ({sites[0]} x {sites[1]} x "
             f"{sites[2]} at spacing {spacing:g} m); enlarge the box or region, lower "
             "particles.placement.spacing, or use fewer particles",
         )

@@ -210,9 +210,43 @@ def test_an_auto_dt_that_underflows_is_refused_without_numpy_warnings(tmp_path, 
     text = edit(TINY, old, new)
     (tmp_path / "case.toml").write_text(text)
     result = sphere("run", "case.toml", "-o", "out", "-q", cwd=tmp_path)
-    assert_clean_error(result, 65, "simulation.dt", '"auto" gives 0 s')
+    if "density" in new:  # its masses, 3e-317 kg, have no finite inverse: refused first
+        assert_clean_error(result, 65, "particles.density", "mass of 3.3", "densities this small")
+    else:
+        assert_clean_error(result, 65, "simulation.dt", '"auto" gives 0 s')
     assert "Warning" not in result.stderr, result.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("radius", ["1e-300", "1e-120"])
+def test_radii_whose_mass_underflows_are_refused_naming_the_key(tmp_path, radius):
+    """r^3 and m r^2 underflow to 0 (and 1/m to inf): a ZeroDivisionError traceback before;
+    refused with the particle, its mass and the key that sets the radii, by validate and run."""
+    text = edit(TINY, "min = 0.0008, max = 0.001", f"min = {radius}, max = {radius}")
+    (tmp_path / "case.toml").write_text(text)
+    for command in (("validate", "case.toml"), ("run", "case.toml", "-o", "out", "-q")):
+        result = sphere_inproc(*command, cwd=tmp_path)
+        where = f"case.toml:{line_of(text, 'radius =')}: particles.radius"
+        assert_clean_error(result, 65, where, "mass of 0 kg", "radii this small")
+    assert not (tmp_path / "out").exists()
+
+
+def test_radii_of_a_placement_file_whose_mass_underflows_are_refused_naming_the_file(tmp_path):
+    (tmp_path / "case.toml").write_text(FROM_FILE)
+    (tmp_path / "spheres.csv").write_text("x,y,z,r\n0.003,0.005,0.005,1e-300\n")
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert_clean_error(result, 65, "particles.placement.path", "particle 0 (r = 1e-300 m", "mass of 0 kg")
+
+
+def test_a_lattice_of_tiny_spacing_counts_its_sites_without_overflow(tmp_path):
+    """1e-60 m spheres in a centimetre box: 1e58 sites along each axis, whose product overflowed
+    int64 into a refusal saying the lattice 'holds only -9223372036854775807 sites'; the lattice
+    holds them, and what stops the case is its step (auto gives 0 s)."""
+    text = edit(TINY, "min = 0.0008, max = 0.001", "min = 1e-60, max = 1e-60")
+    (tmp_path / "case.toml").write_text(text)
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert_clean_error(result, 65, "simulation.dt", '"auto" gives 0 s')
+    assert "sites" not in result.stderr, result.stderr
 
 
 def test_a_duration_beyond_float64_is_refused(tmp_path):
