@@ -246,7 +246,8 @@ class Loop:
             elapsed = wallclock.monotonic() - burst_start
             self.burst = max(1, min(MAX_BURST, int(BURST_SECONDS * burst / max(elapsed, 1e-9))))
             step = clock.step
-            if self.progress.rate_start is None:
+            first = self.progress.rate_start is None
+            if first:
                 self.progress.first_step_done(step)
             if stage_ended:
                 to_host(scene)
@@ -268,7 +269,9 @@ class Loop:
                 check_stable(scene)
                 self.output.checkpoint(scene)
                 self.checkpoints.done(now)
-            if self.status.due(step, now):
+            # the first steps taken, status.json says "running" at once, not only a status
+            # interval later (until then it said "starting": building the scene)
+            if first or self.status.due(step, now):
                 self.progress.update(scene, now - started)
                 self.status.done(now)
         if self.stop.interrupted:

@@ -45,6 +45,12 @@ def _run_directory(rundir: RunDirectory) -> dict:
             out["status"] = json.loads(rundir.status_path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
             out["status"] = {"error": f"{rundir.status_path}: unreadable ({exc})"}
+        status = out["status"]
+        if status.get("state") in ("starting", "running") and rundir.writer_gone():
+            status["writer"] = (
+                "gone: no process holds the run (killed, or its machine went down); `sphere resume "
+                f"{rundir.path}` continues it from its newest checkpoint"
+            )
     if rundir.trajectory_path.is_file():
         try:
             out["trajectory"] = _trajectory(rundir.trajectory_path)

@@ -297,18 +297,29 @@ class RunDirectory:
             os.close(fd)
 
     def busy(self) -> bool:
-        """Whether some process holds the writer lock now. Probed with a shared lock (which a
-        read-only open may take, also on NFS) and released at once."""
+        """Whether some process holds the writer lock now."""
+        return self._probe_lock() is True
+
+    def writer_gone(self) -> bool:
+        """Whether no process holds the writer lock now (a run that says it is running was
+        killed, or its machine went down). A probe that cannot lock at all (a file system
+        without locks) says nothing: False."""
+        return self._probe_lock() is False
+
+    def _probe_lock(self) -> bool | None:
+        """True if another process holds the writer lock, False if none does, None if this
+        process holds it, there is none yet, or the file system cannot say. Probed with a
+        shared lock (which a read-only open may take, also on NFS) and released at once."""
         if self._lock_fd is not None or not self.marker.is_file():
-            return False
+            return None
         try:
             fd = os.open(self.marker, os.O_RDONLY)
         except OSError:
-            return False
+            return None
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except OSError as exc:
-            return exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+            return True if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES) else None
         finally:
             os.close(fd)  # closing releases a lock taken here
         return False

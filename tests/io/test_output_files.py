@@ -15,6 +15,7 @@ import pytest
 
 from sphere_cli import api
 from sphere_cli.io.checkpoint import list_checkpoints
+from sphere_cli.io.rundir import RunOutput
 from sphere_cli.io.trajectory import _append, _time_series
 
 CASE = """
@@ -112,6 +113,27 @@ def test_status_and_log(run_dir: Path):
     log = (run_dir / "run.log").read_text()
     assert "done at step" in log and "checkpoint" in log
     assert (run_dir / "case.toml").read_text() == textwrap.dedent(CASE)
+
+
+def test_status_says_running_from_the_first_steps_not_a_status_interval_later(tmp_path, monkeypatch):
+    """status.json said "starting" (building the scene) until output.status_every_seconds had
+    passed since the loop began: a batch monitor saw a short run, or one killed early, as never
+    started. Read at every frame after the first: "running", at that frame's step."""
+    seen = []
+    frame = RunOutput.frame
+
+    def frame_and_look(self, scene, last: bool = False):
+        frame(self, scene, last)
+        if scene.state.clock.step > 0 and not last:
+            status = json.loads((tmp_path / "run" / "status.json").read_text())
+            seen.append((status["state"], status.get("step"), scene.state.clock.step))
+
+    monkeypatch.setattr(RunOutput, "frame", frame_and_look)
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE).replace("[output]", "[output]\nstatus_every_seconds = 3600"))
+    api.run(case, tmp_path / "run")
+    assert seen and all(state == "running" for state, _, _ in seen), seen
+    assert all(0 < at <= step for _, at, step in seen), seen
 
 
 def test_every_warning_of_a_run_reaches_run_log(tmp_path, capsys):

@@ -22,6 +22,7 @@ from sphere_cli import api
 from sphere_cli.config.load import load_case
 from sphere_cli.errors import ResumeRefused
 from sphere_cli.io.checkpoint import FORMAT, list_checkpoints, read_checkpoint
+from sphere_cli.io.inspect import summarize
 from sphere_cli.scene.builder import build_scene
 
 CONFIGS = sorted((Path(__file__).parents[2] / "configs").glob("*.toml"))
@@ -139,9 +140,15 @@ def test_kill_during_checkpoint_write(tmp_path: Path, part: float):
     ckpts = list_checkpoints(tmp_path / "killed" / "checkpoints")
     assert [int(p.stem.split("-")[1]) for p in ckpts] == [0, 100, 200]
     read_checkpoint(ckpts[-1])  # the newest checkpoint verifies
+    # its status says it was running (from its first steps on); inspect adds that no process
+    # holds it any more, and how to go on
+    status = summarize(tmp_path / "killed")["status"]
+    assert status["state"] == "running" and status["step"] >= 1, status
+    assert status["writer"].startswith("gone: no process holds the run"), status
 
     result = api.resume(tmp_path / "killed")
     assert result.step == 400
+    assert "writer" not in summarize(tmp_path / "killed")["status"]
     assert_same_state(final_state(tmp_path / "whole"), final_state(tmp_path / "killed"))
     assert not list((tmp_path / "killed" / "checkpoints").glob(".*.tmp"))
 
