@@ -395,7 +395,7 @@ def weight_overlaps(
             continue
         i = int(members[np.argmax(mass[members])])
         r, m = float(radius[i]), float(mass[i])
-        weight = m * gravity * (1.0 - fluid_density / (m / (4.0 / 3.0 * math.pi * r**3)))
+        weight = m * gravity * (1.0 - fluid_density / tables.materials[a].density)
         if not weight > 0.0:
             continue
         supports = []

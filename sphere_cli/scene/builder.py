@@ -224,7 +224,7 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     mass = density * 4.0 / 3.0 * np.pi * radius**3
     inertia = 0.4 * mass * radius**2
     if restart is None:
-        _check_masses(loaded, radius, density, mass, inertia, placement_file)
+        _check_masses(loaded, tables, material, radius, mass, inertia, placement_file)
     particles = Particles(
         pos=pos,
         vel=vel,
@@ -307,7 +307,9 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
 TINIEST_RADIUS = 1e-20
 
 
-def _check_masses(loaded: LoadedCase, radius, density, mass, inertia, placement_file) -> None:
+def _check_masses(
+    loaded: LoadedCase, tables: ContactTables, material, radius, mass, inertia, placement_file
+) -> None:
     """Refuse particles whose mass or moment of inertia float64 cannot hold with its inverse
     (a radius of 1e-120 m: r^3 and m r^2 underflow to 0, and the steps would divide by them),
     naming the key that sets the radii."""
@@ -315,8 +317,10 @@ def _check_masses(loaded: LoadedCase, radius, density, mass, inertia, placement_
     if held.all():
         return
     i = int(np.argmin(held))
+    name = tables.names[material[i]]
+    density = tables.materials[material[i]].density
     if radius[i] > TINIEST_RADIUS:  # a radius of any size a grain can have: the density is at fault
-        named = [k for k, m in enumerate(loaded.case.materials) if m.density == density[i]]
+        named = [k for k, m in enumerate(loaded.case.materials) if m.name == name]
         key = ("materials", named[0], "density") if named else ("particles", "density")
         what = "densities this small"
     else:
@@ -325,7 +329,7 @@ def _check_masses(loaded: LoadedCase, radius, density, mass, inertia, placement_
         what = "radii this small (give them in metres)"
     raise loaded.error(
         key,
-        f"particle {i} (r = {radius[i]:.4g} m, density {density[i]:.4g} kg/m^3) has a mass of "
+        f"particle {i} (r = {radius[i]:.4g} m, density {density:.4g} kg/m^3) has a mass of "
         f"{mass[i]:.4g} kg and a moment of inertia of {inertia[i]:.4g} kg m^2, whose inverses "
         f"overflow float64: {what} cannot be simulated",
     )
