@@ -368,56 +368,95 @@ def stability_limit(
     return float(value), what
 
 
-# a particle's overlap under its own weight beyond this share of its radius is warned of: the
-# particles below it carry more, and overlaps of tens of per cent of a radius are outside what a
-# soft-sphere contact law describes (they let spheres pass through one another and through walls)
+# overlaps of tens of per cent of a radius are outside what a soft-sphere contact law describes
+# (they let spheres pass through one another and through walls): a particle's overlap under its
+# own weight beyond this share of its radius is warned of (it lasts, and the particles under it
+# carry more) ...
 WEIGHT_OVERLAP = 0.1
+# ... and in a head-on impact at its initial speed, the dashpot left out, beyond this share (an
+# upper bound of a passing overlap: the verification's impacts reach 0.1 of it with 1e-3 accuracy)
+IMPACT_OVERLAP = 0.25
 
 
-def weight_overlaps(
+def _least_overlap(
+    tables: ContactTables, radius, mass, material, wall_faces, a: int, r: float, load: tuple
+) -> tuple[float, str] | None:
+    """(the least overlap of a particle of material a and radius r over the supports it can
+    meet, any wall or the largest particle of any material (the stiffest, for Hertz), and which
+    support) under `load`: ("weight", force [N]) resting, or ("impact", mass [kg], speed [m/s])
+    striking it head-on. None if it can meet nothing."""
+    law = tables.law
+
+    def overlap(row, r_eff: float, partner_mass: float) -> float:
+        if load[0] == "weight":
+            return law.static_overlap(row, r_eff, load[1])
+        m = load[1]
+        m_eff = m if partner_mass == math.inf else m * partner_mass / (m + partner_mass)  # a wall: m
+        return law.impact_overlap(row, r_eff, m_eff, load[2])
+
+    supports = [
+        (overlap(tables.wall_table[w, a], r, math.inf), f"the {face} wall")
+        for w, face in enumerate(wall_faces)
+    ]
+    for b in range(len(tables.names)):
+        partners = np.flatnonzero(material == b)
+        if partners.size > (1 if b == a else 0):
+            k = int(partners[np.argmax(radius[partners])])
+            r_b = float(radius[k])
+            supports.append(
+                (
+                    overlap(tables.table[a, b], r * r_b / (r + r_b), float(mass[k])),
+                    f"a particle of {tables.label(b)} (r = {r_b:.4g} m)",
+                )
+            )
+    return min(supports, key=lambda item: item[0]) if supports else None
+
+
+def load_overlaps(
     tables: ContactTables,
     radius: np.ndarray,
     mass: np.ndarray,
+    speed: np.ndarray,
     material: np.ndarray,
     wall_faces: list[str],
     gravity: float,
     fluid_density: float = 0.0,
 ) -> list[tuple[int, float, str]]:
-    """(material, overlap / radius, what) for each material whose heaviest particle, resting
-    under its weight (less its buoyancy in a fluid of `fluid_density` [kg/m^3]; gravity [m/s^2])
-    on the stiffest support it can have (any wall, or the largest particle of any material),
-    overlaps it by more than WEIGHT_OVERLAP x its radius: contacts too soft for the load."""
+    """(material, overlap / radius, what) for each load on a material's particles that makes one
+    overlap the stiffest support it can have (_least_overlap) too deeply: the heaviest particle
+    resting under its weight (less its buoyancy in a fluid of `fluid_density` [kg/m^3]; gravity
+    [m/s^2]), beyond WEIGHT_OVERLAP x its radius, and the particle of the most kinetic energy
+    (speed [m/s] each) striking it head-on, the dashpot left out (the most it can overlap),
+    beyond IMPACT_OVERLAP x its radius: contacts too soft for the load."""
     law = tables.law
     found = []
     for a in range(len(tables.names)):
         members = np.flatnonzero(material == a)
         if members.size == 0:
             continue
+        of = "" if tables.names[a] == "" else " of " + tables.label(a)
         i = int(members[np.argmax(mass[members])])
         r, m = float(radius[i]), float(mass[i])
         weight = m * gravity * (1.0 - fluid_density / tables.materials[a].density)
-        if not weight > 0.0:
-            continue
-        supports = []
-        for w, face in enumerate(wall_faces):
-            supports.append((law.static_overlap(tables.wall_table[w, a], r, weight), f"the {face} wall"))
-        for b in range(len(tables.names)):
-            partners = np.flatnonzero(material == b)
-            if partners.size > (1 if b == a else 0):
-                r_b = float(radius[partners].max())
-                overlap = law.static_overlap(tables.table[a, b], r * r_b / (r + r_b), weight)
-                supports.append((overlap, f"a particle of {tables.label(b)} (r = {r_b:.4g} m)"))
-        if not supports:
-            continue
-        overlap, support = min(supports, key=lambda item: item[0])
-        if overlap > WEIGHT_OVERLAP * r:
+        least = None  # a buoyant particle rests on nothing (and (negative)^(2/3) is complex)
+        if weight > 0.0:
+            least = _least_overlap(tables, radius, mass, material, wall_faces, a, r, ("weight", weight))
+        if least is not None and least[0] > WEIGHT_OVERLAP * r:
             what = (
-                f"the heaviest particle{'' if tables.names[a] == '' else ' of ' + tables.label(a)} "
-                f"(r = {r:.4g} m, m = {m:.4g} kg) resting on "
-                f"{support} overlaps it by {overlap:.3g} m, {overlap / r:.3g} x its radius, under its own "
-                f"weight ({law.label} contact)"
+                f"the heaviest particle{of} (r = {r:.4g} m, m = {m:.4g} kg) resting on {least[1]} overlaps "
+                f"it by {least[0]:.3g} m, {least[0] / r:.3g} x its radius, under its own weight"
             )
-            found.append((a, overlap / r, what))
+            found.append((a, least[0] / r, f"{what} ({law.label} contact)"))
+        j = int(members[np.argmax(mass[members] * speed[members] ** 2)])
+        r, m, v = float(radius[j]), float(mass[j]), float(speed[j])
+        least = _least_overlap(tables, radius, mass, material, wall_faces, a, r, ("impact", m, v))
+        if v > 0.0 and least is not None and least[0] > IMPACT_OVERLAP * r:
+            what = (
+                f"the particle{of} of the most kinetic energy (r = {r:.4g} m, m = {m:.4g} kg, {v:.4g} m/s "
+                f"at the start) striking {least[1]} head-on would overlap it by up to {least[0]:.3g} m, "
+                f"{least[0] / r:.3g} x its radius"
+            )
+            found.append((a, least[0] / r, f"{what} ({law.label} contact)"))
     return found
 
 

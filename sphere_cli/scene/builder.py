@@ -20,7 +20,7 @@ from ..config.schema import LAW_KEYS, Case, FilePlacement, LatticePlacement, Ran
 from ..errors import CaseError, ResumeRefused
 from ..kernels.neighbors import worst_overlap
 from ..physics.compiled_steps import CompiledSteps
-from ..physics.contact import PairContactForces, one_contact_limit, stability_limit, weight_overlaps
+from ..physics.contact import PairContactForces, load_overlaps, one_contact_limit, stability_limit
 from ..physics.fluid_plugin import FluidModule, build_fluid
 from ..physics.materials import ContactTables, assign_materials, contact_tables
 from ..physics.module import Step, order_problems
@@ -285,7 +285,8 @@ def _bodies(loaded: LoadedCase, restart=None, files: dict | None = None) -> _Bod
     faces = [w.face for w in case.walls]
     contacts = (tables, radius, mass, material, case.particles.overlap_tolerance, faces)
     limits = [one_contact_limit(*contacts), stability_limit(*contacts)]
-    _warn_soft_contacts(loaded, contacts, getattr(case.fluid, "density", 0.0))
+    speed = np.sqrt(np.einsum("ij,ij->i", vel, vel))
+    _warn_soft_contacts(loaded, contacts, speed, getattr(case.fluid, "density", 0.0))
     if walls_state is not None:
         pushed = fluid.wall_stiffness_limit(state) if fluid is not None else {}
         limits = [_driven_wall_limit(case, walls_state, scales, box, *limit, pushed) for limit in limits]
@@ -335,16 +336,18 @@ def _check_masses(
     )
 
 
-def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, fluid_density: float) -> None:
-    """Warn, naming the stiffness key, of each material whose heaviest particle would overlap its
-    stiffest support by more than a tenth of its radius under its own weight
-    (physics/contact.py weight_overlaps): the run may go on, but beds that deep in one
-    another are not what the contact law describes, and spheres may pass through walls."""
+def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, speed, fluid_density: float) -> None:
+    """Warn, naming the stiffness key, of each material whose particles would overlap their
+    stiffest support by more than a tenth of a radius under their weight or in a head-on impact
+    at their initial speed (physics/contact.py load_overlaps): the run may go on, but spheres
+    that deep in one another are not what the contact law describes, and pass through walls."""
     tables, radius, mass, material, _, faces = contacts
     case = loaded.case
     gravity = math.hypot(*case.domain.gravity)
     key = LAW_KEYS[case.contact.model][0]
-    for a, _ratio, what in weight_overlaps(tables, radius, mass, material, faces, gravity, fluid_density):
+    for a, _ratio, what in load_overlaps(
+        tables, radius, mass, speed, material, faces, gravity, fluid_density
+    ):
         name = tables.names[a]
         own = [i for i, m in enumerate(case.materials) if m.name == name and getattr(m, key) is not None]
         loc = ("materials", own[0], key) if own else ("contact", key)
@@ -352,7 +355,7 @@ def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, fluid_density: floa
             loaded.describe(
                 loc,
                 f"{what}: contacts this soft for the load let spheres pass through one "
-                "another and through walls: stiffen the contact (or lighten the particle)",
+                "another and through walls: stiffen the contact",
             )
         )
 

@@ -6,6 +6,7 @@ newest checkpoint before the failure still verifies and resumes."""
 from __future__ import annotations
 
 import json
+import math
 import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -224,6 +225,50 @@ def test_contacts_too_soft_for_the_weight_are_warned_of_with_the_overlap(tmp_pat
     shown = float(re.search(r"overlaps it by ([0-9.e+-]+) m", line).group(1))
     assert shown == pytest.approx(expected, rel=2e-3), line  # printed to 3 digits
     assert expected > 0.1 * r
+
+
+def _thrown(tmp_path, contact: str, v: float, r: float = 0.001, density: float = 2500.0) -> float:
+    """One sphere thrown at the floor at v [m/s], gravity off, with `contact` ([contact]'s lines):
+    writes the case; returns its mass [kg]."""
+    (tmp_path / "case.toml").write_text(
+        "[simulation]\nduration = 0.001\n[domain]\nupper = [0.01, 0.01, 0.01]\ngravity = [0.0, 0.0, 0.0]\n"
+        f'[particles]\ndensity = {density}\nplacement = {{ method = "file", path = "one.csv" }}\n'
+        f'[contact]\n{contact}\n[[walls]]\nface = "z-"\n'
+    )
+    (tmp_path / "one.csv").write_text(f"x,y,z,r,vx,vy,vz\n0.005,0.005,0.005,{r},0.0,0.0,{-v}\n")
+    return density * 4.0 / 3.0 * math.pi * r**3
+
+
+@pytest.mark.parametrize("model", ["linear", "hertz-mindlin"])
+def test_contacts_too_soft_for_an_initial_speed_are_warned_of_with_the_overlap(tmp_path, model):
+    """One sphere thrown at the floor at 3 m/s: the deepest overlap of the impact, the dashpot
+    left out, is v sqrt(m/k_n) (linear: 1/2 m v^2 = 1/2 k delta^2) or (15 m v^2 / (16 E*
+    sqrt(r)))^(2/5) against a rigid wall (Hertz); beyond a quarter of its radius the case is
+    warned of, naming the stiffness key."""
+    r, v = 0.001, 3.0
+    if model == "linear":
+        m = _thrown(tmp_path, "normal_stiffness = 10.0", v, r)
+        key, expected = "contact.normal_stiffness", v * math.sqrt(m / 10.0)
+    else:
+        m = _thrown(tmp_path, 'model = "hertz-mindlin"\nyoungs_modulus = 1.0e5\npoisson_ratio = 0.3', v, r)
+        e_star = 1.0e5 / (1.0 - 0.3**2)
+        key, expected = "contact.youngs_modulus", (15.0 * m * v * v / (16.0 * e_star * math.sqrt(r))) ** 0.4
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0, result.stderr
+    line = next(x for x in result.stderr.splitlines() if "kinetic energy" in x)
+    assert f"{key} = " in line and "3 m/s at the start" in line and "striking the z- wall" in line, line
+    shown = float(re.search(r"overlap it by up to ([0-9.e+-]+) m", line).group(1))
+    assert shown == pytest.approx(expected, rel=2e-3), line
+    assert expected > 0.25 * r
+
+
+def test_an_impact_that_overlaps_a_tenth_of_a_radius_is_not_warned_of(tmp_path):
+    """The A4 verification's impact: 1 m/s on k_n = 1e3 N/m, at most 0.1 of the radius (less with
+    its dashpot), resolved to 1e-3: below the quarter that is warned of."""
+    m = _thrown(tmp_path, "normal_stiffness = 1000.0", 1.0)
+    assert 0.09 < math.sqrt(m / 1000.0) / 0.001 < 0.11
+    result = sphere_inproc("validate", "case.toml", cwd=tmp_path)
+    assert result.code == 0 and "kinetic energy" not in result.stderr, result.stderr
 
 
 def test_contacts_stiff_enough_for_the_weight_are_not_warned_of(tmp_path):

@@ -47,6 +47,11 @@ class ContactLaw(ABC):
         """The overlap [m] at which a table row's elastic normal force is `force` [N]."""
         return force / row[K_N]
 
+    def impact_overlap(self, row: np.ndarray, r_eff: float, m_eff: float, speed: float) -> float:
+        """The deepest overlap [m] of a head-on impact at `speed` [m/s] of effective mass m_eff
+        [kg], the dashpot left out: 1/2 m* v^2 = 1/2 K_N delta^2."""
+        return speed * math.sqrt(m_eff / row[K_N])
+
     def damping_ratio(self, row: np.ndarray) -> float:
         """The damping ratio of the normal dashpot of a table row (independent of the overlap)."""
         return row[D_N] / (2.0 * math.sqrt(row[K_N]))

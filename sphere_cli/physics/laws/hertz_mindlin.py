@@ -58,6 +58,10 @@ class HertzMindlin(ContactLaw):
         # F = K_N sqrt(R*) delta^{3/2} solved for delta
         return (force / (row[K_N] * math.sqrt(r_eff))) ** (2.0 / 3.0)
 
+    def impact_overlap(self, row: np.ndarray, r_eff: float, m_eff: float, speed: float) -> float:
+        # 1/2 m* v^2 = (2/5) K_N sqrt(R*) delta^{5/2}
+        return (1.25 * m_eff * speed * speed / (row[K_N] * math.sqrt(r_eff))) ** 0.4
+
     def damping_ratio(self, row: np.ndarray) -> float:
         return row[D_N] / (2.0 * math.sqrt(1.5 * row[K_N]))  # c_h/sqrt6
 
