@@ -421,8 +421,8 @@ def load_overlaps(
     wall_faces: list[str],
     gravity: float,
     fluid_density: float = 0.0,
-) -> list[tuple[int, float, str]]:
-    """(material, overlap / radius, what) for each load on a material's particles that makes one
+) -> list[tuple[int, str]]:
+    """(material, what) for each load on a material's particles that makes one
     overlap the stiffest support it can have (_least_overlap) too deeply: the heaviest particle
     resting under its weight (less its buoyancy in a fluid of `fluid_density` [kg/m^3]; gravity
     [m/s^2]), beyond WEIGHT_OVERLAP x its radius, and the particle of the most kinetic energy
@@ -446,7 +446,7 @@ def load_overlaps(
                 f"the heaviest particle{of} (r = {r:.4g} m, m = {m:.4g} kg) resting on {least[1]} overlaps "
                 f"it by {least[0]:.3g} m, {least[0] / r:.3g} x its radius, under its own weight"
             )
-            found.append((a, least[0] / r, f"{what} ({law.label} contact)"))
+            found.append((a, f"{what} ({law.label} contact)"))
         j = int(members[np.argmax(mass[members] * speed[members] ** 2)])
         r, m, v = float(radius[j]), float(mass[j]), float(speed[j])
         least = _least_overlap(tables, radius, mass, material, wall_faces, a, r, ("impact", m, v))
@@ -456,7 +456,7 @@ def load_overlaps(
                 f"at the start) striking {least[1]} head-on would overlap it by up to {least[0]:.3g} m, "
                 f"{least[0] / r:.3g} x its radius"
             )
-            found.append((a, least[0] / r, f"{what} ({law.label} contact)"))
+            found.append((a, f"{what} ({law.label} contact)"))
     return found
 
 

@@ -338,16 +338,15 @@ def _check_masses(
 
 def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, speed, fluid_density: float) -> None:
     """Warn, naming the stiffness key, of each material whose particles would overlap their
-    stiffest support by more than a tenth of a radius under their weight or in a head-on impact
-    at their initial speed (physics/contact.py load_overlaps): the run may go on, but spheres
-    that deep in one another are not what the contact law describes, and pass through walls."""
+    stiffest support too deeply under their weight (a tenth of a radius) or in a head-on impact
+    at their initial speed (a quarter: physics/contact.py load_overlaps): the run may go on, but
+    spheres that deep in one another are not what the contact law describes, and pass through
+    walls."""
     tables, radius, mass, material, _, faces = contacts
     case = loaded.case
     gravity = math.hypot(*case.domain.gravity)
     key = LAW_KEYS[case.contact.model][0]
-    for a, _ratio, what in load_overlaps(
-        tables, radius, mass, speed, material, faces, gravity, fluid_density
-    ):
+    for a, what in load_overlaps(tables, radius, mass, speed, material, faces, gravity, fluid_density):
         name = tables.names[a]
         own = [i for i, m in enumerate(case.materials) if m.name == name and getattr(m, key) is not None]
         loc = ("materials", own[0], key) if own else ("contact", key)
