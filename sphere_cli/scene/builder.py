@@ -318,11 +318,9 @@ def _check_masses(
     if held.all():
         return
     i = int(np.argmin(held))
-    name = tables.names[material[i]]
     density = tables.materials[material[i]].density
     if radius[i] > TINIEST_RADIUS:  # a radius of any size a grain can have: the density is at fault
-        named = [k for k, m in enumerate(loaded.case.materials) if m.name == name]
-        key = ("materials", named[0], "density") if named else ("particles", "density")
+        key = _material_key(loaded.case, tables.names[material[i]], "density", ("particles", "density"))
         what = "densities this small"
     else:
         from_file = placement_file is not None and placement_file.radius is not None
@@ -336,6 +334,15 @@ def _check_masses(
     )
 
 
+def _material_key(case: Case, name: str, key: str, otherwise: tuple) -> tuple:
+    """The location of `key` in the [[materials]] entry called `name` where that entry sets it,
+    else `otherwise` (the single-material form's key, or [contact]'s default)."""
+    for k, entry in enumerate(case.materials):
+        if entry.name == name and getattr(entry, key) is not None:
+            return ("materials", k, key)
+    return otherwise
+
+
 def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, speed, fluid_density: float) -> None:
     """Warn, naming the stiffness key, of each material whose particles would overlap their
     stiffest support too deeply under their weight (a tenth of a radius) or in a head-on impact
@@ -347,9 +354,7 @@ def _warn_soft_contacts(loaded: LoadedCase, contacts: tuple, speed, fluid_densit
     gravity = math.hypot(*case.domain.gravity)
     key = LAW_KEYS[case.contact.model][0]
     for a, what in load_overlaps(tables, radius, mass, speed, material, faces, gravity, fluid_density):
-        name = tables.names[a]
-        own = [i for i, m in enumerate(case.materials) if m.name == name and getattr(m, key) is not None]
-        loc = ("materials", own[0], key) if own else ("contact", key)
+        loc = _material_key(case, tables.names[a], key, ("contact", key))
         warn(
             loaded.describe(
                 loc,
